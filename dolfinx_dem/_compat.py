@@ -1,0 +1,141 @@
+"""The only module that touches DOLFINx-0.5-specific API.
+
+Everything DOLFINx-version dependent (C++ mesh handles, AdjacencyList accessors, function-space
+constructors, the PETSc vector of a Function, VTK and gmsh adapters) is wrapped here, so that a
+move to a newer DOLFINx is this one file's work. Every function returns plain numpy arrays or
+DOLFINx objects; all data are process-local.
+"""
+
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import numpy as np
+
+import dolfinx
+import dolfinx.cpp
+import dolfinx.fem
+import dolfinx.io
+import dolfinx.mesh
+import dolfinx.plot
+
+
+class LocalMeshData(NamedTuple):
+    """Process-local topology and geometry of the owned cells of a simplex mesh.
+
+    Shapes: ``n`` owned cells, ``d`` topological (= geometric) dimension.
+    """
+
+    cell_global: np.ndarray  # (n,) global cell indices of the owned cells
+    cell_vertex_x: np.ndarray  # (n, d+1, d) vertex coordinates, topology vertex order
+    cell_facet_global: np.ndarray  # (n, d+1) global facet index, facet j opposite vertex j
+    num_cells_global: int
+    num_facets_global: int
+
+
+def _cpp(mesh):
+    """The C++ mesh behind Debian's patched Python wrapper."""
+    return getattr(mesh, "_mesh", mesh)
+
+
+def _adjacency(topology, d0: int, d1: int) -> tuple[np.ndarray, np.ndarray]:
+    topology.create_connectivity(d0, d1)
+    c = topology.connectivity(d0, d1)
+    return c.array, c.offsets
+
+
+def local_mesh_data(mesh) -> LocalMeshData:
+    """Extract the owned cells' vertex coordinates and global facet numbering."""
+    topology = mesh.topology
+    tdim = topology.dim
+    gdim = mesh.geometry.dim
+    if gdim != tdim:
+        raise ValueError(
+            f"dolfinx_dem needs a mesh whose geometric dimension equals its topological "
+            f"dimension; got tdim={tdim}, gdim={gdim} (manifold meshes are not supported)"
+        )
+    if mesh.geometry.cmap.degree != 1:
+        raise ValueError("dolfinx_dem needs an affine (degree-1) mesh geometry")
+    cell_map = topology.index_map(tdim)
+    n = cell_map.size_local
+    nv = tdim + 1
+
+    c2v, off = _adjacency(topology, tdim, 0)
+    if not np.all(np.diff(off) == nv):
+        raise ValueError(f"dolfinx_dem needs a simplex mesh (every cell with {nv} vertices)")
+    c2v = c2v.reshape(-1, nv)[:n]
+    c2f, _ = _adjacency(topology, tdim, tdim - 1)
+    c2f = c2f.reshape(-1, nv)[:n]
+    f2v, f2v_off = _adjacency(topology, tdim - 1, 0)
+    f2v = f2v.reshape(-1, tdim)
+
+    # Order each cell's facets so that facet j is opposite vertex j (the vertex not in the facet).
+    opposite = c2v.sum(axis=1)[:, None] - f2v[c2f].sum(axis=2)  # (n, d+1) local vertex index
+    order = np.argmax(opposite[:, None, :] == c2v[:, :, None], axis=2)  # (n, d+1)
+    c2f = np.take_along_axis(c2f, order, axis=1)
+
+    num_vertices = topology.index_map(0).size_local + topology.index_map(0).num_ghosts
+    v2x = dolfinx.cpp.mesh.entities_to_geometry(
+        _cpp(mesh), 0, np.arange(num_vertices, dtype=np.int32), False
+    ).reshape(-1)
+    x = mesh.geometry.x[:, :tdim]
+    cell_vertex_x = x[v2x[c2v]]
+
+    facet_map = topology.index_map(tdim - 1)
+    cell_facet_global = facet_map.local_to_global(c2f.reshape(-1).astype(np.int32)).reshape(n, nv)
+    cell_global = cell_map.local_to_global(np.arange(n, dtype=np.int32))
+    return LocalMeshData(
+        cell_global=np.asarray(cell_global, dtype=np.int64),
+        cell_vertex_x=np.ascontiguousarray(cell_vertex_x, dtype=np.float64),
+        cell_facet_global=np.asarray(cell_facet_global, dtype=np.int64),
+        num_cells_global=cell_map.size_global,
+        num_facets_global=facet_map.size_global,
+    )
+
+
+def local_facet_global_indices(mesh, facets: np.ndarray) -> np.ndarray:
+    """Global indices of process-local facets."""
+    facet_map = mesh.topology.index_map(mesh.topology.dim - 1)
+    return np.asarray(facet_map.local_to_global(np.asarray(facets, dtype=np.int32)), dtype=np.int64)
+
+
+def owned_cell_range(mesh) -> tuple[int, int]:
+    """Global index range ``[start, stop)`` of the cells owned by this process."""
+    r = mesh.topology.index_map(mesh.topology.dim).local_range
+    return int(r[0]), int(r[1])
+
+
+def create_vector_space(mesh, family: str, degree: int):
+    """A vector-valued function space (DG0 for DEM cell displacements, P1/P2 for FEM)."""
+    return dolfinx.fem.VectorFunctionSpace(mesh, (family, degree))
+
+
+def create_scalar_space(mesh, family: str, degree: int):
+    return dolfinx.fem.FunctionSpace(mesh, (family, degree))
+
+
+def petsc_vec(function):
+    """The PETSc vector that holds a Function's degrees of freedom (ghosted)."""
+    return function.vector
+
+
+def vtk_mesh(mesh):
+    """(topology, cell types, points) for ``pyvista.UnstructuredGrid``."""
+    return dolfinx.plot.create_vtk_mesh(mesh, mesh.topology.dim)
+
+
+def mesh_from_gmsh_model(model, comm, gdim: int):
+    """(mesh, cell_tags, facet_tags) from a gmsh model held on rank 0."""
+    return dolfinx.io.gmshio.model_to_mesh(model, comm, 0, gdim=gdim)
+
+
+def locate_boundary_facets(mesh, marker) -> np.ndarray:
+    """Process-local boundary facets whose vertices all satisfy ``marker(x)``, x of shape (3, n)."""
+    return dolfinx.mesh.locate_entities_boundary(mesh, mesh.topology.dim - 1, marker)
+
+
+def exterior_facets(mesh) -> np.ndarray:
+    """Process-local indices of the facets on the boundary of the domain."""
+    tdim = mesh.topology.dim
+    mesh.topology.create_connectivity(tdim - 1, tdim)
+    return dolfinx.mesh.exterior_facet_indices(mesh.topology)
