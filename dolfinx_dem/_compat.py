@@ -93,6 +93,19 @@ def local_mesh_data(mesh) -> LocalMeshData:
     )
 
 
+def dg0_cell_dofs(V) -> tuple[np.ndarray, int, int]:
+    """Global block index of the DG0 dof of each owned cell, and the owned block range.
+
+    DOLFINx reorders dofs, so cell ``c`` does not carry dof ``c``. dolfinx_dem numbers cells by
+    their DG0 dof, so that its PETSc operators share the layout of ``Function.vector``.
+    """
+    n = V.mesh.topology.index_map(V.mesh.topology.dim).size_local
+    local = np.asarray(V.dofmap.list.array, dtype=np.int32)[:n]
+    imap = V.dofmap.index_map
+    start, stop = imap.local_range
+    return np.asarray(imap.local_to_global(local), dtype=np.int64), int(start), int(stop)
+
+
 def local_facet_global_indices(mesh, facets: np.ndarray) -> np.ndarray:
     """Global indices of process-local facets."""
     facet_map = mesh.topology.index_map(mesh.topology.dim - 1)
@@ -139,3 +152,48 @@ def exterior_facets(mesh) -> np.ndarray:
     tdim = mesh.topology.dim
     mesh.topology.create_connectivity(tdim - 1, tdim)
     return dolfinx.mesh.exterior_facet_indices(mesh.topology)
+
+
+# --- FEM reference helpers ---
+
+
+def colliding_cells(mesh, points: np.ndarray) -> np.ndarray:
+    """For each point, one process-local (owned or ghost) cell containing it, else -1.
+
+    ``points`` has shape (n, 3); returns an int32 array of shape (n,).
+    """
+    import dolfinx.geometry
+
+    points = np.ascontiguousarray(points, dtype=np.float64).reshape(-1, 3)
+    tdim = mesh.topology.dim
+    tree = dolfinx.geometry.BoundingBoxTree(mesh, tdim)
+    candidates = dolfinx.geometry.compute_collisions(tree, points)
+    colliding = dolfinx.geometry.compute_colliding_cells(mesh, candidates, points)
+    cells = np.full(points.shape[0], -1, dtype=np.int32)
+    for i in range(points.shape[0]):
+        links = colliding.links(i)
+        if len(links) > 0:
+            cells[i] = links[0]
+    return cells
+
+
+# --- meshes / io helpers ---
+
+# `dolfinx.io` does not import its `gmshio` submodule in DOLFINx 0.5; `mesh_from_gmsh_model` needs it.
+import dolfinx.io.gmshio  # noqa: E402
+
+
+def owned_cell_nodes(mesh) -> tuple[np.ndarray, np.ndarray]:
+    """Geometry nodes of the owned cells: global node indices (n, k) int64, coordinates (n, k, 3).
+
+    ``n`` owned cells with ``k`` geometry nodes each (the vertices of an affine simplex mesh).
+    Global node indices are the same on every process, so shared vertices can be matched.
+    """
+    n = mesh.topology.index_map(mesh.topology.dim).size_local
+    k = mesh.geometry.cmap.create_dof_layout().num_dofs
+    nodes = mesh.geometry.dofmap.array.reshape(-1, k)[:n]
+    node_global = mesh.geometry.index_map().local_to_global(nodes.reshape(-1).astype(np.int32))
+    return (
+        np.asarray(node_global, dtype=np.int64).reshape(nodes.shape),
+        np.asarray(mesh.geometry.x[nodes], dtype=np.float64),
+    )

@@ -1,0 +1,105 @@
+# dolfinx_dem: setup / test / demo / bench.
+#
+# DOLFINx 0.5.2 and friends come from Debian 12 packages run by /usr/bin/python3;
+# the package itself and the few PyPI-only dependencies (pyvista, imageio) go
+# into .venv, created with --system-site-packages so the Debian modules are
+# visible. Every pip install uses constraints.txt so numpy stays at Debian's
+# 1.24.2 (numpy 2.x breaks DOLFINx).
+#
+# `make setup` is idempotent and takes a few seconds once everything is done:
+# apt-get only runs if dpkg reports a package missing, and pip only runs when
+# pyproject.toml or constraints.txt is newer than .venv/.installed.
+
+SHELL := /bin/bash
+.DEFAULT_GOAL := setup
+
+SYSTEM_PYTHON := /usr/bin/python3
+VENV          := .venv
+PYTHON        := $(VENV)/bin/python
+STAMP         := $(VENV)/.installed
+MPI_NP        ?= 2
+PYTEST_ARGS   ?=
+
+# Debian packages. openmpi-bin provides mpirun; the GL/EGL libraries let the
+# VTK wheel used by pyvista render off-screen (EGL, no X server needed).
+APT_PACKAGES := \
+	python3-dolfinx-real python3-gmsh python3-matplotlib python3-pytest \
+	python3-venv python3-dev python3-scipy python3-slepc4py python3-cffi \
+	python3-setuptools python3-wheel openmpi-bin ca-certificates \
+	libgl1 libegl1 libegl-mesa0 libgl1-mesa-dri
+
+PIP_PACKAGES := pyvista imageio
+
+export OMPI_ALLOW_RUN_AS_ROOT=1
+export OMPI_ALLOW_RUN_AS_ROOT_CONFIRM=1
+# Containers often forbid the cross-memory-attach (ptrace) used by Open MPI's
+# shared-memory transport; copying through shared memory works everywhere.
+export OMPI_MCA_btl_vader_single_copy_mechanism=none
+export PYVISTA_OFF_SCREEN=true
+
+.PHONY: setup apt verify test demo bench clean
+
+setup: $(STAMP) verify
+
+# --- Debian packages (only when some are missing) ----------------------------
+apt:
+	@command -v dpkg-query >/dev/null 2>&1 || { \
+	  echo "error: dpkg-query not found; this project needs Debian 12 (bookworm)." >&2; exit 1; }
+	@missing=""; \
+	for p in $(APT_PACKAGES); do \
+	  dpkg-query -W -f='$${db:Status-Abbrev}' "$$p" 2>/dev/null | grep -q '^ii' || missing="$$missing $$p"; \
+	done; \
+	if [ -n "$$missing" ]; then \
+	  if [ "$$(id -u)" -eq 0 ]; then SUDO=""; \
+	  elif command -v sudo >/dev/null 2>&1; then SUDO="sudo"; \
+	  else \
+	    echo "error: missing Debian packages:$$missing" >&2; \
+	    echo "error: not root and sudo is not available; as root run:" >&2; \
+	    echo "  apt-get update && apt-get install -y --no-install-recommends$$missing" >&2; \
+	    exit 1; \
+	  fi; \
+	  echo "Installing missing Debian packages:$$missing"; \
+	  if [ -z "$${APT_UPDATED:-}" ]; then $$SUDO apt-get update; fi; \
+	  $$SUDO env DEBIAN_FRONTEND=noninteractive \
+	    apt-get install -y --no-install-recommends $$missing; \
+	fi
+
+# --- virtual environment ------------------------------------------------------
+$(PYTHON): | apt
+	$(SYSTEM_PYTHON) -m venv --system-site-packages $(VENV)
+
+$(STAMP): pyproject.toml constraints.txt | $(PYTHON)
+	$(PYTHON) -m pip install --disable-pip-version-check -q \
+	  -c constraints.txt --no-build-isolation -e . $(PIP_PACKAGES)
+	@touch $@
+
+verify: | $(STAMP)
+	@$(PYTHON) -c "import dolfinx, numpy; assert numpy.__version__ == '1.24.2', numpy.__version__" || { \
+	  echo "error: $(VENV) cannot import DOLFINx with numpy 1.24.2." >&2; \
+	  echo "error: recreate it with: rm -rf $(VENV) && make setup" >&2; exit 1; }
+
+# --- tests --------------------------------------------------------------------
+# Serial run of the whole suite, then the tests marked `mpi` under mpirun.
+# pytest exit code 5 (nothing collected) is only tolerated when there are no
+# mpi-marked tests at all; any other failure is propagated.
+test: export OMP_NUM_THREADS = 1
+test: setup
+	$(PYTHON) -m pytest -q $(PYTEST_ARGS) tests
+	@$(PYTHON) -m pytest -q -m mpi --collect-only -p no:cacheprovider tests >/dev/null 2>&1; rc=$$?; \
+	if [ $$rc -eq 5 ]; then echo "No tests marked 'mpi': skipping the mpirun run."; exit 0; \
+	elif [ $$rc -ne 0 ]; then echo "error: collecting mpi tests failed (exit $$rc)" >&2; exit $$rc; fi; \
+	echo "mpirun -n $(MPI_NP) --oversubscribe $(PYTHON) -m pytest -q -m mpi -p no:cacheprovider $(PYTEST_ARGS) tests"; \
+	mpirun -n $(MPI_NP) --oversubscribe $(PYTHON) -m pytest -q -m mpi -p no:cacheprovider $(PYTEST_ARGS) tests
+
+# --- demo / benchmarks ----------------------------------------------------------
+demo: setup
+	$(VENV)/bin/dolfinx-dem run cantilever --out results/cantilever
+	@echo "Results of the cantilever scene are in $(CURDIR)/results/cantilever"
+
+bench: setup
+	$(PYTHON) benchmarks/run_all.py
+
+# --- cleaning (keeps .venv) -----------------------------------------------------
+clean:
+	rm -rf results build dist *.egg-info .pytest_cache
+	find . -path ./$(VENV) -prune -o -name __pycache__ -type d -print0 | xargs -0 rm -rf

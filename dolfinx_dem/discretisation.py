@@ -1,0 +1,258 @@
+"""The DEM space discretisation on a DOLFINx mesh: set up once, then forces and energies in PETSc.
+
+``DEMDiscretisation`` is the object at the API edge (paper §3): it computes the geometry, the
+reconstruction and the energy operators once, distributes their rows over the processes as PETSc
+matrices in the layout of the DG0 ``Function.vector``, and then offers
+
+- ``force(u, t, out)``: F = -dV/du (eq. (15)-(17)) plus the body force;
+- ``energies(u, t)``: elastic (11), stabilisation (13) and external potential, summed over ranks;
+- ``stress(u, t)``, ``von_mises(u, t)``: cellwise stress of eq. (9) for the owned cells;
+- ``mass``: the lumped mass rho |c| of each owned dof.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from collections.abc import Callable, Sequence
+
+import numpy as np
+import scipy.sparse
+from mpi4py import MPI
+from petsc4py import PETSc
+
+import dolfinx.fem
+
+from dolfinx_dem import _compat
+from dolfinx_dem.geometry import MeshGeometry, compute_geometry
+from dolfinx_dem.material import ElasticMaterial
+from dolfinx_dem.operators import EnergyOperators, compute_energy_operators
+from dolfinx_dem.reconstruction import Reconstruction, compute_reconstruction
+
+
+@dataclasses.dataclass(frozen=True)
+class DirichletBC:
+    """u_f = value on the given process-local boundary facets.
+
+    ``value`` is a constant vector of length d, or a callable ``value(x, t)`` with x of shape
+    (d, n) (facet barycentres) returning shape (d, n). Pass ``time_dependent=True`` when the
+    callable depends on t; otherwise it is evaluated once.
+    """
+
+    facets: np.ndarray
+    value: Sequence[float] | Callable
+    time_dependent: bool = False
+
+
+def _petsc_matrix(comm, rows: scipy.sparse.spmatrix, num_rows: int, local_cols: int):
+    """A distributed PETSc AIJ matrix of ``num_rows`` rows from this process's ``rows``."""
+    sub = rows.tocsr()
+    sub.sort_indices()
+    M = PETSc.Mat().createAIJ(
+        size=((sub.shape[0], num_rows), (local_cols, sub.shape[1])),
+        csr=(sub.indptr.astype(PETSc.IntType), sub.indices.astype(PETSc.IntType), sub.data),
+        comm=comm,
+    )
+    M.assemble()
+    return M
+
+
+class DEMDiscretisation:
+    """Cell-centred DEM for linear elasticity on a DOLFINx simplex mesh (1D, 2D, 3D).
+
+    Parameters
+    ----------
+    mesh : DOLFINx mesh; ghost mode ``shared_facet`` or ``none``.
+    material : ElasticMaterial.
+    scheme : "A" or "B", the Neumann boundary reconstruction (§3.4).
+    dirichlet : DirichletBC conditions; all other boundary facets are traction-free.
+    body_force : force per unit volume (N/m^d), a vector of length d, e.g. rho * g.
+    """
+
+    def __init__(
+        self,
+        mesh,
+        material: ElasticMaterial,
+        scheme: str = "A",
+        dirichlet: Sequence[DirichletBC] = (),
+        body_force: Sequence[float] | None = None,
+    ):
+        self.mesh = mesh
+        self.comm = mesh.comm
+        self.material = material
+        self.d = d = mesh.topology.dim
+        self.V = _compat.create_vector_space(mesh, "DG", 0)
+        self.geometry: MeshGeometry = compute_geometry(self.comm, mesh, self.V)
+        geom = self.geometry
+        rank = self.comm.rank
+        self.cell_range = (int(geom.owned_ranges[rank]), int(geom.owned_ranges[rank + 1]))
+        start, stop = self.cell_range
+        self.n_owned = stop - start
+
+        facet_lists, self._dirichlet = [], []
+        for bc in dirichlet:
+            facets = np.unique(np.concatenate(self.comm.allgather(
+                _compat.local_facet_global_indices(mesh, np.asarray(bc.facets, dtype=np.int32)))))
+            if facets.size == 0:
+                raise ValueError("a Dirichlet condition selects no facet (check its tag or marker)")
+            facet_lists.append(facets)
+            self._dirichlet.append((facets, bc))
+        all_dirichlet = np.concatenate(facet_lists) if facet_lists else np.empty(0, np.int64)
+        if len(np.unique(all_dirichlet)) != len(all_dirichlet):
+            raise ValueError("two Dirichlet conditions share a facet")
+        self.reconstruction: Reconstruction = compute_reconstruction(geom, material, all_dirichlet, scheme)
+
+        # Jump rows grouped by the owner of the facet's first cell: contiguous row blocks per rank.
+        interior = geom.interior_facets
+        owner = geom.owner_of_cells(geom.facet_cells[interior, 0])
+        jump_facets = interior[np.argsort(owner, kind="stable")]
+        counts = np.bincount(owner, minlength=self.comm.size)
+        jump_range = (int(counts[:rank].sum()) * d, int(counts[: rank + 1].sum()) * d)
+        self.operators: EnergyOperators = compute_energy_operators(geom, material, self.reconstruction, jump_facets)
+        ops = self.operators
+
+        m = d * (d + 1) // 2
+        cols = self.n_owned * d
+        self.S = _petsc_matrix(self.comm, ops.S[start * m : stop * m], ops.S.shape[0], cols)
+        self.J = _petsc_matrix(self.comm, ops.J[jump_range[0] : jump_range[1]], ops.J.shape[0], cols)
+        self.grad = _petsc_matrix(self.comm, ops.grad[start * d * d : stop * d * d], ops.grad.shape[0], cols)
+        self._S_dirichlet = ops.S_dirichlet[start * m : stop * m]
+        self._J_dirichlet = ops.J_dirichlet[jump_range[0] : jump_range[1]]
+        self._grad_dirichlet = ops.grad_dirichlet[start * d * d : stop * d * d]
+        own = slice(start * d, stop * d)
+        S_csc, J_csc = ops.S.tocsc(), ops.J.tocsc()
+        K_rows = S_csc[:, own].T @ ops.S + J_csc[:, own].T @ ops.J
+        self.K = _petsc_matrix(self.comm, K_rows, ops.S.shape[1], cols)
+
+        volumes = geom.cell_volumes[start:stop]
+        self.mass = self.create_vector()
+        self.mass.array[:] = np.repeat(material.rho * volumes, d)
+        self.inverse_mass = self.create_vector()
+        self.inverse_mass.array[:] = 1.0 / self.mass.array
+        self.body_force = self.create_vector()
+        if body_force is not None:
+            f = np.asarray(body_force, dtype=float)
+            if f.shape != (d,):
+                raise ValueError(f"body_force must have {d} components, got {f.shape}")
+            self.body_force.array[:] = (volumes[:, None] * f).ravel()
+
+        self._s, self._j = self.S.createVecLeft(), self.J.createVecLeft()
+        self._grad_vec = self.grad.createVecLeft()
+        self._offset = self.create_vector()  # S^T s(t) + J^T j(t)
+        self._lift_time = None
+        self._time_dependent = any(bc.time_dependent for _, bc in self._dirichlet)
+        self._update_dirichlet(0.0)
+
+    # -- vectors -----------------------------------------------------------------------------
+    def create_vector(self) -> PETSc.Vec:
+        """A PETSc vector with the layout of the owned DG0 dofs (cell-major, d per cell)."""
+        v = self.K.createVecRight()
+        v.set(0.0)
+        return v
+
+    def dirichlet_values(self, t: float) -> np.ndarray:
+        """g(t) of shape (n_D, d), in the order of ``reconstruction.dirichlet_facets``."""
+        rec, d = self.reconstruction, self.d
+        g = np.zeros((len(rec.dirichlet_facets), d))
+        for facets, bc in self._dirichlet:
+            index = np.searchsorted(rec.dirichlet_facets, facets)
+            if callable(bc.value):
+                x = self.geometry.facet_centres[facets].T
+                g[index] = np.asarray(bc.value(x, t), dtype=float).reshape(d, -1).T
+            else:
+                value = np.asarray(bc.value, dtype=float)
+                if value.shape != (d,):
+                    raise ValueError(f"a constant Dirichlet value needs {d} components, got {value.shape}")
+                g[index] = value
+        return g
+
+    def _update_dirichlet(self, t: float):
+        if self._lift_time is not None and (not self._time_dependent or self._lift_time == t):
+            return
+        g = self.dirichlet_values(t).ravel()
+        self._g = g
+        self._s_lift = self._S_dirichlet @ g
+        self._j_lift = self._J_dirichlet @ g
+        self._s.array[:] = self._s_lift
+        self._j.array[:] = self._j_lift
+        self.S.multTranspose(self._s, self._offset)
+        self.J.multTransposeAdd(self._j, self._offset, self._offset)
+        self._lift_time = t
+
+    # -- forces and energies -----------------------------------------------------------------
+    def force(self, u: PETSc.Vec, t: float, out: PETSc.Vec) -> PETSc.Vec:
+        """out = -K u - (S^T s(t) + J^T j(t)) + f: the exact negative gradient of the potential."""
+        self._update_dirichlet(t)
+        self.K.mult(u, out)
+        out.axpy(1.0, self._offset)
+        out.aypx(-1.0, self.body_force)
+        return out
+
+    def energies(self, u: PETSc.Vec, t: float) -> dict[str, float]:
+        """Elastic (eq. (11)), stabilisation (eq. (13)) and external potential -f.u; global sums."""
+        self._update_dirichlet(t)
+        self.S.mult(u, self._s)
+        self._s.array[:] += self._s_lift
+        self.J.mult(u, self._j)
+        self._j.array[:] += self._j_lift
+        return {
+            "elastic": 0.5 * self._s.dot(self._s),
+            "stabilisation": 0.5 * self._j.dot(self._j),
+            "external": -self.body_force.dot(u),
+        }
+
+    def gradient(self, u: PETSc.Vec, t: float) -> np.ndarray:
+        """Cell gradients G_c of eq. (8) for the owned cells, shape (n_owned, d, d)."""
+        self._update_dirichlet(t)
+        self.grad.mult(u, self._grad_vec)
+        G = self._grad_vec.array + self._grad_dirichlet @ self._g
+        return G.reshape(self.n_owned, self.d, self.d)
+
+    def stress(self, u: PETSc.Vec, t: float) -> np.ndarray:
+        """Cell stresses sigma_c of eq. (9), shape (n_owned, d, d) (in-plane part in 2D)."""
+        return self.material.stress(self.gradient(u, t))
+
+    def von_mises(self, u: PETSc.Vec, t: float) -> np.ndarray:
+        """Von Mises stress of the owned cells (Pa); the out-of-plane stress of plane strain counts."""
+        G = self.gradient(u, t)
+        sigma = self.material.stress(G)
+        d = self.d
+        if d == 1:
+            return np.abs(sigma[:, 0, 0])
+        s = np.zeros((self.n_owned, 3, 3))
+        s[:, :d, :d] = sigma
+        if d == 2 and self.material.plane == "strain":
+            lmbda, _ = self.material.lame(2)
+            s[:, 2, 2] = lmbda * (G[:, 0, 0] + G[:, 1, 1])
+        dev = s - np.trace(s, axis1=1, axis2=2)[:, None, None] * np.eye(3) / 3
+        return np.sqrt(1.5 * np.einsum("nij,nij->n", dev, dev))
+
+    def stable_time_step(self, rtol: float = 1e-6) -> float:
+        """dt_max = 2 / sqrt(lambda_max(M^-1 K)), the linear stability limit of MEMM (leapfrog)."""
+        from slepc4py import SLEPc
+
+        A = self.K.copy()
+        scale = self.inverse_mass.copy()
+        scale.sqrtabs()
+        A.diagonalScale(scale, scale)
+        eps = SLEPc.EPS().create(self.comm)
+        eps.setOperators(A)
+        eps.setProblemType(SLEPc.EPS.ProblemType.HEP)
+        eps.setWhichEigenpairs(SLEPc.EPS.Which.LARGEST_REAL)
+        eps.setDimensions(1)
+        eps.setTolerances(rtol, 1000)
+        eps.solve()
+        if eps.getConverged() < 1:
+            raise RuntimeError("the largest eigenvalue of M^-1 K did not converge")
+        lmax = eps.getEigenvalue(0).real
+        eps.destroy()
+        A.destroy()
+        return 2.0 / np.sqrt(lmax)
+
+    # -- DOLFINx functions -------------------------------------------------------------------
+    def function(self, values: PETSc.Vec | None = None, name: str = "u") -> dolfinx.fem.Function:
+        """A DG0 vector Function holding ``values`` (owned dofs), ghosts updated."""
+        f = dolfinx.fem.Function(self.V, name=name)
+        if values is not None:
+            _compat.petsc_vec(f).array_w[: self.n_owned * self.d] = values.array_r
+            f.x.scatter_forward()
+        return f

@@ -1,0 +1,1 @@
+"""DOLFINx finite-element reference solvers, to validate the DEM against."""

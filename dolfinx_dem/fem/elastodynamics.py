@@ -1,0 +1,452 @@
+"""DOLFINx finite-element reference for linear elastodynamics.
+
+Small-strain isotropic linear elasticity on a simplex mesh (1D, 2D, 3D), Lagrange P1/P2 vector
+displacements, consistent mass matrix, clamped (``u = 0``) facets:
+
+    M a + K u = F
+
+* :class:`FEMElastodynamics` integrates in time with the implicit Newmark average-acceleration
+  scheme (beta = 1/4, gamma = 1/2): unconditionally stable, second-order accurate and, without
+  external forces, exactly conserving ``1/2 v.M v + 1/2 u.K u``.
+* :func:`first_eigenfrequency` returns the lowest natural angular frequencies from the generalized
+  eigenproblem ``K x = omega^2 M x`` (SLEPc, shift-and-invert around 0).
+
+Units are SI: E in Pa, rho in kg/m^3, body force in N/m^3, lengths in m, time in s. In 2D the
+default is plane strain (``plane_stress=True`` for plane stress); in 1D ``sigma = E u'`` and nu is
+unused. All collective methods must be called on every rank of ``mesh.comm``.
+"""
+
+from __future__ import annotations
+
+import typing
+
+import numpy as np
+import numpy.typing as npt
+import ufl
+from mpi4py import MPI
+from petsc4py import PETSc
+
+import dolfinx
+import dolfinx.fem
+import dolfinx.fem.petsc
+import dolfinx.mesh
+
+from dolfinx_dem import _compat
+
+__all__ = ["FEMElastodynamics", "evaluate_at_points", "first_eigenfrequency"]
+
+VectorField = typing.Callable[[np.ndarray], npt.ArrayLike]
+"""A callable ``x -> values``, x of shape (gdim, n) in m, values of shape (gdim, n)."""
+
+_SIMPLICES = (
+    dolfinx.mesh.CellType.interval,
+    dolfinx.mesh.CellType.triangle,
+    dolfinx.mesh.CellType.tetrahedron,
+)
+
+
+# --- validation ---------------------------------------------------------------------------------
+
+
+def _check_mesh(mesh) -> None:
+    if mesh.topology.cell_type not in _SIMPLICES:
+        raise ValueError(f"mesh must be a simplex mesh, got cell type {mesh.topology.cell_type}")
+    if mesh.geometry.dim != mesh.topology.dim:
+        raise ValueError(
+            f"mesh must have geometric dimension equal to its topological dimension, got "
+            f"gdim={mesh.geometry.dim}, tdim={mesh.topology.dim}"
+        )
+
+
+def _check_degree(degree) -> int:
+    is_int = isinstance(degree, (int, np.integer)) and not isinstance(degree, bool)
+    if not is_int or degree not in (1, 2):
+        raise ValueError(f"degree must be 1 or 2 (Lagrange), got {degree!r}")
+    return int(degree)
+
+
+def _check_positive(name: str, value) -> float:
+    value = float(value)
+    if not (np.isfinite(value) and value > 0.0):
+        raise ValueError(f"{name} must be finite and > 0, got {value!r}")
+    return value
+
+
+def _check_material(E, nu, rho) -> tuple[float, float, float]:
+    E = _check_positive("E (Young's modulus)", E)
+    rho = _check_positive("rho (density)", rho)
+    nu = float(nu)
+    if not (-1.0 < nu < 0.5):
+        raise ValueError(f"nu (Poisson's ratio) must satisfy -1 < nu < 0.5, got {nu!r}")
+    return E, nu, rho
+
+
+def _check_facets(mesh, clamped_facets) -> np.ndarray:
+    facets = np.asarray(clamped_facets)
+    if facets.ndim != 1 or (facets.size > 0 and not np.issubdtype(facets.dtype, np.integer)):
+        raise ValueError("clamped_facets must be a 1D array of process-local facet indices")
+    fdim = mesh.topology.dim - 1
+    mesh.topology.create_entities(fdim)
+    imap = mesh.topology.index_map(fdim)
+    num_facets = imap.size_local + imap.num_ghosts
+    if facets.size > 0 and (facets.min() < 0 or facets.max() >= num_facets):
+        raise ValueError(
+            f"clamped_facets must be process-local facet indices in [0, {num_facets}), got "
+            f"values in [{facets.min()}, {facets.max()}]"
+        )
+    return facets.astype(np.int32)
+
+
+# --- forms and solvers --------------------------------------------------------------------------
+
+
+def _lame(E: float, nu: float, plane_stress: bool, gdim: int) -> tuple[float, float]:
+    """Lamé parameters (lambda, mu) in Pa; plane stress uses the reduced lambda in 2D."""
+    mu = E / (2.0 * (1.0 + nu))
+    lmbda = E * nu / ((1.0 + nu) * (1.0 - 2.0 * nu))
+    if gdim == 2 and plane_stress:
+        lmbda = 2.0 * lmbda * mu / (lmbda + 2.0 * mu)
+    return lmbda, mu
+
+
+def _stiffness_and_mass(V, E: float, nu: float, rho: float, plane_stress: bool):
+    """UFL bilinear forms of the stiffness K (N/m) and the consistent mass M (kg)."""
+    gdim = V.mesh.geometry.dim
+    u, w = ufl.TrialFunction(V), ufl.TestFunction(V)
+
+    def eps(z):
+        return ufl.sym(ufl.grad(z))
+
+    if gdim == 1:
+        sigma = E * eps(u)
+    else:
+        lmbda, mu = _lame(E, nu, plane_stress, gdim)
+        sigma = lmbda * ufl.tr(eps(u)) * ufl.Identity(gdim) + 2.0 * mu * eps(u)
+    k = ufl.inner(sigma, eps(w)) * ufl.dx
+    m = rho * ufl.inner(u, w) * ufl.dx
+    return k, m
+
+
+def _clamped_bc(V, facets: np.ndarray):
+    mesh = V.mesh
+    fdim = mesh.topology.dim - 1
+    mesh.topology.create_connectivity(fdim, mesh.topology.dim)
+    dofs = dolfinx.fem.locate_dofs_topological(V, fdim, facets)
+    zero = np.zeros(mesh.geometry.dim, dtype=PETSc.ScalarType)
+    return dolfinx.fem.dirichletbc(zero, dofs, V)
+
+
+def _configure_lu(ksp: PETSc.KSP) -> None:
+    """Direct solve: one LU factorization (MUMPS if PETSc has it; needed in parallel)."""
+    ksp.setType(PETSc.KSP.Type.PREONLY)
+    pc = ksp.getPC()
+    pc.setType(PETSc.PC.Type.LU)
+    if PETSc.Sys.hasExternalPackage("mumps"):
+        pc.setFactorSolverType("mumps")
+
+
+def _lu_solver(comm: MPI.Comm, A: PETSc.Mat) -> PETSc.KSP:
+    ksp = PETSc.KSP().create(comm)
+    ksp.setOperators(A)
+    _configure_lu(ksp)
+    ksp.setUp()
+    return ksp
+
+
+# --- time integration ---------------------------------------------------------------------------
+
+
+class FEMElastodynamics:
+    """Newmark average-acceleration FEM solver for linear elastodynamics.
+
+    Each step solves ``(K + 4/dt^2 M) u_{n+1} = F + M (4/dt^2 u_n + 4/dt v_n + a_n)`` with an LU
+    factorization computed once at construction, then updates ``a`` and ``v``.
+
+    Args:
+        mesh: DOLFINx simplex mesh with gdim == tdim (1, 2 or 3), lengths in m.
+        degree: Lagrange degree of the displacement, 1 or 2.
+        E: Young's modulus (Pa), > 0.
+        nu: Poisson's ratio, -1 < nu < 0.5 (unused in 1D).
+        rho: Density (kg/m^3), > 0.
+        dt: Time step (s), > 0.
+        clamped_facets: Process-local indices of the facets where ``u = 0``, shape (k,).
+        body_force: Constant body force (N/m^3), shape (gdim,); ``None`` for none.
+        initial_displacement: ``x -> u0(x)`` (m), x of shape (gdim, n), returns (gdim, n).
+        initial_velocity: ``x -> v0(x)`` (m/s), same shapes.
+        plane_stress: In 2D, plane stress instead of plane strain.
+
+    Initial fields are interpolated and then set to 0 on the clamped dofs; the initial
+    acceleration solves ``M a_0 = F - K u_0``.
+    """
+
+    def __init__(
+        self,
+        mesh,
+        degree: int,
+        E: float,
+        nu: float,
+        rho: float,
+        dt: float,
+        clamped_facets: npt.ArrayLike,
+        *,
+        body_force: typing.Optional[npt.ArrayLike] = None,
+        initial_displacement: typing.Optional[VectorField] = None,
+        initial_velocity: typing.Optional[VectorField] = None,
+        plane_stress: bool = False,
+    ):
+        _check_mesh(mesh)
+        degree = _check_degree(degree)
+        E, nu, rho = _check_material(E, nu, rho)
+        self.dt = _check_positive("dt (time step)", dt)
+        facets = _check_facets(mesh, clamped_facets)
+        gdim = mesh.geometry.dim
+        if body_force is not None:
+            body_force = np.asarray(body_force, dtype=PETSc.ScalarType)
+            if body_force.shape != (gdim,):
+                raise ValueError(f"body_force must have shape ({gdim},), got {body_force.shape}")
+
+        self.mesh = mesh
+        self.comm: MPI.Comm = mesh.comm
+        self.t = 0.0
+        self.V = _compat.create_vector_space(mesh, "Lagrange", degree)
+        self.u = dolfinx.fem.Function(self.V, name="displacement")
+        self.v = dolfinx.fem.Function(self.V, name="velocity")
+        self.a = dolfinx.fem.Function(self.V, name="acceleration")
+        self._bcs = [_clamped_bc(self.V, facets)]
+
+        k, m = _stiffness_and_mass(self.V, E, nu, rho, plane_stress)
+        dt = self.dt
+        self._c0, self._c1 = 4.0 / dt**2, 4.0 / dt
+        # Unconstrained K and M for energies and right-hand sides; A with the clamped rows.
+        self._K = dolfinx.fem.petsc.assemble_matrix(dolfinx.fem.form(k))
+        self._K.assemble()
+        self._M = dolfinx.fem.petsc.assemble_matrix(dolfinx.fem.form(m))
+        self._M.assemble()
+        A = dolfinx.fem.petsc.assemble_matrix(
+            dolfinx.fem.form(k + self._c0 * m), bcs=self._bcs, diagonal=1.0
+        )
+        A.assemble()
+        self._solver = _lu_solver(self.comm, A)
+
+        u_vec = _compat.petsc_vec(self.u)
+        self._F = None
+        if body_force is not None and np.any(body_force != 0.0):
+            w = ufl.TestFunction(self.V)
+            f = dolfinx.fem.Constant(mesh, body_force)
+            self._F = dolfinx.fem.petsc.assemble_vector(dolfinx.fem.form(ufl.inner(f, w) * ufl.dx))
+            self._F.ghostUpdate(addv=PETSc.InsertMode.ADD, mode=PETSc.ScatterMode.REVERSE)
+        self._b = u_vec.copy()
+        self._work = u_vec.copy()
+        self._u_old = u_vec.copy()
+
+        for func, field, name in (
+            (self.u, initial_displacement, "initial_displacement"),
+            (self.v, initial_velocity, "initial_velocity"),
+        ):
+            if field is not None:
+                func.interpolate(_vector_field(field, gdim, name))
+                self._apply_clamp(func)
+        if initial_displacement is not None or self._F is not None:
+            self._initial_acceleration(m)
+
+    def _apply_clamp(self, func) -> None:
+        vec = _compat.petsc_vec(func)
+        dolfinx.fem.petsc.set_bc(vec, self._bcs)
+        vec.ghostUpdate(addv=PETSc.InsertMode.INSERT, mode=PETSc.ScatterMode.FORWARD)
+
+    def _initial_acceleration(self, m) -> None:
+        """Solve ``M a_0 = F - K u_0`` with a_0 = 0 on the clamped dofs."""
+        Mbc = dolfinx.fem.petsc.assemble_matrix(dolfinx.fem.form(m), bcs=self._bcs, diagonal=1.0)
+        Mbc.assemble()
+        solver = _lu_solver(self.comm, Mbc)
+        self._K.mult(_compat.petsc_vec(self.u), self._b)
+        self._b.scale(-1.0)
+        if self._F is not None:
+            self._b.axpy(1.0, self._F)
+        dolfinx.fem.petsc.set_bc(self._b, self._bcs)
+        a_vec = _compat.petsc_vec(self.a)
+        solver.solve(self._b, a_vec)
+        a_vec.ghostUpdate(addv=PETSc.InsertMode.INSERT, mode=PETSc.ScatterMode.FORWARD)
+        solver.destroy()
+        Mbc.destroy()
+
+    def step(self) -> None:
+        """Advance ``u``, ``v``, ``a`` and ``t`` by one time step ``dt`` (collective)."""
+        u, v, a = (_compat.petsc_vec(f) for f in (self.u, self.v, self.a))
+        b, w, u_old = self._b, self._work, self._u_old
+        c0, c1, half_dt = self._c0, self._c1, 0.5 * self.dt
+
+        # b = F + M (c0 u_n + c1 v_n + a_n), zero on clamped rows
+        u.copy(w)
+        w.scale(c0)
+        w.axpy(c1, v)
+        w.axpy(1.0, a)
+        self._M.mult(w, b)
+        if self._F is not None:
+            b.axpy(1.0, self._F)
+        dolfinx.fem.petsc.set_bc(b, self._bcs)
+
+        u.copy(u_old)
+        self._solver.solve(b, u)
+        if self._solver.getConvergedReason() < 0:
+            raise RuntimeError(f"LU solve failed: {self._solver.getConvergedReason()}")
+
+        # a_{n+1} = c0 (u_{n+1} - u_n) - c1 v_n - a_n ;  v_{n+1} = v_n + dt/2 (a_n + a_{n+1})
+        a.copy(w)  # w = a_n
+        a.scale(-1.0)
+        a.axpy(c0, u)
+        a.axpy(-c0, u_old)
+        a.axpy(-c1, v)
+        v.axpy(half_dt, w)
+        v.axpy(half_dt, a)
+        for vec in (u, v, a):
+            vec.ghostUpdate(addv=PETSc.InsertMode.INSERT, mode=PETSc.ScatterMode.FORWARD)
+        self.t += self.dt
+
+    def energies(self) -> tuple[float, float]:
+        """(kinetic, elastic) energy in J, ``1/2 v.M v`` and ``1/2 u.K u``, summed over ranks.
+
+        Without body force their sum is conserved by the scheme up to round-off.
+        """
+        u, v = _compat.petsc_vec(self.u), _compat.petsc_vec(self.v)
+        w = self._work
+        self._M.mult(v, w)
+        kinetic = 0.5 * v.dot(w)
+        self._K.mult(u, w)
+        elastic = 0.5 * u.dot(w)
+        return float(kinetic), float(elastic)
+
+    def point_values(self, points: npt.ArrayLike) -> np.ndarray:
+        """Displacement (m) at points, shape (n, gdim), from points of shape (n, gdim) in m.
+
+        Collective: every rank must pass the same points and gets all values. Raises ValueError
+        if a point is outside the mesh.
+        """
+        return evaluate_at_points(self.u, points)
+
+
+def _vector_field(field: VectorField, gdim: int, name: str):
+    """Wrap a user callable (gdim, n) -> (gdim, n) for DOLFINx interpolation (x is (3, n))."""
+    if not callable(field):
+        raise ValueError(f"{name} must be a callable x -> values, got {type(field).__name__}")
+
+    def wrapped(x: np.ndarray) -> np.ndarray:
+        values = np.asarray(field(x[:gdim]), dtype=PETSc.ScalarType)
+        if values.shape != (gdim, x.shape[1]):
+            raise ValueError(
+                f"{name} must return an array of shape (gdim, n) = ({gdim}, {x.shape[1]}), got "
+                f"{values.shape}"
+            )
+        return values
+
+    return wrapped
+
+
+def evaluate_at_points(function, points: npt.ArrayLike) -> np.ndarray:
+    """Values of a (vector) Function at points, gathered on every rank (collective).
+
+    Args:
+        function: A DOLFINx Function on a mesh with geometric dimension gdim.
+        points: Shape (n, gdim) (or (gdim,) for one point).
+
+    Returns:
+        Shape (n, value_size); each value comes from the lowest rank that holds the point.
+    """
+    mesh = function.function_space.mesh
+    comm = mesh.comm
+    gdim = mesh.geometry.dim
+    pts = np.asarray(points, dtype=np.float64)
+    if pts.ndim == 1 and pts.shape[0] == gdim:
+        pts = pts[None, :]
+    if pts.ndim != 2 or pts.shape[1] != gdim:
+        raise ValueError(f"points must have shape (n, {gdim}), got {np.shape(points)}")
+    n = pts.shape[0]
+    x = np.zeros((n, 3), dtype=np.float64)
+    x[:, :gdim] = pts
+
+    cells = _compat.colliding_cells(mesh, x)
+    found = cells >= 0
+    owner = np.where(found, comm.rank, comm.size).astype(np.int32)
+    comm.Allreduce(MPI.IN_PLACE, owner, op=MPI.MIN)
+    if np.any(owner == comm.size):
+        missing = pts[owner == comm.size]
+        raise ValueError(f"points outside the mesh: {missing.tolist()}")
+
+    value_size = function.function_space.dofmap.index_map_bs
+    values = np.zeros((n, value_size), dtype=np.float64)
+    mine = owner == comm.rank
+    if np.any(mine):
+        values[mine] = np.real(function.eval(x[mine], cells[mine])).reshape(-1, value_size)
+    comm.Allreduce(MPI.IN_PLACE, values, op=MPI.SUM)
+    return values
+
+
+# --- eigenfrequencies ---------------------------------------------------------------------------
+
+
+def first_eigenfrequency(
+    mesh,
+    degree: int,
+    E: float,
+    nu: float,
+    rho: float,
+    clamped_facets: npt.ArrayLike,
+    n: int = 1,
+    *,
+    plane_stress: bool = False,
+) -> np.ndarray:
+    """The ``n`` lowest natural angular frequencies omega (rad/s) of the clamped body.
+
+    Solves ``K x = omega^2 M x`` with SLEPc (generalized Hermitian, shift-and-invert around 0,
+    LU). The clamped rows carry 1 on the diagonal of K and 0 on that of M, so their eigenvalues
+    are infinite and never returned.
+
+    Args:
+        mesh, degree, E, nu, rho, clamped_facets, plane_stress: As for :class:`FEMElastodynamics`;
+            ``clamped_facets`` must be non-empty on some rank (else K is singular).
+        n: Number of frequencies, >= 1.
+
+    Returns:
+        Ascending omega, shape (n,), identical on every rank.
+    """
+    from slepc4py import SLEPc
+
+    _check_mesh(mesh)
+    degree = _check_degree(degree)
+    E, nu, rho = _check_material(E, nu, rho)
+    facets = _check_facets(mesh, clamped_facets)
+    if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or n < 1:
+        raise ValueError(f"n (number of frequencies) must be an integer >= 1, got {n!r}")
+    comm = mesh.comm
+    if comm.allreduce(facets.size, op=MPI.SUM) == 0:
+        raise ValueError("clamped_facets is empty on every rank: the free body has zero modes")
+
+    V = _compat.create_vector_space(mesh, "Lagrange", degree)
+    bcs = [_clamped_bc(V, facets)]
+    k, m = _stiffness_and_mass(V, E, nu, rho, plane_stress)
+    K = dolfinx.fem.petsc.assemble_matrix(dolfinx.fem.form(k), bcs=bcs, diagonal=1.0)
+    K.assemble()
+    M = dolfinx.fem.petsc.assemble_matrix(dolfinx.fem.form(m), bcs=bcs, diagonal=0.0)
+    M.assemble()
+
+    eps = SLEPc.EPS().create(comm)
+    eps.setOperators(K, M)
+    eps.setProblemType(SLEPc.EPS.ProblemType.GHEP)
+    eps.setDimensions(nev=int(n))
+    eps.setWhichEigenpairs(SLEPc.EPS.Which.TARGET_MAGNITUDE)
+    eps.setTarget(0.0)
+    eps.setTolerances(tol=1e-12, max_it=1000)
+    st = eps.getST()
+    st.setType(SLEPc.ST.Type.SINVERT)
+    st.setShift(0.0)
+    _configure_lu(st.getKSP())
+    eps.solve()
+
+    lam = np.array([eps.getEigenvalue(i).real for i in range(eps.getConverged())])
+    eps.destroy()
+    K.destroy()
+    M.destroy()
+    lam = np.sort(lam[np.isfinite(lam) & (lam > 0.0)])
+    if lam.size < n:
+        raise RuntimeError(f"SLEPc converged only {lam.size} of the {n} requested eigenvalues")
+    return np.sqrt(lam[:n])
