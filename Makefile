@@ -25,7 +25,7 @@ PYTEST_ARGS   ?=
 APT_PACKAGES := \
 	python3-dolfinx-real python3-gmsh python3-matplotlib python3-pytest \
 	python3-venv python3-dev python3-scipy python3-slepc4py python3-cffi \
-	python3-setuptools python3-wheel openmpi-bin ca-certificates \
+	python3-setuptools python3-wheel openmpi-bin ca-certificates gcc \
 	libgl1 libegl1 libegl-mesa0 libgl1-mesa-dri
 
 PIP_PACKAGES := pyvista imageio
