@@ -100,10 +100,15 @@ def dg0_cell_dofs(V) -> tuple[np.ndarray, int, int]:
     their DG0 dof, so that its PETSc operators share the layout of ``Function.vector``.
     """
     n = V.mesh.topology.index_map(V.mesh.topology.dim).size_local
-    local = np.asarray(V.dofmap.list.array, dtype=np.int32)[:n]
+    local = cell_dofs(V)[:n]
     imap = V.dofmap.index_map
     start, stop = imap.local_range
     return np.asarray(imap.local_to_global(local), dtype=np.int64), int(start), int(stop)
+
+
+def cell_dofs(V) -> np.ndarray:
+    """The (block) dof of each process-local cell in a DG0 space, shape (n_cells_local,)."""
+    return np.asarray(V.dofmap.list.array, dtype=np.int32)
 
 
 def local_facet_global_indices(mesh, facets: np.ndarray) -> np.ndarray:
@@ -179,7 +184,7 @@ def colliding_cells(mesh, points: np.ndarray) -> np.ndarray:
 
 # --- meshes / io helpers ---
 
-# `dolfinx.io` does not import its `gmshio` submodule in DOLFINx 0.5; `mesh_from_gmsh_model` needs it.
+# `dolfinx.io` does not import its gmshio submodule in DOLFINx 0.5; mesh_from_gmsh_model needs it.
 import dolfinx.io.gmshio  # noqa: E402
 
 
@@ -197,3 +202,28 @@ def owned_cell_nodes(mesh) -> tuple[np.ndarray, np.ndarray]:
         np.asarray(node_global, dtype=np.int64).reshape(nodes.shape),
         np.asarray(mesh.geometry.x[nodes], dtype=np.float64),
     )
+
+
+def import_pyvista():
+    """Import pyvista so that VTK keeps its own C++ template instances; returns the module.
+
+    Debian's DOLFINx 0.5 leaves ``sys.setdlopenflags(RTLD_NOW | RTLD_GLOBAL)`` set, so its
+    libraries' std::regex instances (other std::string ABI) interpose VTK's, and VTK aborts with
+    std::bad_alloc when it draws a scalar bar. Loading VTK with RTLD_DEEPBIND makes it bind to its
+    own. This only helps if pyvista was not imported after DOLFINx elsewhere before. Without an X
+    display, VTK renders with EGL (instead of warning that the X connection failed first).
+    """
+    import os
+    import sys
+
+    if not os.environ.get("DISPLAY"):
+        os.environ.setdefault("VTK_DEFAULT_OPENGL_WINDOW", "vtkEGLRenderWindow")
+    flags = sys.getdlopenflags()
+    sys.setdlopenflags(os.RTLD_NOW | os.RTLD_DEEPBIND)
+    try:
+        import pyvista
+        import vtkmodules.vtkRenderingAnnotation  # noqa: F401
+        import vtkmodules.vtkRenderingOpenGL2  # noqa: F401
+    finally:
+        sys.setdlopenflags(flags)
+    return pyvista

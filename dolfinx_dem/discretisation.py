@@ -249,6 +249,19 @@ class DEMDiscretisation:
         return 2.0 / np.sqrt(lmax)
 
     # -- DOLFINx functions -------------------------------------------------------------------
+    def scalar_function(self, values: np.ndarray, name: str) -> dolfinx.fem.Function:
+        """A DG0 scalar Function from per-cell ``values`` (n_owned,) in dolfinx_dem's cell order."""
+        if not hasattr(self, "_Q"):
+            self._Q = _compat.create_scalar_space(self.mesh, "DG", 0)
+            n = self.mesh.topology.index_map(self.d).size_local
+            block = _compat.cell_dofs(self.V)[:n]  # dolfinx_dem's local cell order
+            self._q_of_block = np.empty(n, dtype=np.int32)
+            self._q_of_block[block] = _compat.cell_dofs(self._Q)[:n]
+        f = dolfinx.fem.Function(self._Q, name=name)
+        f.x.array[self._q_of_block] = values
+        f.x.scatter_forward()
+        return f
+
     def function(self, values: PETSc.Vec | None = None, name: str = "u") -> dolfinx.fem.Function:
         """A DG0 vector Function holding ``values`` (owned dofs), ghosts updated."""
         f = dolfinx.fem.Function(self.V, name=name)

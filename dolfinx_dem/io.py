@@ -155,14 +155,20 @@ class SeriesWriter:
     """
 
     def __init__(
-        self, comm: MPI.Comm, path: str | pathlib.Path, columns: Sequence[str], flush_every: int = 10
+        self,
+        comm: MPI.Comm,
+        path: str | pathlib.Path,
+        columns: Sequence[str],
+        flush_every: int = 10,
     ):
         columns = tuple(columns)
         if not columns:
             raise ValueError("columns must name at least one column")
         for name in columns:
             if not isinstance(name, str) or not name or any(c in name for c in ",\n\r\""):
-                raise ValueError(f"column names must be non-empty, without , \" or newlines: {name!r}")
+                raise ValueError(
+                    f"column names must be non-empty, without , \" or newlines, got {name!r}"
+                )
         if len(set(columns)) != len(columns):
             raise ValueError(f"column names must be unique, got {columns}")
         if not (isinstance(flush_every, int) and flush_every >= 1):

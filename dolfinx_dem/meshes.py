@@ -50,7 +50,9 @@ def _check_corners(p0, p1, d: int) -> tuple[np.ndarray, np.ndarray]:
     if a.shape != (d,) or b.shape != (d,):
         raise ValueError(f"corners must have {d} coordinate(s), got p0={p0!r}, p1={p1!r}")
     if not (np.all(np.isfinite(a)) and np.all(np.isfinite(b)) and np.all(b > a)):
-        raise ValueError(f"need finite corners with p1 > p0 componentwise, got p0={p0!r}, p1={p1!r}")
+        raise ValueError(
+            f"need finite corners with p1 > p0 componentwise, got p0={p0!r}, p1={p1!r}"
+        )
     return a, b
 
 
@@ -85,7 +87,11 @@ def create_interval(comm: MPI.Comm, n: int, x0: float, x1: float):
 
 
 def create_rectangle(
-    comm: MPI.Comm, p0: Sequence[float], p1: Sequence[float], n: Sequence[int], diagonal: str = "right"
+    comm: MPI.Comm,
+    p0: Sequence[float],
+    p1: Sequence[float],
+    n: Sequence[int],
+    diagonal: str = "right",
 ):
     """Rectangle [p0, p1] (m) of 2 n[0] n[1] triangles; facet tags XMIN, XMAX, YMIN, YMAX.
 
@@ -102,7 +108,7 @@ def create_rectangle(
         counts,
         cell_type=dolfinx.mesh.CellType.triangle,
         ghost_mode=dolfinx.mesh.GhostMode.shared_facet,
-        diagonal=dolfinx.mesh.DiagonalType[diagonal],
+        diagonal=getattr(dolfinx.mesh.DiagonalType, diagonal),
     )
     return mesh, None, _tag_sides(mesh, a, b)
 
@@ -125,17 +131,19 @@ def _mesh_from_gmsh(comm: MPI.Comm, build: Callable[[], int]):
     """Run ``build`` on rank 0 in a fresh gmsh session, then distribute the mesh.
 
     ``build`` fills the gmsh model (with physical groups) and returns the geometric dimension.
-    Its exceptions are raised on every rank.
+    Its exceptions are raised on every rank. The tags are named "cell_tags" and "facet_tags".
     """
     if comm.rank == 0:
         gmsh.initialize()
         gmsh.option.setNumber("General.Terminal", 0)
     try:
         gdim = call_on_root(comm, build)
-        return _compat.mesh_from_gmsh_model(gmsh.model, comm, gdim)
+        mesh, cell_tags, facet_tags = _compat.mesh_from_gmsh_model(gmsh.model, comm, gdim)
     finally:
         if comm.rank == 0:
             gmsh.finalize()
+    cell_tags.name, facet_tags.name = "cell_tags", "facet_tags"
+    return mesh, cell_tags, facet_tags
 
 
 def create_discs(comm: MPI.Comm, discs: Sequence[tuple[Sequence[float], float]], h: float):
@@ -181,9 +189,7 @@ def create_discs(comm: MPI.Comm, discs: Sequence[tuple[Sequence[float], float]],
         gmsh.model.mesh.generate(2)
         return 2
 
-    mesh, cell_tags, facet_tags = _mesh_from_gmsh(comm, build)
-    cell_tags.name, facet_tags.name = "cell_tags", "facet_tags"
-    return mesh, cell_tags, facet_tags
+    return _mesh_from_gmsh(comm, build)
 
 
 def create_disc(comm: MPI.Comm, centre: Sequence[float], radius: float, h: float):

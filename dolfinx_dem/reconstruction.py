@@ -76,21 +76,27 @@ def _best_combination(geom: MeshGeometry, facets, combos):
     """Among candidate cell tuples ``combos`` (n, m, d+1) pick the most central containing simplex.
 
     The key is the smallest barycentric coordinate (largest wins), then the compactness of the
-    simplex, then a fixed linear form of its cells' positions: every key is geometric, so the
-    choice does not depend on the cell numbering (serial and parallel runs agree).
+    simplex, then the lexicographic order of its sorted barycentre positions. Every key is
+    geometric and rounded, so the choice does not depend on the cell numbering or on summation
+    order: serial and parallel runs pick the same simplices.
     """
+    n, m, k = combos.shape
+    d = geom.d
     xc = geom.cell_centres
     xf = geom.facet_centres[facets]
+    h = geom.facet_diameters[facets, None, None, None]
     alpha, valid = _barycentric(xc[combos], xf[:, None, :])
     distinct = np.all(np.diff(np.sort(combos, axis=-1), axis=-1) > 0, axis=-1)
     valid &= distinct & (combos >= 0).all(axis=-1)
     min_alpha = np.where(valid, alpha.min(axis=-1), -np.inf)
-    spread = np.sum((xc[combos] - xf[:, None, None, :]) ** 2, axis=(-1, -2))
-    position = np.sum(xc[combos] @ np.array([1.0, np.pi, np.e][: geom.d]), axis=-1)
-    n, m = min_alpha.shape
-    score = np.round(min_alpha, 9)
-    order = np.lexsort((position.ravel(), spread.ravel(), -score.ravel(), np.repeat(np.arange(n), m)))
-    best = order.reshape(n, m)[:, 0] % m
+    rel = np.round((xc[combos] - xf[:, None, None, :]) / h, 9)  # (n, m, k, d)
+    spread = np.round(np.sum(rel**2, axis=(-1, -2)), 7)
+    flat = rel.reshape(n * m, k, d)
+    point_order = np.lexsort([flat[:, :, i] for i in reversed(range(d))], axis=-1)
+    canonical = np.take_along_axis(flat, point_order[:, :, None], axis=1).reshape(n * m, k * d)
+    keys = [canonical[:, i] for i in reversed(range(k * d))]
+    keys += [spread.ravel(), -np.round(min_alpha, 9).ravel(), np.repeat(np.arange(n), m)]
+    best = np.lexsort(keys).reshape(n, m)[:, 0] % m
     rows = np.arange(n)
     return combos[rows, best], alpha[rows, best], min_alpha[rows, best]
 
@@ -111,8 +117,14 @@ def compute_interior_stencils(geom: MeshGeometry) -> InteriorStencils:
     facets = geom.interior_facets
     pair = geom.facet_cells[facets]
     k = min(_NEIGHBOURS[d], geom.num_cells)
-    _, near = scipy.spatial.cKDTree(geom.cell_centres).query(geom.facet_centres[facets], k=k)
-    near = near.reshape(len(facets), k)
+    # Equidistant barycentres abound on structured meshes: query more than k and keep the k
+    # nearest by (distance, position), a geometric order, so the choice is numbering-independent.
+    k_query = min(2 * k, geom.num_cells)
+    dist, near = scipy.spatial.cKDTree(geom.cell_centres).query(geom.facet_centres[facets], k=k_query)
+    dist, near = dist.reshape(len(facets), k_query), near.reshape(len(facets), k_query)
+    position = geom.cell_centres[near] @ np.array([1.0, np.pi, np.e][:d])
+    order = np.lexsort((position, np.round(dist / geom.facet_diameters[facets, None], 9)), axis=-1)
+    near = np.take_along_axis(near, order[:, :k], axis=1)
 
     extra = [list(c) for c in itertools.combinations(range(k), d - 1)]
     combos = np.concatenate(

@@ -1,0 +1,264 @@
+"""Scenes: TOML descriptions of a run, validated against a schema before anything is computed.
+
+A scene names its mesh, material, boundary conditions, loads, initial conditions, method, time
+stepping, probes and outputs; see ``docs/scenes.md`` and the built-in scenes next to this file.
+Unknown keys and bad values raise ``SceneError`` naming the key.
+"""
+
+from __future__ import annotations
+
+import copy
+import math
+import pathlib
+import tomllib
+from collections.abc import Mapping
+
+import numpy as np
+
+BUILTIN = pathlib.Path(__file__).parent
+
+
+class SceneError(ValueError):
+    """A scene file or override is invalid; the message names the offending key."""
+
+
+def _number(key, v, positive=False, nonnegative=False):
+    if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
+        raise SceneError(f"scene key '{key}' must be a finite number, got {v!r}")
+    if positive and v <= 0:
+        raise SceneError(f"scene key '{key}' must be > 0, got {v!r}")
+    if nonnegative and v < 0:
+        raise SceneError(f"scene key '{key}' must be >= 0, got {v!r}")
+    return float(v)
+
+
+def _integer(key, v, minimum=1):
+    if isinstance(v, bool) or not isinstance(v, int) or v < minimum:
+        raise SceneError(f"scene key '{key}' must be an integer >= {minimum}, got {v!r}")
+    return v
+
+
+def _vector(key, v, length=None):
+    if not isinstance(v, list) or not v or (length is not None and len(v) != length):
+        n = f"{length} " if length else ""
+        raise SceneError(f"scene key '{key}' must be a list of {n}numbers, got {v!r}")
+    return [_number(f"{key}[{i}]", x) for i, x in enumerate(v)]
+
+
+def _string(key, v, choices=None):
+    if not isinstance(v, str) or (choices is not None and v not in choices):
+        allowed = f" (one of {', '.join(choices)})" if choices else ""
+        raise SceneError(f"scene key '{key}' must be a string{allowed}, got {v!r}")
+    return v
+
+
+def _field(key, v, d):
+    """A constant vector or a list of d expression strings in x, y, z (and t)."""
+    if isinstance(v, list) and v and all(isinstance(e, str) for e in v) and len(v) == (d or len(v)):
+        for i, e in enumerate(v):
+            try:
+                compile(e, f"<{key}[{i}]>", "eval")
+            except SyntaxError as err:
+                raise SceneError(f"scene key '{key}[{i}]' is not a valid expression: {err.msg}") from None
+        return v
+    return _vector(key, v, d)
+
+
+MESH_TYPES = ("interval", "rectangle", "box", "disc", "file")
+METHODS = ("dem-A", "dem-B")
+QUADRATURES = ("midpoint", "gauss-legendre-1", "gauss-legendre-2", "gauss-legendre-3", "gauss-legendre-5")
+
+#: Allowed keys per section; values are validators (key, value, d) -> value.
+SCHEMA = {
+    "name": lambda k, v, d: _string(k, v),
+    "description": lambda k, v, d: _string(k, v),
+    "method": lambda k, v, d: _string(k, v, METHODS),
+    "mesh": {
+        "type": lambda k, v, d: _string(k, v, MESH_TYPES),
+        "n": lambda k, v, d: v if isinstance(v, int) and v >= 1 else [
+            _integer(f"{k}[{i}]", x) for i, x in enumerate(_list(k, v))],
+        "x0": lambda k, v, d: _number(k, v),
+        "x1": lambda k, v, d: _number(k, v),
+        "p0": lambda k, v, d: _vector(k, v),
+        "p1": lambda k, v, d: _vector(k, v),
+        "diagonal": lambda k, v, d: _string(k, v, ("right", "left", "crossed", "left_right", "right_left")),
+        "centre": lambda k, v, d: _vector(k, v, 2),
+        "radius": lambda k, v, d: _number(k, v, positive=True),
+        "h": lambda k, v, d: _number(k, v, positive=True),
+        "path": lambda k, v, d: _string(k, v),
+    },
+    "material": {
+        "E": lambda k, v, d: _number(k, v),
+        "nu": lambda k, v, d: _number(k, v),
+        "rho": lambda k, v, d: _number(k, v),
+        "plane": lambda k, v, d: _string(k, v, ("strain", "stress")),
+        "eta": lambda k, v, d: _number(k, v),
+    },
+    "dirichlet": [{
+        "boundary": lambda k, v, d: v if isinstance(v, int) and not isinstance(v, bool) else _string(k, v),
+        "value": lambda k, v, d: _field(k, v, d),
+        "time_dependent": lambda k, v, d: _bool(k, v),
+    }],
+    "loads": {
+        "gravity": lambda k, v, d: _vector(k, v, d),
+        "body_force": lambda k, v, d: _vector(k, v, d),
+    },
+    "initial": {
+        "displacement": lambda k, v, d: _field(k, v, d),
+        "velocity": lambda k, v, d: _field(k, v, d),
+    },
+    "time": {
+        "end": lambda k, v, d: _number(k, v, positive=True),
+        "dt": lambda k, v, d: _number(k, v, positive=True),
+        "cfl": lambda k, v, d: _number(k, v, positive=True),
+        "quadrature": lambda k, v, d: _string(k, v, QUADRATURES),
+    },
+    "probes": [{
+        "name": lambda k, v, d: _string(k, v),
+        "point": lambda k, v, d: _vector(k, v, d),
+        "component": lambda k, v, d: _integer(k, v, minimum=0),
+    }],
+    "output": {
+        "every": lambda k, v, d: _integer(k, v),
+        "series_every": lambda k, v, d: _integer(k, v),
+        "picture_scale": lambda k, v, d: _number(k, v, positive=True),
+    },
+}
+
+REQUIRED = {"mesh": ("type",), "material": ("E", "nu", "rho"), "time": ("end",)}
+#: Facet tags of the generated interval/rectangle/box meshes, by boundary name.
+SIDES = {"xmin": 1, "xmax": 2, "ymin": 3, "ymax": 4, "zmin": 5, "zmax": 6,
+         "left": 1, "right": 2, "bottom": 3, "top": 4}
+
+
+def _list(key, v):
+    if not isinstance(v, list):
+        raise SceneError(f"scene key '{key}' must be a list, got {v!r}")
+    return v
+
+
+def _bool(key, v):
+    if not isinstance(v, bool):
+        raise SceneError(f"scene key '{key}' must be true or false, got {v!r}")
+    return v
+
+
+def dimension(scene: Mapping) -> int:
+    """Spatial dimension implied by the mesh section."""
+    mesh = scene.get("mesh", {})
+    kind = mesh.get("type")
+    if kind == "interval":
+        return 1
+    if kind in ("rectangle", "disc"):
+        return 2
+    if kind == "box":
+        return 3
+    if kind == "file":
+        return None  # known once the mesh is read; validate() is called again then
+    raise SceneError(f"scene key 'mesh.type' must be one of {', '.join(MESH_TYPES)}, got {kind!r}")
+
+
+def _validate_table(prefix, table, schema, d):
+    if not isinstance(table, dict):
+        raise SceneError(f"scene key '{prefix}' must be a table")
+    out = {}
+    for key, value in table.items():
+        name = f"{prefix}.{key}" if prefix else key
+        if key not in schema:
+            raise SceneError(f"scene key '{name}' is unknown (allowed: {', '.join(sorted(schema))})")
+        rule = schema[key]
+        if isinstance(rule, dict):
+            out[key] = _validate_table(name, value, rule, d)
+        elif isinstance(rule, list):
+            out[key] = [_validate_table(f"{name}[{i}]", v, rule[0], d) for i, v in enumerate(_list(name, value))]
+        else:
+            out[key] = rule(name, value, d)
+    return out
+
+
+def validate(scene: Mapping, mesh_dimension: int | None = None) -> dict:
+    """Check every key and value of a scene; returns a validated deep copy."""
+    scene = copy.deepcopy(dict(scene))
+    if "mesh" not in scene:
+        raise SceneError("scene key 'mesh' is missing")
+    d = mesh_dimension or dimension(scene)
+    scene = _validate_table("", scene, SCHEMA, d)
+    for section, keys in REQUIRED.items():
+        for key in keys:
+            if key not in scene.get(section, {}):
+                raise SceneError(f"scene key '{section}.{key}' is missing")
+    time = scene["time"]
+    if ("dt" in time) == ("cfl" in time):
+        raise SceneError("scene needs exactly one of 'time.dt' and 'time.cfl'")
+    loads = scene.get("loads", {})
+    if "gravity" in loads and "body_force" in loads:
+        raise SceneError("scene key 'loads': give 'gravity' or 'body_force', not both")
+    scene.setdefault("method", "dem-A")
+    scene.setdefault("name", "scene")
+    return scene
+
+
+def builtin_names() -> list[str]:
+    return sorted(p.stem for p in BUILTIN.glob("*.toml"))
+
+
+def load(name_or_path: str, overrides: Mapping[str, object] | None = None) -> dict:
+    """Read a built-in scene by name or a TOML file, apply dotted-key overrides, validate."""
+    path = pathlib.Path(name_or_path)
+    if not path.suffix:
+        if name_or_path not in builtin_names():
+            raise SceneError(f"unknown scene {name_or_path!r}; built-in scenes: {', '.join(builtin_names())}")
+        path = BUILTIN / f"{name_or_path}.toml"
+    if not path.is_file():
+        raise FileNotFoundError(f"scene file {path} does not exist")
+    with open(path, "rb") as f:
+        try:
+            scene = tomllib.load(f)
+        except tomllib.TOMLDecodeError as err:
+            raise SceneError(f"scene file {path} is not valid TOML: {err}") from None
+    if "mesh" in scene and scene["mesh"].get("type") == "file":
+        p = pathlib.Path(scene["mesh"].get("path", ""))
+        if not p.is_absolute():
+            scene["mesh"]["path"] = str((path.parent / p).resolve())
+    for key, value in (overrides or {}).items():
+        set_key(scene, key, value)
+    return validate(scene)
+
+
+def set_key(scene: dict, dotted: str, value):
+    """Set ``a.b.c = value`` in a nested scene dict (creating tables as needed)."""
+    parts = dotted.split(".")
+    table = scene
+    for p in parts[:-1]:
+        table = table.setdefault(p, {})
+        if not isinstance(table, dict):
+            raise SceneError(f"scene key '{dotted}': '{p}' is not a table")
+    table[parts[-1]] = value
+
+
+def parse_override(text: str) -> tuple[str, object]:
+    """``key=value`` with a TOML value (``mesh.n=[40, 4]``, ``time.end=2.0``); bare words are strings."""
+    if "=" not in text:
+        raise SceneError(f"override {text!r} must look like key=value")
+    key, raw = text.split("=", 1)
+    key = key.strip()
+    try:
+        value = tomllib.loads(f"v = {raw.strip()}")["v"]
+    except tomllib.TOMLDecodeError:
+        value = raw.strip()
+    return key, value
+
+
+_NAMESPACE = {name: getattr(np, name) for name in ("sin", "cos", "tan", "exp", "sqrt", "abs", "tanh", "pi", "where")}
+
+
+def evaluate_field(spec, x: np.ndarray, t: float = 0.0) -> np.ndarray:
+    """Evaluate a scene field (constant vector or expressions in x, y, z, t) at points x (d, n)."""
+    d, n = x.shape
+    if all(isinstance(e, str) for e in spec):
+        names = dict(_NAMESPACE, t=t, **{c: x[i] for i, c in enumerate("xyz"[:d])})
+        out = np.empty((d, n))
+        for i, e in enumerate(spec):
+            out[i] = np.broadcast_to(eval(e, {"__builtins__": {}}, names), (n,))  # noqa: S307
+        return out
+    return np.repeat(np.asarray(spec, dtype=float)[:, None], n, axis=1)

@@ -1,0 +1,242 @@
+"""Run a scene: build the mesh and the DEM, integrate with MEMM, write the output contract.
+
+Outputs in the run directory (see ``io.py`` for the INCOMPLETE-marker contract):
+``summary.json``, ``series.csv`` (t, kinetic, elastic, stabilisation, external, pseudo_energy,
+then the probes), ``solution.xdmf`` (+ .h5: DG0 displacement, velocity, von Mises stress) and
+``final.png`` (deformed state coloured by von Mises stress).
+"""
+
+from __future__ import annotations
+
+import math
+import pathlib
+import sys
+import time
+from collections.abc import Mapping
+
+import numpy as np
+from mpi4py import MPI
+
+from dolfinx_dem import _compat, io, meshes, plotting, scenes
+from dolfinx_dem.discretisation import DEMDiscretisation, DirichletBC
+from dolfinx_dem.material import ElasticMaterial
+from dolfinx_dem.memm import MEMM, InstabilityError
+
+SERIES_COLUMNS = ("t", "kinetic", "elastic", "stabilisation", "external", "pseudo_energy")
+
+
+def create_mesh(comm: MPI.Comm, spec: Mapping):
+    """(mesh, facet_tags) from the scene's mesh table."""
+    kind = spec["type"]
+    required = {"interval": ("x0", "x1", "n"), "rectangle": ("p0", "p1", "n"), "box": ("p0", "p1", "n"),
+                "disc": ("centre", "radius", "h"), "file": ("path",)}[kind]
+    for key in required:
+        if key not in spec:
+            raise scenes.SceneError(f"scene key 'mesh.{key}' is missing for a mesh of type {kind!r}")
+    if kind == "interval":
+        mesh, _, tags = meshes.create_interval(comm, spec["n"], spec["x0"], spec["x1"])
+    elif kind == "rectangle":
+        mesh, _, tags = meshes.create_rectangle(comm, spec["p0"], spec["p1"], spec["n"], spec.get("diagonal", "right"))
+    elif kind == "box":
+        mesh, _, tags = meshes.create_box(comm, spec["p0"], spec["p1"], spec["n"])
+    elif kind == "disc":
+        mesh, _, tags = meshes.create_disc(comm, spec["centre"], spec["radius"], spec["h"])
+    else:
+        mesh, _, tags = meshes.read_mesh(comm, spec["path"])
+    return mesh, tags
+
+
+def _boundary_facets(mesh, tags, boundary) -> np.ndarray:
+    if boundary == "all":
+        return _compat.exterior_facets(mesh)
+    tag = boundary if isinstance(boundary, int) else scenes.SIDES.get(boundary)
+    if tag is None:
+        raise scenes.SceneError(
+            f"scene key 'dirichlet.boundary': unknown boundary {boundary!r} "
+            f"(use 'all', an integer facet tag, or one of {', '.join(scenes.SIDES)})")
+    if tags is None:
+        raise scenes.SceneError(f"the mesh has no facet tags, so boundary {boundary!r} cannot be found")
+    facets = tags.find(tag)
+    if mesh.comm.allreduce(len(facets), op=MPI.SUM) == 0:
+        raise scenes.SceneError(f"scene key 'dirichlet.boundary': boundary {boundary!r} (tag {tag}) has no facet")
+    return facets
+
+
+def build(scene: Mapping, comm: MPI.Comm = MPI.COMM_WORLD) -> DEMDiscretisation:
+    """The DEM discretisation a scene describes."""
+    mesh, tags = create_mesh(comm, scene["mesh"])
+    scene = scenes.validate(scene, mesh.topology.dim)
+    m = scene["material"]
+    material = ElasticMaterial(E=m["E"], nu=m["nu"], rho=m["rho"], plane=m.get("plane", "strain"), eta=m.get("eta"))
+    dirichlet = []
+    for bc in scene.get("dirichlet", []):
+        value = bc.get("value", [0.0] * mesh.topology.dim)
+        field = (lambda x, t, v=value: scenes.evaluate_field(v, x, t)) if isinstance(value[0], str) else value
+        dirichlet.append(DirichletBC(_boundary_facets(mesh, tags, bc.get("boundary", "all")), field,
+                                     bc.get("time_dependent", False)))
+    loads = scene.get("loads", {})
+    body_force = loads.get("body_force")
+    if "gravity" in loads:
+        body_force = [material.rho * g for g in loads["gravity"]]
+    scheme = scene["method"].split("-")[1]
+    return DEMDiscretisation(mesh, material, scheme, dirichlet, body_force)
+
+
+class Probes:
+    """Displacement components at points: the P1 reconstruction (eq. (10)) of the containing cell."""
+
+    def __init__(self, dem: DEMDiscretisation, specs):
+        self.dem = dem
+        self.names = [p["name"] for p in specs]
+        if len(set(self.names)) != len(self.names) or set(self.names) & set(SERIES_COLUMNS):
+            raise scenes.SceneError(f"probe names must be unique and differ from {SERIES_COLUMNS}: {self.names}")
+        points = np.zeros((len(specs), 3))
+        for i, p in enumerate(specs):
+            points[i, : dem.d] = p["point"]
+        cells = _compat.colliding_cells(dem.mesh, points) if specs else np.empty(0, np.int32)
+        n = dem.mesh.topology.index_map(dem.d).size_local
+        block = _compat.cell_dofs(dem.V)
+        owned = (cells >= 0) & (cells < n)
+        # One owner per point: the lowest rank that owns a containing cell.
+        rank = np.where(owned, dem.comm.rank, dem.comm.size)
+        first = dem.comm.allreduce(rank, op=MPI.MIN) if specs else rank
+        if np.any(first == dem.comm.size):
+            bad = int(np.argmax(first == dem.comm.size))
+            raise scenes.SceneError(f"probe {self.names[bad]!r} at {specs[bad]['point']} is outside the mesh")
+        self.mine = np.flatnonzero(first == dem.comm.rank)
+        self.blocks = block[cells[self.mine]]
+        self.offsets = points[self.mine, : dem.d] - dem.geometry.cell_centres[dem.cell_range[0] + self.blocks]
+        self.components = np.array([specs[i]["component"] for i in self.mine], dtype=int)
+        if np.any(np.array([p["component"] for p in specs], dtype=int) >= dem.d):
+            raise scenes.SceneError(f"probe components must be < {dem.d}")
+
+    def values(self, u, t) -> np.ndarray:
+        out = np.zeros(len(self.names))
+        if len(self.names) == 0:
+            return out
+        if len(self.mine):
+            d = self.dem.d
+            uc = u.array_r.reshape(-1, d)[self.blocks]
+            G = self.dem.gradient(u, t)[self.blocks]
+            rec = uc + np.einsum("nij,nj->ni", G, self.offsets)
+            out[self.mine] = rec[np.arange(len(self.mine)), self.components]
+        else:
+            self.dem.gradient(u, t)  # collective MatMult
+        return self.dem.comm.allreduce(out, op=MPI.SUM)
+
+
+class Progress:
+    """One line on a terminal: step, t, energy drift, time left."""
+
+    def __init__(self, comm, n_steps: int, quiet: bool):
+        self.enabled = comm.rank == 0 and not quiet and sys.stderr.isatty()
+        self.n_steps, self.start, self.last = n_steps, time.perf_counter(), 0.0
+
+    def update(self, n, t, drift):
+        now = time.perf_counter()
+        if not self.enabled or (now - self.last < 0.5 and n < self.n_steps):
+            return
+        self.last = now
+        left = (now - self.start) / n * (self.n_steps - n)
+        sys.stderr.write(f"\rstep {n}/{self.n_steps}  t = {t:.5g}  energy drift {drift:.2e}  {left:5.0f} s left ")
+        if n == self.n_steps:
+            sys.stderr.write("\n")
+        sys.stderr.flush()
+
+
+def run(scene: Mapping, out: str | pathlib.Path, comm: MPI.Comm = MPI.COMM_WORLD, quiet: bool = False) -> dict:
+    """Run a validated scene and write its outputs into ``out``; returns the summary."""
+    wall = time.perf_counter()
+    with io.OutputDirectory(out, comm) as directory:
+        dem = build(scene, comm)
+        t_setup = time.perf_counter() - wall
+        time_spec = scene["time"]
+        if "dt" in time_spec:
+            dt = time_spec["dt"]
+            n_steps = max(1, round(time_spec["end"] / dt))
+        else:
+            # cfl * stable limit, floored to 4 significant digits so that runs on any number of
+            # processes (whose eigenvalue estimates differ in the last digits) take the same
+            # steps, then shortened to divide the end time.
+            limit = time_spec["cfl"] * dem.stable_time_step()
+            exponent = math.floor(math.log10(limit)) - 3
+            n_steps = math.ceil(time_spec["end"] / (math.floor(limit / 10.0**exponent) * 10.0**exponent))
+            dt = time_spec["end"] / n_steps
+        stepper = MEMM(dem, dt, time_spec.get("quadrature", "midpoint"))
+        probes = Probes(dem, scene.get("probes", []))
+
+        xc = dem.geometry.cell_centres[dem.cell_range[0]:dem.cell_range[1]].T
+        u0, v0 = dem.create_vector(), dem.create_vector()
+        initial = scene.get("initial", {})
+        if "displacement" in initial:
+            u0.array[:] = scenes.evaluate_field(initial["displacement"], xc).T.ravel()
+        if "velocity" in initial:
+            v0.array[:] = scenes.evaluate_field(initial["velocity"], xc).T.ravel()
+        diag = stepper.initialise(u0, v0)
+
+        output = scene.get("output", {})
+        every, series_every = output.get("every", max(1, n_steps // 50)), output.get("series_every", 1)
+        E0, drift, scale, stable, error = diag.pseudo_energy, 0.0, diag.mechanical, True, None
+        progress = Progress(comm, n_steps, quiet)
+        with io.SeriesWriter(comm, directory / "series.csv", SERIES_COLUMNS + tuple(probes.names)) as series, \
+                io.SolutionWriter(comm, directory, dem.mesh) as solution:
+
+            def record(diag, force_fields):
+                if diag.step % series_every == 0 or force_fields:
+                    series.write([diag.t, diag.kinetic, diag.elastic, diag.stabilisation, diag.external,
+                                  diag.pseudo_energy, *probes.values(stepper.u, diag.t)])
+                if diag.step % every == 0 or force_fields:
+                    solution.write(diag.t, fields(dem, stepper))
+
+            record(diag, False)
+            try:
+                for _ in range(n_steps):
+                    diag = stepper.step()
+                    drift = max(drift, abs(diag.pseudo_energy - E0))
+                    scale = max(scale, diag.mechanical)
+                    record(diag, diag.step == n_steps)
+                    progress.update(diag.step, diag.t, drift / scale if scale > 0 else 0.0)
+            except InstabilityError as err:
+                stable, error = False, err
+
+        vm = dem.von_mises(stepper.u, stepper.t)
+        plotting.plot_cell_field(dem.mesh, stepper.u.array_r.reshape(-1, dem.d), vm, directory / "final.png",
+                                 "von Mises stress (Pa)", output.get("picture_scale", 1.0))
+        summary = {
+            "scene": scene["name"],
+            "method": scene["method"],
+            "n_cells": dem.geometry.num_cells,
+            "n_steps": stepper.n,
+            "dt": dt,
+            "t_end": stepper.t,
+            "quadrature": stepper.quadrature,
+            "wall_time_s": time.perf_counter() - wall,
+            "setup_time_s": t_setup,
+            "pseudo_energy_rel_drift": drift / scale if scale > 0 else 0.0,
+            "pseudo_energy_initial": E0,
+            "max_mechanical_energy": scale,
+            "force_evaluations": stepper.force_evaluations,
+            "stable": stable,
+            "processes": comm.size,
+            "multi_neumann_cells": int(len(dem.reconstruction.multi_neumann_cells)),
+            "extrapolated_facets": int(len(dem.reconstruction.stencils.extrapolated)),
+        }
+        if error is not None:
+            summary["error"] = str(error)
+            summary["suggested_dt"] = error.suggested_dt
+        io.write_summary(directory / "summary.json", comm, summary)
+        if error is not None:
+            raise error
+    return summary
+
+
+def fields(dem: DEMDiscretisation, stepper: MEMM) -> dict:
+    """DG0 displacement, velocity (vbar at t_n) and von Mises stress for XDMF output."""
+    v = stepper.v_prev.copy()
+    v.axpy(1.0, stepper.v_next)
+    v.scale(0.5)
+    return {
+        "displacement": dem.function(stepper.u, "displacement"),
+        "velocity": dem.function(v, "velocity"),
+        "von_mises": dem.scalar_function(dem.von_mises(stepper.u, stepper.t), "von_mises"),
+    }

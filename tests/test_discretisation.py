@@ -1,0 +1,198 @@
+"""DEMDiscretisation: forces are the exact gradient of the potential (eq. (15)-(17)); bad inputs."""
+
+import numpy as np
+import pytest
+from mpi4py import MPI
+
+import dolfinx.mesh
+from dolfinx.mesh import CellType, DiagonalType
+
+from dolfinx_dem import _compat
+from dolfinx_dem.discretisation import DEMDiscretisation, DirichletBC
+from dolfinx_dem.material import ElasticMaterial
+
+MATERIAL = ElasticMaterial(E=2.0, nu=0.25, rho=1.5, eta=0.7)
+
+
+def _problem(d, scheme, comm, time_dependent=False):
+    """A mesh with Dirichlet values on x = 0 (callable), a body force and free other sides."""
+    if d == 2:
+        mesh = dolfinx.mesh.create_rectangle(comm, [[0.0, 0.0], [1.5, 1.0]], [4, 3], diagonal=DiagonalType.right)
+    else:
+        mesh = dolfinx.mesh.create_box(comm, [[0.0, 0.0, 0.0], [1.0, 1.0, 1.5]], [2, 2, 2])
+    left = _compat.locate_boundary_facets(mesh, lambda x: np.isclose(x[0], 0.0))
+
+    def g(x, t):
+        return np.stack([0.1 * np.sin(x[1] + t)] + [0.2 * x[0] + 0.3 * x[1] * (1 + t)] * (d - 1))
+
+    bc = DirichletBC(left, g, time_dependent=time_dependent)
+    body = [0.5, -1.0, 0.25][:d]
+    return DEMDiscretisation(mesh, MATERIAL, scheme=scheme, dirichlet=[bc], body_force=body)
+
+
+def _potential(dem, u, t):
+    e = dem.energies(u, t)
+    return e["elastic"] + e["stabilisation"] + e["external"]
+
+
+def _random_field(dem, seed):
+    u = dem.create_vector()
+    x = dem.geometry.cell_centres[dem.cell_range[0] : dem.cell_range[1]]
+    u.array[:] = (np.cos(np.arange(dem.d) + 3 * x) + 0.1 * np.random.default_rng(seed).normal(size=x.shape)).ravel()
+    return u
+
+
+@pytest.mark.parametrize("scheme", ["A", "B"])
+@pytest.mark.parametrize("d", [2, 3])
+def test_force_is_minus_gradient_full(d, scheme):
+    """Every component of F against central differences of E_P + E_S - f.u (exact for a
+    quadratic potential up to round-off)."""
+    dem = _problem(d, scheme, MPI.COMM_SELF)
+    if d == 2 and scheme == "A":
+        assert dem.reconstruction.multi_neumann_cells.size > 0  # the fallback is covered too
+    u = _random_field(dem, 0)
+    F = dem.create_vector()
+    dem.force(u, 0.0, F)
+    h = 1e-4
+    fd = np.empty(u.getSize())
+    w = u.copy()
+    for i in range(u.getSize()):
+        w.array[:] = u.array
+        w.array[i] += h
+        plus = _potential(dem, w, 0.0)
+        w.array[i] -= 2 * h
+        minus = _potential(dem, w, 0.0)
+        fd[i] = -(plus - minus) / (2 * h)
+    assert np.abs(fd - F.array).max() < 1e-6 * np.abs(F.array).max()
+
+
+@pytest.mark.mpi
+@pytest.mark.parametrize("scheme", ["A", "B"])
+@pytest.mark.parametrize("d", [2, 3])
+def test_force_is_minus_gradient_directional(d, scheme):
+    """Directional derivatives along random directions, also in parallel, with time-dependent
+    Dirichlet values evaluated at t = 0.7."""
+    comm = MPI.COMM_WORLD
+    dem = _problem(d, scheme, comm, time_dependent=True)
+    t = 0.7
+    u = _random_field(dem, comm.rank)
+    F = dem.create_vector()
+    dem.force(u, t, F)
+    h = 1e-3
+    w = dem.create_vector()
+    rng = np.random.default_rng(100 + comm.rank)
+    for _ in range(4):
+        direction = dem.create_vector()
+        direction.array[:] = rng.normal(size=direction.array.shape)
+        u.copy(w)
+        w.axpy(h, direction)
+        plus = _potential(dem, w, t)
+        w.axpy(-2 * h, direction)
+        minus = _potential(dem, w, t)
+        slope = (plus - minus) / (2 * h)
+        assert abs(slope + F.dot(direction)) < 1e-6 * F.norm() * direction.norm()
+    # The Dirichlet lifting really is time dependent: F(u, 0) != F(u, t).
+    F0 = dem.create_vector()
+    dem.force(u, 0.0, F0)
+    F0.axpy(-1.0, F)
+    assert F0.norm() > 1e-3 * F.norm()
+
+
+@pytest.mark.mpi
+def test_mass_and_body_force():
+    comm = MPI.COMM_WORLD
+    dem = _problem(2, "A", comm)
+    volume = comm.allreduce(dem.geometry.cell_volumes[dem.cell_range[0] : dem.cell_range[1]].sum())
+    assert volume == pytest.approx(1.5)
+    assert dem.mass.sum() == pytest.approx(2 * MATERIAL.rho * 1.5, rel=1e-13)
+    prod = dem.create_vector()
+    prod.pointwiseMult(dem.mass, dem.inverse_mass)
+    assert np.allclose(prod.array, 1.0, rtol=1e-15)
+    # F(0) with g = 0 is the body force alone: sum over cells is |Omega| f.
+    mesh = dolfinx.mesh.create_unit_square(comm, 3, 3)
+    dem = DEMDiscretisation(mesh, MATERIAL, body_force=[0.5, -1.0])
+    F = dem.create_vector()
+    dem.force(dem.create_vector(), 0.0, F)
+    total = comm.allreduce(F.array.reshape(-1, 2).sum(axis=0))
+    assert np.allclose(total, [0.5, -1.0], rtol=1e-13)
+
+
+# --- bad inputs ----------------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize(
+    "kwargs, word",
+    [
+        (dict(E=1.0, nu=0.5, rho=1.0), "Poisson"),
+        (dict(E=1.0, nu=0.7, rho=1.0), "Poisson"),
+        (dict(E=1.0, nu=-1.0, rho=1.0), "Poisson"),
+        (dict(E=0.0, nu=0.3, rho=1.0), "Young"),
+        (dict(E=-2.0, nu=0.3, rho=1.0), "Young"),
+        (dict(E=1.0, nu=0.3, rho=0.0), "density"),
+        (dict(E=1.0, nu=0.3, rho=-1.0), "density"),
+        (dict(E=float("nan"), nu=0.3, rho=1.0), "finite"),
+        (dict(E=1.0, nu=0.3, rho=1.0, plane="shell"), "plane"),
+        (dict(E=1.0, nu=0.3, rho=1.0, eta=0.0), "eta"),
+    ],
+)
+def test_bad_material(kwargs, word):
+    with pytest.raises(ValueError, match=word):
+        ElasticMaterial(**kwargs)
+
+
+@pytest.fixture
+def square():
+    return dolfinx.mesh.create_unit_square(MPI.COMM_WORLD, 3, 3)
+
+
+@pytest.mark.mpi
+def test_bad_scheme(square):
+    with pytest.raises(ValueError, match="'A' or 'B'"):
+        DEMDiscretisation(square, MATERIAL, scheme="C")
+
+
+@pytest.mark.mpi
+def test_dirichlet_on_interior_facet(square):
+    tdim = square.topology.dim
+    square.topology.create_connectivity(tdim - 1, tdim)
+    num = square.topology.index_map(tdim - 1).size_local
+    interior = np.setdiff1d(np.arange(num, dtype=np.int32), _compat.exterior_facets(square))
+    assert MPI.COMM_WORLD.allreduce(interior.size) > 0
+    with pytest.raises(ValueError, match="interior"):
+        DEMDiscretisation(square, MATERIAL, dirichlet=[DirichletBC(interior[:1], [0.0, 0.0])])
+
+
+@pytest.mark.mpi
+def test_dirichlet_selecting_nothing(square):
+    nothing = _compat.locate_boundary_facets(square, lambda x: x[0] > 5.0)
+    with pytest.raises(ValueError, match="no facet"):
+        DEMDiscretisation(square, MATERIAL, dirichlet=[DirichletBC(nothing, [0.0, 0.0])])
+    with pytest.raises(ValueError, match="no facet"):
+        DEMDiscretisation(square, MATERIAL, dirichlet=[DirichletBC(np.empty(0, np.int32), [0.0, 0.0])])
+
+
+@pytest.mark.mpi
+def test_dirichlet_bad_value_and_overlap(square):
+    left = _compat.locate_boundary_facets(square, lambda x: np.isclose(x[0], 0.0))
+    with pytest.raises(ValueError, match="2 components"):
+        DEMDiscretisation(square, MATERIAL, dirichlet=[DirichletBC(left, [0.0, 0.0, 0.0])])
+    with pytest.raises(ValueError, match="share a facet"):
+        DEMDiscretisation(square, MATERIAL, dirichlet=[DirichletBC(left, [0.0, 0.0])] * 2)
+
+
+@pytest.mark.mpi
+@pytest.mark.parametrize("force", [[1.0], [1.0, 2.0, 3.0], [[1.0, 2.0]]])
+def test_body_force_wrong_length(square, force):
+    with pytest.raises(ValueError, match="body_force"):
+        DEMDiscretisation(square, MATERIAL, body_force=force)
+
+
+@pytest.mark.mpi
+@pytest.mark.parametrize("cell_type", [CellType.quadrilateral, CellType.hexahedron])
+def test_non_simplex_mesh(cell_type):
+    if cell_type == CellType.quadrilateral:
+        mesh = dolfinx.mesh.create_unit_square(MPI.COMM_WORLD, 3, 3, cell_type=cell_type)
+    else:
+        mesh = dolfinx.mesh.create_unit_cube(MPI.COMM_WORLD, 2, 2, 2, cell_type=cell_type)
+    with pytest.raises(ValueError, match="simplex"):
+        DEMDiscretisation(mesh, MATERIAL)

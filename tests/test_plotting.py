@@ -1,0 +1,95 @@
+import pathlib
+import struct
+
+import numpy as np
+import pytest
+from mpi4py import MPI
+
+import dolfinx.fem
+
+from dolfinx_dem import _compat, meshes, plotting
+
+
+def shared_path(tmp_path) -> pathlib.Path:
+    """Rank 0's tmp_path, on every rank."""
+    return MPI.COMM_WORLD.bcast(tmp_path, root=0)
+
+
+def png_size(path: pathlib.Path) -> tuple[int, int]:
+    data = path.read_bytes()
+    assert data[:8] == b"\x89PNG\r\n\x1a\n", f"{path} is not a PNG"
+    return struct.unpack(">II", data[16:24])
+
+
+def dg0_rows(mesh):
+    """Owned rows (plot_cell_field order) of DG0 Functions: centroid x (n,), centroids (n, gdim)."""
+    gdim = mesh.geometry.dim
+    s = dolfinx.fem.Function(_compat.create_scalar_space(mesh, "DG", 0))
+    s.interpolate(lambda x: x[0])
+    u = dolfinx.fem.Function(_compat.create_vector_space(mesh, "DG", 0))
+    u.interpolate(lambda x: x[:gdim])
+    n = mesh.topology.index_map(mesh.topology.dim).size_local
+    return s.x.array[:n].copy(), u.x.array[: n * gdim].reshape(n, gdim).copy()
+
+
+@pytest.mark.mpi
+def test_gather_cells_order_and_vertex_average():
+    mesh, _, _ = meshes.create_rectangle(MPI.COMM_WORLD, [0, 0], [2, 1], [6, 3], "crossed")
+    values, centroids = dg0_rows(mesh)
+    gathered = plotting._gather_cells(mesh, centroids, values)
+    if MPI.COMM_WORLD.rank != 0:
+        assert gathered is None
+        return
+    points, cells, cell_values, u_points = gathered
+    assert cells.shape == (4 * 18, 3)
+    assert points.shape == (7 * 4 + 18, 3)  # vertices + one centre per rectangle
+    cell_centroids = points[cells].mean(axis=1)
+    assert np.allclose(cell_values, cell_centroids[:, 0])  # rows matched to the right cells
+    for p in range(points.shape[0]):  # mean of the centroids of the cells around each point
+        around = np.any(cells == p, axis=1)
+        assert np.allclose(u_points[p], cell_centroids[around, :2].mean(axis=0))
+
+
+@pytest.mark.mpi
+@pytest.mark.parametrize("dim", [1, 2, 3])
+def test_plot_cell_field(tmp_path, dim):
+    comm = MPI.COMM_WORLD
+    if dim == 1:
+        mesh, _, _ = meshes.create_interval(comm, 20, 0.0, 1.0)
+    elif dim == 2:
+        mesh, _, _ = meshes.create_discs(comm, [((0, 0), 1.0), ((2.5, 0), 1.0)], 0.1)
+    else:
+        mesh, _, _ = meshes.create_box(comm, [0, 0, 0], [2, 1, 1], [6, 3, 3])
+    values, centroids = dg0_rows(mesh)
+    displacement = 0.1 * centroids**2
+    filename = shared_path(tmp_path) / f"field{dim}d.png"
+    result = plotting.plot_cell_field(mesh, displacement, values, filename, "x (m)", scale=2.0)
+    assert result == str(filename)
+    comm.barrier()
+    assert png_size(filename) == (1200, 900)
+    assert filename.stat().st_size > 10_000
+
+
+def test_plot_cell_field_undeformed_and_errors(tmp_path):
+    mesh, _, _ = meshes.create_rectangle(MPI.COMM_WORLD, [0, 0], [1, 1], [2, 2])
+    n = mesh.topology.index_map(2).size_local
+    filename = plotting.plot_cell_field(mesh, None, np.arange(n), tmp_path / "a.png", "index")
+    assert pathlib.Path(filename).stat().st_size > 0
+    with pytest.raises(ValueError, match=r"values must have shape \(8,\)"):
+        plotting.plot_cell_field(mesh, None, np.zeros(n + 1), tmp_path / "b.png", "v")
+    with pytest.raises(ValueError, match=r"displacement must have shape \(8, 2\)"):
+        plotting.plot_cell_field(mesh, np.zeros((n, 3)), np.zeros(n), tmp_path / "b.png", "v")
+    with pytest.raises(FileNotFoundError, match="missing"):
+        plotting.plot_cell_field(mesh, None, np.zeros(n), tmp_path / "missing" / "b.png", "v")
+
+
+def test_plot_series(tmp_path):
+    csv = tmp_path / "series.csv"
+    t = np.linspace(0, 1, 11)
+    np.savetxt(csv, np.c_[t, t**2, np.sin(t)], delimiter=",", header="t,kinetic,gap", comments="")
+    filename = plotting.plot_series(csv, ["kinetic", "gap"], tmp_path / "series.png")
+    assert png_size(pathlib.Path(filename))[0] > 0
+    with pytest.raises(ValueError, match="'energy' is not in"):
+        plotting.plot_series(csv, ["energy"], tmp_path / "x.png")
+    with pytest.raises(FileNotFoundError, match="nope.csv"):
+        plotting.plot_series(tmp_path / "nope.csv", ["gap"], tmp_path / "x.png")
