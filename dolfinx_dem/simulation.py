@@ -83,45 +83,45 @@ def build(scene: Mapping, comm: MPI.Comm = MPI.COMM_WORLD) -> DEMDiscretisation:
 
 
 class Probes:
-    """Displacement components at points: the P1 reconstruction (eq. (10)) of the containing cell."""
+    """Displacement components at points: the P1 reconstruction (eq. (10)) of the cell whose
+    barycentre is nearest to the point (ties broken by position, so any process count agrees)."""
 
     def __init__(self, dem: DEMDiscretisation, specs):
         self.dem = dem
         self.names = [p["name"] for p in specs]
         if len(set(self.names)) != len(self.names) or set(self.names) & set(SERIES_COLUMNS):
             raise scenes.SceneError(f"probe names must be unique and differ from {SERIES_COLUMNS}: {self.names}")
+        if any(p["component"] >= dem.d for p in specs):
+            raise scenes.SceneError(f"probe components must be < {dem.d}")
         points = np.zeros((len(specs), 3))
         for i, p in enumerate(specs):
             points[i, : dem.d] = p["point"]
-        cells = _compat.colliding_cells(dem.mesh, points) if specs else np.empty(0, np.int32)
-        n = dem.mesh.topology.index_map(dem.d).size_local
-        block = _compat.cell_dofs(dem.V)
-        owned = (cells >= 0) & (cells < n)
-        # One owner per point: the lowest rank that owns a containing cell.
-        rank = np.where(owned, dem.comm.rank, dem.comm.size)
-        first = dem.comm.allreduce(rank, op=MPI.MIN) if specs else rank
-        if np.any(first == dem.comm.size):
-            bad = int(np.argmax(first == dem.comm.size))
+        inside = _compat.colliding_cells(dem.mesh, points) >= 0 if specs else np.empty(0, bool)
+        inside = dem.comm.allreduce(inside.astype(int), op=MPI.SUM) > 0 if specs else inside
+        if not np.all(inside):
+            bad = int(np.argmin(inside))
             raise scenes.SceneError(f"probe {self.names[bad]!r} at {specs[bad]['point']} is outside the mesh")
-        self.mine = np.flatnonzero(first == dem.comm.rank)
-        self.blocks = block[cells[self.mine]]
-        self.offsets = points[self.mine, : dem.d] - dem.geometry.cell_centres[dem.cell_range[0] + self.blocks]
+        xc = dem.geometry.cell_centres
+        cells = []
+        for x in points[:, : dem.d]:
+            dist = np.round(np.linalg.norm(xc - x, axis=1) / np.ptp(xc, axis=0).max(), 9)
+            cells.append(np.lexsort([xc[:, i] for i in reversed(range(dem.d))] + [dist])[0])
+        cells = np.asarray(cells, dtype=np.int64)
+        start, stop = dem.cell_range
+        self.mine = np.flatnonzero((cells >= start) & (cells < stop))
+        self.blocks = cells[self.mine] - start
+        self.offsets = points[self.mine, : dem.d] - xc[cells[self.mine]]
         self.components = np.array([specs[i]["component"] for i in self.mine], dtype=int)
-        if np.any(np.array([p["component"] for p in specs], dtype=int) >= dem.d):
-            raise scenes.SceneError(f"probe components must be < {dem.d}")
 
     def values(self, u, t) -> np.ndarray:
         out = np.zeros(len(self.names))
         if len(self.names) == 0:
             return out
+        G = self.dem.gradient(u, t)  # collective
         if len(self.mine):
-            d = self.dem.d
-            uc = u.array_r.reshape(-1, d)[self.blocks]
-            G = self.dem.gradient(u, t)[self.blocks]
-            rec = uc + np.einsum("nij,nj->ni", G, self.offsets)
+            uc = u.array_r.reshape(-1, self.dem.d)[self.blocks]
+            rec = uc + np.einsum("nij,nj->ni", G[self.blocks], self.offsets)
             out[self.mine] = rec[np.arange(len(self.mine)), self.components]
-        else:
-            self.dem.gradient(u, t)  # collective MatMult
         return self.dem.comm.allreduce(out, op=MPI.SUM)
 
 
