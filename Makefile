@@ -97,7 +97,7 @@ demo: setup
 	@echo "Results of the cantilever scene are in $(CURDIR)/results/cantilever"
 
 bench: setup
-	$(PYTHON) benchmarks/run_all.py
+	$(PYTHON) benchmarks/bench_core.py
 
 # --- cleaning (keeps .venv) -----------------------------------------------------
 clean:
