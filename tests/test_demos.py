@@ -1,0 +1,140 @@
+"""Run every demo in its quick setting, serially and under ``mpirun -n 2``, and check the
+cantilever demo's numbers.
+
+The demos read ``DOLFINX_DEM_DEMO_QUICK=1`` (coarse mesh, short end time). The run tests start
+the demos as subprocesses (the MPI one launches ``mpirun`` itself), so they are serial tests
+(``skip_in_parallel``). ``test_cantilever_numbers`` imports the cantilever demo in this process
+and asserts on the module-level results it leaves; it runs serially and under MPI.
+
+Tolerances were set from measured values (quick setting: 20 x 2 crossed mesh, t_end = 4 s,
+refinement study on 20 x 2 and 40 x 4; the same on 1 and 2 processes):
+
+===============================================  ========  =========
+quantity                                         measured  tolerance
+===============================================  ========  =========
+omega_dem / omega_fem - 1 (20 x 2)               -8.1 %    (-12 %, 0)
+omega_dem / omega_p2 - 1 (40 x 4)                -2.0 %    (-3 %, 0)
+error ratio 20 x 2 / 40 x 4 (2nd order: 4)       3.98      > 3
+2 pi / (measured DEM period) / omega_dem - 1     +0.19 %   1 %
+DEM mean / DEM static solve K u = f - 1          +0.00 %   1 %
+DEM mean / FEM mean - 1 (20 x 2)                 +18.6 %   (0, 25 %)
+omega^2 x static deflection, DEM / FEM - 1       +0.07 %   2 %
+omega_fem / omega_eb - 1                         -0.51 %   1.5 %
+FEM mean / Euler-Bernoulli static - 1            +0.49 %   1.5 %
+MEMM pseudo-energy relative drift                1e-12     1e-8
+===============================================  ========  =========
+
+A factor 2 in the DEM stiffness or mass moves omega by a factor sqrt(2) (and the static
+deflection by 2, or the product omega^2 x deflection by 2), far outside these bounds: scaling
+``DEMDiscretisation.K`` or ``mass`` by 2 after construction was checked to fail the first
+frequency assertion (+30 % and -35 %).
+"""
+
+import importlib.util
+import os
+import pathlib
+import shutil
+import subprocess
+import sys
+
+import pytest
+from mpi4py import MPI
+
+import numpy as np
+
+DEMO_DIR = pathlib.Path(__file__).resolve().parent.parent / "demos"
+DEMOS = sorted(DEMO_DIR.glob("demo_*.py"))
+QUICK = {"DOLFINX_DEM_DEMO_QUICK": "1"}
+MPI_ENV = {
+    "OMPI_ALLOW_RUN_AS_ROOT": "1",
+    "OMPI_ALLOW_RUN_AS_ROOT_CONFIRM": "1",
+    "OMPI_MCA_btl_vader_single_copy_mechanism": "none",
+}
+TIMEOUT = 600  # s
+
+
+def _environment(extra):
+    """This process's environment without the variables of its own MPI (singleton) start-up,
+    so that a nested ``mpirun`` starts cleanly; plus ``extra``."""
+    env = {k: v for k, v in os.environ.items() if not k.startswith(("OMPI_", "PMIX_", "ORTE_"))}
+    env.update(OMP_NUM_THREADS="1", PYVISTA_OFF_SCREEN="true", **extra)
+    return env
+
+
+def _check(result, command):
+    assert result.returncode == 0, (
+        f"{' '.join(map(str, command))} exited with {result.returncode}\n"
+        f"--- stdout ---\n{result.stdout[-4000:]}\n--- stderr ---\n{result.stderr[-4000:]}")
+
+
+def test_demos_exist():
+    assert DEMOS, f"no demo_*.py in {DEMO_DIR}"
+
+
+@pytest.mark.skip_in_parallel
+@pytest.mark.parametrize("demo", DEMOS, ids=[d.stem for d in DEMOS])
+def test_demo_serial(demo, tmp_path):
+    command = [sys.executable, str(demo)]
+    result = subprocess.run(command, cwd=tmp_path, env=_environment(QUICK), capture_output=True,
+                            text=True, timeout=TIMEOUT)
+    _check(result, command)
+
+
+@pytest.mark.skip_in_parallel
+@pytest.mark.parametrize("demo", DEMOS, ids=[d.stem for d in DEMOS])
+def test_demo_mpi(demo, tmp_path):
+    mpirun = shutil.which("mpirun")
+    if mpirun is None:
+        pytest.skip("mpirun not found (Debian package openmpi-bin)")
+    command = [mpirun, "-n", "2", "--oversubscribe", sys.executable, str(demo)]
+    result = subprocess.run(command, cwd=tmp_path, env=_environment({**QUICK, **MPI_ENV}),
+                            capture_output=True, text=True, timeout=TIMEOUT)
+    _check(result, command)
+
+
+@pytest.fixture(scope="module")
+def cantilever(tmp_path_factory):
+    """The cantilever demo module, run in quick mode in an MPI-shared temporary directory."""
+    comm = MPI.COMM_WORLD
+    path = tmp_path_factory.mktemp("demo_cantilever") if comm.rank == 0 else None
+    path = comm.bcast(path, root=0)
+    spec = importlib.util.spec_from_file_location("demo_cantilever", DEMO_DIR / "demo_cantilever.py")
+    module = importlib.util.module_from_spec(spec)
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setenv("DOLFINX_DEM_DEMO_QUICK", "1")
+        mp.chdir(path)
+        spec.loader.exec_module(module)
+    return module
+
+
+def _rel(a, b):
+    return a / b - 1.0
+
+
+@pytest.mark.mpi
+def test_cantilever_numbers(cantilever):
+    d = cantilever
+    assert d.QUICK
+    # The same numbers on every process.
+    values = np.array([d.omega_dem, d.omega_fem, d.static_deflection_dem, d.static_deflection_fem])
+    assert np.allclose(MPI.COMM_WORLD.allgather(values), values, rtol=1e-12, atol=0)
+
+    # Frequencies: the DEM is softer than P2 and converges to it at second order.
+    assert -0.12 < _rel(d.omega_dem, d.omega_fem) < 0.0
+    assert -0.03 < _rel(d.omega_dem_refined[1], d.omega_p2_refined[1]) < 0.0
+    assert d.refinement_error[0] / d.refinement_error[1] > 3.0
+    # The period of the MEMM history is the eigenvalue's.
+    assert abs(_rel(2.0 * np.pi / d.period_dem, d.omega_dem)) < 0.01
+
+    # Static deflection: the mean of the DEM oscillation is the DEM's static solution, larger
+    # than P2's by the stiffness deficit that lowers its frequency (the lumped mass is exact).
+    assert abs(_rel(d.static_deflection_dem, d.static_deflection_dem_solve)) < 0.01
+    assert 0.0 < _rel(d.static_deflection_dem, d.static_deflection_fem) < 0.25
+    assert abs(_rel(d.omega_dem**2 * d.static_deflection_dem,
+                    d.omega_fem**2 * d.static_deflection_fem)) < 0.02
+    assert np.isclose(d.tip_dem[0], 0.0) and d.tip_dem.min() < -1.5 * d.static_deflection_dem
+
+    # The FEM reference against beam theory (2D is slightly softer: shear).
+    assert abs(_rel(d.omega_fem, d.omega_eb)) < 0.015
+    assert abs(_rel(d.static_deflection_fem, d.static_deflection_eb)) < 0.015
+    assert d.numbers["pseudo_energy_rel_drift"] < 1e-8
