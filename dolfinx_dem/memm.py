@@ -174,9 +174,9 @@ class MEMM:
         negative (its velocity alternates sign) and cancels the growth of V. The run is declared
         unstable when the pseudo-kinetic term is negative and larger in magnitude than the
         budget, or when the mechanical energy exceeds ``growth_limit`` times the budget. The
-        budget is the energy the conserved pseudo-energy makes available: the largest of the
-        initial mechanical energy and |E^0 - V_ext(u^n)| + |E^n - E^0|, which grows when
-        external forces do work.
+        budget is the running maximum of the initial mechanical energy and of
+        |E^n - V_ext(u^n)|, the energy the conserved pseudo-energy makes available to the
+        elastic and kinetic terms (it grows when external forces do work).
         """
         if not all(math.isfinite(x) for x in (diag.pseudo_energy, diag.kinetic, diag.elastic)):
             self._unstable(diag, "energies are no longer finite")

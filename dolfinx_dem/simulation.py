@@ -217,6 +217,8 @@ def run(scene: Mapping, out: str | pathlib.Path, comm: MPI.Comm = MPI.COMM_WORLD
             "max_mechanical_energy": scale,
             "force_evaluations": stepper.force_evaluations,
             "stable": stable,
+            # With time-dependent Dirichlet data the boundary does work: no conservation then.
+            "conservative": not any(bc.get("time_dependent", False) for bc in scene.get("dirichlet", [])),
             "processes": comm.size,
             "multi_neumann_cells": int(len(dem.reconstruction.multi_neumann_cells)),
             "extrapolated_facets": int(len(dem.reconstruction.stencils.extrapolated)),

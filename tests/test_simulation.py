@@ -91,7 +91,10 @@ def test_instability_stops_the_run_with_a_clear_error(tempdir):
     [
         ({"mesh.foo": 1}, "'mesh.foo' is unknown"),
         ({"material.nu": 0.5}, "Poisson ratio nu"),
-        ({"material.E": -1.0}, "Young's modulus E must be > 0"),
+        ({"material.E": -1.0}, "Young.s modulus E must be > 0"),
+        ({"initial.velocity": ["foo * x"]}, "unknown names \\[.foo.\\]"),
+        ({"probes": [{"name": "p"}]}, "probes\\[0\\].point. is missing"),
+        ({"time": {"end": 1.0, "dt": 0.03}}, "must be a multiple"),
         ({"material.rho": 0.0}, "density rho must be > 0"),
         ({"time.dt": -0.1}, "'time.dt' must be > 0"),
         ({"method": "dem-C"}, "'method' must be a string"),

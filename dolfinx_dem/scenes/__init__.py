@@ -15,6 +15,8 @@ from collections.abc import Mapping
 
 import numpy as np
 
+from dolfinx_dem.material import ElasticMaterial
+
 BUILTIN = pathlib.Path(__file__).parent
 
 
@@ -55,11 +57,16 @@ def _string(key, v, choices=None):
 def _field(key, v, d):
     """A constant vector or a list of d expression strings in x, y, z (and t)."""
     if isinstance(v, list) and v and all(isinstance(e, str) for e in v) and len(v) == (d or len(v)):
+        allowed = set(_NAMESPACE) | {"t"} | set("xyz"[: d or 3])
         for i, e in enumerate(v):
             try:
-                compile(e, f"<{key}[{i}]>", "eval")
+                code = compile(e, f"<{key}[{i}]>", "eval")
             except SyntaxError as err:
                 raise SceneError(f"scene key '{key}[{i}]' is not a valid expression: {err.msg}") from None
+            unknown = set(code.co_names) - allowed
+            if unknown:
+                raise SceneError(f"scene key '{key}[{i}]' uses unknown names {sorted(unknown)} "
+                                 f"(allowed: {', '.join(sorted(allowed))})")
         return v
     return _vector(key, v, d)
 
@@ -126,6 +133,8 @@ SCHEMA = {
 }
 
 REQUIRED = {"mesh": ("type",), "material": ("E", "nu", "rho"), "time": ("end",)}
+#: Required keys of the entries of array-of-tables sections.
+REQUIRED_ITEMS = {"dirichlet": ("boundary",), "probes": ("name", "point", "component")}
 #: Facet tags of the generated interval/rectangle/box meshes, by boundary name.
 SIDES = {"xmin": 1, "xmax": 2, "ymin": 3, "ymax": 4, "zmin": 5, "zmax": 6,
          "left": 1, "right": 2, "bottom": 3, "top": 4}
@@ -187,9 +196,21 @@ def validate(scene: Mapping, mesh_dimension: int | None = None) -> dict:
         for key in keys:
             if key not in scene.get(section, {}):
                 raise SceneError(f"scene key '{section}.{key}' is missing")
+    for section, keys in REQUIRED_ITEMS.items():
+        for i, item in enumerate(scene.get(section, [])):
+            for key in keys:
+                if key not in item:
+                    raise SceneError(f"scene key '{section}[{i}].{key}' is missing")
     time = scene["time"]
     if ("dt" in time) == ("cfl" in time):
         raise SceneError("scene needs exactly one of 'time.dt' and 'time.cfl'")
+    if "dt" in time and abs(time["end"] / time["dt"] - round(time["end"] / time["dt"])) > 1e-9 * time["end"] / time["dt"]:
+        raise SceneError(f"scene key 'time.end' ({time['end']}) must be a multiple of 'time.dt' ({time['dt']})")
+    m = scene["material"]
+    try:
+        ElasticMaterial(E=m["E"], nu=m["nu"], rho=m["rho"], plane=m.get("plane", "strain"), eta=m.get("eta"))
+    except ValueError as err:
+        raise SceneError(f"scene table 'material': {err}") from None
     loads = scene.get("loads", {})
     if "gravity" in loads and "body_force" in loads:
         raise SceneError("scene key 'loads': give 'gravity' or 'body_force', not both")
