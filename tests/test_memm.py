@@ -1,0 +1,290 @@
+"""The MEMM stepper (paper §4, eq. (35a)-(35b)): pseudo-energy, momentum, quadratures,
+convergence against exact and FEM solutions, and the a-posteriori stability monitor."""
+
+import math
+
+import numpy as np
+import pytest
+import scipy.linalg
+import scipy.sparse
+import scipy.sparse.linalg
+from mpi4py import MPI
+
+import dolfinx.mesh
+from dolfinx.mesh import DiagonalType
+
+from dolfinx_dem import _compat
+from dolfinx_dem.discretisation import DEMDiscretisation, DirichletBC
+from dolfinx_dem.fem.elastodynamics import first_eigenfrequency
+from dolfinx_dem.material import ElasticMaterial
+from dolfinx_dem.memm import MEMM, InstabilityError
+
+MATERIAL = ElasticMaterial(E=1.0, nu=0.3, rho=1.0)
+
+
+def holed_cantilever(comm, h=0.07):
+    """[0,2]x[0,0.5] with a hole of radius 0.12 at (0.6, 0.25): 523 triangles for h = 0.07."""
+    import gmsh
+
+    if comm.rank == 0:
+        gmsh.initialize()
+        gmsh.option.setNumber("General.Terminal", 0)
+        occ = gmsh.model.occ
+        plate = occ.addRectangle(0.0, 0.0, 0.0, 2.0, 0.5)
+        hole = occ.addDisk(0.6, 0.25, 0.0, 0.12, 0.12)
+        surface = occ.cut([(2, plate)], [(2, hole)])[0][0][1]
+        occ.synchronize()
+        gmsh.model.addPhysicalGroup(2, [surface], 1)
+        gmsh.option.setNumber("Mesh.MeshSizeMin", h)
+        gmsh.option.setNumber("Mesh.MeshSizeMax", h)
+        gmsh.model.mesh.generate(2)
+    try:
+        return _compat.mesh_from_gmsh_model(gmsh.model, comm, 2)[0]
+    finally:
+        if comm.rank == 0:
+            gmsh.finalize()
+
+
+def owned_centres(dem):
+    return dem.geometry.cell_centres[dem.cell_range[0] : dem.cell_range[1]]
+
+
+def field(dem, f):
+    v = dem.create_vector()
+    v.array[:] = np.asarray(f(owned_centres(dem))).ravel()
+    return v
+
+
+def bending_velocity(x):
+    return np.stack([0.1 * x[:, 1] - 0.05, x[:, 0] ** 2], axis=1)
+
+
+def clamped_left(mesh, d=2, **kwargs):
+    left = _compat.locate_boundary_facets(mesh, lambda x: np.isclose(x[0], 0.0))
+    return DEMDiscretisation(mesh, MATERIAL, dirichlet=[DirichletBC(left, np.zeros(d))], **kwargs)
+
+
+# --- conservation ------------------------------------------------------------------------------
+
+
+@pytest.mark.mpi
+def test_pseudo_energy_conserved_5000_steps():
+    comm = MPI.COMM_WORLD
+    dem = clamped_left(holed_cantilever(comm))
+    assert 300 <= dem.geometry.num_cells <= 600
+    memm = MEMM(dem, 0.5 * dem.stable_time_step())
+    d0 = memm.initialise(dem.create_vector(), field(dem, bending_velocity))
+    energy, mechanical, elastic = [d0.pseudo_energy], [d0.mechanical], [d0.elastic]
+    for _ in range(5000):
+        diag = memm.step()
+        energy.append(diag.pseudo_energy)
+        mechanical.append(diag.mechanical)
+        elastic.append(diag.elastic)
+    drift = np.max(np.abs(np.array(energy) - energy[0])) / max(mechanical)
+    # Round-off floor, not a tuning knob: measured 0.76e-12 to 1.0e-12 in serial (h = 0.065 to
+    # 0.075), 0.17e-12 to 1.9e-12 on 2 ranks (the gmsh mesh partition varies between runs); an
+    # independent numpy float64 MEMM on the same K gives 2.0e-12, long double 1e-15. A wrong
+    # force integral is far off (F(u^n) in place of F(u^n + tau v) even blows up at this dt).
+    assert drift <= 4e-12
+    assert max(elastic) > 0.5 * max(mechanical)  # energy really moves between kinetic and elastic
+    assert diag.step == 5000 and diag.t == pytest.approx(5000 * memm.dt)
+
+
+@pytest.mark.mpi
+@pytest.mark.parametrize("body_force", [None, [0.3, -1.0]])
+def test_linear_momentum_free_body(body_force):
+    """sum(M v) is conserved without external forces; with a body force f the momentum of
+    vbar^n = (v^{n-1/2} + v^{n+1/2})/2 grows as P^0 + t_n sum_c f |c|, exactly."""
+    comm = MPI.COMM_WORLD
+    mesh = dolfinx.mesh.create_rectangle(comm, [[0.0, 0.0], [2.0, 0.5]], [12, 3], diagonal=DiagonalType.crossed)
+    dem = DEMDiscretisation(mesh, MATERIAL, scheme="A", body_force=body_force)
+    memm = MEMM(dem, 0.5 * dem.stable_time_step())
+    u0 = field(dem, lambda x: 0.01 * np.cos(x))
+    memm.initialise(u0, field(dem, bending_velocity))
+    volume = comm.allreduce(dem.geometry.cell_volumes[dem.cell_range[0] : dem.cell_range[1]].sum())
+    f_total = volume * np.asarray(body_force if body_force is not None else [0.0, 0.0])
+
+    def momentum(v):
+        mv = dem.create_vector()
+        mv.pointwiseMult(dem.mass, v)
+        return np.array(comm.allreduce(mv.array.reshape(-1, 2).sum(axis=0)))
+
+    p0 = (momentum(memm.v_prev) + momentum(memm.v_next)) / 2
+    scale = np.abs(p0).max() + memm.dt * 400 * np.abs(f_total).max()
+    assert np.abs(p0).max() > 0.1
+    for _ in range(400):
+        memm.step()
+        pbar = (momentum(memm.v_prev) + momentum(memm.v_next)) / 2
+        assert np.abs(pbar - p0 - memm.t * f_total).max() < 1e-12 * scale
+        # the half-step momenta follow the same line
+        assert np.abs(momentum(memm.v_next) - p0 - (memm.t + memm.dt / 2) * f_total).max() < 1e-12 * scale
+
+
+@pytest.mark.mpi
+def test_gauss_legendre_equals_midpoint_for_linear_forces():
+    """The force is affine in tau: every Gauss-Legendre rule integrates it exactly, so all give the
+    midpoint trajectory to round-off; q force evaluations per step, +1 at initialisation."""
+    comm = MPI.COMM_WORLD
+    mesh = dolfinx.mesh.create_rectangle(comm, [[0.0, 0.0], [2.0, 0.5]], [10, 3])
+    dem = clamped_left(mesh, body_force=[0.0, -0.2])
+    dt = 0.5 * dem.stable_time_step()
+    steps = 150
+    results = {}
+    for name, q in [("midpoint", 1), ("gauss-legendre-2", 2), ("gauss-legendre-3", 3), ("gauss-legendre-5", 5)]:
+        memm = MEMM(dem, dt, quadrature=name)
+        memm.initialise(field(dem, lambda x: 0.01 * x**2), field(dem, bending_velocity))
+        assert memm.force_evaluations == 1
+        energies = [memm.step().pseudo_energy for _ in range(steps)]
+        assert memm.force_evaluations == q * steps + 1
+        results[name] = (memm.u.array.copy(), memm.v_next.array.copy(), np.array(energies))
+    u_ref, v_ref, e_ref = results["midpoint"]
+    scale_u = comm.allreduce(np.abs(u_ref).max(), op=MPI.MAX)
+    scale_v = comm.allreduce(np.abs(v_ref).max(), op=MPI.MAX)
+    for name, (u, v, e) in results.items():
+        assert comm.allreduce(np.abs(u - u_ref).max(), op=MPI.MAX) < 1e-12 * scale_u, name
+        assert comm.allreduce(np.abs(v - v_ref).max(), op=MPI.MAX) < 1e-12 * scale_v, name
+        assert np.abs(e - e_ref).max() < 1e-12 * np.abs(e_ref).max(), name
+
+
+# --- convergence -------------------------------------------------------------------------------
+
+
+def _standing_wave_error(N, T=0.5):
+    """Clamped-clamped bar [0, 1], E = rho = 1, u0 = sin(pi x), v0 = 0, dt = 0.5 stable dt."""
+    comm = MPI.COMM_WORLD
+    mesh = dolfinx.mesh.create_interval(comm, N, [0.0, 1.0])
+    dem = DEMDiscretisation(
+        mesh, ElasticMaterial(E=1.0, nu=0.0, rho=1.0), dirichlet=[DirichletBC(_compat.exterior_facets(mesh), [0.0])]
+    )
+    steps = math.ceil(T / (0.5 * dem.stable_time_step()))
+    memm = MEMM(dem, T / steps)
+    x = owned_centres(dem)[:, 0]
+    memm.initialise(field(dem, lambda x: np.sin(np.pi * x)), dem.create_vector())
+    for _ in range(steps):
+        memm.step()
+    assert memm.t == pytest.approx(T)
+    volumes = dem.geometry.cell_volumes[dem.cell_range[0] : dem.cell_range[1]]
+    exact = np.cos(np.pi * T) * np.sin(np.pi * x)
+    return math.sqrt(comm.allreduce(np.sum(volumes * (memm.u.array - exact) ** 2)))
+
+
+@pytest.mark.mpi
+def test_standing_wave_1d_converges_second_order():
+    errors = np.array([_standing_wave_error(N) for N in (20, 40, 80)])
+    orders = np.log2(errors[:-1] / errors[1:])
+    # measured: errors 4.26e-3, 1.07e-3, 2.68e-4; orders 1.996, 1.999
+    assert np.all(np.abs(orders - 2.0) < 0.3), orders
+    assert errors[-1] < 3.5e-4
+
+
+def _dem_first_frequency(n):
+    mesh = dolfinx.mesh.create_unit_square(MPI.COMM_SELF, n, n, diagonal=DiagonalType.right)
+    dem = DEMDiscretisation(mesh, MATERIAL, dirichlet=[DirichletBC(_compat.exterior_facets(mesh), [0.0, 0.0])])
+    ai, aj, av = dem.K.getValuesCSR()
+    K = scipy.sparse.csr_matrix((av, aj, ai), shape=dem.K.getSize())
+    s = scipy.sparse.diags(1.0 / np.sqrt(dem.mass.array))
+    A = (s @ K @ s).tocsc()
+    lam = scipy.sparse.linalg.eigsh(A, k=1, sigma=0.0, which="LM")[0][0]
+    if n <= 8:  # the shift-invert Lanczos result is the dense one
+        assert lam == pytest.approx(scipy.linalg.eigh(A.toarray(), eigvals_only=True)[0], rel=1e-10)
+    return math.sqrt(lam)
+
+
+def test_first_eigenfrequency_converges_to_fem():
+    """Smallest eigenvalue of M^-1 K on a clamped unit square (plane strain) against P2 FEM."""
+    fine = dolfinx.mesh.create_unit_square(MPI.COMM_SELF, 24, 24, diagonal=DiagonalType.crossed)
+    reference = first_eigenfrequency(fine, 2, MATERIAL.E, MATERIAL.nu, MATERIAL.rho,
+                                     _compat.exterior_facets(fine), n=1)[0]
+    assert reference == pytest.approx(3.98128, rel=1e-5)  # P2, 64x64 crossed: 3.9812816
+    omega = np.array([_dem_first_frequency(n) for n in (4, 8, 16)])
+    errors = np.abs(omega - reference) / reference
+    orders = np.log2(errors[:-1] / errors[1:])
+    # measured: omega 3.8017, 3.9350, 3.9696; errors 4.5e-2, 1.16e-2, 2.9e-3; orders 1.96, 1.98
+    assert np.all(np.abs(orders - 2.0) < 0.3), orders
+    assert errors[-1] < 4e-3
+    assert np.all(omega < reference)  # measured: the DEM frequencies approach from below
+
+
+# --- stability monitor ---------------------------------------------------------------------------
+
+
+@pytest.fixture(scope="module")
+def cantilever():
+    mesh = dolfinx.mesh.create_rectangle(MPI.COMM_WORLD, [[0.0, 0.0], [2.0, 0.5]], [16, 4])
+    free = clamped_left(mesh)
+    gravity = clamped_left(mesh, body_force=[0.0, -0.1])
+    return {"free": (free, free.stable_time_step()), "gravity": (gravity, gravity.stable_time_step())}
+
+
+@pytest.mark.mpi
+@pytest.mark.parametrize("load", ["free", "gravity"])
+def test_monitor_detects_instability(cantilever, load):
+    dem, stable = cantilever[load]
+    memm = MEMM(dem, 1.05 * stable)
+    memm.initialise(dem.create_vector(), field(dem, lambda x: 0.1 * bending_velocity(x)))
+    with pytest.raises(InstabilityError) as info:
+        for _ in range(2000):
+            memm.step()
+            assert np.all(np.isfinite(memm.u.array))
+    error = info.value
+    assert np.all(np.isfinite(memm.u.array))  # raised before any NaN
+    assert 0 < error.step < 2000  # measured: step 19-20
+    assert error.dt == pytest.approx(1.05 * stable)
+    assert error.t == pytest.approx(error.step * error.dt)
+    assert 0 < error.suggested_dt < stable
+    message = str(error)
+    assert "step" in message and "dt" in message
+    assert f"{error.suggested_dt:.4g}" in message
+
+
+@pytest.mark.mpi
+@pytest.mark.parametrize("load, start", [("free", "moving"), ("gravity", "rest"), ("gravity", "moving")])
+def test_monitor_quiet_below_the_limit(cantilever, load, start):
+    dem, stable = cantilever[load]
+    memm = MEMM(dem, 0.95 * stable)
+    v0 = field(dem, lambda x: 0.1 * bending_velocity(x)) if start == "moving" else dem.create_vector()
+    first = memm.initialise(dem.create_vector(), v0)
+    for _ in range(2000):
+        diag = memm.step()
+    assert diag.step == 2000
+    assert abs(diag.pseudo_energy - first.pseudo_energy) < 1e-10 * memm.budget
+    assert diag.mechanical < 10 * memm.budget
+
+
+@pytest.mark.mpi
+def test_stable_time_step_is_the_leapfrog_limit(cantilever):
+    """dt_max = 2 / sqrt(lambda_max(M^-1 K)): check against the power method on M^-1 K."""
+    dem, stable = cantilever["free"]
+    x = dem.create_vector()
+    x.array[:] = np.random.default_rng(MPI.COMM_WORLD.rank).normal(size=x.array.shape)
+    y = dem.create_vector()
+    lam = 0.0
+    for _ in range(3000):
+        dem.K.mult(x, y)
+        y.pointwiseMult(y, dem.inverse_mass)
+        lam = y.norm() / x.norm()
+        y.copy(x)
+        x.scale(1.0 / x.norm())
+    assert 2 / math.sqrt(lam) == pytest.approx(stable, rel=2e-3)
+    assert 2 / math.sqrt(lam) >= stable * (1 - 1e-6)  # the power method approaches from below
+
+
+# --- bad input ------------------------------------------------------------------------------------
+
+
+@pytest.mark.mpi
+@pytest.mark.parametrize(
+    "kwargs, word",
+    [
+        (dict(dt=0.0), "dt"),
+        (dict(dt=-1e-3), "dt"),
+        (dict(dt=float("nan")), "dt"),
+        (dict(dt=1e-3, quadrature="simpson"), "quadrature"),
+        (dict(dt=1e-3, quadrature="gauss-legendre-7"), "quadrature"),
+        (dict(dt=1e-3, growth_limit=1.0), "growth_limit"),
+    ],
+)
+def test_bad_input(cantilever, kwargs, word):
+    dem, _ = cantilever["free"]
+    with pytest.raises(ValueError, match=word):
+        MEMM(dem, **kwargs)
