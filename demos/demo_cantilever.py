@@ -65,7 +65,6 @@ import time
 
 from mpi4py import MPI
 from petsc4py import PETSc
-from slepc4py import SLEPc
 
 import matplotlib
 import numpy as np
@@ -149,37 +148,13 @@ t_dem, tip_dem = series["t"], series["tip_uy"]
 # The undamped motion is a sum of the modes of $K x = \omega^2 M x$. The lumped mass is
 # diagonal, so the symmetric matrix $M^{-1/2} K M^{-1/2}$ has the eigenvalues $\omega^2$.
 # SLEPc finds the smallest ones by shift-and-invert around 0 (a direct LU solve, MUMPS in
-# parallel). `DEMDiscretisation.stable_time_step` does the same for the largest eigenvalue.
+# parallel), in `DEMDiscretisation.eigenvalues`; `stable_time_step` uses its largest one.
 
 
 # +
 def dem_eigenfrequencies(dem, n=1):
     """The n lowest angular frequencies (rad/s) of M^-1 K for a DEMDiscretisation."""
-    A = dem.K.copy()
-    scale = dem.inverse_mass.copy()
-    scale.sqrtabs()
-    A.diagonalScale(scale, scale)
-    eps = SLEPc.EPS().create(dem.comm)
-    eps.setOperators(A)
-    eps.setProblemType(SLEPc.EPS.ProblemType.HEP)
-    eps.setWhichEigenpairs(SLEPc.EPS.Which.TARGET_MAGNITUDE)
-    eps.setTarget(0.0)
-    eps.setDimensions(n)
-    eps.setTolerances(1e-10, 1000)
-    st = eps.getST()
-    st.setType(SLEPc.ST.Type.SINVERT)
-    ksp = st.getKSP()
-    ksp.setType(PETSc.KSP.Type.PREONLY)
-    ksp.getPC().setType(PETSc.PC.Type.LU)
-    if PETSc.Sys.hasExternalPackage("mumps"):
-        ksp.getPC().setFactorSolverType("mumps")
-    eps.solve()
-    if eps.getConverged() < n:
-        raise RuntimeError(f"SLEPc converged only {eps.getConverged()} of {n} eigenvalues of M^-1 K")
-    lam = np.sort([eps.getEigenvalue(i).real for i in range(eps.getConverged())])[:n]
-    eps.destroy()
-    A.destroy()
-    return np.sqrt(lam)
+    return np.sqrt(dem.eigenvalues(n))
 
 
 dem = simulation.build(scene, comm)

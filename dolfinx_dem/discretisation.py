@@ -226,8 +226,12 @@ class DEMDiscretisation:
         dev = s - np.trace(s, axis1=1, axis2=2)[:, None, None] * np.eye(3) / 3
         return np.sqrt(1.5 * np.einsum("nij,nij->n", dev, dev))
 
-    def stable_time_step(self, rtol: float = 1e-6) -> float:
-        """dt_max = 2 / sqrt(lambda_max(M^-1 K)), the linear stability limit of MEMM (leapfrog)."""
+    def eigenvalues(self, n: int = 1, largest: bool = False, rtol: float = 1e-10) -> np.ndarray:
+        """The n largest or smallest eigenvalues omega^2 of M^-1 K (rad^2/s^2), ascending.
+
+        SLEPc on the symmetric M^-1/2 K M^-1/2 (M is diagonal); the smallest by shift-and-invert
+        around 0 with a direct LU solve (MUMPS where PETSc has it).
+        """
         from slepc4py import SLEPc
 
         A = self.K.copy()
@@ -237,16 +241,31 @@ class DEMDiscretisation:
         eps = SLEPc.EPS().create(self.comm)
         eps.setOperators(A)
         eps.setProblemType(SLEPc.EPS.ProblemType.HEP)
-        eps.setWhichEigenpairs(SLEPc.EPS.Which.LARGEST_REAL)
-        eps.setDimensions(1)
+        eps.setDimensions(n)
         eps.setTolerances(rtol, 1000)
+        if largest:
+            eps.setWhichEigenpairs(SLEPc.EPS.Which.LARGEST_REAL)
+        else:
+            eps.setWhichEigenpairs(SLEPc.EPS.Which.TARGET_MAGNITUDE)
+            eps.setTarget(0.0)
+            st = eps.getST()
+            st.setType(SLEPc.ST.Type.SINVERT)
+            ksp = st.getKSP()
+            ksp.setType(PETSc.KSP.Type.PREONLY)
+            ksp.getPC().setType(PETSc.PC.Type.LU)
+            if PETSc.Sys.hasExternalPackage("mumps"):
+                ksp.getPC().setFactorSolverType("mumps")
         eps.solve()
-        if eps.getConverged() < 1:
-            raise RuntimeError("the largest eigenvalue of M^-1 K did not converge")
-        lmax = eps.getEigenvalue(0).real
+        if eps.getConverged() < n:
+            raise RuntimeError(f"SLEPc converged only {eps.getConverged()} of {n} eigenvalues of M^-1 K")
+        values = np.array([eps.getEigenvalue(i).real for i in range(eps.getConverged())])
         eps.destroy()
         A.destroy()
-        return 2.0 / np.sqrt(lmax)
+        return np.sort(values)[-n:] if largest else np.sort(values)[:n]
+
+    def stable_time_step(self) -> float:
+        """dt_max = 2 / sqrt(lambda_max(M^-1 K)), the linear stability limit of MEMM (leapfrog)."""
+        return 2.0 / np.sqrt(self.eigenvalues(1, largest=True)[0])
 
     # -- DOLFINx functions -------------------------------------------------------------------
     def scalar_function(self, values: np.ndarray, name: str) -> dolfinx.fem.Function:
