@@ -18,17 +18,15 @@ from dolfinx_dem.discretisation import DEMDiscretisation, DirichletBC
 from dolfinx_dem.fem.elastodynamics import first_eigenfrequency
 from dolfinx_dem.material import ElasticMaterial
 from dolfinx_dem.memm import MEMM, InstabilityError
+from helpers import cell_vector, gmsh_mesh, owned_centres
 
 MATERIAL = ElasticMaterial(E=1.0, nu=0.3, rho=1.0)
 
 
 def holed_cantilever(comm, h=0.07):
     """[0,2]x[0,0.5] with a hole of radius 0.12 at (0.6, 0.25): 523 triangles for h = 0.07."""
-    import gmsh
 
-    if comm.rank == 0:
-        gmsh.initialize()
-        gmsh.option.setNumber("General.Terminal", 0)
+    def build(gmsh):
         occ = gmsh.model.occ
         plate = occ.addRectangle(0.0, 0.0, 0.0, 2.0, 0.5)
         hole = occ.addDisk(0.6, 0.25, 0.0, 0.12, 0.12)
@@ -38,21 +36,8 @@ def holed_cantilever(comm, h=0.07):
         gmsh.option.setNumber("Mesh.MeshSizeMin", h)
         gmsh.option.setNumber("Mesh.MeshSizeMax", h)
         gmsh.model.mesh.generate(2)
-    try:
-        return _compat.mesh_from_gmsh_model(gmsh.model, comm, 2)[0]
-    finally:
-        if comm.rank == 0:
-            gmsh.finalize()
 
-
-def owned_centres(dem):
-    return dem.geometry.cell_centres[dem.cell_range[0] : dem.cell_range[1]]
-
-
-def field(dem, f):
-    v = dem.create_vector()
-    v.array[:] = np.asarray(f(owned_centres(dem))).ravel()
-    return v
+    return gmsh_mesh(comm, build)
 
 
 def bending_velocity(x):
@@ -73,7 +58,7 @@ def test_pseudo_energy_conserved_5000_steps():
     dem = clamped_left(holed_cantilever(comm))
     assert 300 <= dem.geometry.num_cells <= 600
     memm = MEMM(dem, 0.5 * dem.stable_time_step())
-    d0 = memm.initialise(dem.create_vector(), field(dem, bending_velocity))
+    d0 = memm.initialise(dem.create_vector(), cell_vector(dem, bending_velocity))
     energy, mechanical, elastic = [d0.pseudo_energy], [d0.mechanical], [d0.elastic]
     for _ in range(5000):
         diag = memm.step()
@@ -99,8 +84,8 @@ def test_linear_momentum_free_body(body_force):
     mesh = dolfinx.mesh.create_rectangle(comm, [[0.0, 0.0], [2.0, 0.5]], [12, 3], diagonal=DiagonalType.crossed)
     dem = DEMDiscretisation(mesh, MATERIAL, scheme="A", body_force=body_force)
     memm = MEMM(dem, 0.5 * dem.stable_time_step())
-    u0 = field(dem, lambda x: 0.01 * np.cos(x))
-    memm.initialise(u0, field(dem, bending_velocity))
+    u0 = cell_vector(dem, lambda x: 0.01 * np.cos(x))
+    memm.initialise(u0, cell_vector(dem, bending_velocity))
     volume = comm.allreduce(dem.geometry.cell_volumes[dem.cell_range[0] : dem.cell_range[1]].sum())
     f_total = volume * np.asarray(body_force if body_force is not None else [0.0, 0.0])
 
@@ -132,7 +117,7 @@ def test_gauss_legendre_equals_midpoint_for_linear_forces():
     results = {}
     for name, q in [("midpoint", 1), ("gauss-legendre-2", 2), ("gauss-legendre-3", 3), ("gauss-legendre-5", 5)]:
         memm = MEMM(dem, dt, quadrature=name)
-        memm.initialise(field(dem, lambda x: 0.01 * x**2), field(dem, bending_velocity))
+        memm.initialise(cell_vector(dem, lambda x: 0.01 * x**2), cell_vector(dem, bending_velocity))
         assert memm.force_evaluations == 1
         energies = [memm.step().pseudo_energy for _ in range(steps)]
         assert memm.force_evaluations == q * steps + 1
@@ -159,7 +144,7 @@ def _standing_wave_error(N, T=0.5):
     steps = math.ceil(T / (0.5 * dem.stable_time_step()))
     memm = MEMM(dem, T / steps)
     x = owned_centres(dem)[:, 0]
-    memm.initialise(field(dem, lambda x: np.sin(np.pi * x)), dem.create_vector())
+    memm.initialise(cell_vector(dem, lambda x: np.sin(np.pi * x)), dem.create_vector())
     for _ in range(steps):
         memm.step()
     assert memm.t == pytest.approx(T)
@@ -221,7 +206,7 @@ def cantilever():
 def test_monitor_detects_instability(cantilever, load):
     dem, stable = cantilever[load]
     memm = MEMM(dem, 1.05 * stable)
-    memm.initialise(dem.create_vector(), field(dem, lambda x: 0.1 * bending_velocity(x)))
+    memm.initialise(dem.create_vector(), cell_vector(dem, lambda x: 0.1 * bending_velocity(x)))
     with pytest.raises(InstabilityError) as info:
         for _ in range(2000):
             memm.step()
@@ -242,7 +227,7 @@ def test_monitor_detects_instability(cantilever, load):
 def test_monitor_quiet_below_the_limit(cantilever, load, start):
     dem, stable = cantilever[load]
     memm = MEMM(dem, 0.95 * stable)
-    v0 = field(dem, lambda x: 0.1 * bending_velocity(x)) if start == "moving" else dem.create_vector()
+    v0 = cell_vector(dem, lambda x: 0.1 * bending_velocity(x)) if start == "moving" else dem.create_vector()
     first = memm.initialise(dem.create_vector(), v0)
     for _ in range(2000):
         diag = memm.step()

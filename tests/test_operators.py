@@ -12,39 +12,23 @@ from dolfinx.mesh import DiagonalType
 from dolfinx_dem import _compat
 from dolfinx_dem.discretisation import DEMDiscretisation, DirichletBC
 from dolfinx_dem.material import ElasticMaterial
+from helpers import cell_vector, gmsh_mesh, owned_centres
 
 MATERIAL = ElasticMaterial(E=3.0, nu=0.3, rho=1.0)
 
 
 def gmsh_disc(comm, h=0.2):
     """Unstructured unit disc (about 250 triangles for h = 0.2)."""
-    import gmsh
 
-    if comm.rank == 0:
-        gmsh.initialize()
-        gmsh.option.setNumber("General.Terminal", 0)
+    def build(gmsh):
         s = gmsh.model.occ.addDisk(0.0, 0.0, 0.0, 1.0, 1.0)
         gmsh.model.occ.synchronize()
         gmsh.model.addPhysicalGroup(2, [s], 1)
         gmsh.option.setNumber("Mesh.MeshSizeMin", h)
         gmsh.option.setNumber("Mesh.MeshSizeMax", h)
         gmsh.model.mesh.generate(2)
-    try:
-        return _compat.mesh_from_gmsh_model(gmsh.model, comm, 2)[0]
-    finally:
-        if comm.rank == 0:
-            gmsh.finalize()
 
-
-def owned_centres(dem):
-    return dem.geometry.cell_centres[dem.cell_range[0] : dem.cell_range[1]]
-
-
-def cell_vector(dem, field):
-    """PETSc vector of u_c = field(x_c) on the owned cells; field maps (n, d) -> (n, d)."""
-    u = dem.create_vector()
-    u.array[:] = np.asarray(field(owned_centres(dem))).ravel()
-    return u
+    return gmsh_mesh(comm, build)
 
 
 def global_max(comm, a):
