@@ -141,6 +141,52 @@ class DEMDiscretisation:
         self._lift_time = None
         self._time_dependent = any(bc.time_dependent for _, bc in self._dirichlet)
         self._update_dirichlet(0.0)
+        self.contact = None
+        self._setup_free_bodies()
+
+    def _setup_free_bodies(self):
+        """Bodies (connected components) without Dirichlet facets move freely, and K annihilates
+        their translations only up to rounding of order eps |K| |u|, which would spoil the energy
+        balance of a fast-moving body. The elastic operators are therefore applied to u minus each
+        free body's mean (mass-weighted) translation: the same result in exact arithmetic, with
+        rounding relative to the deformation instead of the displacement."""
+        import scipy.sparse.csgraph
+
+        geom, d = self.geometry, self.d
+        interior = geom.interior_facets
+        pairs = geom.facet_cells[interior]
+        graph = scipy.sparse.coo_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])),
+                                        shape=(geom.num_cells, geom.num_cells))
+        n_bodies, labels = scipy.sparse.csgraph.connected_components(graph, directed=False)
+        clamped = np.zeros(n_bodies, dtype=bool)
+        clamped[labels[geom.facet_cells[self.reconstruction.dirichlet_facets, 0]]] = True
+        self.body_labels = labels
+        start, stop = self.cell_range
+        owned = labels[start:stop]
+        self._free = ~clamped
+        self._free_owned = self._free[owned]
+        self._labels_owned = owned
+        self._body_mass = np.bincount(labels, weights=self.material.rho * geom.cell_volumes, minlength=n_bodies)
+        self._shifted = self.create_vector()
+
+    def relative_displacement(self, u: PETSc.Vec) -> PETSc.Vec:
+        """u minus the mean translation of each free body (see ``_setup_free_bodies``)."""
+        if not self._free.any():
+            return u
+        d, m = self.d, self.mass.array_r.reshape(-1, self.d)
+        ua = u.array_r.reshape(-1, d)
+        sums = np.stack([np.bincount(self._labels_owned, weights=m[:, i] * ua[:, i],
+                                     minlength=len(self._free)) for i in range(d)], axis=1)
+        mean = self.comm.allreduce(sums, op=MPI.SUM) / self._body_mass[:, None]
+        mean[~self._free] = 0.0
+        self._shifted.array[:] = (ua - mean[self._labels_owned]).ravel()
+        return self._shifted
+
+    def set_obstacles(self, obstacles) -> None:
+        """Frictionless contact with rigid half-spaces (``contact.HalfSpace``), see contact.py."""
+        from dolfinx_dem.contact import RigidContact
+
+        self.contact = RigidContact(self, obstacles) if obstacles else None
 
     # -- vectors -----------------------------------------------------------------------------
     def create_vector(self) -> PETSc.Vec:
@@ -179,33 +225,48 @@ class DEMDiscretisation:
         self._lift_time = t
 
     # -- forces and energies -----------------------------------------------------------------
-    def force(self, u: PETSc.Vec, t: float, out: PETSc.Vec) -> PETSc.Vec:
-        """out = -K u - (S^T s(t) + J^T j(t)) + f: the exact negative gradient of the potential."""
+    def force(self, u: PETSc.Vec, t: float, out: PETSc.Vec, contact: bool = True) -> PETSc.Vec:
+        """out = -K u - (S^T s(t) + J^T j(t)) + f, plus the contact correction unless
+        ``contact=False``: the exact negative gradient of the potential."""
         self._update_dirichlet(t)
-        self.K.mult(u, out)
+        self.K.mult(self.relative_displacement(u), out)
         out.axpy(1.0, self._offset)
         out.aypx(-1.0, self.body_force)
+        if contact and self.contact is not None:
+            c = self.contact
+            c.add(c.force_correction(c.patch_values(u)), out)
         return out
 
     def energies(self, u: PETSc.Vec, t: float) -> dict[str, float]:
         """Elastic (eq. (11)), stabilisation (eq. (13)) and external potential -f.u; global sums."""
         self._update_dirichlet(t)
-        self.S.mult(u, self._s)
+        w = self.relative_displacement(u)
+        self.S.mult(w, self._s)
         self._s.array[:] += self._s_lift
-        self.J.mult(u, self._j)
+        self.J.mult(w, self._j)
         self._j.array[:] += self._j_lift
-        return {
+        e = {
             "elastic": 0.5 * self._s.dot(self._s),
             "stabilisation": 0.5 * self._j.dot(self._j),
             "external": -self.body_force.dot(u),
         }
+        if self.contact is not None:
+            elastic, stabilisation = self.contact.energy_correction(self.contact.patch_values(u))
+            e["elastic"] += elastic
+            e["stabilisation"] += stabilisation
+        return e
 
     def gradient(self, u: PETSc.Vec, t: float) -> np.ndarray:
         """Cell gradients G_c of eq. (8) for the owned cells, shape (n_owned, d, d)."""
         self._update_dirichlet(t)
         self.grad.mult(u, self._grad_vec)
-        G = self._grad_vec.array + self._grad_dirichlet @ self._g
-        return G.reshape(self.n_owned, self.d, self.d)
+        G = (self._grad_vec.array + self._grad_dirichlet @ self._g).reshape(self.n_owned, self.d, self.d)
+        if self.contact is not None:
+            c = self.contact
+            start, stop = self.cell_range
+            mine = (c.cells >= start) & (c.cells < stop)
+            np.add.at(G, c.cells[mine] - start, c.gradient_correction(c.patch_values(u))[mine])
+        return G
 
     def stress(self, u: PETSc.Vec, t: float) -> np.ndarray:
         """Cell stresses sigma_c of eq. (9), shape (n_owned, d, d) (in-plane part in 2D)."""

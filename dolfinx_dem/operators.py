@@ -56,6 +56,8 @@ class EnergyOperators:
     J: scipy.sparse.csr_matrix  # (Fi d, N d), rows ordered as ``jump_facets``
     J_dirichlet: scipy.sparse.csr_matrix  # (Fi d, n_D d)
     jump_facets: np.ndarray  # (Fi,) interior facets, in the row order of J
+    S_facet: scipy.sparse.csr_matrix  # (N m, F d): S = S_facet (R u + D g)
+    J_facet: scipy.sparse.csr_matrix  # (Fi d, F d): gradient part of J, J = J_facet (R u + D g) + jumps of u_C
 
 
 def facet_gradient(geom: MeshGeometry) -> scipy.sparse.csr_matrix:
@@ -112,12 +114,16 @@ def compute_energy_operators(
     ).tocsr()
     weight = material.stabilisation * geom.facet_areas[jump_facets] / geom.facet_diameters[jump_facets]
     sqrt_w = scipy.sparse.diags(np.repeat(np.sqrt(weight), d))
+    S_facet = (W @ Gf).tocsr()
+    J_facet = (sqrt_w @ X @ Gf).tocsr()
     return EnergyOperators(
+        S_facet=S_facet,
+        J_facet=J_facet,
         grad=grad,
         grad_dirichlet=grad_D,
-        S=(W @ grad).tocsr(),
-        S_dirichlet=(W @ grad_D).tocsr(),
-        J=(sqrt_w @ (delta + X @ grad)).tocsr(),
-        J_dirichlet=(sqrt_w @ (X @ grad_D)).tocsr(),
+        S=(S_facet @ rec.R).tocsr(),
+        S_dirichlet=(S_facet @ rec.D).tocsr(),
+        J=(sqrt_w @ delta + J_facet @ rec.R).tocsr(),
+        J_dirichlet=(J_facet @ rec.D).tocsr(),
         jump_facets=np.asarray(jump_facets),
     )

@@ -51,6 +51,7 @@ class Reconstruction:
     D: scipy.sparse.csr_matrix
     dirichlet_facets: np.ndarray  # (n_D,) global facet indices, the order of g
     neumann_facets: np.ndarray  # (n_N,) global facet indices
+    scheme_a_facets: np.ndarray  # the Neumann facets reconstructed by scheme A (eq. (20))
     scheme: str
     multi_neumann_cells: np.ndarray  # cells where scheme A fell to scheme B (rule above)
     stencils: InteriorStencils
@@ -210,6 +211,7 @@ def compute_reconstruction(
         D=D.tocsr(),
         dirichlet_facets=dirichlet_facets,
         neumann_facets=neumann,
+        scheme_a_facets=a_facets,
         scheme=scheme,
         multi_neumann_cells=multi if scheme == "A" else np.empty(0, dtype=np.int64),
         stencils=stencils,
