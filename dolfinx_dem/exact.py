@@ -21,10 +21,15 @@ velocity ``|v0|`` and no stress.
 
 Benchmark 2 (``bounce_*``): the same bar released at rest under gravity ``g = 10`` (body force
 ``-rho g``); first contact at ``t = sqrt(2 h0 / g) = 1`` with velocity ``-g t = -10``, then
-``p(t) = rho c g t`` on ``[1, 1 + 2 L / c) = [1, 5/3)``. The solution is periodic, with period
-``16/3`` s for these data (found by :func:`signorini_bar_characteristics`, not imposed; see
-``tests/test_exact.py``). It is computed by the method of characteristics below, exact on its
-grid.
+``p(t) = rho c g t = 300 t`` on ``[1, 1 + 2 L / c) = [1, 5/3)``, released at ``5/3`` with
+``p(5/3^-) = 500``. It is computed by the method of characteristics below, exact on its grid.
+What the solver finds (checked in ``tests/test_exact.py``, not imposed): the solution is
+periodic with period ``16/3`` s, when the bar is back at rest, unstressed, at height ``h0``.
+Each period holds two contacts of ``2 L / c = 2/3`` s, 8/3 s apart (on ``[1, 5/3)`` and
+``[11/3, 13/3)``); the first starts with ``p = 300`` rising to 500, the second with 500 falling
+to 300, because the motion is symmetric under ``t -> 16/3 - t``. 8/3 s is not a period: the bar
+leaves the first contact vibrating (elastic energy 200/27 per unit area... of the 1000 total)
+and the second contact takes that vibration out again.
 
 Method of characteristics (:func:`signorini_bar_characteristics`). With ``v = u_t`` and
 ``sigma = E u_X`` the bar obeys ``v_t = sigma_X / rho - g``, ``sigma_t = E v_X``. The Riemann
@@ -177,7 +182,8 @@ class _Energies:
         c = math.sqrt(E / rho)
         lo = L - dx * np.arange(n)  # L - X at the lower and upper end of each cell
         hi = lo - dx
-        self.weights = np.column_stack([2 * lo + hi, lo + 2 * hi]).ravel() * (dx / 6.0 * 0.5 * rho * c / E)
+        scale = dx / 6.0 * 0.5 * rho * c / E  # int of a product of linear functions, sigma / E
+        self.weights = np.column_stack([2 * lo + hi, lo + 2 * hi]).ravel() * scale
         self.k_kin = 0.5 * rho * dx / 3.0 * 0.25
         self.k_ela = (0.5 * rho * c) ** 2 * dx / 3.0 / (2.0 * E)
         self.rho_g, self.L = rho * g, L
@@ -269,7 +275,8 @@ def signorini_bar_characteristics(L, rho, E, v0, g, h0, t_end, n) -> BarSolution
             v_l[k + 1], p_l[k + 1] = end, 0.0
             if x < -tol_x:  # the tip reaches the obstacle inside the step
                 coeffs = [0.5 * (b - a) / dt - 0.5 * g, a, x_tip[k]]
-                roots = [r.real for r in np.roots(coeffs) if abs(r.imag) < 1e-12 and 0 <= r.real <= dt]
+                roots = [r.real for r in np.roots(coeffs) 
+                         if abs(r.imag) < 1e-12 and 0 <= r.real <= dt]
                 events.append((t[k] + (min(roots) if roots else dt), "contact", False))
                 pending = True
                 x = 0.0
@@ -290,13 +297,15 @@ def signorini_bar_characteristics(L, rho, E, v0, g, h0, t_end, n) -> BarSolution
     if not all(on_grid for _, _, on_grid in events):
         off = [ev for ev in events if not ev[2]]
         warnings.warn(
-            f"{len(off)} contact status change(s) between grid times (first at t = {off[0][0]:.6g} s): "
-            "the characteristic solution is not exact; choose n so that they fall on the grid",
+            f"{len(off)} contact status change(s) between grid times (first at t = "
+            f"{off[0][0]:.6g} s): the characteristic solution is not exact; choose n so that "
+            "they fall on the grid",
             RuntimeWarning, stacklevel=2,
         )
     return BarSolution(
-        t=t, x_tip=x_tip, v_tip=v_r, v_tip_minus=v_l, p=p_r, p_minus=p_l, contact=contact[:-1].copy(),
-        kinetic=kin, elastic=ela, gravity=grav, w_plus=wp.copy(), w_minus=wm.copy(), events=tuple(events),
+        t=t, x_tip=x_tip, v_tip=v_r, v_tip_minus=v_l, p=p_r, p_minus=p_l,
+        contact=contact[:-1].copy(), kinetic=kin, elastic=ela, gravity=grav,
+        w_plus=wp.copy(), w_minus=wm.copy(), events=tuple(events),
         n=n, dt=dt, dx=dx, L=L, rho=rho, E=E, g=g,
     )
 
@@ -316,7 +325,7 @@ def impact_tip_position(t, L=10.0, rho=1.0, E=900.0, v0=-10.0, h0=5.0):
     """Benchmark 1 tip position (m) at times ``t`` (s), closed form, same shape as ``t``.
 
     ``h0 + v0 t`` before the impact at ``t1 = h0 / |v0|``, 0 during the contact
-    ``[t1, t1 + 2 L / c]``, ``|v0| (t - t1 - 2 L / c)`` after (rigid rebound).
+    ``[t1, t1 + 2 L / c)``, ``|v0| (t - t1 - 2 L / c)`` after (rigid rebound).
     """
     t = np.asarray(t, dtype=float)
     t1, t2, _ = _impact_times(L, rho, E, v0, h0)
@@ -324,14 +333,14 @@ def impact_tip_position(t, L=10.0, rho=1.0, E=900.0, v0=-10.0, h0=5.0):
 
 
 def impact_tip_velocity(t, L=10.0, rho=1.0, E=900.0, v0=-10.0, h0=5.0):
-    """Benchmark 1 tip velocity (m/s), right-continuous: ``v0``, then 0 on ``[t1, t2)``, then ``|v0|``."""
+    """Benchmark 1 tip velocity (m/s), right-continuous: ``v0``, 0 on ``[t1, t2)``, then ``|v0|``."""
     t = np.asarray(t, dtype=float)
     t1, t2, _ = _impact_times(L, rho, E, v0, h0)
     return np.where(t < t1, v0, np.where(t < t2, 0.0, abs(v0)))
 
 
 def impact_contact_pressure(t, L=10.0, rho=1.0, E=900.0, v0=-10.0, h0=5.0):
-    """Benchmark 1 contact pressure (Pa): ``rho c |v0|`` on ``[t1, t1 + 2 L / c)``, 0 elsewhere."""
+    """Benchmark 1 contact pressure (Pa): ``rho c |v0|`` on ``[t1, t1 + 2 L / c)``, else 0."""
     t = np.asarray(t, dtype=float)
     t1, t2, c = _impact_times(L, rho, E, v0, h0)
     return np.where((t >= t1) & (t < t2), rho * c * abs(v0), 0.0)

@@ -18,6 +18,7 @@ import numpy as np
 from mpi4py import MPI
 
 from dolfinx_dem import _compat, io, meshes, plotting, scenes
+from dolfinx_dem.contact import HalfSpace
 from dolfinx_dem.discretisation import DEMDiscretisation, DirichletBC
 from dolfinx_dem.material import ElasticMaterial
 from dolfinx_dem.memm import MEMM, InstabilityError
@@ -46,19 +47,19 @@ def create_mesh(comm: MPI.Comm, spec: Mapping):
     return mesh, tags
 
 
-def _boundary_facets(mesh, tags, boundary) -> np.ndarray:
+def _boundary_facets(mesh, tags, boundary, key="dirichlet.boundary") -> np.ndarray:
     if boundary == "all":
         return _compat.exterior_facets(mesh)
     tag = boundary if isinstance(boundary, int) else scenes.SIDES.get(boundary)
     if tag is None:
         raise scenes.SceneError(
-            f"scene key 'dirichlet.boundary': unknown boundary {boundary!r} "
+            f"scene key '{key}': unknown boundary {boundary!r} "
             f"(use 'all', an integer facet tag, or one of {', '.join(scenes.SIDES)})")
     if tags is None:
         raise scenes.SceneError(f"the mesh has no facet tags, so boundary {boundary!r} cannot be found")
     facets = tags.find(tag)
     if mesh.comm.allreduce(len(facets), op=MPI.SUM) == 0:
-        raise scenes.SceneError(f"scene key 'dirichlet.boundary': boundary {boundary!r} (tag {tag}) has no facet")
+        raise scenes.SceneError(f"scene key '{key}': boundary {boundary!r} (tag {tag}) has no facet")
     return facets
 
 
@@ -79,7 +80,31 @@ def build(scene: Mapping, comm: MPI.Comm = MPI.COMM_WORLD) -> DEMDiscretisation:
     if "gravity" in loads:
         body_force = [material.rho * g for g in loads["gravity"]]
     scheme = scene["method"].split("-")[1]
-    return DEMDiscretisation(mesh, material, scheme, dirichlet, body_force)
+    dem = DEMDiscretisation(mesh, material, scheme, dirichlet, body_force)
+    obstacles = [HalfSpace(ob["point"], ob["normal"], _boundary_facets(mesh, tags, ob["boundary"], "obstacles.boundary"),
+                           ob.get("tolerance", 0.0)) for ob in scene.get("obstacles", [])]
+    dem.set_obstacles(obstacles)
+    return dem
+
+
+def contact_columns(dem: DEMDiscretisation) -> tuple[str, ...]:
+    """Series columns of a scene with obstacles: the smallest gap and the mean contact pressure,
+    and in 1D the position of the contact end."""
+    if dem.contact is None:
+        return ()
+    return ("contact_gap", "contact_pressure") + (("tip_position",) if dem.d == 1 else ())
+
+
+def contact_values(dem: DEMDiscretisation, u) -> list[float]:
+    if dem.contact is None:
+        return []
+    c = dem.contact
+    up = c.patch_values(u)
+    gap, k = c.contact_gap(up)
+    values = [gap, c.contact_pressure(up)]
+    if dem.d == 1:
+        values.append(float(dem.geometry.facet_centres[c.facets[k], 0] + c.facet_displacements(up)[k, 0]))
+    return values
 
 
 class Probes:
@@ -177,14 +202,20 @@ def run(scene: Mapping, out: str | pathlib.Path, comm: MPI.Comm = MPI.COMM_WORLD
         output = scene.get("output", {})
         every, series_every = output.get("every", max(1, n_steps // 50)), output.get("series_every", 1)
         E0, drift, scale, stable, error = diag.pseudo_energy, 0.0, diag.mechanical, True, None
+        min_gap = math.inf
         progress = Progress(comm, n_steps, quiet)
-        with io.SeriesWriter(comm, directory / "series.csv", SERIES_COLUMNS + tuple(probes.names)) as series, \
+        columns = SERIES_COLUMNS + contact_columns(dem) + tuple(probes.names)
+        with io.SeriesWriter(comm, directory / "series.csv", columns) as series, \
                 io.SolutionWriter(comm, directory, dem.mesh) as solution:
 
             def record(diag, force_fields):
+                nonlocal min_gap
+                contact = contact_values(dem, stepper.u)
+                if contact:
+                    min_gap = min(min_gap, contact[0])
                 if diag.step % series_every == 0 or force_fields:
                     series.write([diag.t, diag.kinetic, diag.elastic, diag.stabilisation, diag.external,
-                                  diag.pseudo_energy, *probes.values(stepper.u, diag.t)])
+                                  diag.pseudo_energy, *contact, *probes.values(stepper.u, diag.t)])
                 if diag.step % every == 0 or force_fields:
                     solution.write(diag.t, fields(dem, stepper))
 
@@ -216,6 +247,7 @@ def run(scene: Mapping, out: str | pathlib.Path, comm: MPI.Comm = MPI.COMM_WORLD
             "pseudo_energy_initial": E0,
             "max_mechanical_energy": scale,
             "force_evaluations": stepper.force_evaluations,
+            "max_force_evaluations_per_step": stepper.max_step_evaluations,
             "stable": stable,
             # With time-dependent Dirichlet data the boundary does work: no conservation then.
             "conservative": not any(bc.get("time_dependent", False) for bc in scene.get("dirichlet", [])),
@@ -223,6 +255,9 @@ def run(scene: Mapping, out: str | pathlib.Path, comm: MPI.Comm = MPI.COMM_WORLD
             "multi_neumann_cells": int(len(dem.reconstruction.multi_neumann_cells)),
             "extrapolated_facets": int(len(dem.reconstruction.stencils.extrapolated)),
         }
+        if dem.contact is not None:
+            summary["contact_candidate_facets"] = int(len(dem.contact.facets))
+            summary["min_contact_gap"] = min_gap
         if error is not None:
             summary["error"] = str(error)
             summary["suggested_dt"] = error.suggested_dt

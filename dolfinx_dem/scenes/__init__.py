@@ -120,6 +120,12 @@ SCHEMA = {
         "cfl": lambda k, v, d: _number(k, v, positive=True),
         "quadrature": lambda k, v, d: _string(k, v, QUADRATURES),
     },
+    "obstacles": [{
+        "point": lambda k, v, d: _vector(k, v, d),
+        "normal": lambda k, v, d: _vector(k, v, d),
+        "boundary": lambda k, v, d: v if isinstance(v, int) and not isinstance(v, bool) else _string(k, v),
+        "tolerance": lambda k, v, d: _number(k, v, nonnegative=True),
+    }],
     "probes": [{
         "name": lambda k, v, d: _string(k, v),
         "point": lambda k, v, d: _vector(k, v, d),
@@ -134,7 +140,8 @@ SCHEMA = {
 
 REQUIRED = {"mesh": ("type",), "material": ("E", "nu", "rho"), "time": ("end",)}
 #: Required keys of the entries of array-of-tables sections.
-REQUIRED_ITEMS = {"dirichlet": ("boundary",), "probes": ("name", "point", "component")}
+REQUIRED_ITEMS = {"dirichlet": ("boundary",), "probes": ("name", "point", "component"),
+                  "obstacles": ("point", "normal", "boundary")}
 #: Facet tags of the generated interval/rectangle/box meshes, by boundary name.
 SIDES = {"xmin": 1, "xmax": 2, "ymin": 3, "ymax": 4, "zmin": 5, "zmax": 6,
          "left": 1, "right": 2, "bottom": 3, "top": 4}
