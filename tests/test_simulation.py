@@ -14,7 +14,7 @@ from dolfinx_dem import io, scenes, simulation
 from dolfinx_dem.memm import InstabilityError
 
 CLI = str(pathlib.Path(sys.executable).parent / "dolfinx-dem")
-SHORT = {"bar-wave": 0.5, "cantilever": 0.05, "block": 0.05}
+SHORT = {"bar-wave": 0.5, "cantilever": 0.05, "block": 0.05, "bar-impact": 0.2, "bar-bounce": 0.25}
 SUMMARY_KEYS = {"scene", "method", "n_cells", "n_steps", "dt", "wall_time_s", "pseudo_energy_rel_drift", "stable"}
 
 
@@ -56,7 +56,7 @@ def test_bar_wave_matches_the_exact_standing_wave(tempdir):
 
 
 @pytest.mark.skip_in_parallel
-@pytest.mark.parametrize("name", ["cantilever", "block"])
+@pytest.mark.parametrize("name", ["cantilever", "block", "bar-impact"])
 def test_two_processes_give_the_same_series(name, tmp_path):
     env = dict(os.environ, OMPI_ALLOW_RUN_AS_ROOT="1", OMPI_ALLOW_RUN_AS_ROOT_CONFIRM="1",
                OMPI_MCA_btl_vader_single_copy_mechanism="none")
@@ -120,7 +120,8 @@ def test_both_dt_and_cfl_or_an_unknown_boundary_are_rejected(tmp_path):
 @pytest.mark.skip_in_parallel
 def test_cli(tmp_path):
     listing = subprocess.run([CLI, "list"], capture_output=True, text=True, check=True).stdout
-    assert {"bar-wave", "cantilever", "block"} <= {line.split()[0] for line in listing.splitlines()}
+    assert {"bar-wave", "cantilever", "block", "bar-impact", "bar-bounce"} <= {
+        line.split()[0] for line in listing.splitlines()}
 
     missing = tmp_path / "scene.toml"
     missing.write_text('[mesh]\ntype = "file"\npath = "nope.msh"\n[material]\nE = 1.0\nnu = 0.3\n'
@@ -138,3 +139,19 @@ def test_cli(tmp_path):
     r = subprocess.run([CLI, "show", str(tmp_path / "ok")], capture_output=True, text=True, check=True)
     assert (tmp_path / "ok" / "energies.png").stat().st_size > 0
     assert (tmp_path / "ok" / "probes.png").stat().st_size > 0
+
+
+@pytest.mark.parametrize(
+    "obstacle, message",
+    [
+        ({"point": [6.0], "normal": [1.0], "boundary": "left"}, "intersects the body at t = 0"),
+        ({"point": [0.0], "normal": [1.0], "boundary": "left", "tolerance": -1.0}, "must be >= 0"),
+        ({"point": [0.0], "normal": [1.0]}, "'obstacles\\[0\\].boundary' is missing"),
+        ({"point": [0.0], "normal": [1.0], "boundary": "nowhere"}, "unknown boundary 'nowhere'"),
+    ],
+)
+def test_bad_obstacles_are_rejected_before_the_run(obstacle, message, tmp_path):
+    with pytest.raises(ValueError, match=message):
+        scene = scenes.load("bar-impact", {"obstacles": [obstacle]})
+        simulation.run(scene, tmp_path / "bad", MPI.COMM_SELF, quiet=True)
+    assert not (tmp_path / "bad" / "series.csv").exists()
