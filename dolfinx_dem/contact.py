@@ -160,19 +160,41 @@ class RigidContact:
         """g_f of the free reconstructions for patch values ``up`` (m)."""
         return self._Rn @ up + self._g0
 
-    def _state(self, up):
+    def _state(self, up, active=None):
         g = self.gaps(up)
-        w = np.minimum(g, 0.0)  # g^-
+        if active is None:
+            active = g < 0
+        w = np.where(active, g, 0.0)  # g^- for the natural active set
         a = self._Q @ up + self._q
         delta = self._Y @ w
-        return g, w, a, delta
+        return active, w, a, delta
 
-    def force_correction(self, up: np.ndarray) -> np.ndarray:
-        """F - F_free at the patch dofs (N): the exact negative gradient of the energy change."""
+    def force_correction(self, up: np.ndarray, active: np.ndarray | None = None) -> np.ndarray:
+        """F - F_free at the patch dofs (N): the exact negative gradient of the energy change.
+        ``active`` imposes the set of facets in contact (default: those with g < 0)."""
         self.evaluations += 1
-        g, w, a, delta = self._state(up)
-        coefficient = np.where(g < 0, self._Y.T @ (a - delta), 0.0)
+        active, w, a, delta = self._state(up, active)
+        coefficient = np.where(active, self._Y.T @ (a - delta), 0.0)
         return self._Z @ w + self._Rn.T @ coefficient
+
+    def reaction_pressures(self, up: np.ndarray) -> np.ndarray:
+        """Normal pressure the obstacle exerts on each candidate facet (Pa, 0 out of contact).
+
+        Facet f's share of the contact force is (y_f . a') r_f (+ a term that sums to zero over a
+        free body's translations); r_f reproduces translations, so its resultant is
+        (y_f . a') n and the pressure (y_f . a') / |f|. The pressures of all facets add up to
+        the total reaction, which balances the load at equilibrium."""
+        active, _, a, delta = self._state(up)
+        reaction = np.where(active, self._Y.T @ (a - delta), 0.0)
+        return reaction / self.dem.geometry.facet_areas[self.facets]
+
+    def hessian_correction(self, active: np.ndarray) -> scipy.sparse.csr_matrix:
+        """d^2 V / du^2 - K on the patch (patch x patch) for a fixed set of facets in contact:
+        with Q' = Q - Y_A Rn_A on the touched rows, Q'^T Q' - Q^T Q."""
+        Rn = self._Rn[active]
+        Y = self._Y[:, active]
+        ZR = self._Z[:, active] @ Rn
+        return (Rn.T @ ((Y.T @ Y) @ Rn) - ZR - ZR.T).tocsr()
 
     def energy_correction(self, up: np.ndarray) -> tuple[float, float]:
         """(elastic, stabilisation) energy changes from the contact reconstructions."""
