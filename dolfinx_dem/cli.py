@@ -23,6 +23,7 @@ def _list(args) -> int:
 def _run(args) -> int:
     from dolfinx_dem import scenes, simulation
     from dolfinx_dem.memm import InstabilityError
+    from dolfinx_dem.statics import StaticsError
 
     comm = MPI.COMM_WORLD
     try:
@@ -39,14 +40,19 @@ def _run(args) -> int:
         if comm.rank == 0:
             print(f"dolfinx-dem: error: {err}\nPartial results (marked INCOMPLETE) are in {out}", file=sys.stderr)
         return 1
-    except (scenes.SceneError, ValueError, FileNotFoundError) as err:
+    except (scenes.SceneError, ValueError, FileNotFoundError, StaticsError) as err:
         if comm.rank == 0:
             print(f"dolfinx-dem: error: {err}", file=sys.stderr)
         return 2
     if comm.rank == 0 and not args.quiet:
-        print(f"{summary['scene']}: {summary['n_steps']} steps of dt = {summary['dt']:.4g} s on "
-              f"{summary['n_cells']} cells in {summary['wall_time_s']:.1f} s; pseudo-energy drift "
-              f"{summary['pseudo_energy_rel_drift']:.2e}")
+        if summary.get("analysis") == "static":
+            print(f"{summary['scene']} ({summary['method']}, static): {summary['iterations']} iterations in "
+                  f"{summary['wall_time_s']:.1f} s; top vertical displacement "
+                  f"{summary['top_vertical_displacement']:.5g} m")
+        else:
+            print(f"{summary['scene']}: {summary['n_steps']} steps of dt = {summary['dt']:.4g} s on "
+                  f"{summary['n_cells']} cells in {summary['wall_time_s']:.1f} s; pseudo-energy drift "
+                  f"{summary['pseudo_energy_rel_drift']:.2e}")
         print(f"results in {out.resolve()} (summary.json, series.csv, solution.xdmf, final.png)")
     return 0
 

@@ -50,11 +50,20 @@ def create_mesh(comm: MPI.Comm, spec: Mapping):
 def _boundary_facets(mesh, tags, boundary, key="dirichlet.boundary") -> np.ndarray:
     if boundary == "all":
         return _compat.exterior_facets(mesh)
+    if isinstance(boundary, str) and any(op in boundary for op in "<>="):
+        # A condition on x, y, z that every vertex of the boundary facet satisfies.
+        d = mesh.topology.dim
+        facets = _compat.locate_boundary_facets(
+            mesh, lambda x: np.asarray(scenes.evaluate_condition(boundary, x[:d], key), dtype=bool))
+        if mesh.comm.allreduce(len(facets), op=MPI.SUM) == 0:
+            raise scenes.SceneError(f"scene key '{key}': boundary condition {boundary!r} selects no facet")
+        return facets
     tag = boundary if isinstance(boundary, int) else scenes.SIDES.get(boundary)
     if tag is None:
         raise scenes.SceneError(
             f"scene key '{key}': unknown boundary {boundary!r} "
-            f"(use 'all', an integer facet tag, or one of {', '.join(scenes.SIDES)})")
+            f"(use 'all', an integer facet tag, a condition such as 'y <= 0.2', or one of "
+            f"{', '.join(scenes.SIDES)})")
     if tags is None:
         raise scenes.SceneError(f"the mesh has no facet tags, so boundary {boundary!r} cannot be found")
     facets = tags.find(tag)
@@ -171,6 +180,10 @@ class Progress:
 
 def run(scene: Mapping, out: str | pathlib.Path, comm: MPI.Comm = MPI.COMM_WORLD, quiet: bool = False) -> dict:
     """Run a validated scene and write its outputs into ``out``; returns the summary."""
+    if "statics" in scene:
+        from dolfinx_dem.static_simulation import run_static
+
+        return run_static(scene, out, comm)
     wall = time.perf_counter()
     with io.OutputDirectory(out, comm) as directory:
         dem = build(scene, comm)

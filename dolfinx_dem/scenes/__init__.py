@@ -72,7 +72,7 @@ def _field(key, v, d):
 
 
 MESH_TYPES = ("interval", "rectangle", "box", "disc", "file")
-METHODS = ("dem-A", "dem-B")
+METHODS = ("dem-A", "dem-B", "fem-P2")
 QUADRATURES = ("midpoint", "gauss-legendre-1", "gauss-legendre-2", "gauss-legendre-3", "gauss-legendre-5")
 
 #: Allowed keys per section; values are validators (key, value, d) -> value.
@@ -131,6 +131,11 @@ SCHEMA = {
         "point": lambda k, v, d: _vector(k, v, d),
         "component": lambda k, v, d: _integer(k, v, minimum=0),
     }],
+    "statics": {
+        "fixed_mean": lambda k, v, d: [_integer(f"{k}[{i}]", x, minimum=0) for i, x in enumerate(_list(k, v))],
+        "fixed_rotation": lambda k, v, d: _bool(k, v),
+        "rtol": lambda k, v, d: _number(k, v, positive=True),
+    },
     "output": {
         "every": lambda k, v, d: _integer(k, v),
         "series_every": lambda k, v, d: _integer(k, v),
@@ -138,7 +143,7 @@ SCHEMA = {
     },
 }
 
-REQUIRED = {"mesh": ("type",), "material": ("E", "nu", "rho"), "time": ("end",)}
+REQUIRED = {"mesh": ("type",), "material": ("E", "nu", "rho")}
 #: Required keys of the entries of array-of-tables sections.
 REQUIRED_ITEMS = {"dirichlet": ("boundary",), "probes": ("name", "point", "component"),
                   "obstacles": ("point", "normal", "boundary")}
@@ -208,11 +213,14 @@ def validate(scene: Mapping, mesh_dimension: int | None = None) -> dict:
             for key in keys:
                 if key not in item:
                     raise SceneError(f"scene key '{section}[{i}].{key}' is missing")
-    time = scene["time"]
-    if ("dt" in time) == ("cfl" in time):
-        raise SceneError("scene needs exactly one of 'time.dt' and 'time.cfl'")
-    if "dt" in time and abs(time["end"] / time["dt"] - round(time["end"] / time["dt"])) > 1e-9 * time["end"] / time["dt"]:
-        raise SceneError(f"scene key 'time.end' ({time['end']}) must be a multiple of 'time.dt' ({time['dt']})")
+    if "statics" in scene:
+        for section in ("time", "initial"):
+            if section in scene:
+                raise SceneError(f"a static scene ('statics' table) takes no '{section}' table")
+    else:
+        _validate_time(scene)
+        if scene.get("method") == "fem-P2":
+            raise SceneError("method 'fem-P2' is available for static scenes (the Hertz reference) only")
     m = scene["material"]
     try:
         ElasticMaterial(E=m["E"], nu=m["nu"], rho=m["rho"], plane=m.get("plane", "strain"), eta=m.get("eta"))
@@ -224,6 +232,16 @@ def validate(scene: Mapping, mesh_dimension: int | None = None) -> dict:
     scene.setdefault("method", "dem-A")
     scene.setdefault("name", "scene")
     return scene
+
+
+def _validate_time(scene):
+    time = scene.get("time", {})
+    if "end" not in time:
+        raise SceneError("scene key 'time.end' is missing")
+    if ("dt" in time) == ("cfl" in time):
+        raise SceneError("scene needs exactly one of 'time.dt' and 'time.cfl'")
+    if "dt" in time and abs(time["end"] / time["dt"] - round(time["end"] / time["dt"])) > 1e-9 * time["end"] / time["dt"]:
+        raise SceneError(f"scene key 'time.end' ({time['end']}) must be a multiple of 'time.dt' ({time['dt']})")
 
 
 def builtin_names() -> list[str]:
@@ -278,6 +296,20 @@ def parse_override(text: str) -> tuple[str, object]:
 
 
 _NAMESPACE = {name: getattr(np, name) for name in ("sin", "cos", "tan", "exp", "sqrt", "abs", "tanh", "pi", "where")}
+
+
+def evaluate_condition(expression: str, x: np.ndarray, key: str) -> np.ndarray:
+    """A boolean expression in x, y, z (e.g. "y <= 0.2") at points x (d, n)."""
+    d = x.shape[0]
+    names = dict(_NAMESPACE, **{c: x[i] for i, c in enumerate("xyz"[:d])})
+    try:
+        code = compile(expression, f"<{key}>", "eval")
+    except SyntaxError as err:
+        raise SceneError(f"scene key '{key}' is not a valid condition: {err.msg}") from None
+    unknown = set(code.co_names) - set(names)
+    if unknown:
+        raise SceneError(f"scene key '{key}' uses unknown names {sorted(unknown)}")
+    return eval(code, {"__builtins__": {}}, names)  # noqa: S307
 
 
 def evaluate_field(spec, x: np.ndarray, t: float = 0.0) -> np.ndarray:

@@ -1,0 +1,72 @@
+"""Static DEM by active-set Newton minimisation (paper §5.2): exactness, equilibrium, Hertz."""
+
+import json
+import pathlib
+
+import numpy as np
+import pytest
+from mpi4py import MPI
+
+from dolfinx_dem import meshes, scenes, simulation
+from dolfinx_dem.contact import HalfSpace
+from dolfinx_dem.discretisation import DEMDiscretisation
+from dolfinx_dem.material import ElasticMaterial
+from dolfinx_dem.statics import StaticsError, minimise_energy
+from helpers import owned_centres
+
+
+@pytest.mark.parametrize("scheme", ["A", "B"])
+def test_bar_resting_on_an_obstacle(scheme):
+    """1D bar [0, L] on an obstacle at 0 under gravity: u(x) = -rho g (L x - x^2 / 2) / E."""
+    L, E, rho, g = 1.0, 100.0, 1.0, 10.0
+    errors = []
+    for n in (20, 40, 80):
+        mesh, _, tags = meshes.create_interval(MPI.COMM_WORLD, n, 0.0, L)
+        dem = DEMDiscretisation(mesh, ElasticMaterial(E=E, nu=0.0, rho=rho), scheme, body_force=[-rho * g])
+        dem.set_obstacles([HalfSpace([0.0], [1.0], tags.find(meshes.XMIN))])
+        result = minimise_energy(dem)
+        assert result.gradient_reduction < 1e-8
+        x = owned_centres(dem)[:, 0]
+        exact = -rho * g * (L * x - x**2 / 2) / E
+        errors.append(MPI.COMM_WORLD.allreduce(np.abs(result.u.array - exact).max(), op=MPI.MAX))
+        c = dem.contact
+        assert c.contact_gap(c.patch_values(result.u))[0] == pytest.approx(0.0, abs=1e-14)
+        assert c.reaction_pressures(c.patch_values(result.u))[0] == pytest.approx(rho * g * L, rel=1e-8)
+    order = np.log2(errors[0] / errors[2]) / 2
+    assert errors[-1] < 1e-2 * rho * g * L**2 / (2 * E)
+    assert order > 0.9, (errors, order)
+
+
+@pytest.mark.mpi
+def test_hertz_disc_equilibrium_and_symmetry(tempdir):
+    scene = scenes.load("hertz", {"mesh.h": 0.02})
+    summary = simulation.run(scene, pathlib.Path(tempdir) / "hertz", MPI.COMM_WORLD)
+    load = 2e6 * np.pi * 0.2**2
+    assert summary["gradient_norm_reduction"] < 1e-8
+    assert summary["contact_force"] == pytest.approx(load, rel=2e-3)
+    # Hertz: a = 0.0490 m, p0 = 3.27 MPa; the body-force disc differs by a few percent.
+    assert summary["contact_half_width"] == pytest.approx(0.049, rel=0.08)
+    assert summary["max_contact_pressure"] == pytest.approx(3.27e6, rel=0.1)
+    assert summary["top_vertical_displacement"] == pytest.approx(-0.0139, rel=0.03)
+    if MPI.COMM_WORLD.rank == 0:
+        data = np.loadtxt(pathlib.Path(tempdir) / "hertz" / "contact_pressure.csv", delimiter=",", skiprows=1)
+        x, p = data[:, 0], data[:, 2]
+        touching = p > 0
+        assert abs(x[touching].mean()) < 0.2 * np.abs(x[touching]).max()  # centred: no rolling, no sliding
+        assert json.loads((pathlib.Path(tempdir) / "hertz" / "summary.json").read_text())["iterations"] <= 10
+
+
+def test_free_body_is_rejected():
+    mesh, _, _ = meshes.create_interval(MPI.COMM_WORLD, 10, 0.0, 1.0)
+    dem = DEMDiscretisation(mesh, ElasticMaterial(E=1.0, nu=0.0, rho=1.0), "A", body_force=[-1.0])
+    with pytest.raises(StaticsError, match="unconstrained rigid mode"):
+        minimise_energy(dem)
+    with pytest.raises(ValueError, match="fixed_mean components"):
+        minimise_energy(dem, fixed_mean=(3,))
+
+
+def test_static_scene_rejects_time_and_fem_needs_statics():
+    with pytest.raises(scenes.SceneError, match="takes no 'time' table"):
+        scenes.load("hertz", {"time": {"end": 1.0, "dt": 0.1}})
+    with pytest.raises(scenes.SceneError, match="static scenes"):
+        scenes.load("bar-impact", {"method": "fem-P2"})
