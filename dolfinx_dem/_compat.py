@@ -227,3 +227,55 @@ def import_pyvista():
     finally:
         sys.setdlopenflags(flags)
     return pyvista
+
+
+# --- Hertz FEM helpers ---
+
+
+def create_tensor_space(mesh, family: str, degree: int):
+    """A (gdim, gdim) tensor-valued function space, e.g. DG(k) for stresses."""
+    return dolfinx.fem.TensorFunctionSpace(mesh, (family, degree))
+
+
+def interpolate_expression(function, expr) -> None:
+    """Interpolate a UFL expression into ``function`` (exact if it lies in the space)."""
+    points = function.function_space.element.interpolation_points()
+    function.interpolate(dolfinx.fem.Expression(expr, points))
+
+
+def newton_solver(comm, F, u, J):
+    """(NewtonSolver, NonlinearProblem) for the residual form F(u; v) = 0 with Jacobian form J.
+
+    The solver's Jacobian matrix is ``solver.A``, its linear solver ``solver.krylov_solver``;
+    ``solver.solve(u)`` returns (iterations, converged) and scatters u forward.
+    """
+    import dolfinx.fem.petsc
+    import dolfinx.nls.petsc
+
+    problem = dolfinx.fem.petsc.NonlinearProblem(F, u, bcs=[], J=J)
+    return dolfinx.nls.petsc.NewtonSolver(comm, problem), problem
+
+
+def facet_cell_and_vertices(mesh, facets: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """For boundary facets: their one cell, the facet's vertex and the cell's vertex coordinates.
+
+    Returns cells (n,) int32, facet vertex coordinates (n, tdim, 3) and cell vertex coordinates
+    (n, tdim + 1, 3), for an affine simplex mesh; ``facets`` are process-local indices.
+    """
+    tdim = mesh.topology.dim
+    facets = np.asarray(facets, dtype=np.int32)
+    mesh.topology.create_connectivity(tdim - 1, tdim)
+    mesh.topology.create_connectivity(tdim - 1, 0)
+    mesh.topology.create_connectivity(tdim, 0)
+    f2c = mesh.topology.connectivity(tdim - 1, tdim)
+    cells = np.array([f2c.links(f)[0] for f in facets], dtype=np.int32)
+    num_vertices = mesh.topology.index_map(0).size_local + mesh.topology.index_map(0).num_ghosts
+    v2x = dolfinx.cpp.mesh.entities_to_geometry(
+        _cpp(mesh), 0, np.arange(num_vertices, dtype=np.int32), False
+    ).reshape(-1)
+    x = mesh.geometry.x
+    f2v = mesh.topology.connectivity(tdim - 1, 0)
+    c2v = mesh.topology.connectivity(tdim, 0)
+    facet_x = np.array([x[v2x[f2v.links(f)]] for f in facets]).reshape(-1, tdim, 3)
+    cell_x = np.array([x[v2x[c2v.links(c)]] for c in cells]).reshape(-1, tdim + 1, 3)
+    return cells, facet_x, cell_x

@@ -53,7 +53,7 @@ def _run(args) -> int:
             print(f"{summary['scene']}: {summary['n_steps']} steps of dt = {summary['dt']:.4g} s on "
                   f"{summary['n_cells']} cells in {summary['wall_time_s']:.1f} s; pseudo-energy drift "
                   f"{summary['pseudo_energy_rel_drift']:.2e}")
-        print(f"results in {out.resolve()} (summary.json, series.csv, solution.xdmf, final.png)")
+        print(f"results in {out.resolve()}")
     return 0
 
 

@@ -4,9 +4,9 @@ state at t = 0, plus ``contact_pressure.csv`` (facet or boundary positions and p
 summary keys ``contact_half_width``, ``contact_half_width_last``, ``top_vertical_displacement``,
 ``max_contact_pressure``, ``h`` and ``iterations``.
 
-The contact half-width is the a of the Hertz profile fitted to the pressures (hertz.py), which
-resolves the edge of the contact zone below the mesh size; ``contact_half_width_last`` is the
-largest |x| of a facet in contact, for comparison.
+The contact half-width is the a of the Hertz profile fitted to the pressures
+(``hertz.contact_half_width_fit``, the same for DEM and FEM), which resolves the edge of the contact
+zone below the mesh size; ``contact_half_width_last`` is half the extent of the facets in contact.
 """
 
 from __future__ import annotations
@@ -41,8 +41,6 @@ def _write_pressure(path: pathlib.Path, comm, x: np.ndarray, p: np.ndarray):
 def run_static(scene: Mapping, out, comm: MPI.Comm = MPI.COMM_WORLD) -> dict:
     """Solve a static scene and write its outputs into ``out``; returns the summary."""
     if scene["method"] == "fem-P2":
-        from dolfinx_dem.fem.hertz_scene import run_fem_hertz
-
         return run_fem_hertz(scene, out, comm)
     wall = time.perf_counter()
     with io.OutputDirectory(out, comm) as directory:
@@ -80,13 +78,12 @@ def run_static(scene: Mapping, out, comm: MPI.Comm = MPI.COMM_WORLD) -> dict:
             x = dem.geometry.facet_centres[c.facets]
             _write_pressure(directory / "contact_pressure.csv", comm, x, pressure)
             touching = pressure > 0
-            centre = x[touching, 0].mean() if touching.any() else 0.0
             summary["max_contact_pressure"] = float(pressure.max())
-            summary["contact_half_width_last"] = float(np.abs(x[touching, 0] - centre).max()) if touching.any() else 0.0
+            summary["contact_half_width_last"] = hertz.contact_half_width_last(x[:, 0], pressure)
             summary["contact_facets"] = int(touching.sum())
             summary["contact_force"] = float((pressure * dem.geometry.facet_areas[c.facets]).sum())
             if dem.d == 2 and touching.sum() >= 3:
-                a, p0 = hertz.fit_hertz_profile(x[:, 0] - centre, pressure)
+                a, p0, _ = hertz.contact_half_width_fit(x[:, 0], pressure)
                 summary["contact_half_width"], summary["fitted_max_pressure"] = a, p0
         plotting.plot_cell_field(dem.mesh, u.array_r.reshape(-1, dem.d), dem.von_mises(u, 0.0),
                                  directory / "final.png", "von Mises stress (Pa)",
@@ -94,3 +91,73 @@ def run_static(scene: Mapping, out, comm: MPI.Comm = MPI.COMM_WORLD) -> dict:
         summary["wall_time_s"] = time.perf_counter() - wall
         io.write_summary(directory / "summary.json", comm, summary)
     return summary
+
+
+def run_fem_hertz(scene: Mapping, out, comm: MPI.Comm = MPI.COMM_WORLD) -> dict:
+    """The DOLFINx P2 FEM reference (fem/hertz.py: Nitsche contact, Newton) for the hertz scene.
+
+    It solves the paper's disc (centre (0, R), plane y = 0, vertical body force) with the scene's
+    radius, mesh size and material; other scenes are rejected."""
+    from dolfinx_dem.fem.hertz import solve_hertz
+
+    mesh, loads = scene["mesh"], scene.get("loads", {})
+    force = loads.get("body_force", [0.0, 0.0])
+    if mesh["type"] != "disc" or abs(force[0]) > 0 or force[1] >= 0 or mesh["centre"] != [0.0, mesh["radius"]]:
+        raise scenes.SceneError("method 'fem-P2' solves the Hertz disc only: a 'disc' mesh centred at "
+                                "(0, radius) on the plane y = 0 with a downward 'loads.body_force'")
+    wall = time.perf_counter()
+    with io.OutputDirectory(out, comm) as directory:
+        m = scene["material"]
+        result = solve_hertz(comm, mesh["h"], degree=2, R=mesh["radius"], E=m["E"], nu=m["nu"], body_force=-force[1])
+        result.write_xdmf(directory / "solution.xdmf")
+        _write_pressure(directory / "contact_pressure.csv", comm, result.contact_x[:, None], result.traction_pressure)
+        summary = {
+            "scene": scene["name"],
+            "method": "fem-P2",
+            "analysis": "static",
+            "h": mesh["h"],
+            "n_dofs": result.num_dofs,
+            "iterations": result.iterations,
+            "residual": result.residual,
+            "contact_half_width": result.contact_half_width,
+            "contact_half_width_last": result.contact_half_width_last,
+            "top_vertical_displacement": result.top_vertical_displacement,
+            "max_contact_pressure": result.max_contact_pressure,
+            "fitted_max_pressure": result.fit_peak_pressure,
+            "contact_force": result.contact_force,
+            "processes": comm.size,
+        }
+        displacement, von_mises = _fem_cell_fields(result.u, m["E"], m["nu"])
+        plotting.plot_cell_field(result.mesh, displacement, von_mises, directory / "final.png",
+                                 "von Mises stress (Pa)", scene.get("output", {}).get("picture_scale", 1.0))
+        summary["wall_time_s"] = time.perf_counter() - wall
+        io.write_summary(directory / "summary.json", comm, summary)
+    return summary
+
+
+def _fem_cell_fields(u, E: float, nu: float):
+    """Cell-midpoint displacement and plane-strain von Mises stress of a FEM displacement, in the
+    owned DG0 dof order that plotting expects."""
+    import dolfinx.fem
+    import ufl
+
+    from dolfinx_dem import _compat
+
+    mesh = u.function_space.mesh
+    lmbda, mu = E * nu / ((1 + nu) * (1 - 2 * nu)), E / (2 * (1 + nu))
+    eps = ufl.sym(ufl.grad(u))
+    sigma = 2 * mu * eps + lmbda * ufl.tr(eps) * ufl.Identity(2)
+    szz = lmbda * ufl.tr(eps)
+    s = sigma - (ufl.tr(sigma) + szz) / 3 * ufl.Identity(2)
+    vm = ufl.sqrt(1.5 * (ufl.inner(s, s) + (szz - (ufl.tr(sigma) + szz) / 3) ** 2))
+    Q = _compat.create_scalar_space(mesh, "DG", 0)
+    V0 = _compat.create_vector_space(mesh, "DG", 0)
+    q, w = dolfinx.fem.Function(Q), dolfinx.fem.Function(V0)
+    q.interpolate(dolfinx.fem.Expression(vm, Q.element.interpolation_points()))
+    w.interpolate(u)
+    n = mesh.topology.index_map(2).size_local
+    cells = np.arange(n)
+    blocks = _compat.cell_dofs(V0)[:n]
+    order = np.empty(n, dtype=np.int64)
+    order[blocks] = cells  # local cell of each owned DG0 vector block
+    return w.x.array[: 2 * n].reshape(n, 2), q.x.array[_compat.cell_dofs(Q)[order]]

@@ -1,0 +1,601 @@
+"""DOLFINx finite-element reference for the static Hertz problem (DEM paper, section 5.2).
+
+A disc of radius R (m), centre (0, R), in plane strain (Young's modulus E in Pa, Poisson's ratio
+nu), loaded by the body force (0, -f) (N/m^3), rests on the rigid plane y = 0. Contact is
+frictionless on the lower half of the boundary (y < R); there is no Dirichlet condition.
+
+Sign conventions (the plane's normal e_y = (0, 1) points into the body's side; ``n`` is the
+outward unit normal of the body, n ~ (0, -1) in the contact zone):
+
+* gap ``g(u) = (x + u) . e_y - y_plane >= 0`` (m), the distance of the displaced boundary point
+  from the plane, measured along e_y;
+* contact pressure ``p(u) = e_y . sigma(u) n`` (Pa), the e_y-component of the boundary traction
+  exerted by the plane on the body: ``p >= 0`` in compression (``p = -sigma_nn`` where n = -e_y);
+* frictionless: the traction has no component along the plane, ``sigma(u) n = p e_y``;
+* Signorini: ``g >= 0, p >= 0, p g = 0``, equivalently ``p = [p - gamma g]_+`` for any gamma > 0.
+
+Nitsche's method (Chouly, Hild & Renard, Math. Comp. 84, 2015) with ``P(u) = p(u) - gamma g(u)``
+and ``gamma = gamma0 E / h_K`` (h_K the diameter of the facet's cell): find u such that for all v
+
+    a(u, v) - theta/gamma (p(u), p(v))_Gc + 1/gamma ([P(u)]_+, theta p(v) - gamma v . e_y)_Gc = L(v)
+
+with ``a(u, v) = (sigma(u), eps(v))``, ``L(v) = (f, v)``; theta = 1 (symmetric, the default: the
+Euler-Lagrange equation of an energy, symmetric Jacobian), 0 or -1 (skew-symmetric). The Nitsche
+multiplier ``lambda = [P(u)]_+`` (Pa) is the contact pressure that enters the equilibrium: with
+the rigid translation v = e_y, ``integral_Gc lambda ds = f |Omega_h|`` exactly
+(``HertzResult.contact_pressure``).
+
+The horizontal rigid translation is free (frictionless contact, no Dirichlet condition): the
+residual is exactly invariant under ``u -> u + c e_x`` (F(u; e_x) = 0 for every u), so e_x is a
+right and a left null vector of the Jacobian J. It is fixed by the constraint "mass-weighted mean
+of u_x = 0" (as in the DEM; uniform density, so the area-weighted mean), ``m . u = 0`` with
+``m_i = (phi_i . e_x, 1)``. Newton's linear solves use ``J + eps M_x`` (MUMPS LU), ``M_x`` the
+mass matrix of the x-components and eps = 1e-10 E / R^2: nonsingular, and since e_x^T J = 0,
+e_x^T F = 0 and ``M_x e_x = m``, every update satisfies ``m . du = 0`` exactly. The residual is
+not modified, so the converged solution is the exact one; the perturbed Jacobian only leaves a
+relative error ~ 20 eps R^2 / E = 2e-9 per iteration (no extra iteration in practice). Each update is
+also projected onto ``m . du = 0`` against round-off. The alternative
+``singular_method="nullspace"`` attaches e_x to J as a PETSc MatNullSpace and lets MUMPS detect
+the null pivot (ICNTL(24) = 1); with MUMPS's default threshold it sees the null pivot on coarse meshes
+but not on h <= 3e-3, where the LU of the numerically singular J still works thanks to the
+projection (same results), but less safely.
+
+The mesh polygon of :func:`dolfinx_dem.meshes.create_disc` does not, in general, have a vertex at
+the origin; the plane is put at ``y_plane = min_y`` of the mesh so that the discrete disc touches
+it (the difference is at most h^2 / (8 R)). With ``exact_gap=True`` the gap uses the circle
+instead of the polygon, ``g = R - sqrt(R^2 - x^2) + u_y`` with the plane at y = 0: this removes
+the pressure peaks of the multiplier at the polygon's vertices (pressed flat onto the plane).
+Newton starts from the rigid translation ``u = (0, -a_H^2 / (2 R))`` (a_H the Hertz
+half-width), which gives a contact zone of about the right size; it converges in 3-5 iterations
+(semi-smooth Newton: the active set settles, then one exact step), so load stepping is optional.
+
+Pressures are sampled at equispaced interior points of the contact facets. Two estimates:
+
+* the Nitsche multiplier ``lambda = [p(u_h) - gamma g(u_h)]_+``: >= 0 and in exact equilibrium
+  with the load, but it oscillates within each facet (+-10 % on h = 1.2e-2, polygon gap);
+* the FE traction ``p(u_h) = e_y . sigma(u_h) n``: smooth inside the contact zone, slightly
+  negative just outside it.
+
+The contact half-width ``a`` is measured by a least-squares fit of the Hertz profile to the
+traction on the samples in contact (:func:`contact_half_width_fit`: p^2 is quadratic in x),
+which resolves the edge below the mesh size and hardly depends on gamma0; the outermost samples
+with lambda > 0 (:func:`contact_half_width_last`) and the fit to lambda are reported as well.
+
+Units are SI throughout. :func:`solve_hertz` is collective on ``comm``.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import time
+import typing
+
+import numpy as np
+import numpy.typing as npt
+import ufl
+from mpi4py import MPI
+from petsc4py import PETSc
+
+import dolfinx
+import dolfinx.fem
+import dolfinx.fem.petsc
+import dolfinx.mesh
+
+from dolfinx_dem import _compat
+from dolfinx_dem.hertz import contact_half_width_fit, contact_half_width_last, hertz_analytic
+
+__all__ = [
+    "HertzAnalytic",
+    "HertzResult",
+    "contact_half_width_fit",
+    "contact_half_width_last",
+    "hertz_analytic",
+    "solve_hertz",
+]
+
+_CONTACT = 1  # facet tag of the potential contact boundary (lower half of the disc)
+
+
+# --- validation ---------------------------------------------------------------------------------
+
+
+def _check_positive(name: str, value) -> float:
+    value = float(value)
+    if not (np.isfinite(value) and value > 0.0):
+        raise ValueError(f"{name} must be finite and > 0, got {value!r}")
+    return value
+
+
+def _check_material(E, nu) -> tuple[float, float]:
+    E = _check_positive("E (Young's modulus)", E)
+    nu = float(nu)
+    if not (-1.0 < nu < 0.5):
+        raise ValueError(f"nu (Poisson's ratio) must satisfy -1 < nu < 0.5, got {nu!r}")
+    return E, nu
+
+
+def _check_degree(degree) -> int:
+    is_int = isinstance(degree, (int, np.integer)) and not isinstance(degree, bool)
+    if not is_int or degree not in (1, 2):
+        raise ValueError(f"degree must be 1 or 2 (Lagrange), got {degree!r}")
+    return int(degree)
+
+
+def _check_int(name: str, value, minimum: int) -> int:
+    if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < minimum:
+        raise ValueError(f"{name} must be an integer >= {minimum}, got {value!r}")
+    return int(value)
+
+
+# --- result -------------------------------------------------------------------------------------
+
+
+@dataclasses.dataclass
+class HertzResult:
+    """The FEM solution of the Hertz problem and the measured quantities (SI units).
+
+    Pressure samples are on the owned facets of the lower half of the boundary (gathered on every
+    rank, sorted by x): ``samples_per_facet`` equispaced interior points per facet (facet
+    vertices excluded, where the stress jumps between cells).
+    """
+
+    mesh: typing.Any  # dolfinx.mesh.Mesh
+    u: typing.Any  # displacement Function (m), Lagrange P1/P2 vector
+    h: float  # requested mesh size (m)
+    degree: int
+    gamma0: float
+    theta: float
+    exact_gap: bool
+    y_plane: float  # height of the rigid plane (m): the lowest mesh node (0 with exact_gap)
+    num_dofs: int  # global number of scalar displacement dofs
+    iterations: int  # Newton iterations (sum over load steps)
+    null_pivots: int  # MUMPS's null pivots in the last LU ("nullspace" method only; 1 = e_x)
+    contact_x: np.ndarray  # (n,) sample x positions (m)
+    contact_pressure: np.ndarray  # (n,) Nitsche multiplier lambda = [p - gamma g]_+ (Pa)
+    traction_pressure: np.ndarray  # (n,) p(u_h) = e_y . sigma(u_h) n of the FE stress (Pa)
+    contact_gap: np.ndarray  # (n,) g(u_h) (m), negative = penetration
+    contact_half_width: float  # a (m): Hertz fit to the traction in contact (fit_fraction)
+    contact_half_width_multiplier: float  # a (m): Hertz fit to the multiplier lambda
+    contact_half_width_last: float  # a (m): half the span of the samples with lambda > 0
+    fit_peak_pressure: float  # p0 of the fit to the traction (Pa)
+    fit_centre: float  # centre of the fitted profile (m)
+    max_contact_pressure: float  # max of the traction over the samples with lambda > 0 (Pa)
+    max_multiplier: float  # max of lambda (Pa)
+    top_vertical_displacement: float  # u_y at the top of the disc, x = 0 (m)
+    contact_force: float  # integral of lambda over the contact boundary (N/m)
+    applied_load: float  # f |Omega_h| (N/m), the body force on the mesh
+    mean_ux: float  # mass-weighted mean of u_x (m)
+    residual: float  # final ||F(u_h)|| / ||(f, v)||, Euclidean norms of the assembled vectors
+    analytic: HertzAnalytic
+    times: dict  # wall times (s): mesh, setup, solve, postprocess, total (max over ranks)
+
+    def write_xdmf(self, path) -> None:
+        """Write the displacement, interpolated to P1 (Debian's XDMF keeps vertex values only)."""
+        import dolfinx.io
+
+        V1 = _compat.create_vector_space(self.mesh, "Lagrange", 1)
+        u1 = dolfinx.fem.Function(V1, name="displacement")
+        u1.interpolate(self.u)
+        with dolfinx.io.XDMFFile(self.mesh.comm, str(path), "w") as xdmf:
+            xdmf.write_mesh(self.mesh)
+            xdmf.write_function(u1)
+
+
+# --- the solver ---------------------------------------------------------------------------------
+
+
+def _lame(E: float, nu: float) -> tuple[float, float]:
+    """Plane-strain Lamé parameters (lambda, mu) in Pa."""
+    return E * nu / ((1.0 + nu) * (1.0 - 2.0 * nu)), E / (2.0 * (1.0 + nu))
+
+
+def _global_min(comm, values: np.ndarray) -> float:
+    local = float(np.min(values)) if values.size > 0 else np.inf
+    return comm.allreduce(local, op=MPI.MIN)
+
+
+def _top_displacement(u, R: float) -> tuple[float, float]:
+    """(y_top, u_y) at the top of the mesh at x = 0 (m): on the polygon, not the circle.
+
+    Evaluated in the cell of the owned boundary facet that crosses x = 0 (no point location).
+    """
+    mesh = u.function_space.mesh
+    facets = _owned(mesh, _compat.locate_boundary_facets(mesh, lambda x: x[1] > R))
+    cells, facet_x, _ = _compat.facet_cell_and_vertices(mesh, facets)
+    best = (-np.inf, 0.0)
+    for cell, ((x0, y0, _), (x1, y1, _)) in zip(cells, facet_x):
+        if min(x0, x1) <= 0.0 <= max(x0, x1) and x0 != x1:
+            y = y0 + (y1 - y0) * (0.0 - x0) / (x1 - x0)
+            if y > best[0]:
+                point = np.array([[0.0, y, 0.0]])
+                value = np.real(u.eval(point, np.array([cell], dtype=np.int32))).reshape(-1)
+                best = (y, float(value[1]))
+    return mesh.comm.allreduce(best, op=MPI.MAX)
+
+
+def _owned(mesh, facets: np.ndarray) -> np.ndarray:
+    return facets[facets < mesh.topology.index_map(mesh.topology.dim - 1).size_local]
+
+
+def _sample_contact(u, sigma_h, facets, y_plane, gamma0, E, samples_per_facet, R, exact_gap):
+    """(x, lambda, p, g) at equispaced interior points of the given owned boundary facets.
+
+    Same quantities as in the forms: p = e_y . sigma_h n, g the gap, lambda = [p - gamma g]_+
+    with gamma = gamma0 E / h_K (h_K the largest vertex distance of the facet's cell, as
+    ufl.CellDiameter on an affine simplex).
+    """
+    if facets.size == 0:
+        empty = np.zeros(0)
+        return empty, empty, empty, empty
+    mesh = u.function_space.mesh
+    cells, facet_x, cell_x = _compat.facet_cell_and_vertices(mesh, facets)
+    s = (np.arange(samples_per_facet) + 0.5) / samples_per_facet
+    points = facet_x[:, :1, :] + s[None, :, None] * (facet_x[:, 1:2, :] - facet_x[:, :1, :])
+    points = points.reshape(-1, 3)
+    point_cells = np.repeat(cells, samples_per_facet)
+    # outward unit normal of each facet, and the cell diameter (max vertex distance)
+    t = facet_x[:, 1, :2] - facet_x[:, 0, :2]
+    normal = np.stack([t[:, 1], -t[:, 0]], axis=1) / np.linalg.norm(t, axis=1)[:, None]
+    inward = cell_x[:, :, :2].mean(axis=1) - facet_x[:, :, :2].mean(axis=1)
+    normal *= -np.sign(np.sum(normal * inward, axis=1))[:, None]
+    diffs = cell_x[:, :, None, :2] - cell_x[:, None, :, :2]
+    h_cell = np.sqrt(np.max(np.sum(diffs**2, axis=-1), axis=(1, 2)))
+
+    u_val = np.real(u.eval(points, point_cells)).reshape(-1, 2)
+    sig = np.real(sigma_h.eval(points, point_cells)).reshape(-1, 2, 2)
+    n_pt = np.repeat(normal, samples_per_facet, axis=0)
+    p = np.einsum("ij,ij->i", sig[:, 1, :], n_pt)  # e_y . sigma n
+    if exact_gap:
+        g = R - np.sqrt(np.clip(R**2 - points[:, 0] ** 2, 0.0, None)) + u_val[:, 1]
+    else:
+        g = points[:, 1] + u_val[:, 1] - y_plane
+    gamma = gamma0 * E / np.repeat(h_cell, samples_per_facet)
+    lam = np.maximum(p - gamma * g, 0.0)
+    return points[:, 0].copy(), lam, p, g
+
+
+def _gather_sorted(comm, *arrays):
+    gathered = [np.concatenate(comm.allgather(a)) for a in arrays]
+    order = np.argsort(gathered[0], kind="stable")
+    return [a[order] for a in gathered]
+
+
+class _MeanUx:
+    """The constraint "mass-weighted mean of u_x = 0" (uniform density: area-weighted).
+
+    ``m . u = integral of u_x dx`` with ``m_i = integral of phi_i . e_x dx``; ``e_x`` holds the
+    coefficients of the constant field (1, 0), the null vector of the Jacobian.
+    """
+
+    def __init__(self, V):
+        v = ufl.TestFunction(V)
+        self.m = dolfinx.fem.petsc.assemble_vector(dolfinx.fem.form(v[0] * ufl.dx))
+        self.m.ghostUpdate(addv=PETSc.InsertMode.ADD, mode=PETSc.ScatterMode.REVERSE)
+        self._e_x_function = dolfinx.fem.Function(V)
+        self._e_x_function.interpolate(
+            lambda x: np.stack([np.ones(x.shape[1]), np.zeros(x.shape[1])])
+        )
+        self.e_x = _compat.petsc_vec(self._e_x_function)
+        self.area = self.m.dot(self.e_x)
+
+    def mean(self, vec: PETSc.Vec) -> float:
+        """Mean x-component (m) of the field with coefficients ``vec``."""
+        return self.m.dot(vec) / self.area
+
+    def remove(self, vec: PETSc.Vec) -> None:
+        """Subtract the mean x-translation from ``vec`` (owned entries; ghosts untouched)."""
+        vec.axpy(-self.mean(vec), self.e_x)
+
+
+class _Newton:
+    """DOLFINx's NewtonSolver with MUMPS LU and updates free of the mean x-translation.
+
+    The Jacobian is singular (its null vector is e_x). ``method`` makes the linear solves well
+    posed:
+
+    * "regularise": solve with ``J + eps M_x``, ``M_x`` the mass matrix of the x-components
+      (``(du_x, v_x)``, eps = ``regularisation`` in Pa/m^2). The residual is unchanged, so the
+      converged solution is exact; every update satisfies ``m . du = 0`` exactly (e_x is a left
+      null vector of J and ``M_x e_x = m``), and Newton's convergence is slowed by a factor
+      ~ eps / (smallest nonzero eigenvalue of J relative to M) only.
+    * "nullspace": e_x as a PETSc MatNullSpace of J and MUMPS with null-pivot detection
+      (ICNTL(24) = 1). MUMPS's default threshold does not always see the (round-off) null pivot.
+
+    In both cases the update is projected onto zero mean u_x.
+    """
+
+    _METHODS = ("regularise", "nullspace")
+
+    def __init__(self, comm, F, u, mean_ux, rtol, atol, max_it, method, regularisation):
+        V = u.function_space
+        du, v = ufl.TrialFunction(V), ufl.TestFunction(V)
+        J = ufl.derivative(F, u, du)
+        options = {"ksp_type": "preonly", "pc_type": "lu", "pc_factor_mat_solver_type": "mumps"}
+        if method == "regularise":
+            J = J + regularisation * du[0] * v[0] * ufl.dx
+        else:
+            options["mat_mumps_icntl_24"] = 1
+        self.solver, self._problem = _compat.newton_solver(comm, F, u, J)
+        # DOLFINx 0.5's "residual" criterion divides by the first update's norm, not by the first
+        # residual's; the incremental criterion ||du_k|| <= rtol ||du_1|| is used instead (the
+        # caller checks the final residual).
+        self.solver.convergence_criterion = "incremental"
+        self.solver.rtol = rtol
+        self.solver.atol = atol
+        self.solver.max_it = max_it
+        self.solver.error_on_nonconvergence = False
+
+        self._null_space = None
+        if method == "nullspace":
+            e_x = self.solver.A.createVecRight()
+            e_x.array[:] = mean_ux.e_x.array_r[: e_x.getLocalSize()]
+            e_x.normalize()
+            self._null_space = PETSc.NullSpace().create(vectors=[e_x], comm=comm)
+            self.solver.A.setNullSpace(self._null_space)
+
+        # MUMPS reads its options when the factor is created (first solve): keep them till close()
+        self.ksp = self.solver.krylov_solver
+        self._prefix = f"dolfinx_dem_hertz_{id(self)}_"
+        self.ksp.setOptionsPrefix(self._prefix)
+        self._options = options
+        database = PETSc.Options()
+        for key, value in options.items():
+            database[self._prefix + key] = value
+        self.ksp.setFromOptions()
+
+        def update(_solver, dx: PETSc.Vec, x: PETSc.Vec) -> None:
+            mean_ux.remove(dx)  # the update keeps the mean of u_x (zero) unchanged
+            x.axpy(-1.0, dx)
+
+        self.solver.set_update(update)
+
+    def solve(self, u) -> tuple[int, bool]:
+        return self.solver.solve(u)
+
+    def null_pivots(self) -> int:
+        """Null pivots MUMPS detected in the last factorisation (0 unless "nullspace")."""
+        if self._null_space is None:
+            return 0
+        return int(self.ksp.getPC().getFactorMatrix().getMumpsInfog(28))
+
+    def close(self) -> None:
+        database = PETSc.Options()
+        for key in self._options:
+            database.delValue(self._prefix + key)
+        if self._null_space is not None:
+            self._null_space.destroy()
+
+
+def _assembled_norm(form) -> float:
+    vec = dolfinx.fem.petsc.assemble_vector(dolfinx.fem.form(form))
+    vec.ghostUpdate(addv=PETSc.InsertMode.ADD, mode=PETSc.ScatterMode.REVERSE)
+    norm = vec.norm()
+    vec.destroy()
+    return norm
+
+
+def solve_hertz(
+    comm: MPI.Comm,
+    h: float,
+    degree: int = 2,
+    R: float = 0.2,
+    E: float = 25e6,
+    nu: float = 0.25,
+    body_force: float = 2e6,
+    gamma0: float = 20.0,
+    theta: float = 1.0,
+    *,
+    exact_gap: bool = False,
+    singular_method: str = "regularise",
+    regularisation: float = 1e-10,
+    load_steps: int = 1,
+    rtol: float = 1e-10,
+    max_it: int = 30,
+    fit_fraction: float = 0.2,
+    samples_per_facet: int = 8,
+    quadrature_degree: typing.Optional[int] = None,
+) -> HertzResult:
+    """Solve the static Hertz problem with P1/P2 FEM and Nitsche frictionless contact.
+
+    Args:
+        comm: MPI communicator (collective).
+        h: Mesh size (m) passed to :func:`dolfinx_dem.meshes.create_disc`, 0 < h < R.
+        degree: Lagrange degree of the displacement, 1 or 2.
+        R: Disc radius (m), > 0; centre (0, R).
+        E: Young's modulus (Pa), > 0.
+        nu: Poisson's ratio, -1 < nu < 0.5 (plane strain).
+        body_force: Magnitude f (N/m^3) > 0 of the downward body force (0, -f).
+        gamma0: Nitsche parameter, gamma = gamma0 E / h_K, > 0.
+        theta: Nitsche variant, 1 (symmetric), 0 or -1 (skew-symmetric); any value in [-1, 1].
+        exact_gap: Measure the gap from the circle instead of the mesh polygon (see above).
+        singular_method: How the linear solves handle the free x-translation: "regularise"
+            (default) or "nullspace" (see the module docstring).
+        regularisation: eps / (E / R^2) of the "regularise" method, > 0.
+        load_steps: Number of equal load increments (>= 1), each solved by Newton.
+        rtol: Newton stops when the update's norm is <= rtol times the first update's.
+        max_it: Maximum Newton iterations per load step.
+        fit_fraction: Threshold of :func:`contact_half_width_fit`, in (0, 1).
+        samples_per_facet: Pressure samples per contact facet (>= 1).
+        quadrature_degree: Quadrature degree on the contact boundary (default 4 * degree: the
+            contact integrand has a kink at the edge of the contact zone).
+
+    Returns:
+        A :class:`HertzResult`; its numbers and sample arrays are identical on every rank (the
+        mesh and the Function are distributed).
+
+    Raises:
+        ValueError: bad input. RuntimeError: Newton did not converge.
+    """
+    from dolfinx_dem.meshes import create_disc
+
+    t_start = time.perf_counter()
+    h = _check_positive("h (mesh size)", h)
+    degree = _check_degree(degree)
+    R = _check_positive("R (radius)", R)
+    if h >= R:
+        raise ValueError(f"h (mesh size) must be smaller than R, got h={h}, R={R}")
+    E, nu = _check_material(E, nu)
+    f = _check_positive("body_force", body_force)
+    gamma0 = _check_positive("gamma0 (Nitsche parameter)", gamma0)
+    theta = float(theta)
+    if not -1.0 <= theta <= 1.0:
+        raise ValueError(f"theta must be in [-1, 1] (1, 0, -1 are the usual variants), got {theta}")
+    if singular_method not in _Newton._METHODS:
+        raise ValueError(
+            f"singular_method must be one of {', '.join(_Newton._METHODS)}, got {singular_method!r}"
+        )
+    regularisation = _check_positive("regularisation", regularisation)
+    load_steps = _check_int("load_steps", load_steps, 1)
+    max_it = _check_int("max_it", max_it, 1)
+    samples_per_facet = _check_int("samples_per_facet", samples_per_facet, 1)
+    rtol = _check_positive("rtol", rtol)
+    if not 0.0 < fit_fraction < 1.0:
+        raise ValueError(f"fit_fraction must be in (0, 1), got {fit_fraction!r}")
+    if quadrature_degree is None:
+        quadrature_degree = 4 * degree
+    quadrature_degree = _check_int("quadrature_degree", quadrature_degree, 1)
+    analytic = hertz_analytic(R, E, nu, f)
+
+    mesh, _, _ = create_disc(comm, (0.0, R), R, h)
+    t_mesh = time.perf_counter()
+
+    # potential contact boundary: the lower half of the disc
+    fdim = mesh.topology.dim - 1
+    contact_facets = np.sort(_compat.locate_boundary_facets(mesh, lambda x: x[1] < R))
+    tags = dolfinx.mesh.meshtags(
+        mesh, fdim, contact_facets, np.full(contact_facets.size, _CONTACT, dtype=np.int32)
+    )
+    ds_c = ufl.Measure(
+        "ds",
+        domain=mesh,
+        subdomain_data=tags,
+        subdomain_id=_CONTACT,
+        metadata={"quadrature_degree": quadrature_degree},
+    )
+    y_plane = 0.0 if exact_gap else _global_min(comm, mesh.geometry.x[:, 1])
+
+    # Nitsche residual (module docstring)
+    V = _compat.create_vector_space(mesh, "Lagrange", degree)
+    u = dolfinx.fem.Function(V, name="displacement")
+    v = ufl.TestFunction(V)
+    lmbda, mu = _lame(E, nu)
+
+    def eps(w):
+        return ufl.sym(ufl.grad(w))
+
+    def sigma(w):
+        return lmbda * ufl.tr(eps(w)) * ufl.Identity(2) + 2.0 * mu * eps(w)
+
+    n = ufl.FacetNormal(mesh)
+    e_y = ufl.as_vector((0.0, 1.0))
+    x = ufl.SpatialCoordinate(mesh)
+
+    def pressure(w):
+        return ufl.dot(e_y, ufl.dot(sigma(w), n))
+
+    gamma = gamma0 * E / ufl.CellDiameter(mesh)
+    if exact_gap:
+        gap = R - ufl.sqrt(R**2 - x[0] ** 2) + u[1]  # |x| <= R on the polygon
+    else:
+        gap = x[1] + u[1] - y_plane
+    P = pressure(u) - gamma * gap
+    multiplier = ufl.conditional(ufl.gt(P, 0.0), P, 0.0)
+    load_factor = dolfinx.fem.Constant(mesh, PETSc.ScalarType(1.0))
+    force = ufl.as_vector((0.0, -f * load_factor))
+    load_form = ufl.inner(force, v) * ufl.dx
+    F = (
+        ufl.inner(sigma(u), eps(v)) * ufl.dx
+        - theta / gamma * pressure(u) * pressure(v) * ds_c
+        + 1.0 / gamma * multiplier * (theta * pressure(v) - gamma * v[1]) * ds_c
+        - load_form
+    )
+
+    mean_ux = _MeanUx(V)
+    newton = _Newton(
+        comm, F, u, mean_ux, rtol, 1e-14 * R, max_it, singular_method, regularisation * E / R**2
+    )
+    t_setup = time.perf_counter()
+    try:
+        iterations = 0
+        for step in range(1, load_steps + 1):
+            load_factor.value = step / load_steps
+            if step == 1:
+                # rigid downward translation: a contact zone of about the Hertz width
+                delta = analytic.a**2 / (2.0 * R) / load_steps
+                u.interpolate(
+                    lambda x: np.stack([np.zeros(x.shape[1]), np.full(x.shape[1], -delta)])
+                )
+            it, converged = newton.solve(u)
+            iterations += int(it)
+            if not converged:
+                raise RuntimeError(
+                    f"Newton did not converge in {max_it} iterations (load step {step} of "
+                    f"{load_steps}); try load_steps > 1 or another gamma0"
+                )
+        null_pivots = newton.null_pivots()
+    finally:
+        newton.close()
+    u_vec = _compat.petsc_vec(u)
+    mean_ux.remove(u_vec)  # round-off only
+    u_vec.ghostUpdate(addv=PETSc.InsertMode.INSERT, mode=PETSc.ScatterMode.FORWARD)
+    t_solve = time.perf_counter()
+
+    # --- postprocessing
+    residual = _assembled_norm(F) / _assembled_norm(load_form)
+    W = _compat.create_tensor_space(mesh, "DG", degree - 1)
+    sigma_h = dolfinx.fem.Function(W)
+    _compat.interpolate_expression(sigma_h, sigma(u))  # exact: sigma(u_h) is in DG(degree-1)
+    samples = _sample_contact(
+        u, sigma_h, _owned(mesh, contact_facets), y_plane, gamma0, E, samples_per_facet, R,
+        exact_gap,
+    )
+    xs, lam, p, g = _gather_sorted(comm, *samples)
+    traction_in_contact = np.where(lam > 0.0, p, 0.0)
+    a_fit, p0_fit, centre = contact_half_width_fit(xs, traction_in_contact, fit_fraction)
+
+    def integral(expr) -> float:
+        return comm.allreduce(dolfinx.fem.assemble_scalar(dolfinx.fem.form(expr)), op=MPI.SUM)
+
+    contact_force = integral(multiplier * ds_c)
+    applied = f * integral(dolfinx.fem.Constant(mesh, PETSc.ScalarType(1.0)) * ufl.dx)
+    _, u_top = _top_displacement(u, R)
+    t_end = time.perf_counter()
+
+    times = {
+        "mesh": t_mesh - t_start,
+        "setup": t_setup - t_mesh,
+        "solve": t_solve - t_setup,
+        "postprocess": t_end - t_solve,
+        "total": t_end - t_start,
+    }
+    return HertzResult(
+        mesh=mesh,
+        u=u,
+        h=h,
+        degree=degree,
+        gamma0=gamma0,
+        theta=theta,
+        exact_gap=bool(exact_gap),
+        y_plane=y_plane,
+        num_dofs=V.dofmap.index_map.size_global * V.dofmap.index_map_bs,
+        iterations=iterations,
+        null_pivots=null_pivots,
+        contact_x=xs,
+        contact_pressure=lam,
+        traction_pressure=p,
+        contact_gap=g,
+        contact_half_width=a_fit,
+        contact_half_width_multiplier=contact_half_width_fit(xs, lam, fit_fraction)[0],
+        contact_half_width_last=contact_half_width_last(xs, lam),
+        fit_peak_pressure=p0_fit,
+        fit_centre=centre,
+        max_contact_pressure=float(np.max(traction_in_contact)),
+        max_multiplier=float(np.max(lam)),
+        top_vertical_displacement=float(u_top),
+        contact_force=contact_force,
+        applied_load=applied,
+        mean_ux=float(mean_ux.mean(u_vec)),
+        residual=float(residual),
+        analytic=analytic,
+        times={k: comm.allreduce(t, op=MPI.MAX) for k, t in times.items()},
+    )
