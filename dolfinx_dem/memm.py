@@ -58,7 +58,7 @@ class Diagnostics:
     stabilisation: float
     external: float
     pseudo_kinetic: float  # 1/2 (v^{n-1/2})^T M v^{n+1/2}
-    pseudo_energy: float  # pseudo_kinetic + elastic + stabilisation + external
+    pseudo_energy: float  # pseudo_kinetic + the potential the force derives from (energies()["potential"])
 
     @property
     def mechanical(self) -> float:
@@ -180,7 +180,7 @@ class MEMM:
             stabilisation=e["stabilisation"],
             external=e["external"],
             pseudo_kinetic=pseudo_kinetic,
-            pseudo_energy=pseudo_kinetic + e["elastic"] + e["stabilisation"] + e["external"],
+            pseudo_energy=pseudo_kinetic + e["potential"],
         )
 
     def check_stability(self, diag: Diagnostics):

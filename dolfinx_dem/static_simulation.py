@@ -55,7 +55,7 @@ def run_static(scene: Mapping, out, comm: MPI.Comm = MPI.COMM_WORLD) -> dict:
         columns = simulation.SERIES_COLUMNS + simulation.contact_columns(dem) + tuple(probes.names)
         with io.SeriesWriter(comm, directory / "series.csv", columns) as series:
             series.write([0.0, 0.0, energies["elastic"], energies["stabilisation"], energies["external"],
-                          sum(energies.values()), *simulation.contact_values(dem, u), *probes.values(u, 0.0)])
+                          energies["potential"], *simulation.contact_values(dem, u), *probes.values(u, 0.0)])
         with io.SolutionWriter(comm, directory, dem.mesh) as solution:
             solution.write(0.0, {"displacement": dem.function(u, "displacement"),
                                  "von_mises": dem.scalar_function(dem.von_mises(u, 0.0), "von_mises")})

@@ -196,3 +196,15 @@ def test_non_simplex_mesh(cell_type):
         mesh = dolfinx.mesh.create_unit_cube(MPI.COMM_WORLD, 2, 2, 2, cell_type=cell_type)
     with pytest.raises(ValueError, match="simplex"):
         DEMDiscretisation(mesh, MATERIAL)
+
+
+def test_potential_is_the_sum_of_the_energies_up_to_rounding():
+    """energies()["potential"] (the form the force derives from) equals elastic + stabilisation +
+    external up to the rounding of K = S^T S + J^T J."""
+    from dolfinx_dem import meshes
+
+    mesh, _, tags = meshes.create_rectangle(MPI.COMM_WORLD, [0.0, 0.0], [1.0, 0.5], [8, 4], "crossed")
+    dem = DEMDiscretisation(mesh, MATERIAL, "A", [DirichletBC(tags.find(1), [0.01, -0.02])], body_force=[0.0, -1.0])
+    e = dem.energies(_random_field(dem, 5), 0.0)
+    total = e["elastic"] + e["stabilisation"] + e["external"]
+    assert e["potential"] == pytest.approx(total, rel=1e-11)
