@@ -138,3 +138,92 @@ def test_cantilever_numbers(cantilever):
     assert abs(_rel(d.omega_fem, d.omega_eb)) < 0.015
     assert abs(_rel(d.static_deflection_fem, d.static_deflection_eb)) < 0.015
     assert d.numbers["pseudo_energy_rel_drift"] < 1e-8
+
+
+@pytest.fixture(scope="module")
+def signorini(tmp_path_factory):
+    """The Signorini bar demo module, run in quick mode in an MPI-shared temporary directory."""
+    comm = MPI.COMM_WORLD
+    path = tmp_path_factory.mktemp("demo_signorini_bar") if comm.rank == 0 else None
+    path = comm.bcast(path, root=0)
+    spec = importlib.util.spec_from_file_location("demo_signorini_bar", DEMO_DIR / "demo_signorini_bar.py")
+    module = importlib.util.module_from_spec(spec)
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setenv("DOLFINX_DEM_DEMO_QUICK", "1")
+        mp.chdir(path)
+        spec.loader.exec_module(module)
+    return module
+
+
+@pytest.mark.mpi
+def test_signorini_demo_numbers(signorini):
+    """The quick Signorini bar demo (benchmark 1 on 100 cells up to t = 1.25 s, benchmark 2 on 20
+    and 40 cells up to 4 s, CFL 0.75; the same on 1 and 2 processes):
+
+    ==================================================  ===============  ==============
+    quantity                                            measured         tolerance
+    ==================================================  ===============  ==============
+    pseudo-energy variation, event splitting (all)      <= 6.1e-15       1e-12
+    pseudo-energy variation, Gauss-Legendre 2           2.25e-6          > 1e-9, > 1e4 x split
+    the same before the lift-off                        6.6e-15          1e-12
+    extra force evaluations with splitting (impact)     2                <= 4
+    max force evaluations per step with splitting       2                <= 3
+    first contact (s)                                   0.5              one step (0.0025)
+    lift-off / 7/6, relative to the duration 2/3        +1.25 %          2 %
+    penetration (m)                                     0                1e-12
+    mean pressure over [1/2, 7/6] / 300 - 1             -1.2 %           2 %
+    scheme A pressure after the lift-off (Pa)           0                exactly 0
+    tip L2 order, N = 50, 100 (A, B)                    0.77, 0.78       >= 0.5
+    benchmark 2 tip L2 error, N = 40 / N = 20           0.58, 0.56       < 0.8
+    benchmark 2 first peak / exact - 1, N = 40          -2.4 %, -2.3 %   5 %
+    stability limit, CFL of 2 / sqrt(lambda_max)        1.0002           (0.99, 1.01)
+    runs at CFL 1.05 and 1.2                            stopped after t = 0.5, no NaN
+    ==================================================  ===============  ==============
+
+    Without event splitting the variation is that of Gauss-Legendre 1 (about 1e-6, the lift-off
+    inside a step); a wrong contact reconstruction moves the pressure or the lift-off by far more
+    than these bounds (a wave speed off by a factor sqrt(2) changes the contact duration by 40 %).
+    """
+    d = signorini
+    assert d.QUICK
+    n = d.numbers
+    values = np.array([n["impact"]["A"]["mean_pressure"], n["impact"]["B"]["tip_l2_error"],
+                       n["bounce"]["A"]["tip_l2_error"], n["energy"]["gauss-legendre-2"]["max_rel_variation"]])
+    assert np.allclose(MPI.COMM_WORLD.allgather(values), values, rtol=1e-8, atol=0)
+
+    # Conservation: exact with event splitting, not with a Gauss-Legendre rule (jump at lift-off).
+    assert max(d.paper_drifts.values()) <= 1e-12
+    assert max(d.refined_drifts.values()) <= 1e-12
+    split, gl2 = n["energy"]["midpoint-split"], n["energy"]["gauss-legendre-2"]
+    assert gl2["max_rel_variation"] > max(1e-9, 1e4 * split["max_rel_variation"])
+    assert gl2["max_rel_variation_before_release"] <= 1e-12
+    # Cost: one force per step, plus one contact-patch evaluation per extra piece of a step.
+    assert 0 <= split["extra_evaluations"] <= 4
+    assert gl2["extra_evaluations"] == 0
+    assert max(d.split_evaluations) <= 3
+
+    # Benchmark 1: contact interval, penetration, pressure.
+    for scheme in "AB":
+        m = d.impact_numbers[scheme]
+        assert abs(m["contact_start"] - 0.5) <= 0.0025 + 1e-12
+        assert abs(m["contact_end_error_rel_duration"]) <= 0.02
+        assert m["penetration"] <= 1e-12
+        assert abs(m["mean_pressure_rel_error"]) <= 0.02
+        assert d.order_tip[scheme] >= 0.5
+    assert d.impact_numbers["A"]["max_abs_pressure_after_release"] == 0.0
+
+    # Benchmark 2: the error falls under refinement, the first bounce is within 5 %.
+    assert np.isclose(d.exact_peaks[0], 40.0 / 9.0, rtol=1e-6)
+    for scheme in "AB":
+        l2 = d.bounce_tip_l2[scheme]
+        assert l2[1] / l2[0] < 0.8
+        assert abs(d.bounce_peaks[scheme][0] / d.exact_peaks[0] - 1.0) < 0.05
+
+    # Stability: the limit is CFL 1; beyond it the monitor stops the run after the impact,
+    # before any NaN.
+    assert 0.99 < n["stability"]["cfl_limit"] < 1.01
+    for r in n["stability"]["runs"]:
+        assert r["stable"] == (r["cfl"] < n["stability"]["cfl_limit"])
+        assert r["series_finite"]
+        if not r["stable"]:
+            assert r["failure_t"] > 0.5 and r["summary_stable_flag"] is False
