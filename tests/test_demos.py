@@ -92,19 +92,23 @@ def test_demo_mpi(demo, tmp_path):
     _check(result, command)
 
 
-@pytest.fixture(scope="module")
-def cantilever(tmp_path_factory):
-    """The cantilever demo module, run in quick mode in an MPI-shared temporary directory."""
+def _import_quick(tmp_path_factory, name):
+    """Run a demo module in quick mode in an MPI-shared temporary directory and return it."""
     comm = MPI.COMM_WORLD
-    path = tmp_path_factory.mktemp("demo_cantilever") if comm.rank == 0 else None
+    path = tmp_path_factory.mktemp(name) if comm.rank == 0 else None
     path = comm.bcast(path, root=0)
-    spec = importlib.util.spec_from_file_location("demo_cantilever", DEMO_DIR / "demo_cantilever.py")
+    spec = importlib.util.spec_from_file_location(name, DEMO_DIR / f"{name}.py")
     module = importlib.util.module_from_spec(spec)
     with pytest.MonkeyPatch.context() as mp:
         mp.setenv("DOLFINX_DEM_DEMO_QUICK", "1")
         mp.chdir(path)
         spec.loader.exec_module(module)
     return module
+
+
+@pytest.fixture(scope="module")
+def cantilever(tmp_path_factory):
+    return _import_quick(tmp_path_factory, "demo_cantilever")
 
 
 def _rel(a, b):
@@ -142,17 +146,7 @@ def test_cantilever_numbers(cantilever):
 
 @pytest.fixture(scope="module")
 def signorini(tmp_path_factory):
-    """The Signorini bar demo module, run in quick mode in an MPI-shared temporary directory."""
-    comm = MPI.COMM_WORLD
-    path = tmp_path_factory.mktemp("demo_signorini_bar") if comm.rank == 0 else None
-    path = comm.bcast(path, root=0)
-    spec = importlib.util.spec_from_file_location("demo_signorini_bar", DEMO_DIR / "demo_signorini_bar.py")
-    module = importlib.util.module_from_spec(spec)
-    with pytest.MonkeyPatch.context() as mp:
-        mp.setenv("DOLFINX_DEM_DEMO_QUICK", "1")
-        mp.chdir(path)
-        spec.loader.exec_module(module)
-    return module
+    return _import_quick(tmp_path_factory, "demo_signorini_bar")
 
 
 @pytest.mark.mpi
