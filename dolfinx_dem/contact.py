@@ -31,7 +31,6 @@ from collections.abc import Sequence
 
 import numpy as np
 import scipy.sparse
-from mpi4py import MPI
 from petsc4py import PETSc
 
 

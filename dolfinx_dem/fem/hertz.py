@@ -71,7 +71,6 @@ import time
 import typing
 
 import numpy as np
-import numpy.typing as npt
 import ufl
 from mpi4py import MPI
 from petsc4py import PETSc
