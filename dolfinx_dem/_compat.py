@@ -17,7 +17,6 @@ import dolfinx.cpp
 import dolfinx.fem
 import dolfinx.io
 import dolfinx.mesh
-import dolfinx.plot
 
 
 class LocalMeshData(NamedTuple):
@@ -117,12 +116,6 @@ def local_facet_global_indices(mesh, facets: np.ndarray) -> np.ndarray:
     return np.asarray(facet_map.local_to_global(np.asarray(facets, dtype=np.int32)), dtype=np.int64)
 
 
-def owned_cell_range(mesh) -> tuple[int, int]:
-    """Global index range ``[start, stop)`` of the cells owned by this process."""
-    r = mesh.topology.index_map(mesh.topology.dim).local_range
-    return int(r[0]), int(r[1])
-
-
 def create_vector_space(mesh, family: str, degree: int):
     """A vector-valued function space (DG0 for DEM cell displacements, P1/P2 for FEM)."""
     return dolfinx.fem.VectorFunctionSpace(mesh, (family, degree))
@@ -135,11 +128,6 @@ def create_scalar_space(mesh, family: str, degree: int):
 def petsc_vec(function):
     """The PETSc vector that holds a Function's degrees of freedom (ghosted)."""
     return function.vector
-
-
-def vtk_mesh(mesh):
-    """(topology, cell types, points) for ``pyvista.UnstructuredGrid``."""
-    return dolfinx.plot.create_vtk_mesh(mesh, mesh.topology.dim)
 
 
 def mesh_from_gmsh_model(model, comm, gdim: int):
