@@ -102,3 +102,48 @@ def contact_half_width_last(x: npt.ArrayLike, pressure: npt.ArrayLike) -> float:
     if active.size == 0:
         return 0.0
     return float(0.5 * (active.max() - active.min()))
+
+
+def contact_half_width_moments(m0: float, m1: float, m2: float) -> tuple[float, float]:
+    """Contact half-width from the moments of a pressure distribution (the moment measure).
+
+    With ``m_k = integral of x^k p(x) dx`` over the contact zone, the centre is
+    ``xc = m1 / m0`` and the half-width ``a = 2 sqrt(m2 / m0 - xc^2)``: for the Hertz profile
+    ``p0 sqrt(1 - (x - xc)^2 / a^2)`` the second central moment divided by the total force is
+    exactly a^2 / 4. For any other profile it is the half-width of the Hertz profile with the same
+    force, centre and second moment. An integral of the pressure (no threshold, no fit), it
+    converges like the pressure's integrals do.
+
+    Args:
+        m0, m1, m2: The moments (N/m, N, N m per unit thickness), m0 > 0.
+
+    Returns:
+        (a, xc): the half-width (m) and the centre (m).
+    """
+    if not m0 > 0.0:
+        raise ValueError(f"the total contact force m0 must be > 0, got {m0!r}: no contact")
+    xc = m1 / m0
+    variance = m2 / m0 - xc**2
+    if not variance > 0.0:
+        raise ValueError("the pressure has no spread (second central moment <= 0)")
+    return float(2.0 * np.sqrt(variance)), float(xc)
+
+
+def facet_pressure_moments(
+    x_start: npt.ArrayLike, x_end: npt.ArrayLike, force: npt.ArrayLike
+) -> tuple[float, float, float]:
+    """Moments (m0, m1, m2) of a pressure that is uniform on each of a set of straight facets.
+
+    Facet f spans [x_start_f, x_end_f] in x and carries the force ``force_f`` (its pressure times
+    its length), uniformly distributed along it: exactly, ``integral x^k p = force_f * mean of x^k``
+    over the facet, i.e. ``x_f`` and ``x_f^2 + dx_f^2 / 12`` (x_f its midpoint, dx_f its
+    x-extent) for k = 1, 2.
+    """
+    x0 = np.asarray(x_start, dtype=np.float64).reshape(-1)
+    x1 = np.asarray(x_end, dtype=np.float64).reshape(-1)
+    P = np.asarray(force, dtype=np.float64).reshape(-1)
+    if not (x0.shape == x1.shape == P.shape):
+        raise ValueError(f"x_start, x_end and force must have the same shape, got {x0.shape}, "
+                         f"{x1.shape}, {P.shape}")
+    xm, dx = 0.5 * (x0 + x1), x1 - x0
+    return float(P.sum()), float(P @ xm), float(P @ (xm**2 + dx**2 / 12.0))

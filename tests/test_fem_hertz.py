@@ -19,6 +19,7 @@ from dolfinx_dem.fem.hertz import (
     hertz_analytic,
     solve_hertz,
 )
+from dolfinx_dem.hertz import contact_half_width_moments, facet_pressure_moments
 
 H_COARSE = 1.2e-2
 U_TOP_FINE = -1.3892e-2  # m, h = 1.5e-3 P2 (measured)
@@ -56,6 +57,23 @@ def test_half_width_measures_on_synthetic_hertz_profile():
         contact_half_width_fit(x, np.zeros_like(x))
     with pytest.raises(ValueError):
         contact_half_width_fit(x, p, 0.0)
+
+
+def test_moment_half_width_of_hertz_profile_on_facets():
+    """Uniform pressures on facets: exact moments; a Hertz profile gives a (to O(h^2))."""
+    a, p0, xc = 0.05, 3e6, 1e-3
+    edges = np.linspace(-0.06, 0.07, 2601)
+    mid = 0.5 * (edges[:-1] + edges[1:])
+    p = p0 * np.sqrt(np.clip(1 - ((mid - xc) / a) ** 2, 0, None))
+    moments = facet_pressure_moments(edges[:-1], edges[1:], p * np.diff(edges))
+    a_m, xc_m = contact_half_width_moments(*moments)
+    assert a_m == pytest.approx(a, rel=1e-5)
+    assert xc_m == pytest.approx(xc, abs=1e-8)
+    # one facet [0, 1] with force 2: m1 = 1, m2 = 2 / 3 exactly; a = 2 sqrt(1/3 - 1/4)
+    assert facet_pressure_moments([0.0], [1.0], [2.0]) == pytest.approx((2.0, 1.0, 2.0 / 3.0))
+    assert contact_half_width_moments(2.0, 1.0, 2.0 / 3.0)[0] == pytest.approx(2 * np.sqrt(1 / 12))
+    with pytest.raises(ValueError, match="no contact"):
+        contact_half_width_moments(0.0, 0.0, 0.0)
 
 
 @pytest.mark.mpi
@@ -140,6 +158,11 @@ def test_solution_is_symmetric(coarse):
     assert np.max(np.abs(u[:, 0] + u_m[:, 0])) < 0.02 * scale_x
     assert np.max(np.abs(u[:, 1] - u_m[:, 1])) < 0.02 * scale_y
     assert abs(coarse.fit_centre) < 0.01 * coarse.contact_half_width
+    # the moment measure of the multiplier and of the traction agree within 2 %, near the fit
+    assert coarse.contact_half_width_moment == pytest.approx(coarse.contact_half_width, rel=0.01)
+    traction = coarse.contact_half_width_moment_traction
+    assert traction == pytest.approx(coarse.contact_half_width_moment, rel=0.02)
+    assert abs(coarse.moment_centre) < 1e-6 * coarse.contact_half_width
 
 
 @pytest.mark.mpi
@@ -151,6 +174,7 @@ def test_parallel_matches_serial(coarse, tempdir):
         "top_vertical_displacement",
         "contact_half_width",
         "contact_half_width_last",
+        "contact_half_width_moment",
         "max_contact_pressure",
         "contact_force",
     ):

@@ -81,7 +81,12 @@ import dolfinx.fem.petsc
 import dolfinx.mesh
 
 from dolfinx_dem import _compat
-from dolfinx_dem.hertz import contact_half_width_fit, contact_half_width_last, hertz_analytic
+from dolfinx_dem.hertz import (
+    contact_half_width_fit,
+    contact_half_width_last,
+    contact_half_width_moments,
+    hertz_analytic,
+)
 
 __all__ = [
     "HertzAnalytic",
@@ -156,6 +161,9 @@ class HertzResult:
     contact_half_width: float  # a (m): Hertz fit to the traction in contact (fit_fraction)
     contact_half_width_multiplier: float  # a (m): Hertz fit to the multiplier lambda
     contact_half_width_last: float  # a (m): half the span of the samples with lambda > 0
+    contact_half_width_moment: float  # a (m): moment measure of lambda, 2 sqrt(2nd central moment / force)
+    contact_half_width_moment_traction: float  # a (m): moment measure of the traction where lambda > 0
+    moment_centre: float  # centre of lambda, integral x lambda / integral lambda (m)
     fit_peak_pressure: float  # p0 of the fit to the traction (Pa)
     fit_centre: float  # centre of the fitted profile (m)
     max_contact_pressure: float  # max of the traction over the samples with lambda > 0 (Pa)
@@ -556,6 +564,12 @@ def solve_hertz(
         return comm.allreduce(dolfinx.fem.assemble_scalar(dolfinx.fem.form(expr)), op=MPI.SUM)
 
     contact_force = integral(multiplier * ds_c)
+    # moment measure of the half-width (hertz.contact_half_width_moments), by quadrature on Gc
+    a_moment, moment_centre = contact_half_width_moments(
+        *(integral(multiplier * x[0] ** k * ds_c) for k in range(3)))
+    in_contact = ufl.conditional(ufl.gt(P, 0.0), pressure(u), 0.0)
+    a_moment_traction, _ = contact_half_width_moments(
+        *(integral(in_contact * x[0] ** k * ds_c) for k in range(3)))
     applied = f * integral(dolfinx.fem.Constant(mesh, PETSc.ScalarType(1.0)) * ufl.dx)
     _, u_top = _top_displacement(u, R)
     t_end = time.perf_counter()
@@ -586,6 +600,9 @@ def solve_hertz(
         contact_half_width=a_fit,
         contact_half_width_multiplier=contact_half_width_fit(xs, lam, fit_fraction)[0],
         contact_half_width_last=contact_half_width_last(xs, lam),
+        contact_half_width_moment=a_moment,
+        contact_half_width_moment_traction=a_moment_traction,
+        moment_centre=moment_centre,
         fit_peak_pressure=p0_fit,
         fit_centre=centre,
         max_contact_pressure=float(np.max(traction_in_contact)),
