@@ -4,9 +4,15 @@ state at t = 0, plus ``contact_pressure.csv`` (facet or boundary positions and p
 summary keys ``contact_half_width``, ``contact_half_width_last``, ``top_vertical_displacement``,
 ``max_contact_pressure``, ``h`` and ``iterations``.
 
-The contact half-width is the a of the Hertz profile fitted to the pressures
-(``hertz.contact_half_width_fit``, the same for DEM and FEM), which resolves the edge of the contact
-zone below the mesh size; ``contact_half_width_last`` is half the extent of the facets in contact.
+The contact half-width ``contact_half_width`` is the moment measure of the contact pressure,
+``a = 2 sqrt(integral (x - xc)^2 p / integral p)`` (``hertz.contact_half_width_moments``; exactly a
+for a Hertz profile): for the DEM the facet pressures are uniform on their facets
+(``hertz.facet_pressure_moments``), for the FEM the Nitsche multiplier is integrated by quadrature.
+An integral of the pressure, it converges smoothly under refinement and has no threshold.
+``contact_half_width_fit`` is the a of the Hertz profile fitted to the pressure samples
+(``hertz.contact_half_width_fit``, the same for DEM and FEM) and ``contact_half_width_last`` half
+the extent of the facets in contact. Facets that the minimisation holds on a kink of the potential
+(g_f = 0, ``kink_facets``) carry their Lagrange multiplier as contact force.
 """
 
 from __future__ import annotations
@@ -29,6 +35,15 @@ def _top_point(dem) -> list[float]:
     top = x[:, -1] >= x[:, -1].max() - 1e-12 * np.ptp(x[:, -1])
     candidates = x[top]
     return candidates[np.argmin(np.abs(candidates[:, 0] - np.median(x[:, 0])))].tolist()
+
+
+def _facet_x_ranges(geom, facets: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(smallest, largest) x coordinate of the vertices of each facet (2D: segment ends)."""
+    cells, local = geom.facet_cells[facets, 0], geom.facet_local[facets, 0]
+    nv = geom.cell_vertices.shape[1]
+    others = (local[:, None] + np.arange(1, nv)[None, :]) % nv  # the vertices other than j
+    x = geom.cell_vertices[cells[:, None], others, 0]
+    return x.min(axis=1), x.max(axis=1)
 
 
 def _write_pressure(path: pathlib.Path, comm, x: np.ndarray, p: np.ndarray):
@@ -74,17 +89,24 @@ def run_static(scene: Mapping, out, comm: MPI.Comm = MPI.COMM_WORLD) -> dict:
         if dem.contact is not None:
             c = dem.contact
             up = c.patch_values(u)
+            areas = dem.geometry.facet_areas[c.facets]
             pressure = c.reaction_pressures(up)
+            # facets held on a kink of the potential (statics.minimise_energy) carry their multiplier
+            pressure[result.pinned] = result.kink_forces[result.pinned] / areas[result.pinned]
             x = dem.geometry.facet_centres[c.facets]
             _write_pressure(directory / "contact_pressure.csv", comm, x, pressure)
             touching = pressure > 0
             summary["max_contact_pressure"] = float(pressure.max())
             summary["contact_half_width_last"] = hertz.contact_half_width_last(x[:, 0], pressure)
             summary["contact_facets"] = int(touching.sum())
-            summary["contact_force"] = float((pressure * dem.geometry.facet_areas[c.facets]).sum())
+            summary["kink_facets"] = int(result.pinned.sum())
+            summary["contact_force"] = float((pressure * areas).sum())
             if dem.d == 2 and touching.sum() >= 3:
+                x_start, x_end = _facet_x_ranges(dem.geometry, c.facets)
+                moments = hertz.facet_pressure_moments(x_start, x_end, pressure * areas)
+                summary["contact_half_width"] = hertz.contact_half_width_moments(*moments)[0]
                 a, p0, _ = hertz.contact_half_width_fit(x[:, 0], pressure)
-                summary["contact_half_width"], summary["fitted_max_pressure"] = a, p0
+                summary["contact_half_width_fit"], summary["fitted_max_pressure"] = a, p0
         plotting.plot_cell_field(dem.mesh, u.array_r.reshape(-1, dem.d), dem.von_mises(u, 0.0),
                                  directory / "final.png", "von Mises stress (Pa)",
                                  scene.get("output", {}).get("picture_scale", 1.0))
@@ -119,7 +141,9 @@ def run_fem_hertz(scene: Mapping, out, comm: MPI.Comm = MPI.COMM_WORLD) -> dict:
             "n_dofs": result.num_dofs,
             "iterations": result.iterations,
             "residual": result.residual,
-            "contact_half_width": result.contact_half_width,
+            "contact_half_width": result.contact_half_width_moment,
+            "contact_half_width_fit": result.contact_half_width,
+            "contact_half_width_traction_moment": result.contact_half_width_moment_traction,
             "contact_half_width_last": result.contact_half_width_last,
             "top_vertical_displacement": result.top_vertical_displacement,
             "max_contact_pressure": result.max_contact_pressure,

@@ -1,8 +1,9 @@
 """Quasi-static DEM: minimise the potential energy (paper §5.2).
 
 With rigid-obstacle contact the potential V(u) = E_P + E_S + external is continuous and piecewise
-quadratic: quadratic for every fixed set A of facets in contact (contact.py). dolfinx_dem
-minimises it by an active-set Newton iteration, exact on each piece:
+quadratic: quadratic for every fixed set A of facets in contact (contact.py). Its gradient jumps
+across a contact switch g_f = 0 (by the force r_f the facet would carry in contact), so V has a
+kink there. dolfinx_dem minimises it by an active-set Newton iteration, exact on each piece:
 
     A_0 = the facets touching the obstacle at u_0 = 0,
     solve H_A d = F_A(u_k)        (H_A = K + contact correction, F_A = -grad V_A; one linear solve),
@@ -11,11 +12,31 @@ minimises it by an active-set Newton iteration, exact on each piece:
 
 At the end u minimises V_A and every facet is on the side of the switch that A says, so the
 gradient of V vanishes to the accuracy of the linear solve. The line search on the continuous
-potential makes the iteration a descent method: it cannot cycle between contact sets. The paper uses BFGS;
-PETSc TAO's LMVM (BFGS) was measured on the Hertz disc (h = 1.5e-2, 1,300 cells) and stalled at a
-gradient reduction of 7e-7 (More-Thuente line search failure after 5,000 iterations) or 9e-8
-(BLMVM, 100,000 iterations): the kinks of V at the contact switches and the rounding of V near
-the minimum defeat its line search. The exact Newton iteration needs a handful of solves.
+potential makes the iteration a descent method.
+
+Kinks. The minimum of V can sit on a switch: then no point has a zero gradient, and the iteration
+returns to an earlier contact set (measured: scheme B on the Hertz disc, h = 3.75e-3 m, three
+facets at the edge of the contact zone). When the set repeats, the facets that switched since its
+first occurrence are pinned, g_f = 0 for f in C, and the Newton step becomes the equality-
+constrained one, with Lagrange multipliers mu (|C| extra solves, a |C| x |C| Schur complement):
+
+    H_A z_0 = F_A,   H_A z_f = P grad g_f,   (grad g_C . Z) mu = g_C(u) + grad g_C . z_0,   d = z_0 - Z mu.
+
+At its solution the directional derivatives of V must be >= 0 on both sides of each pinned
+facet's switch: towards lifting off (g_f > 0) it is -mu_f, towards pressing in mu_f + r_f, so
+-r_f <= mu_f <= 0. The pinned facet then carries the contact force -mu_f, between 0 and r_f. A facet
+with mu_f > 0 is released, one with mu_f + r_f < 0 is put in contact, and the iteration goes on.
+The reported gradient norm is that of the Lagrangian (grad V_A + sum mu_f grad g_f), the
+gradient of V itself when nothing is pinned.
+
+The issue asks for a BFGS-type solver of PETSc TAO. Measured on the Hertz disc: LMVM (BFGS)
+stalled at a gradient reduction of 7e-7 (More-Thuente line search failure after 5,000
+iterations) or 9e-8 (BLMVM, 100,000 iterations) on h = 1.5e-2; the kinks of V and the rounding
+of V near the minimum defeat its line search. TAO's NLS (Newton line search) with this module's
+exact active-set Hessian (shell P H_A P + (I - P), CG + GAMG) reaches the 1e-8 reduction for
+scheme A (TAO_NLS_MEASUREMENTS) but stops with a line search failure on the kink of scheme B
+(h = 3.75e-3 m, gradient norm 2.3e3 after 12 iterations): an unconstrained TAO solver has no
+stationary point to find there. The active-set iteration above is kept for both schemes.
 
 Rigid translations that neither a Dirichlet condition nor contact fixes (the horizontal motion of
 a disc on a frictionless plane) are removed by holding the mass-weighted mean displacement in
@@ -48,6 +69,8 @@ class StaticResult:
     energy: float
     contact_facets: int
     wall_time_s: float
+    pinned: np.ndarray  # candidate facets held at g_f = 0 on a kink of V (bool, per candidate)
+    kink_forces: np.ndarray  # contact force (N/m) of each pinned facet, -mu_f; 0 elsewhere
 
     @property
     def gradient_reduction(self) -> float:
@@ -137,6 +160,19 @@ def _constrained(H, normals):
     return shell, P
 
 
+def _gap_gradient(dem, f: int, directions) -> PETSc.Vec:
+    """P grad g_f: the gradient of candidate facet f's gap (a row of R_n on the contact patch),
+    projected onto the subspace of the linear constraints."""
+    c = dem.contact
+    row = np.zeros(len(c.patch))
+    r = c._Rn.getrow(f)
+    row[r.indices] = r.data
+    vec = dem.create_vector()
+    c.add(row, vec)
+    _project(vec, directions)
+    return vec
+
+
 def minimise_energy(
     dem,
     fixed_mean: Sequence[int] = (),
@@ -171,15 +207,17 @@ def minimise_energy(
     zero, rhs, u = dem.create_vector(), dem.create_vector(), dem.create_vector()  # u starts at 0
     force = dem.create_vector()
     dem.force(zero, 0.0, force)
-    for w in directions:
-        force.axpy(-force.dot(w), w)
+    _project(force, directions)
     norm0 = force.norm()
 
+    pinned = np.zeros(0, dtype=bool)
     if c is not None:
         # Start from the facets touching the obstacle at u = 0 (smallest gap); the iteration
         # adds the facets the solution pushes into it and releases those it lifts off.
         g = c.gaps(c.patch_values(zero))
         active = g <= g.min() + 1e-9 * dem.geometry.facet_diameters[c.facets].min()
+        pinned = np.zeros_like(active)
+        history = [active.copy()]
     ksp = PETSc.KSP().create(dem.comm)
     ksp.setType(PETSc.KSP.Type.CG)
     ksp.getPC().setType(PETSc.PC.Type.GAMG)
@@ -188,12 +226,25 @@ def minimise_energy(
     ksp.setFromOptions()
     linear_iterations = 0
     step, trial = dem.create_vector(), dem.create_vector()
+    multipliers = np.zeros(0)
 
     def potential(vec):
         return dem.energies(vec, 0.0)["potential"]
 
+    def solve(b, x, iteration):
+        nonlocal linear_iterations
+        x.set(0.0)
+        ksp.solve(b, x)
+        linear_iterations += ksp.getIterationNumber()
+        if ksp.getConvergedReason() < 0:
+            raise StaticsError(f"the linear solve of active-set iteration {iteration} failed "
+                               f"(KSP reason {ksp.getConvergedReason()}): a rigid mode may be unconstrained "
+                               "(missing Dirichlet condition, obstacle contact or fixed_mean component)")
+
     for iteration in range(1, max_iterations + 1):
-        # Newton step of the quadratic piece A at u: H_A d = F_A(u).
+        # Newton step of the quadratic piece A at u: H_A d = F_A(u), with the pinned facets (if
+        # any) held on the obstacle, g_C(u + d) = 0, by Lagrange multipliers mu:
+        # d = z_0 - Z mu, H_A z_0 = F_A, H_A Z = P grad g_C, (grad g_C . Z) mu = g_C(u) + grad g_C . z_0.
         H = _hessian(dem, active) if c is not None else dem.K
         dem.force(u, 0.0, rhs, contact=False)
         if c is not None:
@@ -201,32 +252,64 @@ def minimise_energy(
         operator, preconditioner = _constrained(H, directions)
         _project(rhs, directions)
         ksp.setOperators(operator, preconditioner)
-        step.set(0.0)
-        ksp.solve(rhs, step)
-        linear_iterations += ksp.getIterationNumber()
-        if ksp.getConvergedReason() < 0:
-            raise StaticsError(f"the linear solve of active-set iteration {iteration} failed "
-                               f"(KSP reason {ksp.getConvergedReason()}): a rigid mode may be unconstrained "
-                               "(missing Dirichlet condition, obstacle contact or fixed_mean component)")
+        solve(rhs, step, iteration)
         if c is None:
             step.copy(u)
             break
+        facets = np.flatnonzero(pinned)
+        if facets.size:
+            gradients = [_gap_gradient(dem, f, directions) for f in facets]
+            Z = [dem.create_vector() for _ in facets]
+            for b, z in zip(gradients, Z):
+                solve(b, z, iteration)
+            rows = c._Rn[facets]
+            S = np.array([rows @ c.patch_values(z) for z in Z]).T
+            multipliers = np.linalg.solve(S, c.gaps(c.patch_values(u))[facets] + rows @ c.patch_values(step))
+            for m, z in zip(multipliers, Z):
+                step.axpy(-m, z)
+            for m, b in zip(multipliers, gradients):
+                rhs.axpy(-m, b)  # the gradient of the Lagrangian: d is a descent direction on g_C = 0
         # Backtracking (Armijo) on the continuous potential: the full step when the contact set
-        # does not change, a shorter one when it overshoots a switch (no cycling between sets).
+        # does not change, a shorter one when it overshoots a switch. The first step onto newly
+        # pinned facets is taken in full (it moves them onto the obstacle).
         slope, v0, alpha = -rhs.dot(step), potential(u), 1.0
-        while True:
+        entering = facets.size and np.abs(c.gaps(c.patch_values(u))[facets]).max() > \
+            1e-12 * dem.geometry.facet_diameters[c.facets].min()
+        while not entering:
             u.copy(trial)
             trial.axpy(alpha, step)
             if potential(trial) <= v0 + 1e-4 * alpha * slope or alpha < 1e-8:
                 break
             alpha *= 0.5
-        trial.copy(u)
-        new = c.gaps(c.patch_values(u)) < 0
-        if not new.any():
+        u.axpy(alpha, step)
+        new = (c.gaps(c.patch_values(u)) < 0) & ~pinned
+        if not (new | pinned).any():
             raise StaticsError("no facet is in contact at the solution: the obstacle does not hold the "
                                "body (check the contact candidate boundary and the load direction)")
         converged = alpha == 1.0 and np.array_equal(new, active)
+        if converged and facets.size:
+            # Kink conditions of the pinned facets (g_f = 0): the directional derivatives of V
+            # towards lifting off (-mu_f) and towards pressing in (mu_f + r_f, r_f the force the
+            # facet would carry in contact) must both be >= 0.
+            _, _, a, delta = c._state(c.patch_values(u), active | pinned)
+            reaction = (c._Y.T @ (a - delta))[facets]
+            lift, press = multipliers > 0, multipliers + reaction < 0
+            if lift.any() or press.any():
+                converged = False
+                pinned[facets[lift | press]] = False
+                new[facets[press]] = True
+        elif not converged and any(np.array_equal(new, old) for old in history):
+            # The active set returns to an earlier state: V has its minimum on (or across) a
+            # contact switch. Hold the facets that keep switching on the obstacle (g_f = 0).
+            first = next(k for k, old in enumerate(history) if np.array_equal(new, old))
+            switching = np.zeros_like(new)
+            for old in history[first:]:
+                switching |= old != new
+            pinned |= switching
+            new &= ~pinned
+            history = []
         active = new
+        history.append(active.copy())
         if converged:
             break
     else:
@@ -234,9 +317,16 @@ def minimise_energy(
                            "contact states: the load may be too large or the contact tag wrong)")
     ksp.destroy()
 
-    dem.force(u, 0.0, force)
-    for w in directions:
-        force.axpy(-force.dot(w), w)
+    # Gradient of the Lagrangian at the end: grad V of the active piece minus the pinned facets'
+    # multiplier forces (= grad V itself when no facet is pinned).
+    dem.force(u, 0.0, force, contact=False)
+    if c is not None:
+        c.add(c.force_correction(c.patch_values(u), active), force)
+    _project(force, directions)
+    kink_forces = np.zeros(len(c.facets)) if c is not None else np.zeros(0)
+    for f, m in zip(np.flatnonzero(pinned), multipliers if pinned.any() else []):
+        force.axpy(-m, _gap_gradient(dem, f, directions))
+        kink_forces[f] = -m
     return StaticResult(
         u=u,
         iterations=iteration,
@@ -244,6 +334,8 @@ def minimise_energy(
         gradient_norm_initial=norm0,
         gradient_norm=force.norm(),
         energy=dem.energies(u, 0.0)["potential"],
-        contact_facets=int(active.sum()) if c is not None else 0,
+        contact_facets=int((active | pinned).sum()) if c is not None else 0,
         wall_time_s=time.perf_counter() - start,
+        pinned=pinned.copy() if c is not None else np.zeros(0, dtype=bool),
+        kink_forces=kink_forces,
     )
