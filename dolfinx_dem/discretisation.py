@@ -142,7 +142,8 @@ class DEMDiscretisation:
         self._lift_time = None
         self._time_dependent = any(bc.time_dependent for _, bc in self._dirichlet)
         self._update_dirichlet(0.0)
-        self.contact = None
+        self.contact = None  # contact.RigidContact, see set_obstacles
+        self.pair_contact = None  # pair_contact.PairContact, see set_contact_boundary
         self._setup_free_bodies()
 
     def _setup_free_bodies(self):
@@ -188,6 +189,18 @@ class DEMDiscretisation:
         from dolfinx_dem.contact import RigidContact
 
         self.contact = RigidContact(self, obstacles) if obstacles else None
+
+    def set_contact_boundary(self, facets, self_contact: bool = False, tolerance: float = 0.0) -> None:
+        """Frictionless contact between the bodies of the mesh on the given (process-local)
+        boundary facets, scheme B (``pair_contact.PairContact``, paper §3.4.3)."""
+        from dolfinx_dem.pair_contact import PairContact
+
+        self.pair_contact = PairContact(self, facets, self_contact=self_contact, tolerance=tolerance)
+
+    @property
+    def contacts(self) -> tuple:
+        """The contact models in use: rigid obstacles and contact between bodies."""
+        return tuple(c for c in (self.contact, self.pair_contact) if c is not None)
 
     # -- vectors -----------------------------------------------------------------------------
     def create_vector(self) -> PETSc.Vec:
@@ -243,9 +256,9 @@ class DEMDiscretisation:
         self.J.multTransposeAdd(self._j2, out, out)
         out.axpy(1.0, self._offset)
         out.aypx(-1.0, self.body_force)
-        if contact and self.contact is not None:
-            c = self.contact
-            c.add(c.force_correction(c.patch_values(u)), out)
+        if contact:
+            for c in self.contacts:
+                c.add(c.force_correction(c.patch_values(u)), out)
         return out
 
     def energies(self, u: PETSc.Vec, t: float) -> dict[str, float]:
@@ -263,8 +276,8 @@ class DEMDiscretisation:
             "external": -self.body_force.dot(u),
         }
         e["potential"] = e["elastic"] + e["stabilisation"] + e["external"]
-        if self.contact is not None:
-            elastic, stabilisation = self.contact.energy_correction(self.contact.patch_values(u))
+        for c in self.contacts:
+            elastic, stabilisation = c.energy_correction(c.patch_values(u))
             e["elastic"] += elastic
             e["stabilisation"] += stabilisation
             e["potential"] += elastic + stabilisation
@@ -275,9 +288,8 @@ class DEMDiscretisation:
         self._update_dirichlet(t)
         self.grad.mult(u, self._grad_vec)
         G = (self._grad_vec.array + self._grad_dirichlet @ self._g).reshape(self.n_owned, self.d, self.d)
-        if self.contact is not None:
-            c = self.contact
-            start, stop = self.cell_range
+        start, stop = self.cell_range
+        for c in self.contacts:
             mine = (c.cells >= start) & (c.cells < stop)
             np.add.at(G, c.cells[mine] - start, c.gradient_correction(c.patch_values(u))[mine])
         return G

@@ -125,26 +125,25 @@ class MEMM:
         """int_0^dt F(u^n + tau v^{n+1/2}, t_n + tau) dtau (eq. (35b)).
 
         Gauss-Legendre rules evaluate the whole force at their nodes. The midpoint rule, with a
-        problem that has contact, integrates the smooth (affine) part at the midpoint and the
-        contact correction piecewise between the events where a gap changes sign (paper §4):
-        exact for piecewise-affine forces, so the pseudo-energy is conserved through impacts.
+        problem that has contact, integrates the smooth (affine) part at the midpoint and each
+        contact correction piecewise between its events (paper §4): exactly, so the
+        pseudo-energy is conserved through impacts. ``force_evaluations`` counts a step's
+        patch-only evaluations beyond the first as evaluations too.
         """
         out.set(0.0)
-        contact = getattr(self.problem, "contact", None)
-        split = contact is not None and self.quadrature == "midpoint"
+        contacts = getattr(self.problem, "contacts", ())
+        split = bool(contacts) and self.quadrature == "midpoint"
         evaluations = 0
         for x, w in zip(self.nodes, self.weights):
             tau = x * self.dt
             self.u.copy(self._w)
             self._w.axpy(tau, self.v_next)
-            if split:
-                self.problem.force(self._w, self.t + tau, self._f, contact=False)
-            else:
-                self.problem.force(self._w, self.t + tau, self._f)
+            self.problem.force(self._w, self.t + tau, self._f, contact=not split)
             evaluations += 1
             out.axpy(w * self.dt, self._f)
         if split:
-            evaluations += contact.force_integral(self.u, self.v_next, self.dt, out) - 1
+            for contact in contacts:
+                evaluations += max(contact.force_integral(self.u, self.v_next, self.dt, out) - 1, 0)
         self.force_evaluations += evaluations
         self.max_step_evaluations = max(self.max_step_evaluations, evaluations)
         return out

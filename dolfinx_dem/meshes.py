@@ -6,7 +6,8 @@ Every function returns ``(mesh, cell_tags, facet_tags)``:
   ``facet_tags`` marks the boundary facets with 1..2d for the sides x=min, x=max, y=min, y=max,
   z=min, z=max (constants ``XMIN`` ... ``ZMAX``).
 * ``create_disc``, ``create_discs``: cell tag and boundary facet tag = 1-based disc number (the
-  body tag). The discs are separate connected bodies that share no vertex.
+  body tag). The discs are separate connected bodies that share no vertex; ``create_discs`` can
+  add a frame around them (the billiard table), see its docstring.
 * ``read_mesh``: whatever tags the file holds (see its docstring).
 
 Meshes use ``dolfinx.mesh.GhostMode.shared_facet``. Lengths are in metres (any consistent unit).
@@ -146,11 +147,15 @@ def _mesh_from_gmsh(comm: MPI.Comm, build: Callable[[], int]):
     return mesh, cell_tags, facet_tags
 
 
-def create_discs(comm: MPI.Comm, discs: Sequence[tuple[Sequence[float], float]], h: float):
-    """Separate discs meshed with triangles of size ~h (m).
+def create_discs(comm: MPI.Comm, discs: Sequence[tuple[Sequence[float], float]], h: float,
+                 frame: tuple[Sequence[float], Sequence[float], float] | None = None):
+    """Separate discs, optionally inside a rectangular frame, meshed with triangles of size ~h (m).
 
     ``discs`` is a sequence of ``(centre (2,), radius)``; discs may touch but not overlap. Disc
-    ``i`` (1-based) has cell tag ``i`` and boundary facet tag ``i``.
+    ``i`` (1-based) has cell tag ``i`` and boundary facet tag ``i``. ``frame = (p0, p1, width)``
+    adds the frame [p0 - width, p1 + width] minus the open rectangle (p0, p1) (the billiard table
+    of paper §5.4): cell tag ``n + 1``, inner boundary tag ``n + 1``, outer boundary tag ``n + 2``
+    for n discs. The discs must lie inside (p0, p1). No two bodies share a vertex.
     """
     if len(discs) == 0:
         raise ValueError("discs must hold at least one (centre, radius) pair")
@@ -173,17 +178,43 @@ def create_discs(comm: MPI.Comm, discs: Sequence[tuple[Sequence[float], float]],
             gap = np.linalg.norm(centres[i] - centres[j]) - radii[i] - radii[j]
             if gap < -1e-12 * (radii[i] + radii[j]):
                 raise ValueError(f"discs {j + 1} and {i + 1} overlap (gap {gap:g} m)")
+    if frame is not None:
+        if len(frame) != 3:
+            raise ValueError(f"frame must be (p0, p1, width), got {frame!r}")
+        p0, p1 = _check_corners(frame[0], frame[1], 2)
+        width = float(frame[2])
+        if not (math.isfinite(width) and width > 0):
+            raise ValueError(f"frame width must be > 0, got {frame[2]!r}")
+        for i, (c, r) in enumerate(zip(centres, radii), start=1):
+            if np.any(c - r <= p0) or np.any(c + r >= p1):
+                raise ValueError(f"disc {i} (centre {c.tolist()}, radius {r:g}) is not strictly inside "
+                                 f"the frame's opening {p0.tolist()} - {p1.tolist()}")
 
     def build() -> int:
         gmsh.model.add("discs")
         surfaces = [
             gmsh.model.occ.addDisk(c[0], c[1], 0.0, r, r) for c, r in zip(centres, radii)
         ]
+        if frame is not None:
+            outer = gmsh.model.occ.addRectangle(p0[0] - width, p0[1] - width, 0.0,
+                                                p1[0] - p0[0] + 2 * width, p1[1] - p0[1] + 2 * width)
+            hole = gmsh.model.occ.addRectangle(p0[0], p0[1], 0.0, p1[0] - p0[0], p1[1] - p0[1])
+            cut, _ = gmsh.model.occ.cut([(2, outer)], [(2, hole)])
         gmsh.model.occ.synchronize()
         for tag, surface in enumerate(surfaces, start=1):
             gmsh.model.addPhysicalGroup(2, [surface], tag)
             curves = [c for _, c in gmsh.model.getBoundary([(2, surface)], oriented=False)]
             gmsh.model.addPhysicalGroup(1, curves, tag)
+        if frame is not None:
+            n = len(surfaces)
+            gmsh.model.addPhysicalGroup(2, [cut[0][1]], n + 1)
+            inner, outer_curves = [], []
+            for _, c in gmsh.model.getBoundary(cut, oriented=False):
+                x = gmsh.model.occ.getCenterOfMass(1, c)
+                on_hole = (p0[0] - 1e-9 <= x[0] <= p1[0] + 1e-9) and (p0[1] - 1e-9 <= x[1] <= p1[1] + 1e-9)
+                (inner if on_hole else outer_curves).append(c)
+            gmsh.model.addPhysicalGroup(1, inner, n + 1)
+            gmsh.model.addPhysicalGroup(1, outer_curves, n + 2)
         gmsh.option.setNumber("Mesh.MeshSizeMin", h)
         gmsh.option.setNumber("Mesh.MeshSizeMax", h)
         gmsh.model.mesh.generate(2)

@@ -100,14 +100,60 @@ def plot_cell_field(
     Returns ``str(filename)``.
     """
     filename = pathlib.Path(filename)
+    _check_output(filename, scale)
+    grid = _grid(mesh, displacement, values, title, scale)
+    if grid is None:
+        return str(filename)
+    plotter = pyvista.Plotter(off_screen=True, window_size=(1200, 900))
+    _show(plotter, grid, title, mesh.geometry.dim)
+    plotter.screenshot(str(filename))
+    plotter.close()
+    return str(filename)
+
+
+class Animation:
+    """An animated GIF of the deformed mesh coloured by a cell field, one frame per ``write``.
+
+    Collective over ``mesh.comm`` (rank 0 renders off-screen); arguments as ``plot_cell_field``.
+    The colour scale of each frame spans that frame's values; the frame shows the time.
+    """
+
+    def __init__(self, mesh, filename: str | pathlib.Path, title: str, scale: float = 1.0):
+        self.filename = pathlib.Path(filename)
+        _check_output(self.filename, scale)
+        self.mesh, self.title, self.scale = mesh, title, scale
+        self.frames = 0
+        self._plotter = None
+        if mesh.comm.rank == 0:
+            self._plotter = pyvista.Plotter(off_screen=True, window_size=(1000, 800))
+            self._plotter.open_gif(str(self.filename))
+
+    def write(self, t: float, displacement: np.ndarray, values: np.ndarray) -> None:
+        grid = _grid(self.mesh, displacement, values, self.title, self.scale)
+        if grid is not None:
+            _show(self._plotter, grid, self.title, self.mesh.geometry.dim, name="body", reset=self.frames == 0)
+            self._plotter.add_text(f"t = {t:.4g} s", position="upper_left", color="black", name="time")
+            self._plotter.write_frame()
+        self.frames += 1
+
+    def close(self) -> None:
+        if self._plotter is not None:
+            self._plotter.close()
+            self._plotter = None
+
+
+def _check_output(filename: pathlib.Path, scale: float):
     if not math.isfinite(scale):
         raise ValueError(f"scale must be finite, got {scale!r}")
     if not filename.parent.is_dir():
         raise FileNotFoundError(f"directory {filename.parent} of {filename} does not exist")
+
+
+def _grid(mesh, displacement, values, title: str, scale: float):
+    """The deformed pyvista grid with the cell field ``title`` on rank 0, None elsewhere."""
     gathered = _gather_cells(mesh, displacement, values)
     if gathered is None:
-        return str(filename)
-
+        return None
     points, cells, cell_values, u_points = gathered
     tdim = mesh.topology.dim
     gdim = mesh.geometry.dim
@@ -119,27 +165,29 @@ def plot_cell_field(
         connectivity, np.full(num_cells, _VTK_SIMPLEX[tdim], dtype=np.uint8), points
     )
     grid.cell_data[title] = cell_values
+    return grid
 
-    plotter = pyvista.Plotter(off_screen=True, window_size=(1200, 900))
+
+def _show(plotter, grid, title: str, gdim: int, name: str | None = None, reset: bool = True):
+    """Add ``grid`` (white background, viridis, scalar bar) to ``plotter``; set the camera if
+    ``reset``."""
     plotter.set_background("white")
     style = {
         "scalars": title,
         "cmap": "viridis",
         "scalar_bar_args": {"title": title, "color": "black"},
+        "name": name,
     }
-    if tdim == 1:
+    num_cells = grid.n_cells
+    if grid.get_cell(0).type == pyvista.CellType.LINE:
         plotter.add_mesh(grid, line_width=10, **style)
     else:
-        plotter.add_mesh(
-            grid, show_edges=num_cells <= _MAX_CELLS_WITH_EDGES, edge_color="grey", **style
-        )
-    if gdim == 3:
-        plotter.view_isometric()
-    else:
-        plotter.camera_position = "xy"
-    plotter.screenshot(str(filename))
-    plotter.close()
-    return str(filename)
+        plotter.add_mesh(grid, show_edges=num_cells <= _MAX_CELLS_WITH_EDGES, edge_color="grey", **style)
+    if reset:
+        if gdim == 3:
+            plotter.view_isometric()
+        else:
+            plotter.camera_position = "xy"
 
 
 def plot_series(

@@ -3,7 +3,8 @@
 Outputs in the run directory (see ``io.py`` for the INCOMPLETE-marker contract):
 ``summary.json``, ``series.csv`` (t, kinetic, elastic, stabilisation, external, pseudo_energy,
 then the probes), ``solution.xdmf`` (+ .h5: DG0 displacement, velocity, von Mises stress) and
-``final.png`` (deformed state coloured by von Mises stress).
+``final.png`` (deformed state coloured by von Mises stress), and with ``output.animation`` the
+GIF ``animation.gif`` of the von Mises stress on the deformed bodies at the XDMF output times.
 """
 
 from __future__ import annotations
@@ -30,7 +31,7 @@ def create_mesh(comm: MPI.Comm, spec: Mapping):
     """(mesh, facet_tags) from the scene's mesh table."""
     kind = spec["type"]
     required = {"interval": ("x0", "x1", "n"), "rectangle": ("p0", "p1", "n"), "box": ("p0", "p1", "n"),
-                "disc": ("centre", "radius", "h"), "file": ("path",)}[kind]
+                "disc": ("centre", "radius", "h"), "discs": ("discs", "h"), "file": ("path",)}[kind]
     for key in required:
         if key not in spec:
             raise scenes.SceneError(f"scene key 'mesh.{key}' is missing for a mesh of type {kind!r}")
@@ -42,6 +43,14 @@ def create_mesh(comm: MPI.Comm, spec: Mapping):
         mesh, _, tags = meshes.create_box(comm, spec["p0"], spec["p1"], spec["n"])
     elif kind == "disc":
         mesh, _, tags = meshes.create_disc(comm, spec["centre"], spec["radius"], spec["h"])
+    elif kind == "discs":
+        if ("frame" in spec) != ("frame_width" in spec):
+            raise scenes.SceneError("scene keys 'mesh.frame' and 'mesh.frame_width' go together")
+        frame = (spec["frame"][:2], spec["frame"][2:], spec["frame_width"]) if "frame" in spec else None
+        try:
+            mesh, _, tags = meshes.create_discs(comm, [(c[:2], c[2]) for c in spec["discs"]], spec["h"], frame)
+        except ValueError as err:
+            raise scenes.SceneError(f"scene table 'mesh': {err}") from None
     else:
         mesh, _, tags = meshes.read_mesh(comm, spec["path"])
     return mesh, tags
@@ -93,27 +102,49 @@ def build(scene: Mapping, comm: MPI.Comm = MPI.COMM_WORLD) -> DEMDiscretisation:
     obstacles = [HalfSpace(ob["point"], ob["normal"], _boundary_facets(mesh, tags, ob["boundary"], "obstacles.boundary"),
                            ob.get("tolerance", 0.0)) for ob in scene.get("obstacles", [])]
     dem.set_obstacles(obstacles)
+    if "contact" in scene:
+        c = scene["contact"]
+        facets = np.unique(np.concatenate([_boundary_facets(mesh, tags, b, "contact.boundary") for b in c["boundary"]]))
+        dem.set_contact_boundary(facets, c.get("self_contact", False), c.get("tolerance", 0.0))
     return dem
 
 
 def contact_columns(dem: DEMDiscretisation) -> tuple[str, ...]:
-    """Series columns of a scene with obstacles: the smallest gap and the mean contact pressure,
-    and in 1D the position of the contact end."""
-    if dem.contact is None:
-        return ()
-    return ("contact_gap", "contact_pressure") + (("tip_position",) if dem.d == 1 else ())
+    """Series columns of contact: with obstacles the smallest gap and the mean contact pressure
+    (and in 1D the position of the contact end); with contact between bodies the summed normal
+    contact force, the largest interpenetration of the contact reconstructions, and the total
+    linear momentum."""
+    columns = ()
+    if dem.contact is not None:
+        columns += ("contact_gap", "contact_pressure") + (("tip_position",) if dem.d == 1 else ())
+    if dem.pair_contact is not None:
+        columns += ("contact_force", "penetration") + tuple(f"momentum_{'xyz'[i]}" for i in range(dem.d))
+    return columns
 
 
-def contact_values(dem: DEMDiscretisation, u) -> list[float]:
-    if dem.contact is None:
-        return []
-    c = dem.contact
-    up = c.patch_values(u)
-    gap, k = c.contact_gap(up)
-    values = [gap, c.contact_pressure(up)]
-    if dem.d == 1:
-        values.append(float(dem.geometry.facet_centres[c.facets[k], 0] + c.facet_displacements(up)[k, 0]))
+def contact_values(dem: DEMDiscretisation, stepper: MEMM) -> list[float]:
+    """The values of ``contact_columns`` at the stepper's current state."""
+    u, values = stepper.u, []
+    if dem.contact is not None:
+        c = dem.contact
+        up = c.patch_values(u)
+        gap, k = c.contact_gap(up)
+        values += [gap, c.contact_pressure(up)]
+        if dem.d == 1:
+            values.append(float(dem.geometry.facet_centres[c.facets[k], 0] + c.facet_displacements(up)[k, 0]))
+    if dem.pair_contact is not None:
+        c = dem.pair_contact
+        up = c.patch_values(u)
+        values += [c.contact_force(up), c.penetration(up), *momentum(dem, stepper)]
     return values
+
+
+def momentum(dem: DEMDiscretisation, stepper: MEMM) -> np.ndarray:
+    """Total linear momentum sum_c m_c vbar_c at t_n (vbar the mean of the two half-step
+    velocities), shape (d,)."""
+    m = dem.mass.array_r.reshape(-1, dem.d)
+    v = 0.5 * (stepper.v_prev.array_r + stepper.v_next.array_r).reshape(-1, dem.d)
+    return dem.comm.allreduce((m * v).sum(axis=0), op=MPI.SUM)
 
 
 class Probes:
@@ -216,6 +247,9 @@ def run(scene: Mapping, out: str | pathlib.Path, comm: MPI.Comm = MPI.COMM_WORLD
         every, series_every = output.get("every", max(1, n_steps // 50)), output.get("series_every", 1)
         E0, drift, scale, stable, error = diag.pseudo_energy, 0.0, diag.mechanical, True, None
         min_gap = math.inf
+        pair_stats = PairContactStatistics(dem, stepper)
+        animation = plotting.Animation(dem.mesh, directory / "animation.gif", "von Mises stress (Pa)",
+                                       output.get("picture_scale", 1.0)) if output.get("animation") else None
         progress = Progress(comm, n_steps, quiet)
         columns = SERIES_COLUMNS + contact_columns(dem) + tuple(probes.names)
         with io.SeriesWriter(comm, directory / "series.csv", columns) as series, \
@@ -223,25 +257,36 @@ def run(scene: Mapping, out: str | pathlib.Path, comm: MPI.Comm = MPI.COMM_WORLD
 
             def record(diag, force_fields):
                 nonlocal min_gap
-                contact = contact_values(dem, stepper.u)
-                if contact:
+                contact = contact_values(dem, stepper)
+                if dem.contact is not None:
                     min_gap = min(min_gap, contact[0])
+                if dem.pair_contact is not None:
+                    pair_stats.record(diag.t, dem.pair_contact, stepper)
                 if diag.step % series_every == 0 or force_fields:
                     series.write([diag.t, diag.kinetic, diag.elastic, diag.stabilisation, diag.external,
                                   diag.pseudo_energy, *contact, *probes.values(stepper.u, diag.t)])
                 if diag.step % every == 0 or force_fields:
-                    solution.write(diag.t, fields(dem, stepper))
+                    f = fields(dem, stepper)
+                    solution.write(diag.t, f)
+                    if animation is not None:
+                        animation.write(diag.t, stepper.u.array_r.reshape(-1, dem.d),
+                                        f["von_mises"].x.array[: dem.n_owned])
 
             record(diag, False)
+            t_stepping = 0.0  # processor time in MEMM steps (forces, events, energies), without outputs
             try:
                 for _ in range(n_steps):
+                    tic = time.process_time()
                     diag = stepper.step()
+                    t_stepping += time.process_time() - tic
                     drift = max(drift, abs(diag.pseudo_energy - E0))
                     scale = max(scale, diag.mechanical)
                     record(diag, diag.step == n_steps)
                     progress.update(diag.step, diag.t, drift / scale if scale > 0 else 0.0)
             except InstabilityError as err:
                 stable, error = False, err
+            if animation is not None:
+                animation.close()
 
         vm = dem.von_mises(stepper.u, stepper.t)
         plotting.plot_cell_field(dem.mesh, stepper.u.array_r.reshape(-1, dem.d), vm, directory / "final.png",
@@ -271,6 +316,8 @@ def run(scene: Mapping, out: str | pathlib.Path, comm: MPI.Comm = MPI.COMM_WORLD
         if dem.contact is not None:
             summary["contact_candidate_facets"] = int(len(dem.contact.facets))
             summary["min_contact_gap"] = min_gap
+        if dem.pair_contact is not None:
+            summary.update(pair_stats.summary(t_stepping))
         if error is not None:
             summary["error"] = str(error)
             summary["suggested_dt"] = error.suggested_dt
@@ -281,12 +328,56 @@ def run(scene: Mapping, out: str | pathlib.Path, comm: MPI.Comm = MPI.COMM_WORLD
 
 
 def fields(dem: DEMDiscretisation, stepper: MEMM) -> dict:
-    """DG0 displacement, velocity (vbar at t_n) and von Mises stress for XDMF output."""
+    """DG0 displacement, velocity (vbar at t_n) and von Mises stress for XDMF output, and with
+    several bodies the body number of each cell (``body``: 1-based connected component)."""
     v = stepper.v_prev.copy()
     v.axpy(1.0, stepper.v_next)
     v.scale(0.5)
-    return {
+    out = {
         "displacement": dem.function(stepper.u, "displacement"),
         "velocity": dem.function(v, "velocity"),
         "von_mises": dem.scalar_function(dem.von_mises(stepper.u, stepper.t), "von_mises"),
     }
+    if dem.body_labels.max() > 0:
+        start, stop = dem.cell_range
+        out["body"] = dem.scalar_function(dem.body_labels[start:stop] + 1.0, "body")
+    return out
+
+
+class PairContactStatistics:
+    """Running figures of contact between bodies for ``summary.json``: first contact time,
+    largest interpenetration, momentum change, and the time spent in contact work."""
+
+    def __init__(self, dem: DEMDiscretisation, stepper: MEMM):
+        self.first_contact, self.penetration = None, 0.0
+        self.p0 = momentum(dem, stepper) if dem.pair_contact is not None else None
+        m = dem.mass.array_r.reshape(-1, dem.d)
+        v = 0.5 * (stepper.v_prev.array_r + stepper.v_next.array_r).reshape(-1, dem.d)
+        self.p_scale = dem.comm.allreduce(float(np.abs(m * v).sum()), op=MPI.SUM)
+        self.momentum_change = 0.0
+        self.free = len(dem.reconstruction.dirichlet_facets) == 0
+        self.dem = dem
+
+    def record(self, t: float, contact, stepper: MEMM):
+        up = contact.patch_values(stepper.u)
+        if self.first_contact is None and contact.touching(up):
+            self.first_contact = t
+        self.penetration = max(self.penetration, contact.penetration(up))
+        if self.free:
+            change = np.abs(momentum(self.dem, stepper) - self.p0).max()
+            self.momentum_change = max(self.momentum_change, change)
+
+    def summary(self, stepping_seconds: float) -> dict:
+        c = self.dem.pair_contact
+        out = {
+            "contact_candidate_facets": int(len(c.facets)),
+            "contact_pairs_listed": int(len(c.listed)),
+            "contact_list_rebuilds": c.rebuilds,
+            "first_contact_time": self.first_contact,
+            "max_penetration": self.penetration,
+            "contact_seconds": c.seconds,
+            "contact_fraction": c.seconds / stepping_seconds if stepping_seconds > 0 else 0.0,
+        }
+        if self.free:
+            out["momentum_rel_change"] = self.momentum_change / self.p_scale if self.p_scale > 0 else 0.0
+        return out

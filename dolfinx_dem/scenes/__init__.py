@@ -71,7 +71,7 @@ def _field(key, v, d):
     return _vector(key, v, d)
 
 
-MESH_TYPES = ("interval", "rectangle", "box", "disc", "file")
+MESH_TYPES = ("interval", "rectangle", "box", "disc", "discs", "file")
 METHODS = ("dem-A", "dem-B", "fem-P2")
 QUADRATURES = ("midpoint", "gauss-legendre-1", "gauss-legendre-2", "gauss-legendre-3", "gauss-legendre-5")
 
@@ -93,6 +93,9 @@ SCHEMA = {
         "radius": lambda k, v, d: _number(k, v, positive=True),
         "h": lambda k, v, d: _number(k, v, positive=True),
         "path": lambda k, v, d: _string(k, v),
+        "discs": lambda k, v, d: [_vector(f"{k}[{i}]", x, 3) for i, x in enumerate(_list(k, v))],
+        "frame": lambda k, v, d: _vector(k, v, 4),
+        "frame_width": lambda k, v, d: _number(k, v, positive=True),
     },
     "material": {
         "E": lambda k, v, d: _number(k, v),
@@ -126,6 +129,12 @@ SCHEMA = {
         "boundary": lambda k, v, d: v if isinstance(v, int) and not isinstance(v, bool) else _string(k, v),
         "tolerance": lambda k, v, d: _number(k, v, nonnegative=True),
     }],
+    "contact": {
+        "boundary": lambda k, v, d: [x if isinstance(x, int) and not isinstance(x, bool) else _string(f"{k}[{i}]", x)
+                                     for i, x in enumerate(_list(k, v))],
+        "self_contact": lambda k, v, d: _bool(k, v),
+        "tolerance": lambda k, v, d: _number(k, v, nonnegative=True),
+    },
     "probes": [{
         "name": lambda k, v, d: _string(k, v),
         "point": lambda k, v, d: _vector(k, v, d),
@@ -140,10 +149,12 @@ SCHEMA = {
         "every": lambda k, v, d: _integer(k, v),
         "series_every": lambda k, v, d: _integer(k, v),
         "picture_scale": lambda k, v, d: _number(k, v, positive=True),
+        "animation": lambda k, v, d: _bool(k, v),
     },
 }
 
-REQUIRED = {"mesh": ("type",), "material": ("E", "nu", "rho")}
+#: Required keys of the sections; "mesh" and "material" are required sections, the others optional.
+REQUIRED = {"mesh": ("type",), "material": ("E", "nu", "rho"), "contact": ("boundary",)}
 #: Required keys of the entries of array-of-tables sections.
 REQUIRED_ITEMS = {"dirichlet": ("boundary",), "probes": ("name", "point", "component"),
                   "obstacles": ("point", "normal", "boundary")}
@@ -170,7 +181,7 @@ def dimension(scene: Mapping) -> int:
     kind = mesh.get("type")
     if kind == "interval":
         return 1
-    if kind in ("rectangle", "disc"):
+    if kind in ("rectangle", "disc", "discs"):
         return 2
     if kind == "box":
         return 3
@@ -205,6 +216,8 @@ def validate(scene: Mapping, mesh_dimension: int | None = None) -> dict:
     d = mesh_dimension or dimension(scene)
     scene = _validate_table("", scene, SCHEMA, d)
     for section, keys in REQUIRED.items():
+        if section not in scene and section not in ("mesh", "material"):
+            continue
         for key in keys:
             if key not in scene.get(section, {}):
                 raise SceneError(f"scene key '{section}.{key}' is missing")
@@ -231,6 +244,11 @@ def validate(scene: Mapping, mesh_dimension: int | None = None) -> dict:
         raise SceneError("scene key 'loads': give 'gravity' or 'body_force', not both")
     scene.setdefault("method", "dem-A")
     scene.setdefault("name", "scene")
+    if "contact" in scene:
+        if scene["method"] != "dem-B":
+            raise SceneError("contact between bodies ('contact' table) uses scheme B: set method = \"dem-B\"")
+        if "statics" in scene:
+            raise SceneError("contact between bodies ('contact' table) is implemented for dynamics only")
     return scene
 
 

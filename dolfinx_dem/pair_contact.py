@@ -1,0 +1,381 @@
+"""Frictionless contact between deformable bodies, scheme B (paper §3.4.2-3.4.3, eq. (25)-(34)), 2D.
+
+Candidate facets are declared boundary facets with scheme B's free reconstruction u_f = u_c (the
+facet translates with its cell). For two candidate facets f (cell c) and f' (cell c') of facing
+orientation, the common normal and the normal penetration (eq. (22), (30)) are
+
+    n = (|f| n_f - |f'| n_f') / || |f| n_f - |f'| n_f' ||   (normalised; n_f, n_f' outward),
+    g = (u_c' + x_f' - u_c - x_f) . n,                       affine in u,
+
+and the overlap w = |f cap f'| is the length of the intersection of the two facets, displaced by
+u_c and u_c', projected on the tangent t of n: piecewise affine in u. The contact reconstruction
+(eq. (31)) is, with g^- = min(g, 0),
+
+    u_f = u_c + 1/2 sum_{f'} (w / |f|) g^- n,       u_f' = u_c' - 1/2 sum_f (w / |f'|) g^- n.
+
+It equals the free one when g = 0 or w = 0, so the energy is continuous (§3.4.3). Writing the
+energy rows a = Q u + q (Q = [S; J]) and z_p = 1/2 (Q_f n / |f| - Q_f' n / |f'|) for a pair p,
+the rows change by delta_a = sum_p c_p z_p with c_p = w_p g_p^-, so that
+
+    V = 1/2 |a + delta_a|^2,     -dV/du = -Q^T (a + delta_a) - sum_p (z_p . (a + delta_a)) dc_p/du,
+    dc_p/du = w_p dg_p/du + g_p dw_p/du      (on pairs with g_p < 0),
+
+the exact gradient; g_p dw_p/du is the sliding force F^G of eq. (34). Along a MEMM free flight
+u + tau v, g_p and the four facet-end projections are affine in tau: c_p is a quadratic and the
+force correction a cubic between the events where a gap changes sign or a facet end crosses the
+end of the other facet's projection (paper §4). The force integral is split at those events and
+integrated by 2-point Gauss-Legendre on each piece, which is exact for cubics: the pseudo-energy
+is conserved to rounding.
+
+Broad phase: pairs are listed (a Verlet list built with a k-d tree on the displaced facet
+centres) when the centres are closer than r = max|f| + skin; the list is rebuilt when a candidate
+cell has moved more than skin/2 since the last build (checked at both ends of each step, and the
+flight is affine), so a pair that is not listed cannot touch. Cost per step: the listed pairs
+and the contact patch, not all boundary facets. Everything is local to the contact patch and
+computed from gathered patch values on every process (as contact.RigidContact).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import time
+
+import numpy as np
+import scipy.sparse
+import scipy.spatial
+from petsc4py import PETSc
+
+#: Gauss-Legendre 2-point nodes on [0, 1]: exact for the cubic force correction on each piece.
+_GL2 = 0.5 + np.array([-0.5, 0.5]) / np.sqrt(3.0)
+
+
+class PairContact:
+    """Scheme B contact between candidate facets of a 2D DEMDiscretisation; see the module docstring.
+
+    Parameters
+    ----------
+    dem : DEMDiscretisation (2D); the candidate facets must be Neumann facets of scheme B.
+    facets : process-local indices of the candidate boundary facets (the contact boundaries).
+    self_contact : also pair facets of the same body (never facets that share a vertex).
+    skin : Verlet-list margin (m), default the largest candidate facet length.
+    tolerance : how far facets may interpenetrate at t = 0 (m).
+    """
+
+    def __init__(self, dem, facets, self_contact: bool = False, skin: float | None = None,
+                 tolerance: float = 0.0):
+        from dolfinx_dem import _compat
+
+        geom, rec, ops, d = dem.geometry, dem.reconstruction, dem.operators, dem.d
+        if d != 2:
+            raise ValueError(f"contact between deformable bodies is implemented in 2D, not {d}D")
+        self.dem, self.comm, self.d = dem, dem.comm, d
+        f = np.unique(np.concatenate(self.comm.allgather(
+            _compat.local_facet_global_indices(dem.mesh, np.asarray(facets, dtype=np.int32)))))
+        if f.size == 0:
+            raise ValueError("the contact boundary has no facet (check its tag)")
+        if (geom.facet_cells[f, 1] >= 0).any():
+            bad = f[geom.facet_cells[f, 1] >= 0][0]
+            raise ValueError(f"contact facets must be boundary facets; facet {bad} at "
+                             f"{geom.facet_centres[bad].tolist()} is interior")
+        if np.isin(f, rec.dirichlet_facets).any():
+            raise ValueError("contact facets must not carry a Dirichlet condition")
+        if np.isin(f, rec.scheme_a_facets).any():
+            raise ValueError("contact between bodies uses scheme B reconstructions: build the "
+                             "discretisation with scheme='B'")
+        if not (np.isfinite(tolerance) and tolerance >= 0):
+            raise ValueError(f"the penetration tolerance must be >= 0, got {tolerance}")
+        _check_bodies_share_no_vertex(geom, dem.body_labels)
+        self.facets = f
+        self.cells = cells = geom.facet_cells[f, 0]
+        self.bodies = dem.body_labels[cells]
+        self.self_contact = bool(self_contact)
+        self.tolerance = float(tolerance)
+        an = geom.facet_area_normals[cells, geom.facet_local[f, 0]]
+        self.lengths = np.linalg.norm(an, axis=1)
+        self.normals = an / self.lengths[:, None]
+        self.centres = geom.facet_centres[f]
+        mask = np.ones((len(f), d + 1), dtype=bool)
+        mask[np.arange(len(f)), geom.facet_local[f, 0]] = False
+        self.vertices = geom.cell_vertices[cells][mask].reshape(len(f), d, d)  # (nf, 2 ends, d)
+        self.skin = float(self.lengths.max() if skin is None else skin)
+        if not self.skin > 0:
+            raise ValueError(f"the Verlet skin must be > 0, got {skin}")
+        self.radius = float(self.lengths.max()) + self.skin
+
+        # Energy rows touched by the candidate facets' values, and the contact patch.
+        nf = len(f)
+        dofs = (f[:, None] * d + np.arange(d)).ravel()
+        QF = scipy.sparse.vstack([ops.S_facet[:, dofs], ops.J_facet[:, dofs]]).tocsr()
+        rows = np.unique(QF.tocoo().row)
+        Q = scipy.sparse.vstack([ops.S, ops.J]).tocsr()
+        g = dem.dirichlet_values(0.0).ravel()
+        q = np.concatenate([ops.S_dirichlet @ g, ops.J_dirichlet @ g])
+        cell_dofs = (cells[:, None] * d + np.arange(d)).ravel()
+        self.patch = np.unique(np.concatenate([Q[rows].indices, cell_dofs]))
+        self._Q = Q[rows][:, self.patch].tocsr()
+        self._q = q[rows]
+        self._QF = QF[rows].tocsr()  # (rows, nf d)
+        self._is_elastic_row = rows < ops.S.shape[0]
+        self._cell_pos = np.searchsorted(self.patch, cells[:, None] * d + np.arange(d))  # (nf, d)
+        self._grad_weights = an / geom.cell_volumes[cells, None]
+        start, stop = dem.cell_range
+        self._owned = (self.patch >= start * d) & (self.patch < stop * d)
+        self._owned_local = (self.patch[self._owned] - start * d).astype(np.int32)
+        self.evaluations = 0
+        self.rebuilds = 0
+        self.seconds = 0.0  # processor time of the contact work in force integrals and energies
+        self._reference = None  # candidate cell displacements at the last list build
+        zero = np.zeros((len(f), d))
+        self._build_pairs(zero)
+        g0, w0 = self.listed.gaps(zero), self.listed.overlaps(zero)[0]
+        deep = (g0 < -self.tolerance) & (w0 > 0)
+        if deep.any():
+            k = int(np.argmin(np.where(deep, g0, np.inf)))
+            i, j = self.listed.i[k], self.listed.j[k]
+            raise ValueError(f"bodies {self.bodies[i]} and {self.bodies[j]} overlap at t = 0: facets at "
+                             f"{self.centres[i].tolist()} and {self.centres[j].tolist()} interpenetrate by "
+                             f"{-g0[k]:.3e} m (tolerance {self.tolerance:g} m)")
+
+    # -- broad phase ---------------------------------------------------------------------------
+    def _build_pairs(self, uc: np.ndarray):
+        """The Verlet list of facing facet pairs with centres closer than ``radius``, for the
+        candidate cell displacements ``uc`` (n_facets, d)."""
+        tree = scipy.spatial.cKDTree(self.centres + uc)
+        pairs = tree.query_pairs(self.radius, output_type="ndarray")
+        i, j = pairs[:, 0], pairs[:, 1]
+        keep = np.einsum("pi,pi->p", self.normals[i], self.normals[j]) < 0  # facing facets only
+        same = self.bodies[i] == self.bodies[j]
+        if self.self_contact:
+            shared = (np.abs(self.vertices[i][:, :, None] - self.vertices[j][:, None]).sum(-1) == 0).any((1, 2))
+            keep &= ~(same & shared)
+        else:
+            keep &= ~same
+        i, j = i[keep], j[keep]
+        n = self.lengths[i, None] * self.normals[i] - self.lengths[j, None] * self.normals[j]
+        n /= np.linalg.norm(n, axis=1)[:, None]
+        t = np.stack([-n[:, 1], n[:, 0]], axis=1)
+        # z_p = 1/2 (Q_f n / |f| - Q_f' n / |f'|): columns of a sparse (rows, P) matrix.
+        P, d = len(i), self.d
+        cols = np.repeat(np.arange(P), 2 * d)
+        rows = np.concatenate([i[:, None] * d + np.arange(d), j[:, None] * d + np.arange(d)], axis=1).ravel()
+        vals = np.concatenate([0.5 * n / self.lengths[i, None], -0.5 * n / self.lengths[j, None]], axis=1).ravel()
+        N = scipy.sparse.csr_matrix((vals, (rows, cols)), shape=(len(self.facets) * d, P))
+        self.listed = _Pairs(
+            i=i, j=j, n=n, t=t,
+            d0=np.einsum("pi,pi->p", self.centres[j] - self.centres[i], n),
+            si=np.sort(np.einsum("pki,pi->pk", self.vertices[i], t), axis=1),  # (P, 2): lo, hi
+            sj=np.sort(np.einsum("pki,pi->pk", self.vertices[j], t), axis=1),
+            Z=(self._QF @ N).tocsc(),
+        )
+        self._reference = uc.copy()
+        self.rebuilds += 1
+
+    def _update_pairs(self, uc: np.ndarray, uc_end: np.ndarray):
+        """Rebuild the list if a candidate cell moves more than skin/2 during the coming step."""
+        moved = max(np.linalg.norm(x - self._reference, axis=1).max() for x in (uc, uc_end))
+        if moved > 0.5 * self.skin:
+            self._build_pairs(uc)
+
+    # -- energy and force ----------------------------------------------------------------------
+    def patch_values(self, vec: PETSc.Vec) -> np.ndarray:
+        """Values of a distributed vector at the patch dofs, on every process."""
+        mine = vec.array_r[self._owned_local]
+        if self.comm.size == 1:
+            return mine.copy()
+        return np.concatenate(self.comm.allgather(mine))  # ranks own ascending dof ranges
+
+    def _cells(self, up: np.ndarray) -> np.ndarray:
+        """Displacements of the candidates' cells, (n_facets, d)."""
+        return up[self._cell_pos]
+
+    def _touching(self, up: np.ndarray) -> _Pairs:
+        """The listed pairs with g < 0."""
+        L = self.listed
+        return L.subset(np.flatnonzero(L.gaps(self._cells(up)) < 0))
+
+    def energy_correction(self, up: np.ndarray) -> tuple[float, float]:
+        """(elastic, stabilisation) energy changes from the contact reconstructions."""
+        start = time.process_time()
+        uc = self._cells(up)
+        g = np.minimum(self.listed.gaps(uc), 0.0)
+        elastic = stabilisation = 0.0
+        if (g < 0).any():
+            a = self._Q @ up + self._q
+            delta = self.listed.Z @ (self.listed.overlaps(uc)[0] * g)
+            change = a * delta + 0.5 * delta**2
+            elastic, stabilisation = float(change[self._is_elastic_row].sum()), float(change[~self._is_elastic_row].sum())
+        self.seconds += time.process_time() - start
+        return elastic, stabilisation
+
+    def force_correction(self, up: np.ndarray) -> np.ndarray:
+        """F - F_free at the patch dofs (N): the exact negative gradient of the energy change.
+        ``up`` holds patch values, shape (n_patch,), or K states as columns, (n_patch, K)."""
+        U = up.reshape(len(up), -1)
+        self.evaluations += U.shape[1]
+        L = self.listed
+        uc = U[self._cell_pos]  # (nf, d, K)
+        g = np.minimum(L.gaps(uc), 0.0)  # (P, K)
+        out = np.zeros_like(U)
+        if (g < 0).any():
+            w, ds = L.overlaps(uc)
+            a = self._Q @ U + self._q[:, None]
+            delta = L.Z @ (w * g)
+            mu = np.where(g < 0, L.Z.T @ (a + delta), 0.0)
+            out -= self._Q.T @ delta
+            # dc/du_c' = w n - g ds_i t, dc/du_c = -(that): F -= mu dc/du.
+            dc = mu[:, None] * (w[:, None] * L.n[..., None] - (g * ds)[:, None] * L.t[..., None])
+            np.add.at(out, self._cell_pos[L.i], dc)
+            np.add.at(out, self._cell_pos[L.j], -dc)
+        return out.reshape(up.shape)
+
+    def add(self, correction: np.ndarray, out: PETSc.Vec, scale: float = 1.0):
+        """out += scale * correction on the owned patch dofs."""
+        out.array[self._owned_local] += scale * correction[self._owned]
+
+    # -- events --------------------------------------------------------------------------------
+    def force_integral(self, u: PETSc.Vec, v: PETSc.Vec, dt: float, out: PETSc.Vec) -> int:
+        """out += int_0^dt (F - F_free)(u + tau v) dtau, split at the events and integrated by
+        2-point Gauss-Legendre on each piece; returns the number of patch force evaluations.
+
+        Events (paper §4): for the pairs with g < 0 somewhere in the step, the times where g
+        changes sign or a facet end crosses an end of the other facet (the kinks of w); all are
+        roots of affine functions of tau."""
+        start = time.process_time()
+        up, vp = self.patch_values(u), self.patch_values(v)
+        uc0, uc1 = self._cells(up), self._cells(up + dt * vp)
+        self._update_pairs(uc0, uc1)
+        L = self.listed
+        g0, g1 = L.gaps(uc0), L.gaps(uc1)
+        p = np.flatnonzero((g0 < 0) | (g1 < 0))
+        if len(p) == 0:
+            self.seconds += time.process_time() - start
+            return 0
+        pairs = L.subset(p)
+        e0, e1 = pairs.crossings(uc0), pairs.crossings(uc1)
+        values0, values1 = np.concatenate([g0[p], e0]), np.concatenate([g1[p], e1])
+        crossing = values0 * values1 < 0
+        tau = dt * values0[crossing] / (values0[crossing] - values1[crossing])
+        tau = np.concatenate([[0.0], np.unique(tau[(tau > 0) & (tau < dt)]), [dt]])
+        # All Gauss points of all pieces at once, as columns.
+        length = np.diff(tau)
+        nodes = (tau[:-1, None] + _GL2[None, :] * length[:, None]).ravel()
+        weights = np.repeat(0.5 * length, len(_GL2))
+        self.add(self.force_correction(up[:, None] + vp[:, None] * nodes[None, :]) @ weights, out)
+        self.seconds += time.process_time() - start
+        return 2 * (len(tau) - 1)
+
+    # -- outputs -------------------------------------------------------------------------------
+    def facet_corrections(self, up: np.ndarray) -> np.ndarray:
+        """u_f - u_c of every candidate facet (eq. (31)), shape (n_facets, d)."""
+        pairs = self._touching(up)
+        uc = self._cells(up)
+        c = pairs.overlaps(uc)[0] * pairs.gaps(uc)
+        delta = np.zeros((len(self.facets), self.d))
+        np.add.at(delta, pairs.i, (0.5 * c / self.lengths[pairs.i])[:, None] * pairs.n)
+        np.add.at(delta, pairs.j, (-0.5 * c / self.lengths[pairs.j])[:, None] * pairs.n)
+        return delta
+
+    def gradient_correction(self, up: np.ndarray) -> np.ndarray:
+        """Change of the gradient (eq. (8)) of each candidate's cell, shape (n_facets, d, d)."""
+        return np.einsum("ni,nj->nij", self.facet_corrections(up), self._grad_weights)
+
+    def penetration(self, up: np.ndarray) -> float:
+        """Largest interpenetration (m, >= 0) of the contact-aware facet reconstructions: over the
+        candidate facets, the overlap-weighted mean over their partners of the reconstructed gap
+        (x_f' + u_f' - x_f - u_f) . n, negated. Eq. (31) makes it zero when each facet has one
+        partner covering it exactly; partial overlaps (facets sliding against each other) leave a
+        gap of the order of the cell gap times the uncovered fraction."""
+        uc = self._cells(up)
+        w = self.listed.overlaps(uc)[0]
+        if not (w > 0).any():
+            return 0.0
+        pairs = self.listed.subset(np.flatnonzero(w > 0))
+        w = w[w > 0]
+        uf = uc + self.facet_corrections(up)
+        i, j = pairs.i, pairs.j
+        gap = np.einsum("pi,pi->p", self.centres[j] + uf[j] - self.centres[i] - uf[i], pairs.n)
+        nf = len(self.facets)
+        weight = np.bincount(i, w, nf) + np.bincount(j, w, nf)
+        mean = np.bincount(i, w * gap, nf) + np.bincount(j, w * gap, nf)
+        touched = weight > 0
+        return float(max(0.0, -(mean[touched] / weight[touched]).min()))
+
+    def touching(self, up: np.ndarray) -> bool:
+        """Whether some pair is in contact (g < 0 with a positive overlap)."""
+        pairs = self._touching(up)
+        return bool(len(pairs) and (pairs.overlaps(self._cells(up))[0] > 0).any())
+
+    def contact_force(self, up: np.ndarray) -> float:
+        """Sum over touching pairs of the normal contact force magnitude (N, per unit thickness):
+        |(z_p . (a + delta_a)) w_p|, the force one facet of the pair exerts on the other."""
+        L = self.listed
+        uc = self._cells(up)
+        g = np.minimum(L.gaps(uc), 0.0)
+        w = L.overlaps(uc)[0]
+        a = self._Q @ up + self._q
+        return float(np.abs(np.where(g < 0, L.Z.T @ (a + L.Z @ (w * g)), 0.0) * w).sum())
+
+
+@dataclasses.dataclass(frozen=True)
+class _Pairs:
+    """Facet pairs (f_i, f_j) of the Verlet list, vectorised: the common normal n and tangent t,
+    the reference gap d0, the tangential facet ends si, sj (lo, hi), and (for the whole list) the
+    columns z_p of Z over the patch's energy rows."""
+
+    i: np.ndarray
+    j: np.ndarray
+    n: np.ndarray
+    t: np.ndarray
+    d0: np.ndarray
+    si: np.ndarray
+    sj: np.ndarray
+    Z: scipy.sparse.csc_matrix | None = None
+
+    def __len__(self) -> int:
+        return len(self.i)
+
+    def subset(self, p: np.ndarray) -> _Pairs:
+        """The pairs ``p`` (without Z)."""
+        return _Pairs(self.i[p], self.j[p], self.n[p], self.t[p], self.d0[p], self.si[p], self.sj[p])
+
+    def gaps(self, uc: np.ndarray) -> np.ndarray:
+        """g = d0 + (u_c' - u_c) . n for candidate cell displacements uc, shape (nf, d) or
+        (nf, d, K) for K states; returns (P,) or (P, K)."""
+        x = np.einsum("pi...,pi->p...", uc[self.j] - uc[self.i], self.n)
+        return (self.d0 if x.ndim == 1 else self.d0[:, None]) + x
+
+    def ends(self, uc: np.ndarray):
+        """Tangential facet ends (lo_i, hi_i, lo_j, hi_j), displaced by their cells."""
+        ti = np.einsum("pi...,pi->p...", uc[self.i], self.t)
+        tj = np.einsum("pi...,pi->p...", uc[self.j], self.t)
+        si, sj = (self.si, self.sj) if ti.ndim == 1 else (self.si[:, None], self.sj[:, None])
+        return si[..., 0] + ti, si[..., 1] + ti, sj[..., 0] + tj, sj[..., 1] + tj
+
+    def overlaps(self, uc: np.ndarray):
+        """w and its slope ds_i: dw/du_c = ds_i t, dw/du_c' = -ds_i t (0 without overlap)."""
+        lo_i, hi_i, lo_j, hi_j = self.ends(uc)
+        w = np.minimum(hi_i, hi_j) - np.maximum(lo_i, lo_j)
+        ds_i = (hi_i <= hi_j).astype(float) - (lo_i >= lo_j).astype(float)
+        inside = w > 0
+        return np.where(inside, w, 0.0), np.where(inside, ds_i, 0.0)
+
+    def crossings(self, uc: np.ndarray) -> np.ndarray:
+        """The differences of facet ends whose sign changes are the kinks of w, (4 P,)."""
+        lo_i, hi_i, lo_j, hi_j = self.ends(uc)
+        return np.concatenate([hi_i - hi_j, lo_i - lo_j, hi_i - lo_j, hi_j - lo_i])
+
+
+def _check_bodies_share_no_vertex(geom, labels: np.ndarray):
+    """Separate bodies (connected through facets) must not share a vertex: contact between them
+    would be undefined at the shared point."""
+    d = geom.d
+    x = geom.cell_vertices.reshape(-1, d)
+    body = np.repeat(labels, d + 1)
+    _, vertex = np.unique(x, axis=0, return_inverse=True)
+    pairs = np.unique(np.stack([vertex.ravel(), body], axis=1), axis=0)
+    counts = np.bincount(pairs[:, 0])
+    if (counts > 1).any():
+        k = int(np.flatnonzero(counts > 1)[0])
+        point = x[np.flatnonzero(vertex.ravel() == k)[0]]
+        raise ValueError(f"bodies share the vertex {point.tolist()}: bodies in contact must be meshed "
+                         "separately (no common vertex)")
