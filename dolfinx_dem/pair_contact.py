@@ -121,6 +121,8 @@ class PairContact:
         start, stop = dem.cell_range
         self._owned = (self.patch >= start * d) & (self.patch < stop * d)
         self._owned_local = (self.patch[self._owned] - start * d).astype(np.int32)
+        self._patch_local = np.full(len(self.patch), -1, dtype=np.int32)  # patch -> local dof
+        self._patch_local[self._owned] = self._owned_local
         self.evaluations = 0
         self.rebuilds = 0
         self.seconds = 0.0  # processor time of the contact work in force integrals and energies
@@ -160,12 +162,23 @@ class PairContact:
         rows = np.concatenate([i[:, None] * d + np.arange(d), j[:, None] * d + np.arange(d)], axis=1).ravel()
         vals = np.concatenate([0.5 * n / self.lengths[i, None], -0.5 * n / self.lengths[j, None]], axis=1).ravel()
         N = scipy.sparse.csr_matrix((vals, (rows, cols)), shape=(len(self.facets) * d, P))
+        Z = (self._QF @ N).tocsr()
+        # The listed patch: the energy rows the pairs touch and the patch dofs those rows and
+        # the pairs' cells read. Contact work per step only involves these.
+        rows = np.unique(Z.tocoo().row)
+        Q = self._Q[rows]
+        columns = np.unique(np.concatenate([Q.indices, self._cell_pos[i].ravel(), self._cell_pos[j].ravel()]))
+        Q = Q[:, columns].tocsr()
         self.listed = _Pairs(
             i=i, j=j, n=n, t=t,
             d0=np.einsum("pi,pi->p", self.centres[j] - self.centres[i], n),
             si=np.sort(np.einsum("pki,pi->pk", self.vertices[i], t), axis=1),  # (P, 2): lo, hi
             sj=np.sort(np.einsum("pki,pi->pk", self.vertices[j], t), axis=1),
-            Z=(self._QF @ N).tocsc(),
+            patch=_ListedPatch(
+                columns=columns, Z=Z[rows], ZT=Z[rows].T.tocsr(), Q=Q, QT=Q.T.tocsr(), q=self._q[rows],
+                elastic=self._is_elastic_row[rows],
+                pos_i=np.searchsorted(columns, self._cell_pos[i]), pos_j=np.searchsorted(columns, self._cell_pos[j]),
+                local=self._patch_local[columns]),
         )
         self._reference = uc.copy()
         self.rebuilds += 1
@@ -196,37 +209,43 @@ class PairContact:
     def energy_correction(self, up: np.ndarray) -> tuple[float, float]:
         """(elastic, stabilisation) energy changes from the contact reconstructions."""
         start = time.process_time()
+        L, P = self.listed, self.listed.patch
         uc = self._cells(up)
-        g = np.minimum(self.listed.gaps(uc), 0.0)
+        g = np.minimum(L.gaps(uc), 0.0)
         elastic = stabilisation = 0.0
         if (g < 0).any():
-            a = self._Q @ up + self._q
-            delta = self.listed.Z @ (self.listed.overlaps(uc)[0] * g)
+            a = P.Q @ up[P.columns] + P.q
+            delta = P.Z @ (L.overlaps(uc)[0] * g)
             change = a * delta + 0.5 * delta**2
-            elastic, stabilisation = float(change[self._is_elastic_row].sum()), float(change[~self._is_elastic_row].sum())
+            elastic, stabilisation = float(change[P.elastic].sum()), float(change[~P.elastic].sum())
         self.seconds += time.process_time() - start
         return elastic, stabilisation
 
     def force_correction(self, up: np.ndarray) -> np.ndarray:
-        """F - F_free at the patch dofs (N): the exact negative gradient of the energy change.
-        ``up`` holds patch values, shape (n_patch,), or K states as columns, (n_patch, K)."""
-        U = up.reshape(len(up), -1)
+        """F - F_free at the patch dofs (N): the exact negative gradient of the energy change."""
+        out = np.zeros_like(up)
+        P = self.listed.patch
+        out[P.columns] = self._correction(self._cells(up)[..., None], up[P.columns, None])[:, 0]
+        return out
+
+    def _correction(self, uc: np.ndarray, U: np.ndarray) -> np.ndarray:
+        """F - F_free on the listed patch for K states: candidate cell displacements uc
+        (nf, d, K) and the listed patch's values U (n_columns, K); returns (n_columns, K)."""
         self.evaluations += U.shape[1]
-        L = self.listed
-        uc = U[self._cell_pos]  # (nf, d, K)
+        L, P = self.listed, self.listed.patch
         g = np.minimum(L.gaps(uc), 0.0)  # (P, K)
         out = np.zeros_like(U)
         if (g < 0).any():
             w, ds = L.overlaps(uc)
-            a = self._Q @ U + self._q[:, None]
-            delta = L.Z @ (w * g)
-            mu = np.where(g < 0, L.Z.T @ (a + delta), 0.0)
-            out -= self._Q.T @ delta
+            a = P.Q @ U + P.q[:, None]
+            delta = P.Z @ (w * g)
+            mu = np.where(g < 0, P.ZT @ (a + delta), 0.0)
+            out -= P.QT @ delta
             # dc/du_c' = w n - g ds_i t, dc/du_c = -(that): F -= mu dc/du.
             dc = mu[:, None] * (w[:, None] * L.n[..., None] - (g * ds)[:, None] * L.t[..., None])
-            np.add.at(out, self._cell_pos[L.i], dc)
-            np.add.at(out, self._cell_pos[L.j], -dc)
-        return out.reshape(up.shape)
+            np.add.at(out, P.pos_i, dc)
+            np.add.at(out, P.pos_j, -dc)
+        return out
 
     def add(self, correction: np.ndarray, out: PETSc.Vec, scale: float = 1.0):
         """out += scale * correction on the owned patch dofs."""
@@ -256,11 +275,16 @@ class PairContact:
         crossing = values0 * values1 < 0
         tau = dt * values0[crossing] / (values0[crossing] - values1[crossing])
         tau = np.concatenate([[0.0], np.unique(tau[(tau > 0) & (tau < dt)]), [dt]])
-        # All Gauss points of all pieces at once, as columns.
+        # All Gauss points of all pieces at once, as columns, on the listed patch.
         length = np.diff(tau)
         nodes = (tau[:-1, None] + _GL2[None, :] * length[:, None]).ravel()
         weights = np.repeat(0.5 * length, len(_GL2))
-        self.add(self.force_correction(up[:, None] + vp[:, None] * nodes[None, :]) @ weights, out)
+        P = L.patch
+        U = up[P.columns, None] + vp[P.columns, None] * nodes
+        UC = uc0[..., None] + self._cells(vp)[..., None] * nodes
+        F = self._correction(UC, U) @ weights
+        mine = P.local >= 0
+        out.array[P.local[mine]] += F[mine]
         self.seconds += time.process_time() - start
         return 2 * (len(tau) - 1)
 
@@ -305,22 +329,54 @@ class PairContact:
         pairs = self._touching(up)
         return bool(len(pairs) and (pairs.overlaps(self._cells(up))[0] > 0).any())
 
+    def touch_time(self, up0: np.ndarray, up1: np.ndarray, dt: float) -> float | None:
+        """For a step from ``up0`` (no contact) to ``up1``: the time tau in [0, dt] at which the
+        first pair touching at ``up1`` closed its gap (gaps are affine along the step); None if
+        no pair touches at ``up1``."""
+        L = self.listed
+        uc0, uc1 = self._cells(up0), self._cells(up1)
+        g0, g1 = L.gaps(uc0), L.gaps(uc1)
+        touching = (g1 < 0) & (L.overlaps(uc1)[0] > 0)
+        if not touching.any():
+            return None
+        g0, g1 = np.maximum(g0[touching], 0.0), g1[touching]
+        return float(dt * (g0 / (g0 - g1)).min())
+
     def contact_force(self, up: np.ndarray) -> float:
         """Sum over touching pairs of the normal contact force magnitude (N, per unit thickness):
         |(z_p . (a + delta_a)) w_p|, the force one facet of the pair exerts on the other."""
-        L = self.listed
+        L, P = self.listed, self.listed.patch
         uc = self._cells(up)
         g = np.minimum(L.gaps(uc), 0.0)
         w = L.overlaps(uc)[0]
-        a = self._Q @ up + self._q
-        return float(np.abs(np.where(g < 0, L.Z.T @ (a + L.Z @ (w * g)), 0.0) * w).sum())
+        a = P.Q @ up[P.columns] + P.q
+        return float(np.abs(np.where(g < 0, P.ZT @ (a + P.Z @ (w * g)), 0.0) * w).sum())
+
+
+@dataclasses.dataclass(frozen=True)
+class _ListedPatch:
+    """The part of the contact patch the listed pairs touch: patch dofs ``columns``, the energy
+    rows (Q, QT = Q^T, q, which are elastic rows) restricted to them, the columns z_p of
+    Z (and ZT), the positions of the pairs' cells in ``columns`` (P, d), and the process-local
+    dof of each column (-1 if another process owns it)."""
+
+    columns: np.ndarray
+    Z: scipy.sparse.csr_matrix
+    ZT: scipy.sparse.csr_matrix
+    Q: scipy.sparse.csr_matrix
+    QT: scipy.sparse.csr_matrix
+    q: np.ndarray
+    elastic: np.ndarray
+    pos_i: np.ndarray
+    pos_j: np.ndarray
+    local: np.ndarray
 
 
 @dataclasses.dataclass(frozen=True)
 class _Pairs:
     """Facet pairs (f_i, f_j) of the Verlet list, vectorised: the common normal n and tangent t,
-    the reference gap d0, the tangential facet ends si, sj (lo, hi), and (for the whole list) the
-    columns z_p of Z over the patch's energy rows."""
+    the reference gap d0, the tangential facet ends si, sj (lo, hi), and (for the whole list)
+    the listed patch."""
 
     i: np.ndarray
     j: np.ndarray
@@ -329,7 +385,7 @@ class _Pairs:
     d0: np.ndarray
     si: np.ndarray
     sj: np.ndarray
-    Z: scipy.sparse.csc_matrix | None = None
+    patch: _ListedPatch | None = None
 
     def __len__(self) -> int:
         return len(self.i)

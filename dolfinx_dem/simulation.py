@@ -345,8 +345,9 @@ def fields(dem: DEMDiscretisation, stepper: MEMM) -> dict:
 
 
 class PairContactStatistics:
-    """Running figures of contact between bodies for ``summary.json``: first contact time,
-    largest interpenetration, momentum change, and the time spent in contact work."""
+    """Running figures of contact between bodies for ``summary.json``: first contact time (when
+    the first gap closed, interpolated within the step), largest interpenetration, momentum
+    change, and the processor time spent in contact work."""
 
     def __init__(self, dem: DEMDiscretisation, stepper: MEMM):
         self.first_contact, self.penetration = None, 0.0
@@ -357,11 +358,15 @@ class PairContactStatistics:
         self.momentum_change = 0.0
         self.free = len(dem.reconstruction.dirichlet_facets) == 0
         self.dem = dem
+        self.previous = None  # patch values of the previous step, until the first contact
 
     def record(self, t: float, contact, stepper: MEMM):
         up = contact.patch_values(stepper.u)
-        if self.first_contact is None and contact.touching(up):
-            self.first_contact = t
+        if self.first_contact is None and self.previous is not None:
+            tau = contact.touch_time(self.previous, up, stepper.dt)
+            if tau is not None:
+                self.first_contact = t - stepper.dt + tau
+        self.previous = up
         self.penetration = max(self.penetration, contact.penetration(up))
         if self.free:
             change = np.abs(momentum(self.dem, stepper) - self.p0).max()

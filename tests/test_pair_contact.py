@@ -186,3 +186,16 @@ def _discs_sharing_a_vertex():
         gmsh.model.mesh.generate(2)
 
     return DEMDiscretisation(gmsh_mesh(MPI.COMM_WORLD, build), SOFT, "B")
+
+
+@pytest.mark.parametrize("overrides, message", [
+    ({"contact.boundary": [7]}, "tag 7.* has no facet"),
+    ({"method": "dem-A"}, "uses scheme B"),
+    ({"mesh.discs": [[0.14, 2.27, 0.1], [0.3, 2.27, 0.1]]}, "overlap"),
+])
+def test_bad_contact_scenes_are_rejected_before_the_run(overrides, message, tmp_path):
+    from dolfinx_dem import scenes, simulation
+
+    with pytest.raises(scenes.SceneError, match=message):
+        scene = scenes.load("two-disks", {"mesh.h": 0.05, **overrides})
+        simulation.run(scene, tmp_path / "out", quiet=True)
