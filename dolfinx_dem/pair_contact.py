@@ -1,21 +1,25 @@
-"""Frictionless contact between deformable bodies, scheme B (paper §3.4.2-3.4.3, eq. (25)-(34)), 2D.
+"""Frictionless contact between deformable bodies (paper §3.4, eq. (22)-(34)), 2D.
 
-Candidate facets are declared boundary facets with scheme B's free reconstruction u_f = u_c (the
-facet translates with its cell). For two candidate facets f (cell c) and f' (cell c') of facing
-orientation, the common normal and the normal penetration (eq. (22), (30)) are
+Candidate facets are declared boundary facets; out of contact they keep their free
+reconstruction u_f^free = R_f u (+ D_f g): u_c for scheme B facets (the facet translates with its
+cell), the traction-free value of eq. (19)-(21) for scheme A facets. For two candidate facets f
+and f' of facing orientation, the common normal and the normal penetration (eq. (22), (30)) are
 
     n = (|f| n_f - |f'| n_f') / || |f| n_f - |f'| n_f' ||   (normalised; n_f, n_f' outward),
-    g = (u_c' + x_f' - u_c - x_f) . n,                       affine in u,
+    g = (x_f' + u_f'^free - x_f - u_f^free) . n,             affine in u,
 
 and the overlap w = |f cap f'| is the length of the intersection of the two facets, displaced by
-u_c and u_c', projected on the tangent t of n: piecewise affine in u. The contact reconstruction
-(eq. (31)) is, with g^- = min(g, 0),
+their free values and projected on the tangent t of n: piecewise affine in u. The contact
+reconstruction (eq. (31)) is, with g^- = min(g, 0),
 
-    u_f = u_c + 1/2 sum_{f'} (w / |f|) g^- n,       u_f' = u_c' - 1/2 sum_f (w / |f'|) g^- n.
+    u_f = u_f^free + sum_{f'} (w / |f|) g^- e_f,      u_f' = u_f'^free + sum_f (w / |f'|) g^- e_f',
 
-It equals the free one when g = 0 or w = 0, so the energy is continuous (§3.4.3). Writing the
-energy rows a = Q u + q (Q = [S; J]) and z_p = 1/2 (Q_f n / |f| - Q_f' n / |f'|) for a pair p,
-the rows change by delta_a = sum_p c_p z_p with c_p = w_p g_p^-, so that
+with e_f = n/2, e_f' = -n/2 for scheme B (eq. (26)-(27), theta = 1/2), and for two scheme A
+facets the directions of eq. (23)-(24) (equal normal tractions, no tangential traction; see
+``PairContact._directions``). It equals the free one when g = 0 or w = 0, so the energy is
+continuous (§3.4.3). Writing the energy rows a = Q u + q (Q = [S; J]) and
+z_p = Q_f e_f / |f| + Q_f' e_f' / |f'| for a pair p, the rows change by delta_a = sum_p c_p z_p
+with c_p = w_p g_p^-, so that
 
     V = 1/2 |a + delta_a|^2,     -dV/du = -Q^T (a + delta_a) - sum_p (z_p . (a + delta_a)) dc_p/du,
     dc_p/du = w_p dg_p/du + g_p dw_p/du      (on pairs with g_p < 0),
@@ -29,9 +33,10 @@ is conserved to rounding.
 
 Broad phase: pairs are listed (a Verlet list built with a k-d tree on the displaced facet
 centres) when the centres are closer than r = max|f| + skin; the list is rebuilt when a candidate
-cell has moved more than skin/2 since the last build (checked at both ends of each step, and the
-flight is affine), so a pair that is not listed cannot touch. Cost per step: the listed pairs
-and the contact patch, not all boundary facets. Everything is local to the contact patch and
+facet has moved more than skin/2 since the last build (checked at both ends of each step, and the
+flight is affine), so a pair that is not listed cannot touch. Cost per step: the gaps of the
+listed pairs, and on steps with contact the energy rows those pairs touch (the listed patch),
+not all boundary facets. Everything is local to the contact patch and
 computed from gathered patch values on every process (as contact.RigidContact).
 """
 
@@ -50,11 +55,11 @@ _GL2 = 0.5 + np.array([-0.5, 0.5]) / np.sqrt(3.0)
 
 
 class PairContact:
-    """Scheme B contact between candidate facets of a 2D DEMDiscretisation; see the module docstring.
+    """Contact between candidate facets of a 2D DEMDiscretisation; see the module docstring.
 
     Parameters
     ----------
-    dem : DEMDiscretisation (2D); the candidate facets must be Neumann facets of scheme B.
+    dem : DEMDiscretisation (2D); the candidate facets must be Neumann (boundary) facets.
     facets : process-local indices of the candidate boundary facets (the contact boundaries).
     self_contact : also pair facets of the same body (never facets that share a vertex).
     skin : Verlet-list margin (m), default the largest candidate facet length.
@@ -79,9 +84,8 @@ class PairContact:
                              f"{geom.facet_centres[bad].tolist()} is interior")
         if np.isin(f, rec.dirichlet_facets).any():
             raise ValueError("contact facets must not carry a Dirichlet condition")
-        if np.isin(f, rec.scheme_a_facets).any():
-            raise ValueError("contact between bodies uses scheme B reconstructions: build the "
-                             "discretisation with scheme='B'")
+        if dem._time_dependent:
+            raise ValueError("contact with time-dependent Dirichlet conditions is not supported")
         if not (np.isfinite(tolerance) and tolerance >= 0):
             raise ValueError(f"the penetration tolerance must be >= 0, got {tolerance}")
         _check_bodies_share_no_vertex(geom, dem.body_labels)
@@ -110,14 +114,22 @@ class PairContact:
         Q = scipy.sparse.vstack([ops.S, ops.J]).tocsr()
         g = dem.dirichlet_values(0.0).ravel()
         q = np.concatenate([ops.S_dirichlet @ g, ops.J_dirichlet @ g])
-        cell_dofs = (cells[:, None] * d + np.arange(d)).ravel()
-        self.patch = np.unique(np.concatenate([Q[rows].indices, cell_dofs]))
+        R = rec.R[dofs]
+        self.patch = np.unique(np.concatenate([Q[rows].indices, R.indices]))
         self._Q = Q[rows][:, self.patch].tocsr()
         self._q = q[rows]
         self._QF = QF[rows].tocsr()  # (rows, nf d)
         self._is_elastic_row = rows < ops.S.shape[0]
-        self._cell_pos = np.searchsorted(self.patch, cells[:, None] * d + np.arange(d))  # (nf, d)
+        # Free reconstructions u_f = R_f u + D_f g of the candidates (u_c for scheme B facets).
+        self._R = R[:, self.patch].tocsr()
+        self._R_lift = (rec.D[dofs] @ g).reshape(nf, d)
         self._grad_weights = an / geom.cell_volumes[cells, None]
+        self.is_scheme_a = np.isin(f, rec.scheme_a_facets)
+        self._A = None
+        if self.is_scheme_a.any():
+            C = dem.material.elasticity_tensor(d)
+            # A_f x = (C : (x (x) a_f)) n / |c| for the pair's normal n: einsum with C and a_f.
+            self._Ca = np.einsum("ijkl,nl->nijk", C, an) / geom.cell_volumes[cells, None, None, None]
         start, stop = dem.cell_range
         self._owned = (self.patch >= start * d) & (self.patch < stop * d)
         self._owned_local = (self.patch[self._owned] - start * d).astype(np.int32)
@@ -156,19 +168,23 @@ class PairContact:
         n = self.lengths[i, None] * self.normals[i] - self.lengths[j, None] * self.normals[j]
         n /= np.linalg.norm(n, axis=1)[:, None]
         t = np.stack([-n[:, 1], n[:, 0]], axis=1)
-        # z_p = 1/2 (Q_f n / |f| - Q_f' n / |f'|): columns of a sparse (rows, P) matrix.
+        e_i, e_j = self._directions(i, j, n)
+        # z_p = Q_f e_f / |f| + Q_f' e_f' / |f'|: columns of a sparse (rows, P) matrix.
         P, d = len(i), self.d
         cols = np.repeat(np.arange(P), 2 * d)
         rows = np.concatenate([i[:, None] * d + np.arange(d), j[:, None] * d + np.arange(d)], axis=1).ravel()
-        vals = np.concatenate([0.5 * n / self.lengths[i, None], -0.5 * n / self.lengths[j, None]], axis=1).ravel()
+        vals = np.concatenate([e_i / self.lengths[i, None], e_j / self.lengths[j, None]], axis=1).ravel()
         N = scipy.sparse.csr_matrix((vals, (rows, cols)), shape=(len(self.facets) * d, P))
         Z = (self._QF @ N).tocsr()
         # The listed patch: the energy rows the pairs touch and the patch dofs those rows and
         # the pairs' cells read. Contact work per step only involves these.
         rows = np.unique(Z.tocoo().row)
         Q = self._Q[rows]
-        columns = np.unique(np.concatenate([Q.indices, self._cell_pos[i].ravel(), self._cell_pos[j].ravel()]))
+        facets = np.unique(np.concatenate([i, j]))
+        facet_dofs = (facets[:, None] * d + np.arange(d)).ravel()
+        columns = np.unique(np.concatenate([Q.indices, self._R[facet_dofs].indices]))
         Q = Q[:, columns].tocsr()
+        R = self._R[:, columns].tocsr()
         self.listed = _Pairs(
             i=i, j=j, n=n, t=t,
             d0=np.einsum("pi,pi->p", self.centres[j] - self.centres[i], n),
@@ -176,12 +192,33 @@ class PairContact:
             sj=np.sort(np.einsum("pki,pi->pk", self.vertices[j], t), axis=1),
             patch=_ListedPatch(
                 columns=columns, Z=Z[rows], ZT=Z[rows].T.tocsr(), Q=Q, QT=Q.T.tocsr(), q=self._q[rows],
-                elastic=self._is_elastic_row[rows],
-                pos_i=np.searchsorted(columns, self._cell_pos[i]), pos_j=np.searchsorted(columns, self._cell_pos[j]),
-                local=self._patch_local[columns]),
+                elastic=self._is_elastic_row[rows], RT=R.T.tocsr(), local=self._patch_local[columns]),
         )
         self._reference = uc.copy()
         self.rebuilds += 1
+
+    def _directions(self, i: np.ndarray, j: np.ndarray, n: np.ndarray):
+        """The contact corrections of a pair are u_f += (w/|f|) g^- e_f, u_f' += (w/|f'|) g^- e_f'.
+
+        Scheme B (eq. (26)-(27), theta = 1/2): e_f = n/2, e_f' = -n/2. Scheme A (eq. (23)-(24)),
+        when both facets are scheme A facets: the corrections change the two cells' tractions
+        on n by s A_f e_f... with A_f x = (C : (x (x) a_f)) n / |c|: e_f = A_f^-1 n / D,
+        e_f' = A_f'^-1 n / D, D = n . A_f^-1 n - n . A_f'^-1 n, so that the tractions on n are
+        normal and equal on both sides (eq. (23)-(24)) and a fully overlapping pair closes its
+        gap; free Neumann facets already carry zero traction on n when n = n_f = -n_f'.
+        Both rules close the gap of a pair of equal facets covering each other."""
+        e_i, e_j = 0.5 * n, -0.5 * n
+        both_a = self.is_scheme_a[i] & self.is_scheme_a[j]
+        if both_a.any():
+            k = np.flatnonzero(both_a)
+            h = [np.linalg.solve(np.einsum("nijk,nj->nik", self._Ca[f[k]], n[k]), n[k][..., None])[..., 0]
+                 for f in (i, j)]
+            D = np.einsum("pi,pi->p", n[k], h[0] - h[1])
+            if not (D > 0).all():
+                raise RuntimeError("scheme A contact: a facet pair has no compliant solution of eq. (23)-(24) "
+                                   f"(D = {D.min():.3e} <= 0): use scheme B")
+            e_i[k], e_j[k] = h[0] / D[:, None], h[1] / D[:, None]
+        return e_i, e_j
 
     def _update_pairs(self, uc: np.ndarray, uc_end: np.ndarray):
         """Rebuild the list if a candidate cell moves more than skin/2 during the coming step."""
@@ -197,20 +234,20 @@ class PairContact:
             return mine.copy()
         return np.concatenate(self.comm.allgather(mine))  # ranks own ascending dof ranges
 
-    def _cells(self, up: np.ndarray) -> np.ndarray:
-        """Displacements of the candidates' cells, (n_facets, d)."""
-        return up[self._cell_pos]
+    def _free(self, up: np.ndarray) -> np.ndarray:
+        """Free reconstructions u_f of the candidates (their cells' u_c in scheme B), (n_facets, d)."""
+        return (self._R @ up).reshape(-1, self.d) + self._R_lift
 
     def _touching(self, up: np.ndarray) -> _Pairs:
         """The listed pairs with g < 0."""
         L = self.listed
-        return L.subset(np.flatnonzero(L.gaps(self._cells(up)) < 0))
+        return L.subset(np.flatnonzero(L.gaps(self._free(up)) < 0))
 
     def energy_correction(self, up: np.ndarray) -> tuple[float, float]:
         """(elastic, stabilisation) energy changes from the contact reconstructions."""
         start = time.process_time()
         L, P = self.listed, self.listed.patch
-        uc = self._cells(up)
+        uc = self._free(up)
         g = np.minimum(L.gaps(uc), 0.0)
         elastic = stabilisation = 0.0
         if (g < 0).any():
@@ -225,11 +262,11 @@ class PairContact:
         """F - F_free at the patch dofs (N): the exact negative gradient of the energy change."""
         out = np.zeros_like(up)
         P = self.listed.patch
-        out[P.columns] = self._correction(self._cells(up)[..., None], up[P.columns, None])[:, 0]
+        out[P.columns] = self._correction(self._free(up)[..., None], up[P.columns, None])[:, 0]
         return out
 
     def _correction(self, uc: np.ndarray, U: np.ndarray) -> np.ndarray:
-        """F - F_free on the listed patch for K states: candidate cell displacements uc
+        """F - F_free on the listed patch for K states: free facet reconstructions uc
         (nf, d, K) and the listed patch's values U (n_columns, K); returns (n_columns, K)."""
         self.evaluations += U.shape[1]
         L, P = self.listed, self.listed.patch
@@ -241,10 +278,12 @@ class PairContact:
             delta = P.Z @ (w * g)
             mu = np.where(g < 0, P.ZT @ (a + delta), 0.0)
             out -= P.QT @ delta
-            # dc/du_c' = w n - g ds_i t, dc/du_c = -(that): F -= mu dc/du.
+            # dc/du_f' = w n - g ds_i t, dc/du_f = -(that); F -= R^T (mu dc/du_F).
             dc = mu[:, None] * (w[:, None] * L.n[..., None] - (g * ds)[:, None] * L.t[..., None])
-            np.add.at(out, P.pos_i, dc)
-            np.add.at(out, P.pos_j, -dc)
+            facet_force = np.zeros(uc.shape)
+            np.add.at(facet_force, L.i, dc)
+            np.add.at(facet_force, L.j, -dc)
+            out += P.RT @ facet_force.reshape(-1, U.shape[1])
         return out
 
     def add(self, correction: np.ndarray, out: PETSc.Vec, scale: float = 1.0):
@@ -261,7 +300,7 @@ class PairContact:
         roots of affine functions of tau."""
         start = time.process_time()
         up, vp = self.patch_values(u), self.patch_values(v)
-        uc0, uc1 = self._cells(up), self._cells(up + dt * vp)
+        uc0, uc1 = self._free(up), self._free(up + dt * vp)
         self._update_pairs(uc0, uc1)
         L = self.listed
         g0, g1 = L.gaps(uc0), L.gaps(uc1)
@@ -281,7 +320,7 @@ class PairContact:
         weights = np.repeat(0.5 * length, len(_GL2))
         P = L.patch
         U = up[P.columns, None] + vp[P.columns, None] * nodes
-        UC = uc0[..., None] + self._cells(vp)[..., None] * nodes
+        UC = uc0[..., None] + (self._R @ vp).reshape(-1, self.d)[..., None] * nodes
         F = self._correction(UC, U) @ weights
         mine = P.local >= 0
         out.array[P.local[mine]] += F[mine]
@@ -292,7 +331,7 @@ class PairContact:
     def facet_corrections(self, up: np.ndarray) -> np.ndarray:
         """u_f - u_c of every candidate facet (eq. (31)), shape (n_facets, d)."""
         pairs = self._touching(up)
-        uc = self._cells(up)
+        uc = self._free(up)
         c = pairs.overlaps(uc)[0] * pairs.gaps(uc)
         delta = np.zeros((len(self.facets), self.d))
         np.add.at(delta, pairs.i, (0.5 * c / self.lengths[pairs.i])[:, None] * pairs.n)
@@ -309,7 +348,7 @@ class PairContact:
         (x_f' + u_f' - x_f - u_f) . n, negated. Eq. (31) makes it zero when each facet has one
         partner covering it exactly; partial overlaps (facets sliding against each other) leave a
         gap of the order of the cell gap times the uncovered fraction."""
-        uc = self._cells(up)
+        uc = self._free(up)
         w = self.listed.overlaps(uc)[0]
         if not (w > 0).any():
             return 0.0
@@ -327,14 +366,14 @@ class PairContact:
     def touching(self, up: np.ndarray) -> bool:
         """Whether some pair is in contact (g < 0 with a positive overlap)."""
         pairs = self._touching(up)
-        return bool(len(pairs) and (pairs.overlaps(self._cells(up))[0] > 0).any())
+        return bool(len(pairs) and (pairs.overlaps(self._free(up))[0] > 0).any())
 
     def touch_time(self, up0: np.ndarray, up1: np.ndarray, dt: float) -> float | None:
         """For a step from ``up0`` (no contact) to ``up1``: the time tau in [0, dt] at which the
         first pair touching at ``up1`` closed its gap (gaps are affine along the step); None if
         no pair touches at ``up1``."""
         L = self.listed
-        uc0, uc1 = self._cells(up0), self._cells(up1)
+        uc0, uc1 = self._free(up0), self._free(up1)
         g0, g1 = L.gaps(uc0), L.gaps(uc1)
         touching = (g1 < 0) & (L.overlaps(uc1)[0] > 0)
         if not touching.any():
@@ -346,7 +385,7 @@ class PairContact:
         """Sum over touching pairs of the normal contact force magnitude (N, per unit thickness):
         |(z_p . (a + delta_a)) w_p|, the force one facet of the pair exerts on the other."""
         L, P = self.listed, self.listed.patch
-        uc = self._cells(up)
+        uc = self._free(up)
         g = np.minimum(L.gaps(uc), 0.0)
         w = L.overlaps(uc)[0]
         a = P.Q @ up[P.columns] + P.q
@@ -357,8 +396,8 @@ class PairContact:
 class _ListedPatch:
     """The part of the contact patch the listed pairs touch: patch dofs ``columns``, the energy
     rows (Q, QT = Q^T, q, which are elastic rows) restricted to them, the columns z_p of
-    Z (and ZT), the positions of the pairs' cells in ``columns`` (P, d), and the process-local
-    dof of each column (-1 if another process owns it)."""
+    Z (and ZT), RT = R^T of the candidates' free reconstructions on ``columns``, and the
+    process-local dof of each column (-1 if another process owns it)."""
 
     columns: np.ndarray
     Z: scipy.sparse.csr_matrix
@@ -367,8 +406,7 @@ class _ListedPatch:
     QT: scipy.sparse.csr_matrix
     q: np.ndarray
     elastic: np.ndarray
-    pos_i: np.ndarray
-    pos_j: np.ndarray
+    RT: scipy.sparse.csr_matrix
     local: np.ndarray
 
 
