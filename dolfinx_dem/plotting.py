@@ -125,7 +125,7 @@ class Animation:
         self.frames = 0
         self._plotter = None
         if mesh.comm.rank == 0:
-            self._plotter = pyvista.Plotter(off_screen=True, window_size=(1000, 800))
+            self._plotter = pyvista.Plotter(off_screen=True, window_size=(800, 640))
             self._plotter.open_gif(str(self.filename))
 
     def write(self, t: float, displacement: np.ndarray, values: np.ndarray) -> None:
