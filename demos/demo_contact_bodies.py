@@ -100,7 +100,7 @@ disks = {}
 for h in h_disks:
     summary, series, folder = run("two-disks", {"mesh.h": h, "time.end": T_disks,
                                                  "output.animation": h == h_animated,
-                                                 "output.every": 25 if QUICK else 40})
+                                                 "output.every": 60 if QUICK else 40})
     disks[h] = (summary, series)
     if h == h_animated:
         folder_animated = folder
