@@ -54,7 +54,6 @@
 import json
 import os
 import pathlib
-import time
 
 import numpy as np
 from mpi4py import MPI
@@ -82,6 +81,23 @@ def energy_error(series):
     """|E^n - E^0| / max mechanical energy over the run (Figures 13 and 15)."""
     mechanical = series["kinetic"] + series["elastic"] + series["stabilisation"]
     return np.abs(series["pseudo_energy"] - series["pseudo_energy"][0]) / mechanical.max()
+
+
+def plot_energy_and_force(runs, title, filename):
+    """Energy error (log) and contact force against time for ``runs`` {label: series}."""
+    figure = matplotlib.figure.Figure(figsize=(10, 3.6))
+    ax1, ax2 = figure.subplots(1, 2)
+    for label, series in runs.items():
+        ax1.semilogy(series["t"], np.maximum(energy_error(series), 1e-18), label=label)
+        ax2.plot(series["t"], series["contact_force"], label=label)
+    ax1.set(xlabel="t (s)", ylabel="|E^n - E^0| / max E_mech", title=f"{title}: energy error")
+    ax2.set(xlabel="t (s)", ylabel="summed normal contact force (N/m)", title=f"{title}: contact force")
+    for ax in (ax1, ax2):
+        ax.grid(True, alpha=0.3)
+        if len(runs) > 1:
+            ax.legend()
+    figure.tight_layout()
+    figure.savefig(out_folder / filename, dpi=110)
 # -
 
 # ## Two disks (§5.3)
@@ -125,18 +141,8 @@ if comm.rank == 0:
     in_contact = t[series["contact_force"] > 0]
     print(f"contact from t = {in_contact.min():.4f} to {in_contact.max():.4f} s; the run ends at {t[-1]:.2f} s")
     assert in_contact.max() < t[-1]
-    figure = matplotlib.figure.Figure(figsize=(10, 3.6))
-    ax1, ax2 = figure.subplots(1, 2)
-    for hh, (s, ser) in disks.items():
-        ax1.semilogy(ser["t"], np.maximum(energy_error(ser), 1e-18), label=f"h = {hh}")
-        ax2.plot(ser["t"], ser["contact_force"], label=f"h = {hh}")
-    ax1.set(xlabel="t (s)", ylabel="|E^n - E^0| / max E_mech", title="two disks: energy error (Fig. 13)")
-    ax2.set(xlabel="t (s)", ylabel="summed normal contact force (N/m)", title="contact force")
-    for ax in (ax1, ax2):
-        ax.grid(True, alpha=0.3)
-        ax.legend()
-    figure.tight_layout()
-    figure.savefig(out_folder / "two_disks.png", dpi=110)
+    plot_energy_and_force({f"h = {hh}": ser for hh, (_, ser) in disks.items()}, "two disks (Fig. 13)",
+                          "two_disks.png")
 # -
 
 # ## Scheme A against scheme B on the two disks
@@ -161,15 +167,8 @@ if comm.rank == 0:
               f"{energy_error(ser).max():.2e}, max penetration {s['max_penetration']:.2e} m, "
               f"wall {s['wall_time_s']:.1f} s")
         assert s["pseudo_energy_rel_drift"] < 1e-12
-    figure = matplotlib.figure.Figure(figsize=(6, 3.6))
-    ax = figure.subplots()
-    for method, (s, ser) in schemes.items():
-        ax.plot(ser["t"], ser["contact_force"], label=method)
-    ax.set(xlabel="t (s)", ylabel="summed normal contact force (N/m)", title=f"two disks, h = {h_ab}: A and B")
-    ax.grid(True, alpha=0.3)
-    ax.legend()
-    figure.tight_layout()
-    figure.savefig(out_folder / "two_disks_schemes.png", dpi=110)
+    plot_energy_and_force({method: ser for method, (_, ser) in schemes.items()}, f"two disks, h = {h_ab}",
+                          "two_disks_schemes.png")
 # -
 
 # ## Billiard (§5.4)
@@ -183,7 +182,6 @@ if comm.rank == 0:
 
 # +
 billiard_overrides = {"mesh.h": 0.25, "time.end": 4.0} if QUICK else {}
-tic = time.perf_counter()
 billiard, billiard_series, billiard_folder = run("billiard", {**billiard_overrides, "output.animation": True,
                                                               "output.every": 40 if QUICK else 100})
 if comm.rank == 0:
@@ -193,17 +191,7 @@ if comm.rank == 0:
           f"energy error {energy_error(billiard_series).max():.2e}, max penetration {b['max_penetration']:.2e} m, "
           f"contact work {100 * b['contact_fraction']:.1f} % of the step, list rebuilds {b['contact_list_rebuilds']}")
     assert b["pseudo_energy_rel_drift"] < 1e-12
-    figure = matplotlib.figure.Figure(figsize=(10, 3.6))
-    ax1, ax2 = figure.subplots(1, 2)
-    t = billiard_series["t"]
-    ax1.semilogy(t, np.maximum(energy_error(billiard_series), 1e-18))
-    ax2.plot(t, billiard_series["contact_force"])
-    ax1.set(xlabel="t (s)", ylabel="|E^n - E^0| / max E_mech", title="billiard: energy error (Fig. 15)")
-    ax2.set(xlabel="t (s)", ylabel="summed normal contact force (N/m)", title="contact force")
-    for ax in (ax1, ax2):
-        ax.grid(True, alpha=0.3)
-    figure.tight_layout()
-    figure.savefig(out_folder / "billiard.png", dpi=110)
+    plot_energy_and_force({"billiard": billiard_series}, "billiard (Fig. 15)", "billiard.png")
 # -
 
 # ## Results for the documentation
