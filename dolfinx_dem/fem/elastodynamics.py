@@ -1,13 +1,15 @@
 """DOLFINx finite-element reference for linear elastodynamics.
 
 Small-strain isotropic linear elasticity on a simplex mesh (1D, 2D, 3D), Lagrange P1/P2 vector
-displacements, consistent mass matrix, clamped (``u = 0``) facets:
+displacements, clamped (``u = 0``) facets:
 
     M a + K u = F
 
 * :class:`FEMElastodynamics` integrates in time with the implicit Newmark average-acceleration
-  scheme (beta = 1/4, gamma = 1/2): unconditionally stable, second-order accurate and, without
-  external forces, exactly conserving ``1/2 v.M v + 1/2 u.K u``.
+  scheme (beta = 1/4, gamma = 1/2) and the consistent mass: unconditionally stable, second-order
+  accurate and, without external forces, exactly conserving ``1/2 v.M v + 1/2 u.K u``.
+* :class:`FEMCentralDifference` integrates P1 explicitly with central differences and the lumped
+  (row-sum) mass: no solve, second-order accurate, stable below ``2 / sqrt(lambda_max(m^-1 K))``.
 * :func:`first_eigenfrequency` returns the lowest natural angular frequencies from the generalized
   eigenproblem ``K x = omega^2 M x`` (SLEPc, shift-and-invert around 0).
 
@@ -33,7 +35,7 @@ import dolfinx.mesh
 
 from dolfinx_dem import _compat
 
-__all__ = ["FEMElastodynamics", "evaluate_at_points", "first_eigenfrequency"]
+__all__ = ["FEMCentralDifference", "FEMElastodynamics", "evaluate_at_points", "first_eigenfrequency"]
 
 VectorField = typing.Callable[[np.ndarray], npt.ArrayLike]
 """A callable ``x -> values``, x of shape (gdim, n) in m, values of shape (gdim, n)."""
@@ -156,7 +158,94 @@ def _lu_solver(comm: MPI.Comm, A: PETSc.Mat) -> PETSc.KSP:
 # --- time integration ---------------------------------------------------------------------------
 
 
-class FEMElastodynamics:
+class _FEMSolver:
+    """Set-up shared by the time integrators: checks, space, fields, clamp, forms, body force.
+
+    Builds ``V``, the Functions ``u``, ``v``, ``a`` (displacement, velocity, acceleration at
+    ``t``), the clamp ``_bcs``, the UFL forms ``_k``, ``_m`` and the body-force vector ``_F``
+    (``None`` without one), and interpolates the initial fields (0 on the clamped dofs).
+    Subclasses assemble their operators and then call ``_start()``.
+    """
+
+    def __init__(self, mesh, degree, E, nu, rho, clamped_facets, body_force, initial_displacement,
+                 initial_velocity, plane_stress):
+        _check_mesh(mesh)
+        degree = _check_degree(degree)
+        E, nu, rho = _check_material(E, nu, rho)
+        facets = _check_facets(mesh, clamped_facets)
+        gdim = mesh.geometry.dim
+        if body_force is not None:
+            body_force = np.asarray(body_force, dtype=PETSc.ScalarType)
+            if body_force.shape != (gdim,):
+                raise ValueError(f"body_force must have shape ({gdim},), got {body_force.shape}")
+
+        self.mesh = mesh
+        self.comm: MPI.Comm = mesh.comm
+        self.t = 0.0
+        self.V = _compat.create_vector_space(mesh, "Lagrange", degree)
+        self.u = dolfinx.fem.Function(self.V, name="displacement")
+        self.v = dolfinx.fem.Function(self.V, name="velocity")
+        self.a = dolfinx.fem.Function(self.V, name="acceleration")
+        self._bcs = [_clamped_bc(self.V, facets)]
+        self._k, self._m = _stiffness_and_mass(self.V, E, nu, rho, plane_stress)
+
+        u_vec = _compat.petsc_vec(self.u)
+        self._F = None
+        if body_force is not None and np.any(body_force != 0.0):
+            w = ufl.TestFunction(self.V)
+            f = dolfinx.fem.Constant(mesh, body_force)
+            self._F = dolfinx.fem.petsc.assemble_vector(dolfinx.fem.form(ufl.inner(f, w) * ufl.dx))
+            self._F.ghostUpdate(addv=PETSc.InsertMode.ADD, mode=PETSc.ScatterMode.REVERSE)
+        self._b = u_vec.copy()
+        self._work = u_vec.copy()
+        for func, field, name in (
+            (self.u, initial_displacement, "initial_displacement"),
+            (self.v, initial_velocity, "initial_velocity"),
+        ):
+            if field is not None:
+                func.interpolate(_vector_field(field, gdim, name))
+                self._apply_clamp(func)
+
+    def _apply_clamp(self, func) -> None:
+        vec = _compat.petsc_vec(func)
+        dolfinx.fem.petsc.set_bc(vec, self._bcs)
+        vec.ghostUpdate(addv=PETSc.InsertMode.INSERT, mode=PETSc.ScatterMode.FORWARD)
+
+    def _residual(self, out: PETSc.Vec) -> PETSc.Vec:
+        """``out = F - K u``, zero on the clamped rows (K: the subclass's ``_K``)."""
+        self._K.mult(_compat.petsc_vec(self.u), out)
+        out.scale(-1.0)
+        if self._F is not None:
+            out.axpy(1.0, self._F)
+        dolfinx.fem.petsc.set_bc(out, self._bcs)
+        return out
+
+    def _mass_mult(self, x: PETSc.Vec, out: PETSc.Vec) -> None:
+        raise NotImplementedError
+
+    def energies(self) -> tuple[float, float]:
+        """(kinetic, elastic) energy in J, ``1/2 v.M v`` and ``1/2 u.K u``, summed over ranks.
+
+        ``M`` is the scheme's mass matrix (consistent for Newmark, lumped for central differences).
+        """
+        u, v = _compat.petsc_vec(self.u), _compat.petsc_vec(self.v)
+        w = self._work
+        self._mass_mult(v, w)
+        kinetic = 0.5 * v.dot(w)
+        self._K.mult(u, w)
+        elastic = 0.5 * u.dot(w)
+        return float(kinetic), float(elastic)
+
+    def point_values(self, points: npt.ArrayLike) -> np.ndarray:
+        """Displacement (m) at points, shape (n, gdim), from points of shape (n, gdim) in m.
+
+        Collective: every rank must pass the same points and gets all values. Raises ValueError
+        if a point is outside the mesh.
+        """
+        return evaluate_at_points(self.u, points)
+
+
+class FEMElastodynamics(_FEMSolver):
     """Newmark average-acceleration FEM solver for linear elastodynamics.
 
     Each step solves ``(K + 4/dt^2 M) u_{n+1} = F + M (4/dt^2 u_n + 4/dt v_n + a_n)`` with an LU
@@ -176,7 +265,8 @@ class FEMElastodynamics:
         plane_stress: In 2D, plane stress instead of plane strain.
 
     Initial fields are interpolated and then set to 0 on the clamped dofs; the initial
-    acceleration solves ``M a_0 = F - K u_0``.
+    acceleration solves ``M a_0 = F - K u_0``. Without external forces the energy
+    ``1/2 v.M v + 1/2 u.K u`` (:meth:`energies`) is conserved up to round-off.
     """
 
     def __init__(
@@ -194,28 +284,11 @@ class FEMElastodynamics:
         initial_velocity: typing.Optional[VectorField] = None,
         plane_stress: bool = False,
     ):
-        _check_mesh(mesh)
-        degree = _check_degree(degree)
-        E, nu, rho = _check_material(E, nu, rho)
         self.dt = _check_positive("dt (time step)", dt)
-        facets = _check_facets(mesh, clamped_facets)
-        gdim = mesh.geometry.dim
-        if body_force is not None:
-            body_force = np.asarray(body_force, dtype=PETSc.ScalarType)
-            if body_force.shape != (gdim,):
-                raise ValueError(f"body_force must have shape ({gdim},), got {body_force.shape}")
-
-        self.mesh = mesh
-        self.comm: MPI.Comm = mesh.comm
-        self.t = 0.0
-        self.V = _compat.create_vector_space(mesh, "Lagrange", degree)
-        self.u = dolfinx.fem.Function(self.V, name="displacement")
-        self.v = dolfinx.fem.Function(self.V, name="velocity")
-        self.a = dolfinx.fem.Function(self.V, name="acceleration")
-        self._bcs = [_clamped_bc(self.V, facets)]
-
-        k, m = _stiffness_and_mass(self.V, E, nu, rho, plane_stress)
+        super().__init__(mesh, degree, E, nu, rho, clamped_facets, body_force,
+                         initial_displacement, initial_velocity, plane_stress)
         dt = self.dt
+        k, m = self._k, self._m
         self._c0, self._c1 = 4.0 / dt**2, 4.0 / dt
         # Unconstrained K and M for energies and right-hand sides; A with the clamped rows.
         self._K = dolfinx.fem.petsc.assemble_matrix(dolfinx.fem.form(k))
@@ -227,45 +300,20 @@ class FEMElastodynamics:
         )
         A.assemble()
         self._solver = _lu_solver(self.comm, A)
-
-        u_vec = _compat.petsc_vec(self.u)
-        self._F = None
-        if body_force is not None and np.any(body_force != 0.0):
-            w = ufl.TestFunction(self.V)
-            f = dolfinx.fem.Constant(mesh, body_force)
-            self._F = dolfinx.fem.petsc.assemble_vector(dolfinx.fem.form(ufl.inner(f, w) * ufl.dx))
-            self._F.ghostUpdate(addv=PETSc.InsertMode.ADD, mode=PETSc.ScatterMode.REVERSE)
-        self._b = u_vec.copy()
-        self._work = u_vec.copy()
-        self._u_old = u_vec.copy()
-
-        for func, field, name in (
-            (self.u, initial_displacement, "initial_displacement"),
-            (self.v, initial_velocity, "initial_velocity"),
-        ):
-            if field is not None:
-                func.interpolate(_vector_field(field, gdim, name))
-                self._apply_clamp(func)
+        self._u_old = self._work.copy()
         if initial_displacement is not None or self._F is not None:
-            self._initial_acceleration(m)
+            self._initial_acceleration()
 
-    def _apply_clamp(self, func) -> None:
-        vec = _compat.petsc_vec(func)
-        dolfinx.fem.petsc.set_bc(vec, self._bcs)
-        vec.ghostUpdate(addv=PETSc.InsertMode.INSERT, mode=PETSc.ScatterMode.FORWARD)
+    def _mass_mult(self, x: PETSc.Vec, out: PETSc.Vec) -> None:
+        self._M.mult(x, out)
 
-    def _initial_acceleration(self, m) -> None:
+    def _initial_acceleration(self) -> None:
         """Solve ``M a_0 = F - K u_0`` with a_0 = 0 on the clamped dofs."""
-        Mbc = dolfinx.fem.petsc.assemble_matrix(dolfinx.fem.form(m), bcs=self._bcs, diagonal=1.0)
+        Mbc = dolfinx.fem.petsc.assemble_matrix(dolfinx.fem.form(self._m), bcs=self._bcs, diagonal=1.0)
         Mbc.assemble()
         solver = _lu_solver(self.comm, Mbc)
-        self._K.mult(_compat.petsc_vec(self.u), self._b)
-        self._b.scale(-1.0)
-        if self._F is not None:
-            self._b.axpy(1.0, self._F)
-        dolfinx.fem.petsc.set_bc(self._b, self._bcs)
         a_vec = _compat.petsc_vec(self.a)
-        solver.solve(self._b, a_vec)
+        solver.solve(self._residual(self._b), a_vec)
         a_vec.ghostUpdate(addv=PETSc.InsertMode.INSERT, mode=PETSc.ScatterMode.FORWARD)
         solver.destroy()
         Mbc.destroy()
@@ -303,26 +351,136 @@ class FEMElastodynamics:
             vec.ghostUpdate(addv=PETSc.InsertMode.INSERT, mode=PETSc.ScatterMode.FORWARD)
         self.t += self.dt
 
-    def energies(self) -> tuple[float, float]:
-        """(kinetic, elastic) energy in J, ``1/2 v.M v`` and ``1/2 u.K u``, summed over ranks.
 
-        Without body force their sum is conserved by the scheme up to round-off.
+class FEMCentralDifference(_FEMSolver):
+    """Explicit central-difference P1 FEM solver with lumped (row-sum) mass.
+
+    The lumped mass ``m`` is the row sum of the consistent P1 mass matrix (positive for P1
+    simplices), so the scheme needs no solve. Each step is velocity Verlet, i.e. central
+    differences ``m (u_{n+1} - 2 u_n + u_{n-1}) / dt^2 = F - K u_n`` written with velocities::
+
+        v_{n+1/2} = v_n + dt/2 a_n,   u_{n+1} = u_n + dt v_{n+1/2},
+        a_{n+1} = m^-1 (F - K u_{n+1}),   v_{n+1} = v_{n+1/2} + dt/2 a_{n+1}
+
+    with ``a = 0`` on the clamped dofs. It is second-order accurate and stable for
+    ``dt < dt_stable = 2 / sqrt(lambda_max(m^-1 K))`` (the clamped dofs removed), computed at
+    construction with SLEPc (:attr:`dt_stable`). Without external forces it conserves exactly
+    the modified energy ``1/2 v_{n-1/2}.m v_{n+1/2} + 1/2 u_n.K u_n``
+    (:meth:`modified_energy`); the energy of :meth:`energies` oscillates by O(dt^2) about it.
+
+    Args:
+        mesh, E, nu, rho, clamped_facets, body_force, initial_displacement, initial_velocity,
+            plane_stress: As for :class:`FEMElastodynamics` (the degree is 1).
+        dt: Time step (s), > 0; or
+        cfl: Time step as a fraction of ``dt_stable``, > 0 (exactly one of dt, cfl).
+        allow_unstable: Accept ``dt >= dt_stable`` (the run then blows up; for stability
+            studies). Otherwise such a time step raises ValueError.
+    """
+
+    def __init__(
+        self,
+        mesh,
+        E: float,
+        nu: float,
+        rho: float,
+        clamped_facets: npt.ArrayLike,
+        *,
+        dt: typing.Optional[float] = None,
+        cfl: typing.Optional[float] = None,
+        body_force: typing.Optional[npt.ArrayLike] = None,
+        initial_displacement: typing.Optional[VectorField] = None,
+        initial_velocity: typing.Optional[VectorField] = None,
+        plane_stress: bool = False,
+        allow_unstable: bool = False,
+    ):
+        if (dt is None) == (cfl is None):
+            raise ValueError("give exactly one of dt (time step) and cfl (fraction of dt_stable)")
+        step = _check_positive("dt (time step)" if cfl is None else "cfl", dt if cfl is None else cfl)
+        super().__init__(mesh, 1, E, nu, rho, clamped_facets, body_force,
+                         initial_displacement, initial_velocity, plane_stress)
+        # K with the clamped rows and columns zeroed: u stays 0 there, and 1/2 u.K u is unchanged.
+        self._K = dolfinx.fem.petsc.assemble_matrix(
+            dolfinx.fem.form(self._k), bcs=self._bcs, diagonal=0.0
+        )
+        self._K.assemble()
+        M = dolfinx.fem.petsc.assemble_matrix(dolfinx.fem.form(self._m))
+        M.assemble()
+        self.lumped_mass = self._work.copy()
+        M.getRowSum(self.lumped_mass)
+        M.destroy()
+        self._inverse_mass = self.lumped_mass.copy()
+        self._inverse_mass.reciprocal()
+        self.dt_stable = 2.0 / np.sqrt(_largest_eigenvalue(self.comm, self._K, self._inverse_mass))
+        self.dt = step if cfl is None else step * self.dt_stable
+        if self.dt >= self.dt_stable and not allow_unstable:
+            raise ValueError(
+                f"dt (time step) = {self.dt:.6g} s is not below the stability limit "
+                f"dt_stable = 2/sqrt(lambda_max(m^-1 K)) = {self.dt_stable:.6g} s of central "
+                f"differences (pass allow_unstable=True to run it anyway)"
+            )
+        if self._F is not None:
+            dolfinx.fem.petsc.set_bc(self._F, self._bcs)
+        self._acceleration()
+
+    def _mass_mult(self, x: PETSc.Vec, out: PETSc.Vec) -> None:
+        out.pointwiseMult(x, self.lumped_mass)
+
+    def _acceleration(self) -> None:
+        """``a = m^-1 (F - K u)``, 0 on the clamped dofs."""
+        a = _compat.petsc_vec(self.a)
+        a.pointwiseMult(self._residual(self._b), self._inverse_mass)
+        a.ghostUpdate(addv=PETSc.InsertMode.INSERT, mode=PETSc.ScatterMode.FORWARD)
+
+    def step(self) -> None:
+        """Advance ``u``, ``v``, ``a`` and ``t`` by one time step ``dt`` (collective)."""
+        u, v, a = (_compat.petsc_vec(f) for f in (self.u, self.v, self.a))
+        half_dt = 0.5 * self.dt
+        v.axpy(half_dt, a)
+        u.axpy(self.dt, v)
+        u.ghostUpdate(addv=PETSc.InsertMode.INSERT, mode=PETSc.ScatterMode.FORWARD)
+        self._acceleration()
+        v.axpy(half_dt, a)
+        v.ghostUpdate(addv=PETSc.InsertMode.INSERT, mode=PETSc.ScatterMode.FORWARD)
+        self.t += self.dt
+
+    def modified_energy(self) -> float:
+        """``1/2 v_{n-1/2}.m v_{n+1/2} + 1/2 u.K u - F.u`` (J), summed over ranks.
+
+        Equal to ``kinetic + elastic - dt^2/8 a.m a - F.u`` (:meth:`energies`); conserved by the
+        scheme up to round-off while it is stable.
         """
-        u, v = _compat.petsc_vec(self.u), _compat.petsc_vec(self.v)
+        kinetic, elastic = self.energies()
+        a = _compat.petsc_vec(self.a)
         w = self._work
-        self._M.mult(v, w)
-        kinetic = 0.5 * v.dot(w)
-        self._K.mult(u, w)
-        elastic = 0.5 * u.dot(w)
-        return float(kinetic), float(elastic)
+        w.pointwiseMult(a, self.lumped_mass)
+        energy = kinetic + elastic - self.dt**2 / 8.0 * a.dot(w)
+        if self._F is not None:
+            energy -= self._F.dot(_compat.petsc_vec(self.u))
+        return float(energy)
 
-    def point_values(self, points: npt.ArrayLike) -> np.ndarray:
-        """Displacement (m) at points, shape (n, gdim), from points of shape (n, gdim) in m.
 
-        Collective: every rank must pass the same points and gets all values. Raises ValueError
-        if a point is outside the mesh.
-        """
-        return evaluate_at_points(self.u, points)
+def _largest_eigenvalue(comm: MPI.Comm, K: PETSc.Mat, inverse_mass: PETSc.Vec) -> float:
+    """lambda_max(m^-1 K) (1/s^2) for a diagonal mass, from the symmetric m^-1/2 K m^-1/2 (SLEPc)."""
+    from slepc4py import SLEPc
+
+    A = K.copy()
+    scale = inverse_mass.copy()
+    scale.sqrtabs()
+    A.diagonalScale(scale, scale)
+    eps = SLEPc.EPS().create(comm)
+    eps.setOperators(A)
+    eps.setProblemType(SLEPc.EPS.ProblemType.HEP)
+    eps.setDimensions(nev=1)
+    eps.setWhichEigenpairs(SLEPc.EPS.Which.LARGEST_REAL)
+    eps.setTolerances(tol=1e-8, max_it=20000)
+    eps.solve()
+    if eps.getConverged() < 1:
+        raise RuntimeError("SLEPc did not converge the largest eigenvalue of m^-1 K")
+    lam = max(eps.getEigenvalue(i).real for i in range(eps.getConverged()))
+    eps.destroy()
+    A.destroy()
+    scale.destroy()
+    return float(lam)
 
 
 def _vector_field(field: VectorField, gdim: int, name: str):
