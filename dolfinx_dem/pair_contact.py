@@ -115,13 +115,16 @@ class PairContact:
         g = dem.dirichlet_values(0.0).ravel()
         q = np.concatenate([ops.S_dirichlet @ g, ops.J_dirichlet @ g])
         R = rec.R[dofs]
-        self.patch = np.unique(np.concatenate([Q[rows].indices, R.indices]))
-        self._Q = Q[rows][:, self.patch].tocsr()
+        # The dofs any contact of these facets can involve (global dof numbers); a step only
+        # gathers the part of it it needs (the patch, see _set_patch).
+        self._universe = np.unique(np.concatenate([Q[rows].indices, R.indices]))
+        self._Q = Q[rows][:, self._universe].tocsr()
         self._q = q[rows]
-        self._QF = QF[rows].tocsr()  # (rows, nf d)
+        self._QF = QF[rows].tocsc()  # (rows, nf d); columns are sliced at list builds
         self._is_elastic_row = rows < ops.S.shape[0]
         # Free reconstructions u_f = R_f u + D_f g of the candidates (u_c for scheme B facets).
-        self._R = R[:, self.patch].tocsr()
+        self._R_universe = R[:, self._universe].tocsr()
+        self._kinematic = np.unique(self._R_universe.indices)  # positions in the universe
         self._R_lift = (rec.D[dofs] @ g).reshape(nf, d)
         self._grad_weights = an / geom.cell_volumes[cells, None]
         self.is_scheme_a = np.isin(f, rec.scheme_a_facets)
@@ -130,11 +133,6 @@ class PairContact:
             C = dem.material.elasticity_tensor(d)
             # A_f x = (C : (x (x) a_f)) n / |c| for the pair's normal n: einsum with C and a_f.
             self._Ca = np.einsum("ijkl,nl->nijk", C, an) / geom.cell_volumes[cells, None, None, None]
-        start, stop = dem.cell_range
-        self._owned = (self.patch >= start * d) & (self.patch < stop * d)
-        self._owned_local = (self.patch[self._owned] - start * d).astype(np.int32)
-        self._patch_local = np.full(len(self.patch), -1, dtype=np.int32)  # patch -> local dof
-        self._patch_local[self._owned] = self._owned_local
         self.evaluations = 0
         self.rebuilds = 0
         self.seconds = 0.0  # processor time of the contact work in force integrals and energies
@@ -174,17 +172,19 @@ class PairContact:
         cols = np.repeat(np.arange(P), 2 * d)
         rows = np.concatenate([i[:, None] * d + np.arange(d), j[:, None] * d + np.arange(d)], axis=1).ravel()
         vals = np.concatenate([e_i / self.lengths[i, None], e_j / self.lengths[j, None]], axis=1).ravel()
-        N = scipy.sparse.csr_matrix((vals, (rows, cols)), shape=(len(self.facets) * d, P))
-        Z = (self._QF @ N).tocsr()
+        facets = np.unique(np.concatenate([i, j]))
+        facet_dofs = (facets[:, None] * d + np.arange(d)).ravel()
+        N = scipy.sparse.csr_matrix((vals, (rows, cols)), shape=(len(self.facets) * d, P))[facet_dofs]
+        Z = (self._QF[:, facet_dofs] @ N).tocsr()  # only the listed facets' columns: O(listed)
         # The listed patch: the energy rows the pairs touch and the patch dofs those rows and
         # the pairs' cells read. Contact work per step only involves these.
         rows = np.unique(Z.tocoo().row)
         Q = self._Q[rows]
-        facets = np.unique(np.concatenate([i, j]))
-        facet_dofs = (facets[:, None] * d + np.arange(d)).ravel()
-        columns = np.unique(np.concatenate([Q.indices, self._R[facet_dofs].indices]))
+        columns = np.unique(np.concatenate([Q.indices, self._R_universe[facet_dofs].indices]))
+        self._set_patch(np.union1d(self._kinematic, columns))
         Q = Q[:, columns].tocsr()
-        R = self._R[:, columns].tocsr()
+        R = self._R_universe[:, columns].tocsr()
+        columns = np.searchsorted(self._patch_in_universe, columns)  # now positions in the patch
         self.listed = _Pairs(
             i=i, j=j, n=n, t=t,
             d0=np.einsum("pi,pi->p", self.centres[j] - self.centres[i], n),
@@ -196,6 +196,20 @@ class PairContact:
         )
         self._reference = uc.copy()
         self.rebuilds += 1
+
+    def _set_patch(self, positions: np.ndarray):
+        """The patch: the universe dofs at ``positions`` (the free reconstructions' dofs and the
+        listed pairs' patch). ``patch_values`` gathers these; arrays of patch values are valid
+        until the next list build."""
+        self._patch_in_universe = positions
+        self.patch = self._universe[positions]
+        self._R = self._R_universe[:, positions].tocsr()
+        start, stop = self.dem.cell_range
+        d = self.d
+        self._owned = (self.patch >= start * d) & (self.patch < stop * d)
+        self._owned_local = (self.patch[self._owned] - start * d).astype(np.int32)
+        self._patch_local = np.full(len(self.patch), -1, dtype=np.int32)  # patch -> local dof
+        self._patch_local[self._owned] = self._owned_local
 
     def _directions(self, i: np.ndarray, j: np.ndarray, n: np.ndarray):
         """The contact corrections of a pair are u_f += (w/|f|) g^- e_f, u_f' += (w/|f'|) g^- e_f'.
@@ -220,11 +234,14 @@ class PairContact:
             e_i[k], e_j[k] = h[0] / D[:, None], h[1] / D[:, None]
         return e_i, e_j
 
-    def _update_pairs(self, uc: np.ndarray, uc_end: np.ndarray):
-        """Rebuild the list if a candidate cell moves more than skin/2 during the coming step."""
-        moved = max(np.linalg.norm(x - self._reference, axis=1).max() for x in (uc, uc_end))
-        if moved > 0.5 * self.skin:
+    def _update_pairs(self, uc: np.ndarray, uc_end: np.ndarray) -> bool:
+        """Rebuild the list if a candidate facet moves more than skin/2 during the coming step;
+        returns whether it did (the patch changes then)."""
+        moved = max(np.einsum("ni,ni->n", x - self._reference, x - self._reference).max() for x in (uc, uc_end))
+        if moved > 0.25 * self.skin**2:
             self._build_pairs(uc)
+            return True
+        return False
 
     # -- energy and force ----------------------------------------------------------------------
     def patch_values(self, vec: PETSc.Vec) -> np.ndarray:
@@ -234,20 +251,21 @@ class PairContact:
             return mine.copy()
         return np.concatenate(self.comm.allgather(mine))  # ranks own ascending dof ranges
 
-    def _free(self, up: np.ndarray) -> np.ndarray:
-        """Free reconstructions u_f of the candidates (their cells' u_c in scheme B), (n_facets, d)."""
+    def free_displacements(self, up: np.ndarray) -> np.ndarray:
+        """Free reconstructions u_f of the candidates (their cells' u_c in scheme B), (n_facets, d),
+        from patch values ``up``."""
         return (self._R @ up).reshape(-1, self.d) + self._R_lift
 
     def _touching(self, up: np.ndarray) -> _Pairs:
         """The listed pairs with g < 0."""
         L = self.listed
-        return L.subset(np.flatnonzero(L.gaps(self._free(up)) < 0))
+        return L.subset(np.flatnonzero(L.gaps(self.free_displacements(up)) < 0))
 
     def energy_correction(self, up: np.ndarray) -> tuple[float, float]:
         """(elastic, stabilisation) energy changes from the contact reconstructions."""
         start = time.process_time()
         L, P = self.listed, self.listed.patch
-        uc = self._free(up)
+        uc = self.free_displacements(up)
         g = np.minimum(L.gaps(uc), 0.0)
         elastic = stabilisation = 0.0
         if (g < 0).any():
@@ -262,7 +280,7 @@ class PairContact:
         """F - F_free at the patch dofs (N): the exact negative gradient of the energy change."""
         out = np.zeros_like(up)
         P = self.listed.patch
-        out[P.columns] = self._correction(self._free(up)[..., None], up[P.columns, None])[:, 0]
+        out[P.columns] = self._correction(self.free_displacements(up)[..., None], up[P.columns, None])[:, 0]
         return out
 
     def _correction(self, uc: np.ndarray, U: np.ndarray) -> np.ndarray:
@@ -300,8 +318,9 @@ class PairContact:
         roots of affine functions of tau."""
         start = time.process_time()
         up, vp = self.patch_values(u), self.patch_values(v)
-        uc0, uc1 = self._free(up), self._free(up + dt * vp)
-        self._update_pairs(uc0, uc1)
+        uc0, uc1 = self.free_displacements(up), self.free_displacements(up + dt * vp)
+        if self._update_pairs(uc0, uc1):
+            up, vp = self.patch_values(u), self.patch_values(v)
         L = self.listed
         g0, g1 = L.gaps(uc0), L.gaps(uc1)
         p = np.flatnonzero((g0 < 0) | (g1 < 0))
@@ -331,7 +350,7 @@ class PairContact:
     def facet_corrections(self, up: np.ndarray) -> np.ndarray:
         """u_f - u_c of every candidate facet (eq. (31)), shape (n_facets, d)."""
         pairs = self._touching(up)
-        uc = self._free(up)
+        uc = self.free_displacements(up)
         c = pairs.overlaps(uc)[0] * pairs.gaps(uc)
         delta = np.zeros((len(self.facets), self.d))
         np.add.at(delta, pairs.i, (0.5 * c / self.lengths[pairs.i])[:, None] * pairs.n)
@@ -348,7 +367,7 @@ class PairContact:
         (x_f' + u_f' - x_f - u_f) . n, negated. Eq. (31) makes it zero when each facet has one
         partner covering it exactly; partial overlaps (facets sliding against each other) leave a
         gap of the order of the cell gap times the uncovered fraction."""
-        uc = self._free(up)
+        uc = self.free_displacements(up)
         w = self.listed.overlaps(uc)[0]
         if not (w > 0).any():
             return 0.0
@@ -366,14 +385,13 @@ class PairContact:
     def touching(self, up: np.ndarray) -> bool:
         """Whether some pair is in contact (g < 0 with a positive overlap)."""
         pairs = self._touching(up)
-        return bool(len(pairs) and (pairs.overlaps(self._free(up))[0] > 0).any())
+        return bool(len(pairs) and (pairs.overlaps(self.free_displacements(up))[0] > 0).any())
 
-    def touch_time(self, up0: np.ndarray, up1: np.ndarray, dt: float) -> float | None:
-        """For a step from ``up0`` (no contact) to ``up1``: the time tau in [0, dt] at which the
-        first pair touching at ``up1`` closed its gap (gaps are affine along the step); None if
-        no pair touches at ``up1``."""
+    def touch_time(self, uc0: np.ndarray, uc1: np.ndarray, dt: float) -> float | None:
+        """For a step between the free facet displacements ``uc0`` (no contact) and ``uc1``
+        (``free_displacements``): the time tau in [0, dt] at which the first pair touching at
+        the end closed its gap (gaps are affine along the step); None if no pair touches."""
         L = self.listed
-        uc0, uc1 = self._free(up0), self._free(up1)
         g0, g1 = L.gaps(uc0), L.gaps(uc1)
         touching = (g1 < 0) & (L.overlaps(uc1)[0] > 0)
         if not touching.any():
@@ -385,7 +403,7 @@ class PairContact:
         """Sum over touching pairs of the normal contact force magnitude (N, per unit thickness):
         |(z_p . (a + delta_a)) w_p|, the force one facet of the pair exerts on the other."""
         L, P = self.listed, self.listed.patch
-        uc = self._free(up)
+        uc = self.free_displacements(up)
         g = np.minimum(L.gaps(uc), 0.0)
         w = L.overlaps(uc)[0]
         a = P.Q @ up[P.columns] + P.q

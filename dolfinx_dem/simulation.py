@@ -358,15 +358,16 @@ class PairContactStatistics:
         self.momentum_change = 0.0
         self.free = len(dem.reconstruction.dirichlet_facets) == 0
         self.dem = dem
-        self.previous = None  # patch values of the previous step, until the first contact
+        self.previous = None  # free facet displacements of the previous step
 
     def record(self, t: float, contact, stepper: MEMM):
         up = contact.patch_values(stepper.u)
+        free = contact.free_displacements(up)
         if self.first_contact is None and self.previous is not None:
-            tau = contact.touch_time(self.previous, up, stepper.dt)
+            tau = contact.touch_time(self.previous, free, stepper.dt)
             if tau is not None:
                 self.first_contact = t - stepper.dt + tau
-        self.previous = up
+        self.previous = free
         self.penetration = max(self.penetration, contact.penetration(up))
         if self.free:
             change = np.abs(momentum(self.dem, stepper) - self.p0).max()

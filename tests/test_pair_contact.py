@@ -58,7 +58,7 @@ def test_force_is_the_gradient_of_the_energy_in_contact(scheme):
     u = cell_vector(dem, lambda x: approach(x, 0.013) + 1e-3 * rng.standard_normal(x.shape))
     up = c.patch_values(u)
     touching = c._touching(up)
-    overlap = touching.overlaps(c._free(up))[0]
+    overlap = touching.overlaps(c.free_displacements(up))[0]
     assert (overlap > 0).sum() >= 4 and ((overlap > 0) & (overlap < c.lengths[touching.i])).any()
     F = dem.create_vector()
     dem.force(u, 0.0, F)
@@ -123,7 +123,7 @@ def test_matching_facets_close_the_gap_exactly(scheme):
     c = dem.pair_contact
     u = cell_vector(dem, lambda x: np.where(x[:, :1] < 0.205, [[0.008, 0.0]], [[-0.008, 0.0]]))
     up = c.patch_values(u)
-    assert np.allclose(c._touching(up).gaps(c._free(up)), -0.006)
+    assert np.allclose(c._touching(up).gaps(c.free_displacements(up)), -0.006)
     assert c.penetration(up) < 1e-15
     if scheme == "B":
         assert np.abs(np.abs(c.facet_corrections(up)[:, 0]) - 0.003).max() < 1e-15
@@ -145,7 +145,7 @@ def test_blocks_collide_with_exact_energy_and_bounded_penetration():
         diag = stepper.step()
         drift = max(drift, abs(diag.pseudo_energy - first.pseudo_energy) / first.mechanical)
         up = c.patch_values(stepper.u)
-        deepest = min(deepest, c.listed.gaps(c._free(up)).min())
+        deepest = min(deepest, c.listed.gaps(c.free_displacements(up)).min())
         penetration = max(penetration, c.penetration(up))
     assert deepest < -1e-3  # the cell gaps do go negative: the contact is active
     assert penetration < 0.3 * -deepest
