@@ -201,3 +201,38 @@ def test_bad_contact_scenes_are_rejected_before_the_run(overrides, message, tmp_
     with pytest.raises(scenes.SceneError, match=message):
         scene = scenes.load("two-disks", {"mesh.h": 0.05, **overrides})
         simulation.run(scene, tmp_path / "out", quiet=True)
+
+
+@pytest.mark.mpi
+def test_self_contact_closes_a_slot():
+    """One U-shaped body whose two arms are pushed towards each other: with ``self_contact`` the
+    slot walls (facets of the same body) touch, with exact energy; without it they pass."""
+
+    def build(gmsh):
+        outer = gmsh.model.occ.addRectangle(0.0, 0.0, 0.0, 0.3, 0.2)
+        slot = gmsh.model.occ.addRectangle(0.145, 0.05, 0.0, 0.01, 0.2)
+        body, _ = gmsh.model.occ.cut([(2, outer)], [(2, slot)])
+        gmsh.model.occ.synchronize()
+        gmsh.model.addPhysicalGroup(2, [body[0][1]], 1)
+        gmsh.option.setNumber("Mesh.MeshSizeMax", 0.02)
+        gmsh.model.mesh.generate(2)
+
+    results = {}
+    for self_contact in (True, False):
+        dem = DEMDiscretisation(gmsh_mesh(MPI.COMM_WORLD, build), SOFT, "B")
+        walls = _compat.locate_boundary_facets(dem.mesh, lambda x: (x[0] > 0.14) & (x[0] < 0.16) & (x[1] > 0.05))
+        dem.set_contact_boundary(walls, self_contact=self_contact)
+        c = dem.pair_contact
+        dt = 0.2 * dem.stable_time_step()
+        stepper = MEMM(dem, dt)
+        v = cell_vector(dem, lambda x: np.stack([np.where(x[:, 0] < 0.15, 0.2, -0.2) * x[:, 1] / 0.2,
+                                                  np.zeros(len(x))], axis=1))
+        first = stepper.initialise(dem.create_vector(), v)
+        touched, drift = False, 0.0
+        for _ in range(int(0.2 / dt)):
+            diag = stepper.step()
+            drift = max(drift, abs(diag.pseudo_energy - first.pseudo_energy) / first.mechanical)
+            touched |= c.touching(c.patch_values(stepper.u))
+        results[self_contact] = (len(c.listed), touched, drift)
+    assert results[True][0] > 0 and results[True][1] and results[True][2] < 1e-13
+    assert results[False][0] == 0 and not results[False][1]
