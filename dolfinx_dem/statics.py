@@ -34,9 +34,10 @@ stalled at a gradient reduction of 7e-7 (More-Thuente line search failure after 
 iterations) or 9e-8 (BLMVM, 100,000 iterations) on h = 1.5e-2; the kinks of V and the rounding
 of V near the minimum defeat its line search. TAO's NLS (Newton line search) with this module's
 exact active-set Hessian (shell P H_A P + (I - P), CG + GAMG) reaches the 1e-8 reduction for
-scheme A (TAO_NLS_MEASUREMENTS) but stops with a line search failure on the kink of scheme B
-(h = 3.75e-3 m, gradient norm 2.3e3 after 12 iterations): an unconstrained TAO solver has no
-stationary point to find there. The active-set iteration above is kept for both schemes.
+scheme A (h = 1.5e-2 to 1.875e-3 m: 3, 4, 6, 8 iterations, reductions 1.7e-9 to 1.0e-10) but
+stops with a line search failure on the kink of scheme B (h = 3.75e-3 m, gradient norm 2.3e3,
+no reduction, after 12 iterations): an unconstrained TAO solver has no stationary point to find
+there. The active-set iteration above, with the kink treatment, is kept for both schemes.
 
 Rigid translations that neither a Dirichlet condition nor contact fixes (the horizontal motion of
 a disc on a frictionless plane) are removed by holding the mass-weighted mean displacement in
