@@ -34,6 +34,16 @@ import scipy.sparse
 from petsc4py import PETSc
 
 
+#: Patch operators with at most this many entries are stored as dense arrays: a sparse
+#: product costs microseconds of Python overhead even for the three dofs of a 1D bar.
+_DENSE_ENTRIES = 4096
+
+
+def _compact(A: scipy.sparse.spmatrix):
+    """A as a dense array if small (see ``_DENSE_ENTRIES``), else as CSR; both support ``@``."""
+    return A.toarray() if A.shape[0] * A.shape[1] <= _DENSE_ENTRIES else A.tocsr()
+
+
 @dataclasses.dataclass(frozen=True)
 class HalfSpace:
     """Rigid obstacle {x : (x - point) . normal < 0}; ``normal`` points from the obstacle into the
@@ -127,17 +137,18 @@ class RigidContact:
         Q_rows = Q[rows]
         R_rows = rec.R[dofs]
         self.patch = np.unique(np.concatenate([Q_rows.indices, R_rows.indices]))  # global dofs
-        self._Rn = Rn[:, self.patch].tocsr()
-        self._Q = Q_rows[:, self.patch].tocsr()
+        Rn, Q_patch, Y = Rn[:, self.patch], Q_rows[:, self.patch], Y[rows]
+        self._Rn, self._RnT = _compact(Rn), _compact(Rn.T)
+        self._Q = _compact(Q_patch)
         self._q = q[rows]
-        self._Y = Y[rows].tocsr()
-        self._Z = (self._Q.T @ self._Y).tocsr()
+        self._Y, self._YT = _compact(Y), _compact(Y.T)
+        self._Z = _compact(Q_patch.T @ Y)
         self._is_elastic_row = rows < nS
-        self._R_free = R_rows[:, self.patch].tocsr()
+        self._R_free = _compact(R_rows[:, self.patch])
         self._D_free = rec.D[dofs] @ g
         # G_c += delta_f (x) a_{f,c} / |c| for the candidate's cell (eq. (8)).
         cell_rows = (cells[:, None] * d * d + np.arange(d * d)).ravel()
-        self._grad_rows = ops.grad[cell_rows][:, self.patch].tocsr()
+        self._grad_rows = _compact(ops.grad[cell_rows][:, self.patch])
         self._grad_lift = ops.grad_dirichlet[cell_rows] @ g
         self._grad_weights = geom.facet_area_normals[cells, geom.facet_local[self.facets, 0]] / \
             geom.cell_volumes[cells, None]
@@ -159,8 +170,9 @@ class RigidContact:
         """g_f of the free reconstructions for patch values ``up`` (m)."""
         return self._Rn @ up + self._g0
 
-    def _state(self, up, active=None):
-        g = self.gaps(up)
+    def _state(self, up, active=None, g=None):
+        if g is None:
+            g = self.gaps(up)
         if active is None:
             active = g < 0
         w = np.where(active, g, 0.0)  # g^- for the natural active set
@@ -172,9 +184,12 @@ class RigidContact:
         """F - F_free at the patch dofs (N): the exact negative gradient of the energy change.
         ``active`` imposes the set of facets in contact (default: those with g < 0)."""
         self.evaluations += 1
-        active, w, a, delta = self._state(up, active)
-        coefficient = np.where(active, self._Y.T @ (a - delta), 0.0)
-        return self._Z @ w + self._Rn.T @ coefficient
+        g = self.gaps(up)
+        if active is None and not (g < 0).any():
+            return np.zeros_like(up)  # no facet in contact: the correction is exactly 0
+        active, w, a, delta = self._state(up, active, g)
+        coefficient = np.where(active, self._YT @ (a - delta), 0.0)
+        return self._Z @ w + self._RnT @ coefficient
 
     def reaction_pressures(self, up: np.ndarray) -> np.ndarray:
         """Normal pressure the obstacle exerts on each candidate facet (Pa, 0 out of contact).
@@ -184,20 +199,23 @@ class RigidContact:
         (y_f . a') n and the pressure (y_f . a') / |f|. The pressures of all facets add up to
         the total reaction, which balances the load at equilibrium."""
         active, _, a, delta = self._state(up)
-        reaction = np.where(active, self._Y.T @ (a - delta), 0.0)
+        reaction = np.where(active, self._YT @ (a - delta), 0.0)
         return reaction / self.dem.geometry.facet_areas[self.facets]
 
     def hessian_correction(self, active: np.ndarray) -> scipy.sparse.csr_matrix:
         """d^2 V / du^2 - K on the patch (patch x patch) for a fixed set of facets in contact:
         with Q' = Q - Y_A Rn_A on the touched rows, Q'^T Q' - Q^T Q."""
-        Rn = self._Rn[active]
-        Y = self._Y[:, active]
-        ZR = self._Z[:, active] @ Rn
+        Rn = scipy.sparse.csr_matrix(self._Rn)[active]
+        Y = scipy.sparse.csc_matrix(self._Y)[:, active]
+        ZR = scipy.sparse.csc_matrix(self._Z)[:, active] @ Rn
         return (Rn.T @ ((Y.T @ Y) @ Rn) - ZR - ZR.T).tocsr()
 
     def energy_correction(self, up: np.ndarray) -> tuple[float, float]:
         """(elastic, stabilisation) energy changes from the contact reconstructions."""
-        _, _, a, delta = self._state(up)
+        g = self.gaps(up)
+        if not (g < 0).any():
+            return 0.0, 0.0
+        _, _, a, delta = self._state(up, g=g)
         change = -a * delta + 0.5 * delta**2
         return float(change[self._is_elastic_row].sum()), float(change[~self._is_elastic_row].sum())
 
@@ -210,9 +228,8 @@ class RigidContact:
         """Times tau in (0, dt) where a gap along u + tau v changes sign, sorted."""
         g0 = self.gaps(up)
         slope = self._Rn @ vp
-        with np.errstate(divide="ignore", invalid="ignore"):
-            tau = -g0 / slope
-        tau = tau[np.isfinite(tau) & (tau > 0) & (tau < dt)]
+        tau = np.divide(-g0, slope, out=np.full_like(g0, np.inf), where=slope != 0)
+        tau = tau[(tau > 0) & (tau < dt)]
         return np.unique(tau)
 
     def force_integral(self, u: PETSc.Vec, v: PETSc.Vec, dt: float, out: PETSc.Vec) -> int:

@@ -110,18 +110,31 @@ class DEMDiscretisation:
         self.operators: EnergyOperators = compute_energy_operators(geom, material, self.reconstruction, jump_facets)
         ops = self.operators
 
+        # Q = [S; J] with this process's rows of S, then of J, as one PETSc matrix, and its
+        # transpose stored explicitly (a MatMult is faster than a MatMultTranspose): the force is
+        # -Q^T (Q w + q) + f with two MatMults (see ``force``).
         m = d * (d + 1) // 2
         cols = self.n_owned * d
-        self.S = _petsc_matrix(self.comm, ops.S[start * m : stop * m], ops.S.shape[0], cols)
-        self.J = _petsc_matrix(self.comm, ops.J[jump_range[0] : jump_range[1]], ops.J.shape[0], cols)
-        self.grad = _petsc_matrix(self.comm, ops.grad[start * d * d : stop * d * d], ops.grad.shape[0], cols)
-        self._S_dirichlet = ops.S_dirichlet[start * m : stop * m]
-        self._J_dirichlet = ops.J_dirichlet[jump_range[0] : jump_range[1]]
-        self._grad_dirichlet = ops.grad_dirichlet[start * d * d : stop * d * d]
+        self._n_elastic_rows = (stop - start) * m  # local rows of Q that belong to S
+        q_rows = np.concatenate([np.arange(start * m, stop * m),
+                                 ops.S.shape[0] + np.arange(jump_range[0], jump_range[1])])
+        Q_global = scipy.sparse.vstack([ops.S, ops.J]).tocsr()
+        self._Q_dirichlet = scipy.sparse.vstack([ops.S_dirichlet, ops.J_dirichlet]).tocsr()[q_rows]
+        self.Q = _petsc_matrix(self.comm, Q_global[q_rows], Q_global.shape[0], cols)
+        # Q^T's rows are the owned dofs; its columns follow Q's distributed row numbering: the S
+        # then J rows of rank 0, of rank 1, ...
+        S_counts = np.diff(geom.owned_ranges) * m
+        J_counts = counts * d
+        order = np.concatenate([np.concatenate([np.arange(S_counts[:p].sum(), S_counts[: p + 1].sum()),
+                                                ops.S.shape[0] + np.arange(J_counts[:p].sum(), J_counts[: p + 1].sum())])
+                                for p in range(self.comm.size)])
         own = slice(start * d, stop * d)
-        S_csc, J_csc = ops.S.tocsc(), ops.J.tocsc()
-        K_rows = S_csc[:, own].T @ ops.S + J_csc[:, own].T @ ops.J
-        self.K = _petsc_matrix(self.comm, K_rows, ops.S.shape[1], cols)
+        QT_rows = Q_global[:, own][order].T
+        del Q_global
+        self._QT = _petsc_matrix(self.comm, QT_rows, ops.S.shape[1], self.Q.getLocalSize()[0])
+        self.grad = _petsc_matrix(self.comm, ops.grad[start * d * d : stop * d * d], ops.grad.shape[0], cols)
+        self._grad_dirichlet = ops.grad_dirichlet[start * d * d : stop * d * d]
+        self._K = None
 
         volumes = geom.cell_volumes[start:stop]
         self.mass = self.create_vector()
@@ -135,10 +148,9 @@ class DEMDiscretisation:
                 raise ValueError(f"body_force must have {d} components, got {f.shape}")
             self.body_force.array[:] = (volumes[:, None] * f).ravel()
 
-        self._s, self._j = self.S.createVecLeft(), self.J.createVecLeft()
+        self._a = self.Q.createVecLeft()  # Q w + q(t): the energy rows [S w + s; J w + j]
         self._grad_vec = self.grad.createVecLeft()
-        self._offset = self.create_vector()  # S^T s(t) + J^T j(t)
-        self._s2, self._j2 = self.S.createVecLeft(), self.J.createVecLeft()
+        self._rhs = self.create_vector()  # f - Q^T q(t)
         self._lift_time = None
         self._time_dependent = any(bc.time_dependent for _, bc in self._dirichlet)
         self._update_dirichlet(0.0)
@@ -165,23 +177,32 @@ class DEMDiscretisation:
         self.body_labels = labels
         start, stop = self.cell_range
         owned = labels[start:stop]
-        self._free = ~clamped
-        self._free_owned = self._free[owned]
-        self._labels_owned = owned
-        self._body_mass = np.bincount(labels, weights=self.material.rho * geom.cell_volumes, minlength=n_bodies)
+        self._free = free = ~clamped
+        body_mass = np.bincount(labels, weights=self.material.rho * geom.cell_volumes, minlength=n_bodies)
+        # Mean translations of the free bodies, (n_free, d) = mean_operator @ u.reshape(-1, d)
+        # summed over ranks; row n_free of ``_means`` stays 0 for the cells of clamped bodies.
+        n_free = int(free.sum())
+        index = np.where(free, np.cumsum(free) - 1, n_free)  # body -> its row in _means
+        self._body_of_cell = index[owned]
+        cells = np.flatnonzero(free[owned])
+        weights = self.material.rho * geom.cell_volumes[start:stop][cells] / body_mass[owned[cells]]
+        mean_operator = scipy.sparse.csr_matrix((weights, (index[owned[cells]], cells)), shape=(n_free, self.n_owned))
+        # one free body (a bar, a disc): a dense row, as a sparse product costs ~8 us of overhead
+        self._mean_operator = mean_operator.toarray() if n_free == 1 else mean_operator
+        self._means = np.zeros((n_free + 1, d))
         self._shifted = self.create_vector()
 
     def relative_displacement(self, u: PETSc.Vec) -> PETSc.Vec:
         """u minus the mean translation of each free body (see ``_setup_free_bodies``)."""
-        if not self._free.any():
+        n_free = self._mean_operator.shape[0]
+        if n_free == 0:
             return u
-        d, m = self.d, self.mass.array_r.reshape(-1, self.d)
-        ua = u.array_r.reshape(-1, d)
-        sums = np.stack([np.bincount(self._labels_owned, weights=m[:, i] * ua[:, i],
-                                     minlength=len(self._free)) for i in range(d)], axis=1)
-        mean = self.comm.allreduce(sums, op=MPI.SUM) / self._body_mass[:, None]
-        mean[~self._free] = 0.0
-        self._shifted.array[:] = (ua - mean[self._labels_owned]).ravel()
+        ua = u.array_r.reshape(-1, self.d)
+        means = self._mean_operator @ ua
+        if self.comm.size > 1:
+            self.comm.Allreduce(MPI.IN_PLACE, means, op=MPI.SUM)
+        self._means[:n_free] = means
+        np.subtract(ua, self._means[self._body_of_cell], out=self._shifted.array.reshape(-1, self.d))
         return self._shifted
 
     def set_obstacles(self, obstacles) -> None:
@@ -202,10 +223,22 @@ class DEMDiscretisation:
         """The contact models in use: rigid obstacles and contact between bodies."""
         return tuple(c for c in (self.contact, self.pair_contact) if c is not None)
 
+    @property
+    def K(self) -> PETSc.Mat:
+        """The stiffness K = S^T S + J^T J (PETSc, rows of the owned dofs), built on first use:
+        time stepping applies Q^T Q in factored form and never needs it."""
+        if self._K is None:
+            ops, d = self.operators, self.d
+            start, stop = self.cell_range
+            own = slice(start * d, stop * d)
+            K_rows = ops.S.tocsc()[:, own].T @ ops.S + ops.J.tocsc()[:, own].T @ ops.J
+            self._K = _petsc_matrix(self.comm, K_rows, ops.S.shape[1], self.n_owned * d)
+        return self._K
+
     # -- vectors -----------------------------------------------------------------------------
     def create_vector(self) -> PETSc.Vec:
         """A PETSc vector with the layout of the owned DG0 dofs (cell-major, d per cell)."""
-        v = self.K.createVecRight()
+        v = self.Q.createVecRight()
         v.set(0.0)
         return v
 
@@ -230,32 +263,30 @@ class DEMDiscretisation:
             return
         g = self.dirichlet_values(t).ravel()
         self._g = g
-        self._s_lift = self._S_dirichlet @ g
-        self._j_lift = self._J_dirichlet @ g
-        self._s.array[:] = self._s_lift
-        self._j.array[:] = self._j_lift
-        self.S.multTranspose(self._s, self._offset)
-        self.J.multTransposeAdd(self._j, self._offset, self._offset)
+        self._q = self._Q_dirichlet @ g  # (local rows of Q,)
+        self._a.array[:] = self._q
+        self._QT.mult(self._a, self._rhs)
+        self._rhs.aypx(-1.0, self.body_force)
         self._lift_time = t
 
     # -- forces and energies -----------------------------------------------------------------
     def force(self, u: PETSc.Vec, t: float, out: PETSc.Vec, contact: bool = True) -> PETSc.Vec:
-        """out = -(S^T (S w + s(t)) + J^T (J w + j(t))) + f, plus the contact correction unless
-        ``contact=False``: the exact negative gradient of the potential of ``energies``.
+        """out = -Q^T (Q w + q(t)) + f = -(S^T (S w + s(t)) + J^T (J w + j(t))) + f, plus the
+        contact correction unless ``contact=False``: the exact negative gradient of the potential
+        of ``energies``.
 
-        The force is applied in factored form rather than as -K w: in floating point S^T S w and
+        The force is applied in factored form rather than as -K w: in floating point Q^T Q w and
         K w differ by the rounding of K, of relative size eps (omega_max / omega_1)^2 for smooth
         fields, which showed as pseudo-energy drifts of 8e-12 (1D bar, 800 cells) and 8e-13
-        (cantilever) against 2e-14 and 5e-15 in factored form, for a force 1.6 x a bare K.mult.
+        (cantilever) against 2e-14 and 5e-15 in factored form. Q = [S; J] is one PETSc matrix
+        and Q^T is stored explicitly, so this is two MatMults with about half the nonzeros of K
+        each (docs/bench/README.md).
         """
         self._update_dirichlet(t)
         w = self.relative_displacement(u)
-        self.S.mult(w, self._s2)
-        self.S.multTranspose(self._s2, out)
-        self.J.mult(w, self._j2)
-        self.J.multTransposeAdd(self._j2, out, out)
-        out.axpy(1.0, self._offset)
-        out.aypx(-1.0, self.body_force)
+        self.Q.mult(w, self._a)
+        self._QT.mult(self._a, out)
+        out.aypx(-1.0, self._rhs)
         if contact:
             for c in self.contacts:
                 c.add(c.force_correction(c.patch_values(u)), out)
@@ -266,15 +297,14 @@ class DEMDiscretisation:
         and ``potential``, their total: the potential whose exact gradient ``force`` computes."""
         self._update_dirichlet(t)
         w = self.relative_displacement(u)
-        self.S.mult(w, self._s)
-        self._s.array[:] += self._s_lift
-        self.J.mult(w, self._j)
-        self._j.array[:] += self._j_lift
-        e = {
-            "elastic": 0.5 * self._s.dot(self._s),
-            "stabilisation": 0.5 * self._j.dot(self._j),
-            "external": -self.body_force.dot(u),
-        }
+        self.Q.mult(w, self._a)
+        a = self._a.array
+        a += self._q
+        nS = self._n_elastic_rows
+        local = np.array([a[:nS] @ a[:nS], a[nS:] @ a[nS:], self.body_force.array_r @ u.array_r])
+        if self.comm.size > 1:
+            self.comm.Allreduce(MPI.IN_PLACE, local, op=MPI.SUM)
+        e = {"elastic": 0.5 * local[0], "stabilisation": 0.5 * local[1], "external": -local[2]}
         e["potential"] = e["elastic"] + e["stabilisation"] + e["external"]
         for c in self.contacts:
             elastic, stabilisation = c.energy_correction(c.patch_values(u))
