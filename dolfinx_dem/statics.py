@@ -52,6 +52,7 @@ import time
 from collections.abc import Sequence
 
 import numpy as np
+import scipy.sparse
 from mpi4py import MPI
 from petsc4py import PETSc
 
@@ -165,9 +166,8 @@ def _gap_gradient(dem, f: int, directions) -> PETSc.Vec:
     """P grad g_f: the gradient of candidate facet f's gap (a row of R_n on the contact patch),
     projected onto the subspace of the linear constraints."""
     c = dem.contact
-    row = np.zeros(len(c.patch))
-    r = c._Rn.getrow(f)
-    row[r.indices] = r.data
+    r = c._Rn[[f]]  # dense or sparse (contact._compact)
+    row = (r.toarray() if scipy.sparse.issparse(r) else np.asarray(r)).ravel()
     vec = dem.create_vector()
     c.add(row, vec)
     _project(vec, directions)
