@@ -615,9 +615,10 @@ a = {a:.5e} m ({a / analytic.a - 1:+.2%}) and a fitted peak pressure p0 = {p0:.5
 ({p0 / analytic.p0 - 1:+.2%}). The problem is not Hertz's: the load is a body force spread over
 the disc, not a point load far from the contact; a/R is about 0.25, not small; and the disc is a
 finite body, not a half-space. A separate study with the FEM reference (not repeated by this
-demo) attributed about 0.6 % of a and 2 % of p0 to the body force instead of the point load,
-+0.3 % to the circular instead of parabolic gap, and the remaining ~1.9 % of a to the finite
-disc. Hertz is therefore a sanity check only; the DEM is judged against the converged FEM.
+demo; a measured by the Hertz fit then, which puts the FEM 2.45 % below Hertz instead of the
+moment measure's 2.05 %) attributed about 0.6 % of a and 2 % of p0 to the body force instead of
+the point load, +0.3 % to the circular instead of parabolic gap, and the remaining ~1.9 % of a
+to the finite disc. Hertz is therefore a sanity check only; the DEM is judged against the converged FEM.
 """
 
 
