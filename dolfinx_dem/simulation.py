@@ -122,9 +122,9 @@ def contact_columns(dem: DEMDiscretisation) -> tuple[str, ...]:
     return columns
 
 
-def contact_values(dem: DEMDiscretisation, stepper: MEMM) -> list[float]:
-    """The values of ``contact_columns`` at the stepper's current state."""
-    u, values = stepper.u, []
+def contact_values(dem: DEMDiscretisation, u) -> list[float]:
+    """The values of ``contact_columns`` but the momenta, for the displacement ``u``."""
+    values = []
     if dem.contact is not None:
         c = dem.contact
         up = c.patch_values(u)
@@ -135,7 +135,7 @@ def contact_values(dem: DEMDiscretisation, stepper: MEMM) -> list[float]:
     if dem.pair_contact is not None:
         c = dem.pair_contact
         up = c.patch_values(u)
-        values += [c.contact_force(up), c.penetration(up), *momentum(dem, stepper)]
+        values += [c.contact_force(up), c.penetration(up)]
     return values
 
 
@@ -257,7 +257,9 @@ def run(scene: Mapping, out: str | pathlib.Path, comm: MPI.Comm = MPI.COMM_WORLD
 
             def record(diag, force_fields):
                 nonlocal min_gap
-                contact = contact_values(dem, stepper)
+                contact = contact_values(dem, stepper.u)
+                if dem.pair_contact is not None:
+                    contact += list(momentum(dem, stepper))
                 if dem.contact is not None:
                     min_gap = min(min_gap, contact[0])
                 if dem.pair_contact is not None:

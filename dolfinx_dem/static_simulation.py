@@ -37,15 +37,6 @@ def _top_point(dem) -> list[float]:
     return candidates[np.argmin(np.abs(candidates[:, 0] - np.median(x[:, 0])))].tolist()
 
 
-class _StaticState:
-    """The static solution as the state ``simulation.contact_values`` reads: displacement u, zero
-    velocities."""
-
-    def __init__(self, dem, u):
-        self.u = u
-        self.v_prev = self.v_next = dem.create_vector()
-
-
 def _facet_x_ranges(geom, facets: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """(smallest, largest) x coordinate of the vertices of each facet (2D: segment ends)."""
     cells, local = geom.facet_cells[facets, 0], geom.facet_local[facets, 0]
@@ -79,7 +70,7 @@ def run_static(scene: Mapping, out, comm: MPI.Comm = MPI.COMM_WORLD) -> dict:
         columns = simulation.SERIES_COLUMNS + simulation.contact_columns(dem) + tuple(probes.names)
         with io.SeriesWriter(comm, directory / "series.csv", columns) as series:
             series.write([0.0, 0.0, energies["elastic"], energies["stabilisation"], energies["external"],
-                          energies["potential"], *simulation.contact_values(dem, _StaticState(dem, u)), *probes.values(u, 0.0)])
+                          energies["potential"], *simulation.contact_values(dem, u), *probes.values(u, 0.0)])
         with io.SolutionWriter(comm, directory, dem.mesh) as solution:
             solution.write(0.0, {"displacement": dem.function(u, "displacement"),
                                  "von_mises": dem.scalar_function(dem.von_mises(u, 0.0), "von_mises")})
