@@ -96,10 +96,13 @@ demo: setup
 	$(VENV)/bin/dolfinx-dem run cantilever --out results/cantilever
 	@echo "Results of the cantilever scene are in $(CURDIR)/results/cantilever"
 
-# The performance study of docs/bench/README.md (~15 min; needs ~12 GB for the 1e6-cell MPI run).
+# The studies of docs/bench/README.md (~30 min; needs ~12 GB for the 1e6-cell MPI run).
 bench: export OMP_NUM_THREADS = 1
 bench: setup
 	$(PYTHON) benchmarks/bench_study.py
+	$(PYTHON) benchmarks/bench_signorini.py
+	$(PYTHON) benchmarks/bench_wave2d.py
+	$(PYTHON) benchmarks/bench_contact_scaling.py --out docs/bench/contact_scaling.json
 
 # --- cleaning (keeps .venv) -----------------------------------------------------
 clean:

@@ -1,4 +1,4 @@
-"""The benchmark study runs (quick mode) and writes its JSON and charts, so that it never rots."""
+"""The benchmark studies run (quick mode) and write their JSON and charts, so that they never rot."""
 
 import json
 import pathlib
@@ -30,3 +30,28 @@ def test_bench_study_quick(tmp_path):
     assert all(p["wall_time_s"] > 0 and p["tip_l2"] > 0 for rows in pairs.values() for p in rows)
     for name in data["charts"]:
         assert (tmp_path / name).stat().st_size > 1000
+
+
+def _quick(script, *args, timeout=300):
+    proc = subprocess.run([sys.executable, str(ROOT / "benchmarks" / script), "--quick", *args],
+                          capture_output=True, text=True, timeout=timeout, cwd=ROOT)
+    assert proc.returncode == 0, proc.stderr
+    return proc
+
+
+def test_bench_signorini_quick(tmp_path):
+    _quick("bench_signorini.py", "--out-dir", str(tmp_path))
+    data = json.loads((tmp_path / "signorini.json").read_text())
+    assert data["quick"]
+
+
+def test_bench_wave2d_quick(tmp_path):
+    _quick("bench_wave2d.py", "--out-dir", str(tmp_path))
+    assert json.loads((tmp_path / "wave2d.json").read_text())
+
+
+def test_bench_contact_scaling_quick(tmp_path):
+    _quick("bench_contact_scaling.py", "--out", str(tmp_path / "scaling.json"))
+    data = json.loads((tmp_path / "scaling.json").read_text())
+    # the contact work per step does not grow like the contact facets (5 x more here)
+    assert data["contact_facets_ratio"] == 5.0 and data["contact_work_ratio"] < 3.0
