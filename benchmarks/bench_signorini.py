@@ -47,6 +47,8 @@ import time
 
 import numpy as np
 
+from work_precision import time_to_error  # benchmarks/ is on sys.path when a script runs
+
 ROOT = pathlib.Path(__file__).resolve().parent.parent
 
 L, RHO, E, H0, V0 = 10.0, 1.0, 900.0, 5.0, -10.0
@@ -107,18 +109,6 @@ def impact_metrics(t, tip, p, energy) -> dict:
         "energy_rel_error_max": float(np.abs(variation).max()),
         "energy_rel_error_final": float(variation[-1]),
     }
-
-
-def time_to_error(errors, times, target):
-    """Wall time at which the error reaches ``target``, log-log interpolated between meshes
-    (None outside the measured range)."""
-    e, w = np.log(np.asarray(errors)), np.log(np.asarray(times))
-    for i in range(len(e) - 1):
-        lo, hi = sorted((e[i], e[i + 1]))
-        if lo <= math.log(target) <= hi and e[i] != e[i + 1]:
-            s = (math.log(target) - e[i]) / (e[i + 1] - e[i])
-            return float(math.exp(w[i] + s * (w[i + 1] - w[i])))
-    return None
 
 
 # --- runs -----------------------------------------------------------------------------------------

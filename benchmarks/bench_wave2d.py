@@ -75,6 +75,8 @@ from mpi4py import MPI  # noqa: E402
 
 import numpy as np  # noqa: E402
 
+from work_precision import time_to_error  # noqa: E402  (benchmarks/ is on sys.path when a script runs)
+
 ROOT = pathlib.Path(__file__).resolve().parent.parent
 
 L, H, E, NU, RHO, A = 1.0, 0.5, 1.0, 0.0, 1.0, 0.01
@@ -333,17 +335,6 @@ def sweep_fem(method: str, n: int, cfl: float, t_end: float, dt_p1: float | None
 def fitted_order(x, errors) -> float:
     """Slope of log(error) against log(x)."""
     return float(np.polyfit(np.log(x), np.log(errors), 1)[0])
-
-
-def time_to_error(errors, times, target):
-    """CPU time at which the error reaches ``target``, log-log interpolated (None outside)."""
-    e, w = np.log(np.asarray(errors)), np.log(np.asarray(times))
-    for i in range(len(e) - 1):
-        lo, hi = sorted((e[i], e[i + 1]))
-        if lo <= math.log(target) <= hi and e[i] != e[i + 1]:
-            s = (math.log(target) - e[i]) / (e[i + 1] - e[i])
-            return float(math.exp(w[i] + s * (w[i + 1] - w[i])))
-    return None
 
 
 def time_to_error_table(runs: dict) -> list[dict]:

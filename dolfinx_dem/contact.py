@@ -44,6 +44,16 @@ def _compact(A: scipy.sparse.spmatrix):
     return A.toarray() if A.shape[0] * A.shape[1] <= _DENSE_ENTRIES else A.tocsr()
 
 
+def gather_patch(comm, vec: PETSc.Vec, owned_local: np.ndarray) -> np.ndarray:
+    """The values of ``vec`` at a patch of global dofs, on every process: each process gives its
+    owned patch entries (local indices ``owned_local``, in ascending global order), and ranks own
+    ascending dof ranges, so the concatenation is in patch order."""
+    mine = vec.array_r[owned_local]
+    if comm.size == 1:
+        return mine.copy()
+    return np.concatenate(comm.allgather(mine))
+
+
 @dataclasses.dataclass(frozen=True)
 class HalfSpace:
     """Rigid obstacle {x : (x - point) . normal < 0}; ``normal`` points from the obstacle into the
@@ -161,10 +171,7 @@ class RigidContact:
     # -- patch data ----------------------------------------------------------------------------
     def patch_values(self, vec: PETSc.Vec) -> np.ndarray:
         """Values of a distributed vector at the patch dofs, on every process."""
-        mine = vec.array_r[self._owned_local]
-        if self.comm.size == 1:
-            return mine.copy()
-        return np.concatenate(self.comm.allgather(mine))  # ranks own ascending dof ranges
+        return gather_patch(self.comm, vec, self._owned_local)
 
     def gaps(self, up: np.ndarray) -> np.ndarray:
         """g_f of the free reconstructions for patch values ``up`` (m)."""

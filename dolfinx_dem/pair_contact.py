@@ -50,6 +50,8 @@ import scipy.sparse
 import scipy.spatial
 from petsc4py import PETSc
 
+from dolfinx_dem.contact import gather_patch
+
 #: Gauss-Legendre 2-point nodes on [0, 1]: exact for the cubic force correction on each piece.
 _GL2 = 0.5 + np.array([-0.5, 0.5]) / np.sqrt(3.0)
 
@@ -246,10 +248,7 @@ class PairContact:
     # -- energy and force ----------------------------------------------------------------------
     def patch_values(self, vec: PETSc.Vec) -> np.ndarray:
         """Values of a distributed vector at the patch dofs, on every process."""
-        mine = vec.array_r[self._owned_local]
-        if self.comm.size == 1:
-            return mine.copy()
-        return np.concatenate(self.comm.allgather(mine))  # ranks own ascending dof ranges
+        return gather_patch(self.comm, vec, self._owned_local)
 
     def free_displacements(self, up: np.ndarray) -> np.ndarray:
         """Free reconstructions u_f of the candidates (their cells' u_c in scheme B), (n_facets, d),

@@ -348,8 +348,18 @@ class _Series:
         return {name: a[: self.count].copy() for name, a in self.data.items()}
 
 
-def _blown_up(kinetic: float, elastic: float, budget: float, growth_limit: float) -> bool:
-    return not (math.isfinite(kinetic) and math.isfinite(elastic)) or abs(kinetic) + elastic > growth_limit * budget
+def _record(s: _Series, n: int, dt: float, budget, growth_limit: float, *, tip_position, contact_pressure,
+            kinetic, elastic, gravity, mean_velocity, initial_gravity):
+    """Add step ``n`` of an explicit scheme to ``s``; returns (budget, message): the energy budget
+    (the initial |kinetic + elastic + gravity|) and a non-empty message if the run blew up."""
+    s.add(n, tip_position=tip_position, contact_pressure=contact_pressure, kinetic=kinetic, elastic=elastic,
+          gravity=gravity, mean_velocity=mean_velocity)
+    if budget is None:
+        budget = abs(kinetic + elastic + initial_gravity)
+    blown_up = not (math.isfinite(kinetic) and math.isfinite(elastic)) or abs(kinetic) + elastic > growth_limit * budget
+    message = (f"unstable: kinetic + elastic energy beyond {growth_limit:g} x the initial energy at t = {n * dt:.6g} s"
+               if blown_up else "")
+    return budget, message
 
 
 def _run_projection(ops, data, dt, n_steps, s: _Series, grav0, growth_limit):
@@ -369,14 +379,13 @@ def _run_projection(ops, data, dt, n_steps, s: _Series, grav0, growth_limit):
             u_new[0] = -h0
             v_next[0] += correction / dt
             r = m[0] * correction / dt**2
-        kinetic = 0.5 * float(np.dot(v_prev * m, v_next))
-        elastic = 0.5 * float(u @ (K @ u))
-        s.add(n, tip_position=h0 + u[0], contact_pressure=r, kinetic=kinetic, elastic=elastic,
-              gravity=grav0 - float(F @ u), mean_velocity=float(np.dot(m, 0.5 * (v_prev + v_next))) / mass)
-        if budget is None:
-            budget = abs(kinetic + elastic + grav0)
-        if _blown_up(kinetic, elastic, budget, growth_limit):
-            return f"unstable: kinetic + elastic energy beyond {growth_limit:g} x the initial energy at t = {n * dt:.6g} s"
+        budget, message = _record(
+            s, n, dt, budget, growth_limit, tip_position=h0 + u[0], contact_pressure=r,
+            kinetic=0.5 * float(np.dot(v_prev * m, v_next)), elastic=0.5 * float(u @ (K @ u)),
+            gravity=grav0 - float(F @ u), mean_velocity=float(np.dot(m, 0.5 * (v_prev + v_next))) / mass,
+            initial_gravity=grav0)
+        if message:
+            return message
         if n == n_steps:
             break
         u = u_new
@@ -410,14 +419,13 @@ def _run_modified_mass(ops, data, dt, n_steps, s: _Series, grav0, growth_limit):
     budget = None
     for n in range(n_steps + 1):
         r = float(Ku[0] - Fm[0])  # reaction of the obstacle on the contact node
-        kinetic = 0.5 * float(np.dot(v_prev * mi, v_next))
-        elastic = 0.5 * float(u @ Ku)
-        s.add(n, tip_position=h0 + u[0], contact_pressure=max(r, 0.0), kinetic=kinetic, elastic=elastic,
-              gravity=grav0 - float(Fm @ u), mean_velocity=float(np.dot(mi, 0.5 * (v_prev + v_next))) / mass)
-        if budget is None:
-            budget = abs(kinetic + elastic + grav0)
-        if _blown_up(kinetic, elastic, budget, growth_limit):
-            return f"unstable: kinetic + elastic energy beyond {growth_limit:g} x the initial energy at t = {n * dt:.6g} s"
+        budget, message = _record(
+            s, n, dt, budget, growth_limit, tip_position=h0 + u[0], contact_pressure=max(r, 0.0),
+            kinetic=0.5 * float(np.dot(v_prev * mi, v_next)), elastic=0.5 * float(u @ Ku),
+            gravity=grav0 - float(Fm @ u), mean_velocity=float(np.dot(mi, 0.5 * (v_prev + v_next))) / mass,
+            initial_gravity=grav0)
+        if message:
+            return message
         if n == n_steps:
             break
         u[inner] += dt * v_next
