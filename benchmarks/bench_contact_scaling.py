@@ -33,7 +33,7 @@ SOFT = ElasticMaterial(E=100.0, nu=0.2, rho=100.0)
 
 def measure(n_idle: int, h: float, t_end: float) -> dict:
     """Run the colliding pair with ``n_idle`` idle disks; per-step processor times."""
-    idle = [((1.0 + 0.3 * (k % 8), 2.0 + 0.3 * (k // 8)), 0.1) for k in range(n_idle)]
+    idle = [((1.0 + 0.3 * (k % 32), 2.0 + 0.3 * (k // 32)), 0.1) for k in range(n_idle)]
     mesh, _, _ = meshes.create_discs(MPI.COMM_SELF, [((0.14, 2.27), 0.1), ((0.36, 2.27), 0.1)] + idle, h)
     dem = DEMDiscretisation(mesh, SOFT, "B")
     dem.set_contact_boundary(_compat.exterior_facets(mesh))
@@ -71,7 +71,7 @@ def main():
     parser.add_argument("--quick", action="store_true", help="fewer disks and steps (for the tests)")
     parser.add_argument("--out", type=pathlib.Path, default=None, help="JSON file for the results")
     args = parser.parse_args()
-    counts = [0, 8] if args.quick else [0, 8, 32, 128]
+    counts = [0, 8] if args.quick else [0, 8, 32, 128, 512]
     t_end = 0.05 if args.quick else 0.3
     rows = [measure(n, 0.02, t_end) for n in counts]
     print(f"{'idle':>5} {'cells':>7} {'facets':>7} {'pairs':>6} {'step ms':>8} {'contact ms':>10} {'share':>6}")
@@ -84,7 +84,26 @@ def main():
     if args.out is not None:
         args.out.write_text(json.dumps({"rows": rows, "contact_facets_ratio": facets,
                                         "contact_work_ratio": contact, "quick": args.quick}, indent=1))
+        chart(rows, args.out.with_suffix(".png"))
     return rows
+
+
+def chart(rows: list[dict], filename: pathlib.Path):
+    """Log-log: step and contact work per step against the number of cells."""
+    import matplotlib.figure
+
+    cells = np.array([r["cells"] for r in rows])
+    figure = matplotlib.figure.Figure(figsize=(5.5, 4))
+    ax = figure.subplots()
+    ax.loglog(cells, [r["step_ms"] for r in rows], "C0-o", label="MEMM step")
+    ax.loglog(cells, [r["contact_ms_per_step"] for r in rows], "C1-s", label="contact work")
+    ax.loglog(cells, cells * rows[-1]["step_ms"] / cells[-1], ":", color="grey", label="slope 1")
+    ax.set(xlabel="cells (2 colliding disks + idle disks)", ylabel="processor time per step (ms)",
+           title="contact work follows the contact")
+    ax.grid(True, which="both", alpha=0.3)
+    ax.legend()
+    figure.tight_layout()
+    figure.savefig(filename, dpi=110)
 
 
 if __name__ == "__main__":
