@@ -91,6 +91,7 @@ class PairContact:
         if not (np.isfinite(tolerance) and tolerance >= 0):
             raise ValueError(f"the penetration tolerance must be >= 0, got {tolerance}")
         _check_bodies_share_no_vertex(geom, dem.body_labels)
+        _check_bodies_do_not_overlap(geom, dem.body_labels)
         self.facets = f
         self.cells = cells = geom.facet_cells[f, 0]
         self.bodies = dem.body_labels[cells]
@@ -130,7 +131,6 @@ class PairContact:
         self._R_lift = (rec.D[dofs] @ g).reshape(nf, d)
         self._grad_weights = an / geom.cell_volumes[cells, None]
         self.is_scheme_a = np.isin(f, rec.scheme_a_facets)
-        self._A = None
         if self.is_scheme_a.any():
             C = dem.material.elasticity_tensor(d)
             # A_f x = (C : (x (x) a_f)) n / |c| for the pair's normal n: einsum with C and a_f.
@@ -474,6 +474,34 @@ class _Pairs:
         """The differences of facet ends whose sign changes are the kinks of w, (4 P,)."""
         lo_i, hi_i, lo_j, hi_j = self.ends(uc)
         return np.concatenate([hi_i - hi_j, lo_i - lo_j, hi_i - lo_j, hi_j - lo_i])
+
+
+def _check_bodies_do_not_overlap(geom, labels: np.ndarray):
+    """No boundary vertex of a body may lie strictly inside a cell of another body (in the
+    reference configuration): point-in-simplex tests against the cells near each vertex."""
+    d = geom.d
+    bf = geom.boundary_facets
+    cells, local = geom.facet_cells[bf, 0], geom.facet_local[bf, 0]
+    mask = np.ones((len(bf), d + 1), dtype=bool)
+    mask[np.arange(len(bf)), local] = False
+    points = geom.cell_vertices[cells][mask].reshape(-1, d)
+    bodies = np.repeat(labels[cells], d)
+    radius = np.linalg.norm(geom.cell_vertices - geom.cell_centres[:, None], axis=2).max()
+    near = scipy.spatial.cKDTree(points).sparse_distance_matrix(
+        scipy.spatial.cKDTree(geom.cell_centres), radius, output_type="ndarray")
+    k, c = near["i"], near["j"]
+    other = labels[c] != bodies[k]
+    k, c = k[other], c[other]
+    if len(k) == 0:
+        return
+    v = geom.cell_vertices[c]  # (m, d+1, d)
+    lam = np.linalg.solve(np.swapaxes(v[:, 1:] - v[:, :1], 1, 2), (points[k] - v[:, 0])[..., None])[..., 0]
+    lam = np.concatenate([1 - lam.sum(axis=1, keepdims=True), lam], axis=1)
+    inside = lam.min(axis=1) > 1e-10
+    if inside.any():
+        m = int(np.flatnonzero(inside)[0])
+        raise ValueError(f"bodies {bodies[k[m]]} and {labels[c[m]]} overlap at t = 0: a boundary vertex of body "
+                         f"{bodies[k[m]]} at {points[k[m]].tolist()} lies inside body {labels[c[m]]}")
 
 
 def _check_bodies_share_no_vertex(geom, labels: np.ndarray):

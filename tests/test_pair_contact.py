@@ -159,6 +159,9 @@ def test_bad_contact_input_is_rejected():
     with pytest.raises(ValueError, match="overlap at t = 0"):
         overlapping = _overlapping_discs()
         overlapping.set_contact_boundary(_compat.exterior_facets(overlapping.mesh))
+    with pytest.raises(ValueError, match="overlap at t = 0: a boundary vertex"):
+        inside = _disc_inside_a_disc()
+        inside.set_contact_boundary(_compat.exterior_facets(inside.mesh))
     with pytest.raises(ValueError, match="share the vertex"):
         touching = _discs_sharing_a_vertex()
         touching.set_contact_boundary(_compat.exterior_facets(touching.mesh))
@@ -168,6 +171,20 @@ def _overlapping_discs():
     def build(gmsh):
         for i, x in enumerate((0.0, 0.18), start=1):
             s = gmsh.model.occ.addDisk(x, 0.0, 0.0, 0.1, 0.1)
+            gmsh.model.occ.synchronize()
+            gmsh.model.addPhysicalGroup(2, [s], i)
+        gmsh.option.setNumber("Mesh.MeshSizeMax", 0.03)
+        gmsh.model.mesh.generate(2)
+
+    return DEMDiscretisation(gmsh_mesh(MPI.COMM_WORLD, build), SOFT, "B")
+
+
+def _disc_inside_a_disc():
+    """A small disc meshed inside a large one, as a separate body (no facet is near another)."""
+
+    def build(gmsh):
+        for i, r in enumerate((0.2, 0.05), start=1):
+            s = gmsh.model.occ.addDisk(0.0, 0.0, 0.0, r, r)
             gmsh.model.occ.synchronize()
             gmsh.model.addPhysicalGroup(2, [s], i)
         gmsh.option.setNumber("Mesh.MeshSizeMax", 0.03)
