@@ -71,7 +71,7 @@ def main():
     parser.add_argument("--quick", action="store_true", help="fewer disks and steps (for the tests)")
     parser.add_argument("--out", type=pathlib.Path, default=None, help="JSON file for the results")
     args = parser.parse_args()
-    counts = [0, 8] if args.quick else [0, 8, 32, 128, 512]
+    counts = [0, 8] if args.quick else [0, 8, 32, 128, 512, 2048]
     t_end = 0.05 if args.quick else 0.3
     rows = [measure(n, 0.02, t_end) for n in counts]
     print(f"{'idle':>5} {'cells':>7} {'facets':>7} {'pairs':>6} {'step ms':>8} {'contact ms':>10} {'share':>6}")
