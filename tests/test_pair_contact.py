@@ -157,34 +157,23 @@ def test_bad_contact_input_is_rejected():
     with pytest.raises(ValueError, match="has no facet"):
         dem.set_contact_boundary(np.empty(0, dtype=np.int32))
     with pytest.raises(ValueError, match="overlap at t = 0"):
-        overlapping = _overlapping_discs()
+        overlapping = _two_discs(0.18, 0.1)  # the discs overlap by 0.02 m
         overlapping.set_contact_boundary(_compat.exterior_facets(overlapping.mesh))
     with pytest.raises(ValueError, match="overlap at t = 0: a boundary vertex"):
-        inside = _disc_inside_a_disc()
+        inside = _two_discs(0.0, 0.05)  # a small disc inside the first one
         inside.set_contact_boundary(_compat.exterior_facets(inside.mesh))
     with pytest.raises(ValueError, match="share the vertex"):
         touching = _discs_sharing_a_vertex()
         touching.set_contact_boundary(_compat.exterior_facets(touching.mesh))
 
 
-def _overlapping_discs():
-    def build(gmsh):
-        for i, x in enumerate((0.0, 0.18), start=1):
-            s = gmsh.model.occ.addDisk(x, 0.0, 0.0, 0.1, 0.1)
-            gmsh.model.occ.synchronize()
-            gmsh.model.addPhysicalGroup(2, [s], i)
-        gmsh.option.setNumber("Mesh.MeshSizeMax", 0.03)
-        gmsh.model.mesh.generate(2)
-
-    return DEMDiscretisation(gmsh_mesh(MPI.COMM_WORLD, build), SOFT, "B")
-
-
-def _disc_inside_a_disc():
-    """A small disc meshed inside a large one, as a separate body (no facet is near another)."""
+def _two_discs(x2: float, r2: float):
+    """Discs (0, 0; 0.1) and (x2, 0; r2) meshed independently (no fragment): separate bodies that
+    may overlap."""
 
     def build(gmsh):
-        for i, r in enumerate((0.2, 0.05), start=1):
-            s = gmsh.model.occ.addDisk(0.0, 0.0, 0.0, r, r)
+        for i, (x, r) in enumerate(((0.0, 0.1), (x2, r2)), start=1):
+            s = gmsh.model.occ.addDisk(x, 0.0, 0.0, r, r)
             gmsh.model.occ.synchronize()
             gmsh.model.addPhysicalGroup(2, [s], i)
         gmsh.option.setNumber("Mesh.MeshSizeMax", 0.03)
