@@ -242,3 +242,29 @@ def test_self_contact_closes_a_slot():
         results[self_contact] = (len(c.listed), touched, drift)
     assert results[True][0] > 0 and results[True][1] and results[True][2] < 1e-13
     assert results[False][0] == 0 and not results[False][1]
+
+
+@pytest.mark.mpi
+def test_rigid_wall_and_contact_between_bodies_together():
+    """The two discs collide while sinking onto a rigid floor: both contact models act in the
+    same steps (``dem.contacts``) and the pseudo-energy stays exact."""
+    from dolfinx_dem.contact import HalfSpace
+
+    dem, facets = two_discs(h=0.03)
+    dem.set_contact_boundary(facets)
+    floor = _compat.locate_boundary_facets(dem.mesh, lambda x: x[1] <= 2.27)
+    dem.set_obstacles([HalfSpace([0.0, 2.165], [0.0, 1.0], floor)])
+    assert len(dem.contacts) == 2
+    dt = 0.2 * dem.stable_time_step()
+    stepper = MEMM(dem, dt)
+    v = cell_vector(dem, lambda x: approach(x) + [0.0, -0.1])
+    first = stepper.initialise(dem.create_vector(), v)
+    pair, wall = dem.pair_contact, dem.contact
+    both, drift = False, 0.0
+    for _ in range(int(0.2 / dt)):
+        diag = stepper.step()
+        drift = max(drift, abs(diag.pseudo_energy - first.pseudo_energy) / first.mechanical)
+        on_floor = (wall.gaps(wall.patch_values(stepper.u)) < 0).any()
+        both |= on_floor and pair.touching(pair.patch_values(stepper.u))
+    assert both
+    assert drift < 1e-13
