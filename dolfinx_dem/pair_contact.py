@@ -188,7 +188,7 @@ class PairContact:
         R = self._R_universe[:, columns].tocsr()
         columns = np.searchsorted(self._patch_in_universe, columns)  # now positions in the patch
         self.listed = _Pairs(
-            i=i, j=j, n=n, t=t,
+            i=i, j=j, n=n, t=t, e_i=e_i, e_j=e_j,
             d0=np.einsum("pi,pi->p", self.centres[j] - self.centres[i], n),
             si=np.sort(np.einsum("pki,pi->pk", self.vertices[i], t), axis=1),  # (P, 2): lo, hi
             sj=np.sort(np.einsum("pki,pi->pk", self.vertices[j], t), axis=1),
@@ -347,13 +347,14 @@ class PairContact:
 
     # -- outputs -------------------------------------------------------------------------------
     def facet_corrections(self, up: np.ndarray) -> np.ndarray:
-        """u_f - u_c of every candidate facet (eq. (31)), shape (n_facets, d)."""
+        """u_f - u_f^free of every candidate facet (eq. (31), directions of ``_directions``),
+        shape (n_facets, d)."""
         pairs = self._touching(up)
         uc = self.free_displacements(up)
         c = pairs.overlaps(uc)[0] * pairs.gaps(uc)
         delta = np.zeros((len(self.facets), self.d))
-        np.add.at(delta, pairs.i, (0.5 * c / self.lengths[pairs.i])[:, None] * pairs.n)
-        np.add.at(delta, pairs.j, (-0.5 * c / self.lengths[pairs.j])[:, None] * pairs.n)
+        np.add.at(delta, pairs.i, (c / self.lengths[pairs.i])[:, None] * pairs.e_i)
+        np.add.at(delta, pairs.j, (c / self.lengths[pairs.j])[:, None] * pairs.e_j)
         return delta
 
     def gradient_correction(self, up: np.ndarray) -> np.ndarray:
@@ -430,13 +431,15 @@ class _ListedPatch:
 @dataclasses.dataclass(frozen=True)
 class _Pairs:
     """Facet pairs (f_i, f_j) of the Verlet list, vectorised: the common normal n and tangent t,
-    the reference gap d0, the tangential facet ends si, sj (lo, hi), and (for the whole list)
-    the listed patch."""
+    the correction directions e_i, e_j (``PairContact._directions``), the reference gap d0, the
+    tangential facet ends si, sj (lo, hi), and (for the whole list) the listed patch."""
 
     i: np.ndarray
     j: np.ndarray
     n: np.ndarray
     t: np.ndarray
+    e_i: np.ndarray
+    e_j: np.ndarray
     d0: np.ndarray
     si: np.ndarray
     sj: np.ndarray
@@ -447,7 +450,8 @@ class _Pairs:
 
     def subset(self, p: np.ndarray) -> _Pairs:
         """The pairs ``p`` (without Z)."""
-        return _Pairs(self.i[p], self.j[p], self.n[p], self.t[p], self.d0[p], self.si[p], self.sj[p])
+        return _Pairs(self.i[p], self.j[p], self.n[p], self.t[p], self.e_i[p], self.e_j[p], self.d0[p],
+                      self.si[p], self.sj[p])
 
     def gaps(self, uc: np.ndarray) -> np.ndarray:
         """g = d0 + (u_c' - u_c) . n for candidate cell displacements uc, shape (nf, d) or

@@ -75,6 +75,29 @@ def test_force_is_the_gradient_of_the_energy_in_contact(scheme):
     assert np.abs(correction).max() > 1e-2 * np.abs(F.array).max()
 
 
+@pytest.mark.skip_in_parallel
+@pytest.mark.parametrize("scheme", ["A", "B"])
+def test_facet_corrections_are_the_reconstruction_the_energy_uses(scheme):
+    """The reported facet values u_f (outputs: stresses, penetration) are the ones whose energy
+    the force derives from: a = Q u + q changed by Q_F (u_F - u_F^free) gives the energy change."""
+    dem, facets = two_discs(h=0.02, scheme=scheme)
+    dem.set_contact_boundary(facets)
+    c, ops = dem.pair_contact, dem.operators
+    rng = np.random.default_rng(5)
+    u = cell_vector(dem, lambda x: approach(x, 0.013) + 1e-3 * rng.standard_normal(x.shape))
+    up = c.patch_values(u)
+    delta = c.facet_corrections(up)
+    assert np.abs(delta).max() > 1e-4
+    import scipy.sparse
+    Q = scipy.sparse.vstack([ops.S, ops.J]).tocsr()
+    QF = scipy.sparse.vstack([ops.S_facet, ops.J_facet]).tocsr()
+    dofs = (c.facets[:, None] * 2 + np.arange(2)).ravel()
+    a = Q @ u.array
+    change = QF[:, dofs] @ delta.ravel()
+    expected = float(a @ change + 0.5 * change @ change)
+    assert sum(c.energy_correction(up)) == pytest.approx(expected, rel=1e-10)
+
+
 @pytest.mark.mpi
 @pytest.mark.parametrize("scheme", ["A", "B"])
 def test_two_discs_collide_and_separate_with_exact_energy_and_momentum(scheme):
