@@ -384,8 +384,8 @@ class PairContact:
 
     def touching(self, up: np.ndarray) -> bool:
         """Whether some pair is in contact (g < 0 with a positive overlap)."""
-        pairs = self._touching(up)
-        return bool(len(pairs) and (pairs.overlaps(self.free_displacements(up))[0] > 0).any())
+        uc = self.free_displacements(up)
+        return bool(((self.listed.gaps(uc) < 0) & (self.listed.overlaps(uc)[0] > 0)).any())
 
     def touch_time(self, uc0: np.ndarray, uc1: np.ndarray, dt: float) -> float | None:
         """For a step between the free facet displacements ``uc0`` (no contact) and ``uc1``

@@ -260,10 +260,9 @@ def run(scene: Mapping, out: str | pathlib.Path, comm: MPI.Comm = MPI.COMM_WORLD
                 contact = contact_values(dem, stepper.u)
                 if dem.pair_contact is not None:
                     contact += list(momentum(dem, stepper))
+                    pair_stats.record(diag.t, stepper, dict(zip(contact_columns(dem), contact)))
                 if dem.contact is not None:
                     min_gap = min(min_gap, contact[0])
-                if dem.pair_contact is not None:
-                    pair_stats.record(diag.t, dem.pair_contact, stepper)
                 if diag.step % series_every == 0 or force_fields:
                     series.write([diag.t, diag.kinetic, diag.elastic, diag.stabilisation, diag.external,
                                   diag.pseudo_energy, *contact, *probes.values(stepper.u, diag.t)])
@@ -362,18 +361,19 @@ class PairContactStatistics:
         self.dem = dem
         self.previous = None  # free facet displacements of the previous step
 
-    def record(self, t: float, contact, stepper: MEMM):
-        up = contact.patch_values(stepper.u)
-        free = contact.free_displacements(up)
+    def record(self, t: float, stepper: MEMM, values: Mapping[str, float]):
+        """Update with the state at ``t`` and its series ``values`` (``contact_columns``)."""
+        contact = self.dem.pair_contact
+        free = contact.free_displacements(contact.patch_values(stepper.u))
         if self.first_contact is None and self.previous is not None:
             tau = contact.touch_time(self.previous, free, stepper.dt)
             if tau is not None:
                 self.first_contact = t - stepper.dt + tau
         self.previous = free
-        self.penetration = max(self.penetration, contact.penetration(up))
+        self.penetration = max(self.penetration, values["penetration"])
         if self.free:
-            change = np.abs(momentum(self.dem, stepper) - self.p0).max()
-            self.momentum_change = max(self.momentum_change, change)
+            p = np.array([values[f"momentum_{'xyz'[i]}"] for i in range(self.dem.d)])
+            self.momentum_change = max(self.momentum_change, np.abs(p - self.p0).max())
 
     def summary(self, stepping_seconds: float) -> dict:
         c = self.dem.pair_contact
