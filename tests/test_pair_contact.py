@@ -10,6 +10,7 @@ from dolfinx_dem import _compat, meshes
 from dolfinx_dem.discretisation import DEMDiscretisation
 from dolfinx_dem.material import ElasticMaterial
 from dolfinx_dem.memm import MEMM
+from dolfinx_dem.pair_contact import PairContact
 from helpers import cell_vector, gmsh_mesh
 
 SOFT = ElasticMaterial(E=100.0, nu=0.2, rho=100.0)
@@ -179,6 +180,14 @@ def test_bad_contact_input_is_rejected():
     dem, facets = two_discs(h=0.05)
     with pytest.raises(ValueError, match="has no facet"):
         dem.set_contact_boundary(np.empty(0, dtype=np.int32))
+    interior = np.setdiff1d(np.arange(dem.mesh.topology.index_map(1).size_local, dtype=np.int32),
+                            _compat.exterior_facets(dem.mesh))
+    with pytest.raises(ValueError, match="must be boundary facets"):
+        dem.set_contact_boundary(interior)
+    with pytest.raises(ValueError, match="tolerance must be >= 0"):
+        dem.set_contact_boundary(facets, tolerance=-1.0)
+    with pytest.raises(ValueError, match="skin must be > 0"):
+        PairContact(dem, facets, skin=0.0)
     with pytest.raises(ValueError, match="overlap at t = 0"):
         overlapping = _two_discs(0.18, 0.1)  # the discs overlap by 0.02 m
         overlapping.set_contact_boundary(_compat.exterior_facets(overlapping.mesh))
@@ -222,6 +231,8 @@ def _discs_sharing_a_vertex():
 
 @pytest.mark.parametrize("overrides, message", [
     ({"contact.boundary": [7]}, "tag 7.* has no facet"),
+    ({"mesh.frame": [0.0, 2.0, 0.5, 2.5]}, "go together"),
+    ({"mesh.frame": [0.0, 2.2, 0.5, 2.5], "mesh.frame_width": 0.1}, "not strictly inside"),
     ({"mesh.discs": [[0.14, 2.27, 0.1], [0.3, 2.27, 0.1]]}, "overlap"),
 ])
 def test_bad_contact_scenes_are_rejected_before_the_run(overrides, message, tmp_path):
@@ -291,3 +302,16 @@ def test_rigid_wall_and_contact_between_bodies_together():
         both |= on_floor and pair.touching(pair.patch_values(stepper.u))
     assert both
     assert drift < 1e-13
+
+
+def test_contact_table_needs_a_dynamic_dem_scene():
+    import tomllib
+
+    from dolfinx_dem import scenes
+
+    scene = tomllib.loads((scenes.BUILTIN / "two-disks.toml").read_text())
+    static = {k: v for k, v in scene.items() if k not in ("time", "initial")} | {"statics": {"fixed_mean": [0]}}
+    with pytest.raises(scenes.SceneError, match="dynamics only"):
+        scenes.validate(static)
+    with pytest.raises(scenes.SceneError, match="needs a DEM method"):
+        scenes.validate(static | {"method": "fem-P2"})
