@@ -27,6 +27,7 @@ class LocalMeshData(NamedTuple):
 
     cell_global: np.ndarray  # (n,) global cell indices of the owned cells
     cell_vertex_x: np.ndarray  # (n, d+1, d) vertex coordinates, topology vertex order
+    cell_vertex_global: np.ndarray  # (n, d+1) global (topology) vertex indices, same order
     cell_facet_global: np.ndarray  # (n, d+1) global facet index, facet j opposite vertex j
     num_cells_global: int
     num_facets_global: int
@@ -83,9 +84,11 @@ def local_mesh_data(mesh) -> LocalMeshData:
     facet_map = topology.index_map(tdim - 1)
     cell_facet_global = facet_map.local_to_global(c2f.reshape(-1).astype(np.int32)).reshape(n, nv)
     cell_global = cell_map.local_to_global(np.arange(n, dtype=np.int32))
+    vertex_global = topology.index_map(0).local_to_global(c2v.reshape(-1).astype(np.int32)).reshape(n, nv)
     return LocalMeshData(
         cell_global=np.asarray(cell_global, dtype=np.int64),
         cell_vertex_x=np.ascontiguousarray(cell_vertex_x, dtype=np.float64),
+        cell_vertex_global=np.asarray(vertex_global, dtype=np.int64),
         cell_facet_global=np.asarray(cell_facet_global, dtype=np.int64),
         num_cells_global=cell_map.size_global,
         num_facets_global=facet_map.size_global,
@@ -133,6 +136,19 @@ def petsc_vec(function):
 def mesh_from_gmsh_model(model, comm, gdim: int):
     """(mesh, cell_tags, facet_tags) from a gmsh model held on rank 0."""
     return dolfinx.io.gmshio.model_to_mesh(model, comm, 0, gdim=gdim)
+
+
+def create_simplex_mesh(comm, x: np.ndarray, cells: np.ndarray):
+    """An affine simplex mesh from vertex coordinates ``x`` (n, d) and cells ``cells`` (m, d+1)
+    given on rank 0 (other ranks pass empty arrays), distributed by DOLFINx's default
+    partitioner, with ghost mode ``shared_facet``."""
+    import ufl
+
+    d = x.shape[1]
+    cell = {1: ufl.interval, 2: ufl.triangle, 3: ufl.tetrahedron}[d]
+    domain = ufl.Mesh(ufl.VectorElement("Lagrange", cell, 1))
+    return dolfinx.mesh.create_mesh(comm, np.asarray(cells, dtype=np.int64), np.asarray(x, dtype=np.float64),
+                                    domain, ghost_mode=dolfinx.mesh.GhostMode.shared_facet)
 
 
 def locate_boundary_facets(mesh, marker) -> np.ndarray:

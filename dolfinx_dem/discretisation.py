@@ -164,14 +164,9 @@ class DEMDiscretisation:
         balance of a fast-moving body. The elastic operators are therefore applied to u minus each
         free body's mean (mass-weighted) translation: the same result in exact arithmetic, with
         rounding relative to the deformation instead of the displacement."""
-        import scipy.sparse.csgraph
-
         geom, d = self.geometry, self.d
-        interior = geom.interior_facets
-        pairs = geom.facet_cells[interior]
-        graph = scipy.sparse.coo_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])),
-                                        shape=(geom.num_cells, geom.num_cells))
-        n_bodies, labels = scipy.sparse.csgraph.connected_components(graph, directed=False)
+        labels = geom.cell_bodies
+        n_bodies = int(labels.max()) + 1
         clamped = np.zeros(n_bodies, dtype=bool)
         clamped[labels[geom.facet_cells[self.reconstruction.dirichlet_facets, 0]]] = True
         self.body_labels = labels

@@ -16,6 +16,8 @@ import dataclasses
 import math
 
 import numpy as np
+import scipy.sparse
+import scipy.sparse.csgraph
 from mpi4py import MPI
 
 from dolfinx_dem import _compat
@@ -30,6 +32,8 @@ class MeshGeometry:
 
     d: int
     cell_vertices: np.ndarray  # (N, d+1, d) vertex coordinates
+    cell_vertex_ids: np.ndarray  # (N, d+1) vertex numbers (the mesh topology's), same order
+    cell_bodies: np.ndarray  # (N,) body of each cell (``compute_bodies``)
     cell_facets: np.ndarray  # (N, d+1) global facet index of local facet j
     cell_centres: np.ndarray  # (N, d) barycentres x_c
     cell_volumes: np.ndarray  # (N,) |c|
@@ -77,15 +81,41 @@ def compute_geometry(comm: MPI.Comm, mesh, V) -> MeshGeometry:
     cells = np.concatenate(comm.allgather(dofs))
     vertices = np.empty((N, d + 1, d))
     vertices[cells] = np.concatenate(comm.allgather(local.cell_vertex_x))
+    vertex_ids = np.empty((N, d + 1), dtype=np.int64)
+    vertex_ids[cells] = np.concatenate(comm.allgather(local.cell_vertex_global))
     cell_facets = np.empty((N, d + 1), dtype=np.int64)
     cell_facets[cells] = np.concatenate(comm.allgather(local.cell_facet_global))
-    return geometry_from_arrays(vertices, cell_facets, F, ranges)
+    return geometry_from_arrays(vertices, vertex_ids, cell_facets, F, ranges)
+
+
+def compute_bodies(facet_cells: np.ndarray, centres: np.ndarray) -> np.ndarray:
+    """Body of each cell: the connected components of the cells through their shared facets.
+
+    ``facet_cells`` (F, 2) as in ``MeshGeometry`` (-1 on the boundary), ``centres`` (N, d).
+    Bodies are numbered 0, 1, ... in the lexicographic order (x, then y, then z) of their first
+    barycentre, a geometric order: the numbers do not depend on the cell numbering, hence not on
+    the number of processes either.
+    """
+    N = centres.shape[0]
+    pairs = facet_cells[facet_cells[:, 1] >= 0]
+    graph = scipy.sparse.coo_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])), shape=(N, N))
+    n_bodies, labels = scipy.sparse.csgraph.connected_components(graph, directed=False)
+    order = np.lexsort(centres.T[::-1])  # x first, then y, then z
+    _, first = np.unique(labels[order], return_index=True)  # first cell of each body in that order
+    rank = np.empty(n_bodies, dtype=np.int64)
+    rank[np.argsort(first)] = np.arange(n_bodies)
+    return rank[labels]
 
 
 def geometry_from_arrays(
-    vertices: np.ndarray, cell_facets: np.ndarray, num_facets: int, owned_ranges: np.ndarray
+    vertices: np.ndarray,
+    vertex_ids: np.ndarray,
+    cell_facets: np.ndarray,
+    num_facets: int,
+    owned_ranges: np.ndarray,
 ) -> MeshGeometry:
-    """The geometry of eq. (6)-(13) from cell vertex coordinates (N, d+1, d) and facet numbers."""
+    """The geometry of eq. (6)-(13) from cell vertex coordinates (N, d+1, d), the cells' vertex
+    numbers (N, d+1) and their facet numbers (N, d+1), facet j opposite vertex j."""
     N, nv, d = vertices.shape
     x0 = vertices[:, 0, :]
     Jt = vertices[:, 1:, :] - x0[:, None, :]  # (N, d, d), rows are edge vectors
@@ -140,6 +170,8 @@ def geometry_from_arrays(
     return MeshGeometry(
         d=d,
         cell_vertices=vertices,
+        cell_vertex_ids=np.asarray(vertex_ids, dtype=np.int64),
+        cell_bodies=compute_bodies(facet_cells, centres),
         cell_facets=cell_facets,
         cell_centres=centres,
         cell_volumes=volumes,

@@ -17,16 +17,18 @@ from __future__ import annotations
 
 import dataclasses
 import itertools
+import math
 
 import numpy as np
 import scipy.sparse
-import scipy.spatial
 
 from dolfinx_dem.geometry import MeshGeometry
 from dolfinx_dem.material import ElasticMaterial
 
-#: Number of nearest barycentres searched for an interior stencil, by dimension.
+#: Number of candidate cells (the nearest of the facet's mesh neighbourhood), by dimension.
 _NEIGHBOURS = {1: 2, 2: 10, 3: 14}
+#: Candidate simplices per block of facets (memory bound of the stencil search).
+_CHUNK = 2**22
 #: Barycentric coordinates above -_INSIDE_TOL count as inside the simplex.
 _INSIDE_TOL = 1e-10
 #: Smallest barycentric coordinate accepted when a facet must be extrapolated (see below).
@@ -58,55 +60,137 @@ class Reconstruction:
 
 
 def _barycentric(points: np.ndarray, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Barycentric coordinates of x (..., d) in simplices ``points`` (..., d+1, d).
+    """Barycentric coordinates of x (..., d) in simplices ``points`` (..., d+1, d), d <= 3.
 
-    Returns (alpha (..., d+1), valid (...)); degenerate simplices are not valid.
+    Returns (alpha (..., d+1), valid (...)); degenerate simplices (|det| <= 1e-8 times the
+    product of the edge lengths) are not valid. Cramer's rule, vectorised: a batched LAPACK
+    solve costs a call per 3 x 3 system.
     """
     d = x.shape[-1]
-    edges = points[..., 1:, :] - points[..., :1, :]  # (..., d, d)
-    det = np.linalg.det(edges)
-    scale = np.prod(np.linalg.norm(edges, axis=-1), axis=-1)
+    e = points[..., 1:, :] - points[..., :1, :]  # (..., d, d), rows are edges
+    r = x - points[..., 0, :]
+    if d == 1:
+        det = e[..., 0, 0]
+        numerators = [r[..., 0]]
+    elif d == 2:
+        cross = lambda a, b: a[..., 0] * b[..., 1] - a[..., 1] * b[..., 0]  # noqa: E731
+        det = cross(e[..., 0, :], e[..., 1, :])
+        numerators = [cross(r, e[..., 1, :]), cross(e[..., 0, :], r)]
+    else:
+        triple = lambda a, b, c: np.einsum("...i,...i->...", a, np.cross(b, c))  # noqa: E731
+        det = triple(e[..., 0, :], e[..., 1, :], e[..., 2, :])
+        numerators = [triple(r, e[..., 1, :], e[..., 2, :]), triple(e[..., 0, :], r, e[..., 2, :]),
+                      triple(e[..., 0, :], e[..., 1, :], r)]
+    scale = np.prod(np.linalg.norm(e, axis=-1), axis=-1)
     valid = np.abs(det) > 1e-8 * scale
-    safe = np.where(valid[..., None, None], edges, np.eye(d))
-    beta = np.linalg.solve(np.swapaxes(safe, -1, -2), (x - points[..., 0, :])[..., None])[..., 0]
+    safe = np.where(valid, det, 1.0)
+    beta = np.stack([num / safe for num in numerators], axis=-1)
     alpha = np.concatenate([1 - beta.sum(axis=-1, keepdims=True), beta], axis=-1)
     return alpha, valid
 
 
-def _best_combination(geom: MeshGeometry, facets, combos):
-    """Among candidate cell tuples ``combos`` (n, m, d+1) pick the most central containing simplex.
+def _best_combination(geom: MeshGeometry, facets, combos, alpha, valid):
+    """Among candidate cell tuples ``combos`` (n, m, d+1), with the barycentric coordinates
+    ``alpha`` (n, m, d+1) of the facet barycentres in them and their validity (n, m), pick the
+    most central containing simplex.
 
-    The key is the smallest barycentric coordinate (largest wins), then the compactness of the
-    simplex, then the lexicographic order of its sorted barycentre positions. Every key is
-    geometric and rounded, so the choice does not depend on the cell numbering or on summation
-    order: serial and parallel runs pick the same simplices.
+    The key is the smallest barycentric coordinate (largest wins, rounded to 9 digits), then the
+    compactness of the simplex, then the lexicographic order of its sorted barycentre positions.
+    Every key is geometric and rounded, so the choice does not depend on the cell numbering or
+    on summation order: serial and parallel runs pick the same simplices. The secondary keys are
+    only computed for the simplices tied on the first.
     """
     n, m, k = combos.shape
     d = geom.d
     xc = geom.cell_centres
     xf = geom.facet_centres[facets]
-    h = geom.facet_diameters[facets, None, None, None]
-    alpha, valid = _barycentric(xc[combos], xf[:, None, :])
     distinct = np.all(np.diff(np.sort(combos, axis=-1), axis=-1) > 0, axis=-1)
-    valid &= distinct & (combos >= 0).all(axis=-1)
+    valid = valid & distinct & (combos >= 0).all(axis=-1)
     min_alpha = np.where(valid, alpha.min(axis=-1), -np.inf)
-    rel = np.round((xc[combos] - xf[:, None, None, :]) / h, 9)  # (n, m, k, d)
+    key = np.round(min_alpha, 9)
+    tied_row, tied = np.nonzero(key == key.max(axis=1, keepdims=True))  # row-major: grouped by row
+    rel = np.round((xc[combos[tied_row, tied]] - xf[tied_row, None, :]) / geom.facet_diameters[facets[tied_row], None, None], 9)
     spread = np.round(np.sum(rel**2, axis=(-1, -2)), 7)
-    flat = rel.reshape(n * m, k, d)
-    point_order = np.lexsort([flat[:, :, i] for i in reversed(range(d))], axis=-1)
-    canonical = np.take_along_axis(flat, point_order[:, :, None], axis=1).reshape(n * m, k * d)
-    keys = [canonical[:, i] for i in reversed(range(k * d))]
-    keys += [spread.ravel(), -np.round(min_alpha, 9).ravel(), np.repeat(np.arange(n), m)]
-    best = np.lexsort(keys).reshape(n, m)[:, 0] % m
-    rows = np.arange(n)
+    point_order = np.lexsort([rel[:, :, i] for i in reversed(range(d))], axis=-1)
+    canonical = np.take_along_axis(rel, point_order[:, :, None], axis=1).reshape(len(tied), k * d)
+    order = np.lexsort([canonical[:, i] for i in reversed(range(k * d))] + [spread, tied_row])
+    first = order[np.searchsorted(tied_row[order], np.arange(n))]
+    rows, best = tied_row[first], tied[first]
     return combos[rows, best], alpha[rows, best], min_alpha[rows, best]
 
 
-def compute_interior_stencils(geom: MeshGeometry) -> InteriorStencils:
-    """Eq. (7) for every interior facet.
+def _facet_vertex_ids(geom: MeshGeometry, facets: np.ndarray) -> np.ndarray:
+    """Vertex numbers of the given facets, (n, d): their first cell's vertices but the opposite one."""
+    c, j = geom.facet_cells[facets, 0], geom.facet_local[facets, 0]
+    mask = np.ones((len(facets), geom.d + 1), dtype=bool)
+    mask[np.arange(len(facets)), j] = False
+    return geom.cell_vertex_ids[c][mask].reshape(len(facets), geom.d)
 
-    First the two adjacent cells plus d-1 of the nearest barycentres are tried (the segment
-    between the adjacent barycentres crosses the facet), then any d+1 of the nearest.
+
+def _incidence(rows: np.ndarray, cols: np.ndarray, shape) -> scipy.sparse.csr_matrix:
+    """The 0/1 matrix with ones at (rows[i], cols[i, j]) for an (n, k) array ``cols``."""
+    data = np.ones(cols.size, dtype=np.int32)
+    M = scipy.sparse.csr_matrix((data, (np.repeat(rows, cols.shape[1]), cols.ravel())), shape=shape)
+    M.data[:] = 1
+    return M
+
+
+class _MeshGraph:
+    """Vertex-to-cell incidence of the mesh, for neighbourhoods in the mesh graph."""
+
+    def __init__(self, geom: MeshGeometry):
+        ids, inverse = np.unique(geom.cell_vertex_ids, return_inverse=True)
+        self.geom = geom
+        self.ids = ids
+        N = geom.num_cells
+        # (V, N): vertex v belongs to cell c
+        self.vertex_cells = _incidence(np.arange(N), inverse.reshape(N, -1), (N, len(ids))).T.tocsr()
+
+    def vertex_star(self, vertex_ids: np.ndarray) -> scipy.sparse.csr_matrix:
+        """(n, N): the cells containing some vertex of row i of ``vertex_ids`` (n, k)."""
+        n = vertex_ids.shape[0]
+        rows = _incidence(np.arange(n), np.searchsorted(self.ids, vertex_ids), (n, len(self.ids)))
+        return (rows @ self.vertex_cells).tocsr()
+
+    def widen(self, cells: scipy.sparse.csr_matrix) -> scipy.sparse.csr_matrix:
+        """(n, N): the cells sharing a vertex with a cell of row i of ``cells`` (n, N)."""
+        return ((cells @ self.vertex_cells.T) @ self.vertex_cells).tocsr()
+
+
+def _nearest_in(geom: MeshGeometry, facets: np.ndarray, neighbourhood: scipy.sparse.csr_matrix, k: int):
+    """The k cells of each facet's neighbourhood (row i for ``facets[i]``) inside the facet's body
+    nearest to its barycentre, (n, k), padded with -1. Ordered by distance / h_f (rounded to 9
+    digits), then by x + pi y + e z: a geometric order, independent of the numbering."""
+    coo = neighbourhood.tocoo()
+    row, cell = coo.row, coo.col.astype(np.int64)
+    same = geom.cell_bodies[cell] == geom.cell_bodies[geom.facet_cells[facets[row], 0]]
+    row, cell = row[same], cell[same]
+    x = geom.cell_centres[cell]
+    dist = np.linalg.norm(x - geom.facet_centres[facets[row]], axis=1) / geom.facet_diameters[facets[row]]
+    position = x @ np.array([1.0, np.pi, np.e][: geom.d])
+    order = np.lexsort((position, np.round(dist, 9), row))
+    row, cell = row[order], cell[order]
+    first = np.searchsorted(row, np.arange(len(facets)))
+    rank = np.arange(len(row)) - first[row]
+    near = np.full((len(facets), k), -1, dtype=np.int64)
+    keep = rank < k
+    near[row[keep], rank[keep]] = cell[keep]
+    return near
+
+
+def compute_interior_stencils(geom: MeshGeometry) -> InteriorStencils:
+    """Eq. (7) for every interior facet, with candidate cells from the mesh graph.
+
+    The candidates of facet f are the cells of its body nearest to x_f (k = 2, 10, 14 in 1D, 2D,
+    3D, see ``_nearest_in``) among its neighbourhood in the mesh: first the cells that share a
+    vertex with f, then, for facets with no containing simplex among those, the cells that share
+    a vertex with them. A stencil therefore never reaches across a gap between two bodies or
+    across a slot in one body, whatever the distances, and it is computable from a bounded halo
+    of cells around the facet.
+
+    First the two adjacent cells plus d-1 of the candidates are tried (the segment between the
+    adjacent barycentres crosses the facet), then any d+1 of them, then any d+1 of the wider
+    neighbourhood's nearest.
 
     Near the boundary a facet barycentre can lie outside the convex hull of the barycentres (in
     3D at the edges of a box, for instance). Rule: such a facet is reconstructed from the least
@@ -114,35 +198,17 @@ def compute_interior_stencils(geom: MeshGeometry) -> InteriorStencils:
     reconstruction stays exact for affine fields, and the facet is listed in ``extrapolated``.
     If even that coordinate is below -1, a ValueError names the facet.
     """
-    d = geom.d
+    graph = _MeshGraph(geom)
     facets = geom.interior_facets
-    pair = geom.facet_cells[facets]
-    k = min(_NEIGHBOURS[d], geom.num_cells)
-    # Equidistant barycentres abound on structured meshes: query more than k and keep the k
-    # nearest by (distance, position), a geometric order, so the choice is numbering-independent.
-    k_query = min(2 * k, geom.num_cells)
-    dist, near = scipy.spatial.cKDTree(geom.cell_centres).query(geom.facet_centres[facets], k=k_query)
-    dist, near = dist.reshape(len(facets), k_query), near.reshape(len(facets), k_query)
-    position = geom.cell_centres[near] @ np.array([1.0, np.pi, np.e][:d])
-    order = np.lexsort((position, np.round(dist / geom.facet_diameters[facets, None], 9)), axis=-1)
-    near = np.take_along_axis(near, order[:, :k], axis=1)
-
-    extra = [list(c) for c in itertools.combinations(range(k), d - 1)]
-    combos = np.concatenate(
-        [np.repeat(pair[:, None, :], len(extra), axis=1), near[:, extra]], axis=2
-    )
-    cells, alpha, min_alpha = _best_combination(geom, facets, combos)
-
-    retry = np.flatnonzero(min_alpha < -_INSIDE_TOL)
-    if retry.size:
-        full = [list(c) for c in itertools.combinations(range(k), d + 1)]
-        c2, a2, m2 = _best_combination(geom, facets[retry], near[retry][:, full])
-        better = m2 > min_alpha[retry]
-        cells[retry[better]], alpha[retry[better]], min_alpha[retry[better]] = c2[better], a2[better], m2[better]
+    m = math.comb(_NEIGHBOURS[geom.d], geom.d - 1) * (geom.d + 1)
+    chunk = max(1, _CHUNK // m)  # facets per block: bounds the memory of the candidate arrays
+    parts = [_stencils_of(geom, graph, facets[i : i + chunk]) for i in range(0, len(facets), chunk)]
+    cells, alpha, min_alpha = (np.concatenate(x) for x in zip(*parts)) if parts else (
+        np.empty((0, geom.d + 1), np.int64), np.empty((0, geom.d + 1)), np.empty(0))
     if np.any(min_alpha < _MAX_EXTRAPOLATION):
         bad = facets[min_alpha < _MAX_EXTRAPOLATION]
         raise ValueError(
-            f"no simplex of {d + 1} cell barycentres near interior facet {bad[0]} at "
+            f"no simplex of {geom.d + 1} cell barycentres near interior facet {bad[0]} at "
             f"{geom.facet_centres[bad[0]].tolist()} interpolates its barycentre ({bad.size} such "
             "facets); the mesh is too distorted there for the DEM reconstruction of eq. (7)"
         )
@@ -150,6 +216,72 @@ def compute_interior_stencils(geom: MeshGeometry) -> InteriorStencils:
     alpha[inside] = np.clip(alpha[inside], 0.0, 1.0)
     alpha /= alpha.sum(axis=1, keepdims=True)
     return InteriorStencils(facets=facets, cells=cells, alpha=alpha, extrapolated=facets[~inside])
+
+
+def _stencils_of(geom: MeshGeometry, graph: _MeshGraph, facets: np.ndarray):
+    """(cells (n, d+1), alpha (n, d+1), smallest coordinate (n,)) of the best simplex of each of
+    the interior ``facets``, by the passes of ``compute_interior_stencils``."""
+    d, k = geom.d, _NEIGHBOURS[geom.d]
+    pair = geom.facet_cells[facets]
+    star = graph.vertex_star(_facet_vertex_ids(geom, facets))
+    near = _nearest_in(geom, facets, star, k)
+    cells, alpha, min_alpha = _best_combination(geom, facets, *_pair_simplices(geom, facets, pair, near))
+
+    full = np.array(list(itertools.combinations(range(k), d + 1)))
+    for widen in (False, True):
+        retry = np.flatnonzero(min_alpha < -_INSIDE_TOL)
+        if not retry.size:
+            break
+        near_retry = _nearest_in(geom, facets[retry], graph.widen(star[retry]), k) if widen else near[retry]
+        combos = near_retry[:, full]
+        xf = geom.facet_centres[facets[retry]]
+        c2, a2, m2 = _best_combination(geom, facets[retry], combos,
+                                       *_barycentric(geom.cell_centres[combos], xf[:, None, :]))
+        better = m2 > min_alpha[retry]
+        cells[retry[better]], alpha[retry[better]], min_alpha[retry[better]] = c2[better], a2[better], m2[better]
+    return cells, alpha, min_alpha
+
+
+def _pair_simplices(geom: MeshGeometry, facets: np.ndarray, pair: np.ndarray, near: np.ndarray):
+    """The simplices made of each facet's two cells ``pair`` (n, 2) and d-1 of its candidates
+    ``near`` (n, k): (cells (n, m, d+1), alpha (n, m, d+1), valid (n, m)), m = C(k, d-1).
+
+    Cramer's rule as in ``_barycentric`` with the origin at the first cell, x_1: with e = x_2 - x_1,
+    e_a = x_a - x_1 and r = x_f - x_1, every determinant is a dot product of per-candidate
+    vectors (in 3D det(e, e_a, e_b) = (e x e_a) . e_b), so the m simplices cost O(k^2) small
+    products instead of m solves.
+    """
+    d = geom.d
+    xc = geom.cell_centres
+    x1 = xc[pair[:, 0]]
+    e, r = xc[pair[:, 1]] - x1, geom.facet_centres[facets] - x1
+    if d == 1:
+        alpha, valid = _barycentric(xc[pair][:, None], geom.facet_centres[facets][:, None])
+        return pair[:, None, :], alpha, valid
+    ea = xc[near] - x1[:, None, :]  # (n, k, d)
+    norm_e, norm_a = np.linalg.norm(e, axis=1), np.linalg.norm(ea, axis=2)
+    if d == 2:
+        cross = lambda a, b: a[..., 0] * b[..., 1] - a[..., 1] * b[..., 0]  # noqa: E731
+        det = cross(e[:, None, :], ea)  # (n, k)
+        numerators = [cross(r[:, None, :], ea), np.broadcast_to(cross(e, r)[:, None], det.shape)]
+        scale = norm_e[:, None] * norm_a
+        combos = np.concatenate([np.repeat(pair[:, None, :], near.shape[1], axis=1), near[:, :, None]], axis=2)
+    else:
+        a, b = np.triu_indices(near.shape[1], 1)
+        e_x_a = np.cross(e[:, None, :], ea)  # (n, k, 3)
+        r_x_a = np.cross(r[:, None, :], ea)
+        dot_b = lambda u: np.einsum("nai,nbi->nab", u, ea)[:, a, b]  # noqa: E731
+        det = dot_b(e_x_a)  # det(e, e_a, e_b)
+        numerators = [dot_b(r_x_a),  # det(r, e_a, e_b)
+                      (np.cross(e, r)[:, None, :] * ea).sum(axis=2)[:, b],  # det(e, r, e_b)
+                      np.einsum("nai,ni->na", e_x_a, r)[:, a]]  # det(e, e_a, r)
+        scale = norm_e[:, None] * norm_a[:, a] * norm_a[:, b]
+        combos = np.concatenate([np.repeat(pair[:, None, :], len(a), axis=1), near[:, a, None], near[:, b, None]], axis=2)
+    valid = np.abs(det) > 1e-8 * scale
+    safe = np.where(valid, det, 1.0)
+    beta = np.stack([num / safe for num in numerators], axis=-1)
+    alpha = np.concatenate([1 - beta.sum(axis=-1, keepdims=True), beta], axis=-1)
+    return combos, alpha, valid
 
 
 def _block_coo(rows: np.ndarray, cols: np.ndarray, blocks: np.ndarray, d: int):

@@ -93,7 +93,8 @@ def test_facet_diameters_1d_and_3d():
     x = np.array([0.0, 0.1, 0.4, 0.5, 1.0])
     vertices = np.stack([x[:-1], x[1:]], axis=1)[:, :, None]
     cell_facets = np.stack([np.arange(1, 5), np.arange(0, 4)], axis=1)  # facet j opposite vertex j
-    geom = geometry_from_arrays(vertices, cell_facets, 5, np.array([0, 4]))
+    vertex_ids = np.stack([np.arange(4), np.arange(1, 5)], axis=1)
+    geom = geometry_from_arrays(vertices, vertex_ids, cell_facets, 5, np.array([0, 4]))
     centres = (x[:-1] + x[1:]) / 2
     assert np.allclose(geom.cell_volumes, np.diff(x))
     assert np.allclose(geom.facet_centres[:, 0], x)
