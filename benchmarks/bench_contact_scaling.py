@@ -56,7 +56,7 @@ def measure(n_idle: int, h: float, t_end: float) -> dict:
     total, contact_seconds = min(totals)
     return {
         "idle_disks": n_idle,
-        "cells": dem.geometry.num_cells,
+        "cells": dem.geometry.num_cells_global,
         "contact_facets": int(len(contact.facets)),
         "pairs_listed": int(len(contact.listed)),
         "steps": steps,

@@ -176,16 +176,15 @@ def start_dem(dem, cfl: float, growth_limit: float = GROWTH_LIMIT):
 
     dt_stable = dem.stable_time_step()
     memm = MEMM(dem, cfl * dt_stable, growth_limit=growth_limit)
-    start, stop = dem.cell_range
     u0 = dem.create_vector()
-    u0.array[:] = exact(dem.geometry.cell_centres[start:stop], 0.0).ravel()
+    u0.array[:] = exact(dem.geometry.cell_centres[: dem.n_owned], 0.0).ravel()
     return memm, dt_stable, memm.initialise(u0, dem.create_vector())
 
 
 def dem_error(dem, memm) -> float:
-    start, stop = dem.cell_range
-    return barycentre_error(memm.u.array_r.reshape(-1, 2), dem.geometry.cell_centres[start:stop],
-                            dem.geometry.cell_volumes[start:stop], memm.t)
+    owned = slice(0, dem.n_owned)
+    return barycentre_error(memm.u.array_r.reshape(-1, 2), dem.geometry.cell_centres[owned],
+                            dem.geometry.cell_volumes[owned], memm.t)
 
 
 def run_dem(n: int, cfl: float = CFL_WP) -> dict:
@@ -202,7 +201,7 @@ def run_dem(n: int, cfl: float = CFL_WP) -> dict:
             drift = max(drift, abs(diag.pseudo_energy - d0.pseudo_energy))
         t2 = time.process_time()
         timer.record(t1 - t0, t2 - t1)
-        return dict(n=n, cells=dem.geometry.num_cells, unknowns=2 * dem.geometry.num_cells, dt=memm.dt,
+        return dict(n=n, cells=dem.geometry.num_cells_global, unknowns=2 * dem.geometry.num_cells_global, dt=memm.dt,
                     dt_stable=dt_stable, n_steps=n_steps, t_final=memm.t, error=dem_error(dem, memm),
                     energy_rel_error_final=abs(diag.mechanical - d0.mechanical) / d0.mechanical,
                     invariant_drift_max=drift / d0.mechanical)

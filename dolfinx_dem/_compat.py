@@ -28,6 +28,7 @@ class LocalMeshData(NamedTuple):
     cell_global: np.ndarray  # (n,) global cell indices of the owned cells
     cell_vertex_x: np.ndarray  # (n, d+1, d) vertex coordinates, topology vertex order
     cell_vertex_global: np.ndarray  # (n, d+1) global (topology) vertex indices, same order
+    cell_vertex_owner: np.ndarray  # (n, d+1) rank owning each vertex (DOLFINx's vertex index map)
     cell_facet_global: np.ndarray  # (n, d+1) global facet index, facet j opposite vertex j
     num_cells_global: int
     num_facets_global: int
@@ -84,11 +85,14 @@ def local_mesh_data(mesh) -> LocalMeshData:
     facet_map = topology.index_map(tdim - 1)
     cell_facet_global = facet_map.local_to_global(c2f.reshape(-1).astype(np.int32)).reshape(n, nv)
     cell_global = cell_map.local_to_global(np.arange(n, dtype=np.int32))
-    vertex_global = topology.index_map(0).local_to_global(c2v.reshape(-1).astype(np.int32)).reshape(n, nv)
+    vertex_map = topology.index_map(0)
+    vertex_global = vertex_map.local_to_global(c2v.reshape(-1).astype(np.int32)).reshape(n, nv)
+    vertex_owner = np.concatenate([np.full(vertex_map.size_local, mesh.comm.rank), vertex_map.owners])[c2v]
     return LocalMeshData(
         cell_global=np.asarray(cell_global, dtype=np.int64),
         cell_vertex_x=np.ascontiguousarray(cell_vertex_x, dtype=np.float64),
         cell_vertex_global=np.asarray(vertex_global, dtype=np.int64),
+        cell_vertex_owner=np.asarray(vertex_owner, dtype=np.int64),
         cell_facet_global=np.asarray(cell_facet_global, dtype=np.int64),
         num_cells_global=cell_map.size_global,
         num_facets_global=facet_map.size_global,
@@ -111,6 +115,21 @@ def dg0_cell_dofs(V) -> tuple[np.ndarray, int, int]:
 def cell_dofs(V) -> np.ndarray:
     """The (block) dof of each process-local cell in a DG0 space, shape (n_cells_local,)."""
     return np.asarray(V.dofmap.list.array, dtype=np.int32)
+
+
+def facet_cell_owners(mesh, facets: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """For each process-local facet in ``facets`` and each of its process-local cells (one or
+    two): (position of the facet in ``facets``, rank owning the cell), as two arrays."""
+    tdim = mesh.topology.dim
+    mesh.topology.create_connectivity(tdim - 1, tdim)
+    f2c = mesh.topology.connectivity(tdim - 1, tdim)
+    counts = f2c.offsets[facets + 1] - f2c.offsets[facets]
+    which = np.repeat(np.arange(len(facets)), counts)
+    cells = f2c.array[np.repeat(f2c.offsets[facets], counts) + np.arange(counts.sum()) -
+                      np.repeat(np.cumsum(counts) - counts, counts)]
+    cell_map = mesh.topology.index_map(tdim)
+    owner = np.concatenate([np.full(cell_map.size_local, mesh.comm.rank), cell_map.owners])[cells]
+    return which, np.asarray(owner, dtype=np.int64)
 
 
 def local_facet_global_indices(mesh, facets: np.ndarray) -> np.ndarray:

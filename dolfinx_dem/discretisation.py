@@ -24,6 +24,7 @@ import dolfinx.fem
 
 from dolfinx_dem import _compat
 from dolfinx_dem.geometry import MeshGeometry, compute_geometry
+from dolfinx_dem.halo import owned_facet_marks
 from dolfinx_dem.material import ElasticMaterial
 from dolfinx_dem.operators import EnergyOperators, compute_energy_operators
 from dolfinx_dem.reconstruction import Reconstruction, compute_reconstruction
@@ -43,12 +44,15 @@ class DirichletBC:
     time_dependent: bool = False
 
 
-def _petsc_matrix(comm, rows: scipy.sparse.spmatrix, num_rows: int, local_cols: int):
-    """A distributed PETSc AIJ matrix of ``num_rows`` rows from this process's ``rows``."""
+def _petsc_matrix(comm, rows: scipy.sparse.spmatrix, columns: np.ndarray, local_cols: int):
+    """A distributed PETSc AIJ matrix from this process's ``rows``, whose local column j is the
+    global column ``columns[j]``; ``local_cols`` is the size of the owned column block."""
     sub = rows.tocsr()
+    sub = scipy.sparse.csr_matrix((sub.data, columns[sub.indices], sub.indptr),
+                                  shape=(sub.shape[0], int(columns.max(initial=-1)) + 1))
     sub.sort_indices()
     M = PETSc.Mat().createAIJ(
-        size=((sub.shape[0], num_rows), (local_cols, sub.shape[1])),
+        size=((sub.shape[0], PETSc.DECIDE), (local_cols, PETSc.DECIDE)),
         csr=(sub.indptr.astype(PETSc.IntType), sub.indices.astype(PETSc.IntType), sub.data),
         comm=comm,
     )
@@ -81,62 +85,64 @@ class DEMDiscretisation:
         self.material = material
         self.d = d = mesh.topology.dim
         self.V = _compat.create_vector_space(mesh, "DG", 0)
-        self.geometry: MeshGeometry = compute_geometry(self.comm, mesh, self.V)
+        dirichlet = tuple(dirichlet)
+        facets = [np.asarray(bc.facets, dtype=np.int32) for bc in dirichlet]
+        marks = {"dirichlet": owned_facet_marks(
+            mesh, np.concatenate(facets) if facets else np.empty(0, np.int32),
+            np.repeat(np.arange(len(facets)), [len(f) for f in facets]), "Dirichlet conditions")}
+        self.geometry, facet_marks = compute_geometry(self.comm, mesh, self.V, marks)
         geom = self.geometry
-        rank = self.comm.rank
-        self.cell_range = (int(geom.owned_ranges[rank]), int(geom.owned_ranges[rank + 1]))
-        start, stop = self.cell_range
-        self.n_owned = stop - start
+        self.n_owned = geom.num_owned
+        self.cell_range = geom.owned_range  # global numbers of the owned cells
 
-        facet_lists, self._dirichlet = [], []
-        for bc in dirichlet:
-            facets = np.unique(np.concatenate(self.comm.allgather(
-                _compat.local_facet_global_indices(mesh, np.asarray(bc.facets, dtype=np.int32)))))
-            if facets.size == 0:
-                raise ValueError("a Dirichlet condition selects no facet (check its tag or marker)")
-            facet_lists.append(facets)
-            self._dirichlet.append((facets, bc))
-        all_dirichlet = np.concatenate(facet_lists) if facet_lists else np.empty(0, np.int64)
-        if len(np.unique(all_dirichlet)) != len(all_dirichlet):
-            raise ValueError("two Dirichlet conditions share a facet")
-        self.reconstruction: Reconstruction = compute_reconstruction(geom, material, all_dirichlet, scheme)
+        # Dirichlet facets held here, and the condition of each (owned cells' marks decide).
+        mark = facet_marks["dirichlet"]
+        marked = mark >= 0
+        dirichlet_facets, first = np.unique(geom.cell_facets[marked], return_index=True)
+        condition = mark[marked][first]
+        selected = np.bincount(mark[: self.n_owned][marked[: self.n_owned]], minlength=len(dirichlet))
+        selected = self.comm.allreduce(selected, op=MPI.SUM)
+        if np.any(selected == 0):
+            raise ValueError(f"Dirichlet condition {int(np.argmin(selected))} selects no facet "
+                             "(check its tag or marker)")
+        self._dirichlet = [(dirichlet_facets[condition == k], bc) for k, bc in enumerate(dirichlet)]
+        self.reconstruction: Reconstruction = compute_reconstruction(
+            geom, material, dirichlet_facets, scheme, geom.facets_of_layers(1), self.comm)
 
-        # Jump rows grouped by the owner of the facet's first cell: contiguous row blocks per rank.
+        # The jump row of an interior facet belongs to the owner of its cell with the smaller
+        # global number; this process builds the rows of its owned facets.
         interior = geom.interior_facets
-        owner = geom.owner_of_cells(geom.facet_cells[interior, 0])
-        jump_facets = interior[np.argsort(owner, kind="stable")]
-        counts = np.bincount(owner, minlength=self.comm.size)
-        jump_range = (int(counts[:rank].sum()) * d, int(counts[: rank + 1].sum()) * d)
+        c = geom.facet_cells[interior]
+        first_cell = np.where(geom.cell_global[c[:, 0]] < geom.cell_global[c[:, 1]], c[:, 0], c[:, 1])
+        jump_facets = interior[first_cell < self.n_owned]
+        jump_facets = jump_facets[np.argsort(geom.facet_global[jump_facets])]
         self.operators: EnergyOperators = compute_energy_operators(geom, material, self.reconstruction, jump_facets)
+        rec = self.reconstruction
+        #: owned cells whose Neumann facets use scheme B under scheme A (reconstruction.py)
+        self.multi_neumann_cells = rec.multi_neumann_cells[rec.multi_neumann_cells < self.n_owned]
+        self.num_multi_neumann_cells = self.comm.allreduce(len(self.multi_neumann_cells), op=MPI.SUM)
+        #: extrapolated interior facets (reconstruction.py), counted once: by the owner of their jump row
+        self.num_extrapolated_facets = self.comm.allreduce(
+            int(np.isin(rec.stencils.extrapolated, jump_facets).sum()), op=MPI.SUM)
         ops = self.operators
 
-        # Q = [S; J] with this process's rows of S, then of J, as one PETSc matrix, and its
-        # transpose stored explicitly (a MatMult is faster than a MatMultTranspose): the force is
-        # -Q^T (Q w + q) + f with two MatMults (see ``force``).
+        # Q = [S; J] with this process's rows of S (owned cells), then of J (owned facets), as one
+        # PETSc matrix with global columns, and its transpose stored explicitly (a MatMult is
+        # faster than a MatMultTranspose): the force is -Q^T (Q w + q) + f with two MatMults
+        # (see ``force``).
         m = d * (d + 1) // 2
-        cols = self.n_owned * d
-        self._n_elastic_rows = (stop - start) * m  # local rows of Q that belong to S
-        q_rows = np.concatenate([np.arange(start * m, stop * m),
-                                 ops.S.shape[0] + np.arange(jump_range[0], jump_range[1])])
-        Q_global = scipy.sparse.vstack([ops.S, ops.J]).tocsr()
-        self._Q_dirichlet = scipy.sparse.vstack([ops.S_dirichlet, ops.J_dirichlet]).tocsr()[q_rows]
-        self.Q = _petsc_matrix(self.comm, Q_global[q_rows], Q_global.shape[0], cols)
-        # Q^T's rows are the owned dofs; its columns follow Q's distributed row numbering: the S
-        # then J rows of rank 0, of rank 1, ...
-        S_counts = np.diff(geom.owned_ranges) * m
-        J_counts = counts * d
-        order = np.concatenate([np.concatenate([np.arange(S_counts[:p].sum(), S_counts[: p + 1].sum()),
-                                                ops.S.shape[0] + np.arange(J_counts[:p].sum(), J_counts[: p + 1].sum())])
-                                for p in range(self.comm.size)])
-        own = slice(start * d, stop * d)
-        QT_rows = Q_global[:, own][order].T
-        del Q_global
-        self._QT = _petsc_matrix(self.comm, QT_rows, ops.S.shape[1], self.Q.getLocalSize()[0])
-        self.grad = _petsc_matrix(self.comm, ops.grad[start * d * d : stop * d * d], ops.grad.shape[0], cols)
-        self._grad_dirichlet = ops.grad_dirichlet[start * d * d : stop * d * d]
+        self._n_elastic_rows = self.n_owned * m  # local rows of Q that belong to S
+        owned_rows = np.concatenate([np.arange(self.n_owned * m), ops.S.shape[0] + np.arange(ops.J.shape[0])])
+        Q_local = scipy.sparse.vstack([ops.S, ops.J]).tocsr()[owned_rows]
+        self._Q_dirichlet = scipy.sparse.vstack([ops.S_dirichlet, ops.J_dirichlet]).tocsr()[owned_rows]
+        columns = (geom.cell_global[:, None] * d + np.arange(d)).ravel()  # local dof -> global dof
+        self.Q = _petsc_matrix(self.comm, Q_local, columns, self.n_owned * d)
+        self._QT = self.Q.transpose(PETSc.Mat())  # MatTranspose into a new matrix
+        self.grad = _petsc_matrix(self.comm, ops.grad[: self.n_owned * d * d], columns, self.n_owned * d)
+        self._grad_dirichlet = ops.grad_dirichlet[: self.n_owned * d * d]
         self._K = None
 
-        volumes = geom.cell_volumes[start:stop]
+        volumes = geom.cell_volumes[: self.n_owned]
         self.mass = self.create_vector()
         self.mass.array[:] = np.repeat(material.rho * volumes, d)
         self.inverse_mass = self.create_vector()
@@ -166,21 +172,24 @@ class DEMDiscretisation:
         rounding relative to the deformation instead of the displacement."""
         geom, d = self.geometry, self.d
         labels = geom.cell_bodies
-        n_bodies = int(labels.max()) + 1
-        clamped = np.zeros(n_bodies, dtype=bool)
-        clamped[labels[geom.facet_cells[self.reconstruction.dirichlet_facets, 0]]] = True
+        n_bodies = geom.num_bodies
+        rec = self.reconstruction
+        clamped = np.zeros(n_bodies, dtype=np.int64)
+        clamped[labels[geom.facet_cells[rec.dirichlet_facets, 0]]] = 1
+        self.comm.Allreduce(MPI.IN_PLACE, clamped, op=MPI.MAX)
+        clamped = clamped > 0
         self.body_labels = labels
-        start, stop = self.cell_range
-        owned = labels[start:stop]
+        owned = labels[: self.n_owned]
         self._free = free = ~clamped
-        body_mass = np.bincount(labels, weights=self.material.rho * geom.cell_volumes, minlength=n_bodies)
+        body_mass = np.bincount(owned, weights=self.material.rho * geom.cell_volumes[: self.n_owned], minlength=n_bodies)
+        self.comm.Allreduce(MPI.IN_PLACE, body_mass, op=MPI.SUM)
         # Mean translations of the free bodies, (n_free, d) = mean_operator @ u.reshape(-1, d)
         # summed over ranks; row n_free of ``_means`` stays 0 for the cells of clamped bodies.
         n_free = int(free.sum())
         index = np.where(free, np.cumsum(free) - 1, n_free)  # body -> its row in _means
         self._body_of_cell = index[owned]
         cells = np.flatnonzero(free[owned])
-        weights = self.material.rho * geom.cell_volumes[start:stop][cells] / body_mass[owned[cells]]
+        weights = self.material.rho * geom.cell_volumes[cells] / body_mass[owned[cells]]
         mean_operator = scipy.sparse.csr_matrix((weights, (index[owned[cells]], cells)), shape=(n_free, self.n_owned))
         # one free body (a bar, a disc): a dense row, as a sparse product costs ~8 us of overhead
         self._mean_operator = mean_operator.toarray() if n_free == 1 else mean_operator
@@ -221,14 +230,10 @@ class DEMDiscretisation:
 
     @property
     def K(self) -> PETSc.Mat:
-        """The stiffness K = S^T S + J^T J (PETSc, rows of the owned dofs), built on first use:
-        time stepping applies Q^T Q in factored form and never needs it."""
+        """The stiffness K = Q^T Q = S^T S + J^T J (PETSc, rows of the owned dofs), built on first
+        use by a PETSc product: time stepping applies Q^T Q in factored form and never needs it."""
         if self._K is None:
-            ops, d = self.operators, self.d
-            start, stop = self.cell_range
-            own = slice(start * d, stop * d)
-            K_rows = ops.S.tocsc()[:, own].T @ ops.S + ops.J.tocsc()[:, own].T @ ops.J
-            self._K = _petsc_matrix(self.comm, K_rows, ops.S.shape[1], self.n_owned * d)
+            self._K = self._QT.matMult(self.Q)
         return self._K
 
     # -- vectors -----------------------------------------------------------------------------

@@ -1,13 +1,23 @@
 """Vectorised mesh geometry of the DEM (paper §3.1): barycentres, volumes, facets, normals, h_f.
 
-The DEM stencils reach past a facet's two cells (the d+1 interpolation cells of eq. (7), then the
-gradient and jump of both neighbours' P1 reconstructions), beyond the single layer of ghost cells
-DOLFINx 0.5 provides. dolfinx_dem therefore gathers the global cell geometry on every process
-once, builds the operators' rows for the owned cells from it, and hands them to PETSc. The cost is
-O(N) memory and set-up work per process (measured in ``benchmarks/``); a time step only uses the
-distributed PETSc operators.
+Each process holds the geometry of the cells it owns and of a halo of ``halo.HALO_LAYERS``
+vertex-neighbour layers around them (``halo.build_halo``): the d+1 interpolation cells of a facet
+lie in the vertex neighbourhood of the facet, widened once (reconstruction.py), and a jump row of
+eq. (12) uses the gradients of both cells of its facet. So a process computes
 
-Cells are numbered by the global index of their DG0 dof, facets by DOLFINx's global facet index.
+- the stencils and reconstructions of the facets of its cells in layers 0 and 1 (their
+  neighbourhoods reach layer 3),
+- the gradients of its cells in layers 0 and 1, hence the elastic rows of its owned cells and the
+  jump rows of every facet of its owned cells,
+
+from local data only. Memory and work per process follow its owned cells plus the halo, never the
+global mesh.
+
+Cells are numbered locally: the owned cells first, in the order of their global number (the
+global index of their DG0 dof, so that PETSc vectors share the layout of ``Function.vector``),
+then the halo by layer. Facets are numbered locally too; ``facet_global`` holds DOLFINx's global
+facet index. A facet with one cell is a boundary facet (``facet_cells[f, 1] == -1``) unless its
+cell is in the outermost halo layer, whose outer neighbours are not held (``-2``, unknown).
 """
 
 from __future__ import annotations
@@ -19,34 +29,45 @@ import numpy as np
 import scipy.sparse
 import scipy.sparse.csgraph
 from mpi4py import MPI
+from petsc4py import PETSc
 
-from dolfinx_dem import _compat
+from dolfinx_dem import _compat, halo
+
+#: facet_cells[f, 1] of a facet whose second cell is outside the halo (not a boundary facet).
+OUTSIDE = -2
 
 
 @dataclasses.dataclass(frozen=True)
 class MeshGeometry:
-    """Global geometry of a simplex mesh, replicated on every process.
+    """Geometry of the cells a process holds (module docstring): n cells, F facets, dimension d.
 
-    N cells, F facets, dimension d. Facet j of a cell is opposite its vertex j.
+    Facet j of a cell is opposite its vertex j. Cells [0, num_owned) are owned.
     """
 
     d: int
-    cell_vertices: np.ndarray  # (N, d+1, d) vertex coordinates
-    cell_vertex_ids: np.ndarray  # (N, d+1) vertex numbers (the mesh topology's), same order
-    cell_bodies: np.ndarray  # (N,) body of each cell (``compute_bodies``)
-    cell_facets: np.ndarray  # (N, d+1) global facet index of local facet j
-    cell_centres: np.ndarray  # (N, d) barycentres x_c
-    cell_volumes: np.ndarray  # (N,) |c|
-    facet_area_normals: np.ndarray  # (N, d+1, d) |f| n_{f,c}, outward from c
+    num_owned: int
+    cell_global: np.ndarray  # (n,) global cell number (global DG0 dof index)
+    cell_owner: np.ndarray  # (n,) rank owning the cell
+    cell_layer: np.ndarray  # (n,) 0 owned, k in the k-th halo layer
+    cell_vertices: np.ndarray  # (n, d+1, d) vertex coordinates
+    cell_vertex_ids: np.ndarray  # (n, d+1) global vertex numbers (the mesh topology's), same order
+    cell_bodies: np.ndarray  # (n,) body of each cell (``compute_bodies``)
+    cell_facets: np.ndarray  # (n, d+1) local facet index of facet j
+    cell_centres: np.ndarray  # (n, d) barycentres x_c
+    cell_volumes: np.ndarray  # (n,) |c|
+    facet_area_normals: np.ndarray  # (n, d+1, d) |f| n_{f,c}, outward from c
+    facet_global: np.ndarray  # (F,) DOLFINx's global facet index
     facet_centres: np.ndarray  # (F, d) barycentres x_f
     facet_areas: np.ndarray  # (F,) |f| (1 for the points of a 1D mesh)
     facet_diameters: np.ndarray  # (F,) h_f of eq. (13)
-    facet_cells: np.ndarray  # (F, 2) adjacent cells, second = -1 on the boundary
+    facet_cells: np.ndarray  # (F, 2) adjacent cells; second -1 on the boundary, OUTSIDE if not held
     facet_local: np.ndarray  # (F, 2) local index of the facet in each adjacent cell
-    owned_ranges: np.ndarray  # (P+1,) cells [owned_ranges[p], owned_ranges[p+1]) on process p
+    num_cells_global: int
+    num_bodies: int
 
     @property
     def num_cells(self) -> int:
+        """Cells held by this process (owned and halo)."""
         return self.cell_volumes.shape[0]
 
     @property
@@ -54,69 +75,113 @@ class MeshGeometry:
         return self.facet_areas.shape[0]
 
     @property
+    def owned_range(self) -> tuple[int, int]:
+        """Global numbers [start, stop) of the owned cells."""
+        start = int(self.cell_global[0]) if self.num_owned else 0
+        return start, start + self.num_owned
+
+    @property
     def boundary_facets(self) -> np.ndarray:
-        """Global indices of the facets with a single adjacent cell."""
-        return np.flatnonzero(self.facet_cells[:, 1] < 0)
+        """Local indices of the facets with a single adjacent cell (the domain's boundary)."""
+        return np.flatnonzero(self.facet_cells[:, 1] == -1)
 
     @property
     def interior_facets(self) -> np.ndarray:
+        """Local indices of the facets with both adjacent cells held."""
         return np.flatnonzero(self.facet_cells[:, 1] >= 0)
 
-    def owner_of_cells(self, cells: np.ndarray) -> np.ndarray:
-        """Rank owning each cell."""
-        return np.searchsorted(self.owned_ranges, cells, side="right") - 1
+    def facets_of_layers(self, layers: int) -> np.ndarray:
+        """Local indices of the facets of the cells in halo layers 0 .. ``layers``."""
+        return np.unique(self.cell_facets[self.cell_layer <= layers])
 
 
-def compute_geometry(comm: MPI.Comm, mesh, V) -> MeshGeometry:
-    """Gather the owned cells of every process and compute the global DEM geometry.
+def compute_geometry(comm: MPI.Comm, mesh, V, marks=None) -> tuple[MeshGeometry, dict]:
+    """The geometry of this process's cells and halo, and the halo cells' facet markers.
 
-    ``V`` is the DG0 vector space whose dof numbering becomes the cell numbering.
+    ``V`` is the DG0 vector space whose dof numbering becomes the global cell numbering;
+    ``marks`` maps names to (n_owned, d+1) facet markers of the owned cells
+    (``halo.owned_facet_marks``), returned for all held cells as (n, d+1) arrays.
     """
-    local = _compat.local_mesh_data(mesh)
     dofs, start, stop = _compat.dg0_cell_dofs(V)
-    d = local.cell_vertex_x.shape[2]
-    N, F = local.num_cells_global, local.num_facets_global
-
-    ranges = np.array([0] + [r[1] for r in comm.allgather((start, stop))], dtype=np.int64)
-    cells = np.concatenate(comm.allgather(dofs))
-    vertices = np.empty((N, d + 1, d))
-    vertices[cells] = np.concatenate(comm.allgather(local.cell_vertex_x))
-    vertex_ids = np.empty((N, d + 1), dtype=np.int64)
-    vertex_ids[cells] = np.concatenate(comm.allgather(local.cell_vertex_global))
-    cell_facets = np.empty((N, d + 1), dtype=np.int64)
-    cell_facets[cells] = np.concatenate(comm.allgather(local.cell_facet_global))
-    return geometry_from_arrays(vertices, vertex_ids, cell_facets, F, ranges)
+    cells = halo.build_halo(mesh, dofs, (start, stop), marks or {})
+    geom = geometry_from_arrays(
+        cells.vertices, cells.vertex_ids, cells.facet_ids, cell_global=cells.global_index,
+        cell_owner=cells.owner, cell_layer=cells.layer, num_owned=cells.num_owned,
+        num_cells_global=cells.num_cells_global, comm=comm)
+    return geom, dict(cells.marks)
 
 
-def compute_bodies(facet_cells: np.ndarray, centres: np.ndarray) -> np.ndarray:
-    """Body of each cell: the connected components of the cells through their shared facets.
-
-    ``facet_cells`` (F, 2) as in ``MeshGeometry`` (-1 on the boundary), ``centres`` (N, d).
-    Bodies are numbered 0, 1, ... in the lexicographic order (x, then y, then z) of their first
-    barycentre, a geometric order: the numbers do not depend on the cell numbering, hence not on
-    the number of processes either.
-    """
-    N = centres.shape[0]
+def _components(num_cells: int, facet_cells: np.ndarray) -> np.ndarray:
+    """Connected components of the held cells through their shared (held) facets."""
     pairs = facet_cells[facet_cells[:, 1] >= 0]
-    graph = scipy.sparse.coo_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])), shape=(N, N))
-    n_bodies, labels = scipy.sparse.csgraph.connected_components(graph, directed=False)
-    order = np.lexsort(centres.T[::-1])  # x first, then y, then z
-    _, first = np.unique(labels[order], return_index=True)  # first cell of each body in that order
-    rank = np.empty(n_bodies, dtype=np.int64)
-    rank[np.argsort(first)] = np.arange(n_bodies)
-    return rank[labels]
+    graph = scipy.sparse.coo_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])), shape=(num_cells,) * 2)
+    return scipy.sparse.csgraph.connected_components(graph, directed=False)[1]
+
+
+def compute_bodies(comm: MPI.Comm, facet_cells: np.ndarray, centres: np.ndarray, cell_global: np.ndarray,
+                   num_owned: int) -> tuple[np.ndarray, int]:
+    """Body of each held cell (the components of the global mesh through shared facets), and the
+    number of bodies.
+
+    Label propagation: each held cell starts with its global number; each round, every local
+    component takes the smallest label of its cells, and the halo cells take their owners'
+    labels (a PETSc ghost update), until no label changes on any process. Bodies are then
+    numbered 0, 1, ... in the lexicographic order (x, then y, then z) of their first barycentre,
+    a geometric order: the numbers do not depend on the cell numbering or the process count. The
+    one collective that grows is a gather of one barycentre per body present on a process.
+    """
+    n = len(cell_global)
+    component = _components(n, facet_cells)
+    label = cell_global.astype(np.float64)
+    ghosts = np.asarray(cell_global[num_owned:], dtype=PETSc.IntType)
+    vec = PETSc.Vec().createGhost(ghosts, size=(num_owned, PETSc.DECIDE), comm=comm)
+    while True:
+        smallest = np.full(component.max() + 1 if n else 0, np.inf)
+        np.minimum.at(smallest, component, label)
+        new = smallest[component]
+        with vec.localForm() as local:
+            local.array[:num_owned] = new[:num_owned]
+        vec.ghostUpdate(PETSc.InsertMode.INSERT, PETSc.ScatterMode.FORWARD)
+        with vec.localForm() as local:
+            new[num_owned:] = local.array[num_owned:]
+        changed = comm.allreduce(bool(np.any(new != label)), op=MPI.LOR)
+        label = new
+        if not changed:
+            break
+    vec.destroy()
+    label = label.astype(np.int64)
+    # The lexicographically first owned barycentre of each body present here, gathered.
+    order = np.lexsort(centres[:num_owned].T[::-1])
+    present, first = np.unique(label[:num_owned][order], return_index=True)
+    keys = np.concatenate(comm.allgather(np.c_[present, centres[:num_owned][order][first]]))
+    keys = keys[np.lexsort(keys[:, 1:].T[::-1])]  # by position
+    labels, first = np.unique(keys[:, 0], return_index=True)
+    number = np.empty(len(labels), dtype=np.int64)
+    number[np.argsort(first)] = np.arange(len(labels))  # rank of each body's first barycentre
+    return number[np.searchsorted(labels, label)], len(labels)
 
 
 def geometry_from_arrays(
     vertices: np.ndarray,
     vertex_ids: np.ndarray,
-    cell_facets: np.ndarray,
-    num_facets: int,
-    owned_ranges: np.ndarray,
+    facet_ids: np.ndarray,
+    cell_global: np.ndarray | None = None,
+    cell_owner: np.ndarray | None = None,
+    cell_layer: np.ndarray | None = None,
+    num_owned: int | None = None,
+    num_cells_global: int | None = None,
+    comm: MPI.Comm = MPI.COMM_SELF,
 ) -> MeshGeometry:
-    """The geometry of eq. (6)-(13) from cell vertex coordinates (N, d+1, d), the cells' vertex
-    numbers (N, d+1) and their facet numbers (N, d+1), facet j opposite vertex j."""
+    """The geometry of eq. (6)-(13) from the held cells' vertex coordinates (N, d+1, d), global
+    vertex numbers (N, d+1) and global facet numbers (N, d+1), facet j opposite vertex j. Without
+    the ownership arguments the cells are a whole mesh owned by one process."""
     N, nv, d = vertices.shape
+    if cell_global is None:
+        cell_global, cell_owner = np.arange(N), np.zeros(N, dtype=np.int64)
+        cell_layer, num_owned, num_cells_global = np.zeros(N, dtype=np.int64), N, N
+    facet_global, cell_facets = np.unique(facet_ids, return_inverse=True)
+    cell_facets = cell_facets.reshape(N, nv)
+    num_facets = len(facet_global)
     x0 = vertices[:, 0, :]
     Jt = vertices[:, 1:, :] - x0[:, None, :]  # (N, d, d), rows are edge vectors
     det = np.linalg.det(Jt)
@@ -135,7 +200,7 @@ def geometry_from_arrays(
     flat = cell_facets.reshape(-1)
     order = np.argsort(flat, kind="stable")
     counts = np.bincount(flat, minlength=num_facets)
-    if np.any(counts == 0) or np.any(counts > 2):
+    if np.any(counts > 2):
         raise ValueError("inconsistent mesh: every facet must belong to one or two cells")
     first = np.concatenate([[0], np.cumsum(counts)[:-1]])
     facet_cells = np.full((num_facets, 2), -1, dtype=np.int64)
@@ -143,6 +208,8 @@ def geometry_from_arrays(
     facet_cells[:, 0], facet_local[:, 0] = np.divmod(order[first], nv)
     two = counts == 2
     facet_cells[two, 1], facet_local[two, 1] = np.divmod(order[first[two] + 1], nv)
+    outer = np.max(cell_layer, initial=0)
+    facet_cells[~two & (cell_layer[facet_cells[:, 0]] == outer) & (outer > 0), 1] = OUTSIDE
 
     c0, j0 = facet_cells[:, 0], facet_local[:, 0]
     mask = np.ones((num_facets, nv), dtype=bool)
@@ -167,19 +234,26 @@ def geometry_from_arrays(
             [np.linalg.norm(facet_vertices[:, a] - facet_vertices[:, b], axis=1) for a, b in pairs],
             axis=0,
         )
+    bodies, num_bodies = compute_bodies(comm, facet_cells, centres, np.asarray(cell_global), num_owned)
     return MeshGeometry(
         d=d,
+        num_owned=int(num_owned),
+        cell_global=np.asarray(cell_global, dtype=np.int64),
+        cell_owner=np.asarray(cell_owner, dtype=np.int64),
+        cell_layer=np.asarray(cell_layer, dtype=np.int64),
         cell_vertices=vertices,
         cell_vertex_ids=np.asarray(vertex_ids, dtype=np.int64),
-        cell_bodies=compute_bodies(facet_cells, centres),
+        cell_bodies=bodies,
+        num_bodies=num_bodies,
         cell_facets=cell_facets,
         cell_centres=centres,
         cell_volumes=volumes,
         facet_area_normals=area_normals,
+        facet_global=facet_global,
         facet_centres=facet_centres,
         facet_areas=facet_areas,
         facet_diameters=diam,
         facet_cells=facet_cells,
         facet_local=facet_local,
-        owned_ranges=np.asarray(owned_ranges, dtype=np.int64),
+        num_cells_global=int(num_cells_global),
     )

@@ -22,6 +22,14 @@ pyvista = _compat.import_pyvista()
 
 _VTK_SIMPLEX = {1: pyvista.CellType.LINE, 2: pyvista.CellType.TRIANGLE, 3: pyvista.CellType.TETRA}
 _MAX_CELLS_WITH_EDGES = 5000  # above this the cell edges would hide the colours
+#: Pictures gather the mesh on rank 0; above this many cells (globally) they are skipped, so that
+#: no process ever holds a large mesh whole (the XDMF output has every field, for ParaView).
+PICTURE_MAX_CELLS = 500_000
+
+
+def too_large(mesh) -> bool:
+    """Whether ``mesh`` has more cells than pictures draw (``PICTURE_MAX_CELLS``)."""
+    return mesh.topology.index_map(mesh.topology.dim).size_global > PICTURE_MAX_CELLS
 
 
 def _gather_cells(mesh, displacement: np.ndarray | None, values: np.ndarray):
@@ -97,10 +105,13 @@ def plot_cell_field(
     (vector) and ``s`` (scalar) pass ``u.x.array[:n * gdim].reshape(n, gdim)`` and
     ``s.x.array[:n]``.
 
-    Returns ``str(filename)``.
+    Returns ``str(filename)``, or None without writing anything when the mesh has more than
+    ``PICTURE_MAX_CELLS`` cells.
     """
     filename = pathlib.Path(filename)
     _check_output(filename, scale)
+    if too_large(mesh):
+        return None
     grid = _grid(mesh, displacement, values, title, scale)
     if grid is None:
         return str(filename)
@@ -115,7 +126,8 @@ class Animation:
     """An animated GIF of the deformed mesh coloured by a cell field, one frame per ``write``.
 
     Collective over ``mesh.comm`` (rank 0 renders off-screen); arguments as ``plot_cell_field``.
-    The colour scale of each frame spans that frame's values; the frame shows the time.
+    The colour scale of each frame spans that frame's values; the frame shows the time. Above
+    ``PICTURE_MAX_CELLS`` cells nothing is drawn and no file is written (``skipped``).
     """
 
     def __init__(self, mesh, filename: str | pathlib.Path, title: str, scale: float = 1.0):
@@ -124,11 +136,14 @@ class Animation:
         self.mesh, self.title, self.scale = mesh, title, scale
         self.frames = 0
         self._plotter = None
-        if mesh.comm.rank == 0:
+        self.skipped = too_large(mesh)
+        if mesh.comm.rank == 0 and not self.skipped:
             self._plotter = pyvista.Plotter(off_screen=True, window_size=(800, 640))
             self._plotter.open_gif(str(self.filename))
 
     def write(self, t: float, displacement: np.ndarray, values: np.ndarray) -> None:
+        if self.skipped:
+            return
         grid = _grid(self.mesh, displacement, values, self.title, self.scale)
         if grid is not None:
             _show(self._plotter, grid, self.title, self.mesh.geometry.dim, name="body", reset=self.frames == 0)

@@ -178,8 +178,9 @@ def _nearest_in(geom: MeshGeometry, facets: np.ndarray, neighbourhood: scipy.spa
     return near
 
 
-def compute_interior_stencils(geom: MeshGeometry) -> InteriorStencils:
-    """Eq. (7) for every interior facet, with candidate cells from the mesh graph.
+def compute_interior_stencils(geom: MeshGeometry, facets: np.ndarray | None = None) -> InteriorStencils:
+    """Eq. (7) for the interior facets among ``facets`` (default: all), with candidate cells from
+    the mesh graph.
 
     The candidates of facet f are the cells of its body nearest to x_f (k = 2, 10, 14 in 1D, 2D,
     3D, see ``_nearest_in``) among its neighbourhood in the mesh: first the cells that share a
@@ -199,7 +200,7 @@ def compute_interior_stencils(geom: MeshGeometry) -> InteriorStencils:
     If even that coordinate is below -1, a ValueError names the facet.
     """
     graph = _MeshGraph(geom)
-    facets = geom.interior_facets
+    facets = geom.interior_facets if facets is None else np.intersect1d(geom.interior_facets, facets)
     m = math.comb(_NEIGHBOURS[geom.d], geom.d - 1) * (geom.d + 1)
     chunk = max(1, _CHUNK // m)  # facets per block: bounds the memory of the candidate arrays
     parts = [_stencils_of(geom, graph, facets[i : i + chunk]) for i in range(0, len(facets), chunk)]
@@ -297,20 +298,31 @@ def compute_reconstruction(
     material: ElasticMaterial,
     dirichlet_facets: np.ndarray,
     scheme: str,
+    facets: np.ndarray | None = None,
+    comm=None,
 ) -> Reconstruction:
-    """Assemble R and D (eq. (6)) for the given Dirichlet facets and Neumann scheme "A" or "B"."""
+    """Assemble R and D (eq. (6)) for the given Dirichlet facets and Neumann scheme "A" or "B".
+
+    Only the rows of ``facets`` (default: all held facets; in parallel the facets of the cells in
+    halo layers 0 and 1, see geometry.py) are computed; the others stay empty. ``comm``, if given,
+    makes the input checks collective, so that every process raises the same error.
+    """
     if scheme not in ("A", "B"):
         raise ValueError(f"boundary scheme must be 'A' or 'B', got {scheme!r}")
     d, N, F = geom.d, geom.num_cells, geom.num_facets
+    rows = np.arange(F) if facets is None else np.asarray(facets, dtype=np.int64)
     dirichlet_facets = np.unique(np.asarray(dirichlet_facets, dtype=np.int64))
-    boundary = geom.boundary_facets
-    if not np.isin(dirichlet_facets, boundary).all():
-        bad = dirichlet_facets[~np.isin(dirichlet_facets, boundary)]
+    interior = dirichlet_facets[geom.facet_cells[dirichlet_facets, 1] >= 0]
+    bad = geom.facet_global[interior[:1]].tolist()
+    if comm is not None:
+        bad = [f for b in comm.allgather(bad) for f in b]
+    if bad:
         raise ValueError(f"Dirichlet facets must lie on the boundary; facet {bad[0]} is interior")
+    boundary = np.intersect1d(geom.boundary_facets, rows)
     neumann = np.setdiff1d(boundary, dirichlet_facets)
     eye = np.broadcast_to(np.eye(d), (max(len(neumann), len(dirichlet_facets), 1), d, d))
 
-    stencils = compute_interior_stencils(geom)
+    stencils = compute_interior_stencils(geom, rows)
     fi = np.repeat(stencils.facets, d + 1)
     ci = stencils.cells.ravel()
     blocks = stencils.alpha.ravel()[:, None, None] * np.eye(d)

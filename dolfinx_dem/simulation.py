@@ -166,16 +166,23 @@ class Probes:
         if not np.all(inside):
             bad = int(np.argmin(inside))
             raise scenes.SceneError(f"probe {self.names[bad]!r} at {specs[bad]['point']} is outside the mesh")
-        xc = dem.geometry.cell_centres
-        cells = []
-        for x in points[:, : dem.d]:
-            dist = np.round(np.linalg.norm(xc - x, axis=1) / np.ptp(xc, axis=0).max(), 9)
-            cells.append(np.lexsort([xc[:, i] for i in reversed(range(dem.d))] + [dist])[0])
-        cells = np.asarray(cells, dtype=np.int64)
-        start, stop = dem.cell_range
-        self.mine = np.flatnonzero((cells >= start) & (cells < stop))
-        self.blocks = cells[self.mine] - start
-        self.offsets = points[self.mine, : dem.d] - xc[cells[self.mine]]
+        # Each process proposes its nearest owned cell (key: distance rounded relative to the
+        # mesh extent, then position); the smallest key over the processes wins.
+        xc = dem.geometry.cell_centres[: dem.n_owned]
+        lo = dem.comm.allreduce(xc.min(axis=0, initial=np.inf), op=MPI.MIN)
+        hi = dem.comm.allreduce(xc.max(axis=0, initial=-np.inf), op=MPI.MAX)
+        keys = np.full((len(specs), 1 + dem.d), np.inf)
+        cells = np.zeros(len(specs), dtype=np.int64)
+        for i, x in enumerate(points[:, : dem.d]):
+            if dem.n_owned:
+                dist = np.round(np.linalg.norm(xc - x, axis=1) / (hi - lo).max(), 9)
+                cells[i] = np.lexsort([xc[:, k] for k in reversed(range(dem.d))] + [dist])[0]
+                keys[i] = [dist[cells[i]], *xc[cells[i]]]
+        proposals = np.array(dem.comm.allgather(keys))  # (P, n_probes, 1 + d)
+        winner = np.array([np.lexsort(proposals[:, i].T[::-1])[0] for i in range(len(specs))], dtype=int)
+        self.mine = np.flatnonzero(winner == dem.comm.rank)
+        self.blocks = cells[self.mine]
+        self.offsets = points[self.mine, : dem.d] - xc[self.blocks]
         self.components = np.array([specs[i]["component"] for i in self.mine], dtype=int)
 
     def values(self, u, t) -> np.ndarray:
@@ -188,6 +195,13 @@ class Probes:
             rec = uc + np.einsum("nij,nj->ni", G[self.blocks], self.offsets)
             out[self.mine] = rec[np.arange(len(self.mine)), self.components]
         return self.dem.comm.allreduce(out, op=MPI.SUM)
+
+
+def peak_rss_mb(comm: MPI.Comm) -> float:
+    """The largest peak resident memory of the processes so far (MB)."""
+    import resource
+
+    return comm.allreduce(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0, op=MPI.MAX)
 
 
 class Progress:
@@ -234,7 +248,7 @@ def run(scene: Mapping, out: str | pathlib.Path, comm: MPI.Comm = MPI.COMM_WORLD
         stepper = MEMM(dem, dt, time_spec.get("quadrature", "midpoint"))
         probes = Probes(dem, scene.get("probes", []))
 
-        xc = dem.geometry.cell_centres[dem.cell_range[0]:dem.cell_range[1]].T
+        xc = dem.geometry.cell_centres[: dem.n_owned].T
         u0, v0 = dem.create_vector(), dem.create_vector()
         initial = scene.get("initial", {})
         if "displacement" in initial:
@@ -295,13 +309,14 @@ def run(scene: Mapping, out: str | pathlib.Path, comm: MPI.Comm = MPI.COMM_WORLD
         summary = {
             "scene": scene["name"],
             "method": scene["method"],
-            "n_cells": dem.geometry.num_cells,
+            "n_cells": dem.geometry.num_cells_global,
             "n_steps": stepper.n,
             "dt": dt,
             "t_end": stepper.t,
             "quadrature": stepper.quadrature,
             "wall_time_s": time.perf_counter() - wall,
-            "setup_time_s": t_setup,
+            "setup_time_s": comm.allreduce(t_setup, op=MPI.MAX),
+            "peak_rss_mb": peak_rss_mb(comm),
             "pseudo_energy_rel_drift": drift / scale if scale > 0 else 0.0,
             "pseudo_energy_initial": E0,
             "max_mechanical_energy": scale,
@@ -311,8 +326,8 @@ def run(scene: Mapping, out: str | pathlib.Path, comm: MPI.Comm = MPI.COMM_WORLD
             # With time-dependent Dirichlet data the boundary does work: no conservation then.
             "conservative": not any(bc.get("time_dependent", False) for bc in scene.get("dirichlet", [])),
             "processes": comm.size,
-            "multi_neumann_cells": int(len(dem.reconstruction.multi_neumann_cells)),
-            "extrapolated_facets": int(len(dem.reconstruction.stencils.extrapolated)),
+            "multi_neumann_cells": dem.num_multi_neumann_cells,
+            "extrapolated_facets": dem.num_extrapolated_facets,
         }
         if dem.contact is not None:
             summary["contact_candidate_facets"] = int(len(dem.contact.facets))
@@ -339,9 +354,8 @@ def fields(dem: DEMDiscretisation, stepper: MEMM) -> dict:
         "velocity": dem.function(v, "velocity"),
         "von_mises": dem.scalar_function(dem.von_mises(stepper.u, stepper.t), "von_mises"),
     }
-    if dem.body_labels.max() > 0:
-        start, stop = dem.cell_range
-        out["body"] = dem.scalar_function(dem.body_labels[start:stop] + 1.0, "body")
+    if dem.geometry.num_bodies > 1:
+        out["body"] = dem.scalar_function(dem.body_labels[: dem.n_owned] + 1.0, "body")
     return out
 
 

@@ -29,12 +29,19 @@ from dolfinx_dem.statics import minimise_energy
 
 
 def _top_point(dem) -> list[float]:
-    """The highest vertex of the body (largest last coordinate, then smallest |x|): the point
-    whose vertical displacement the summary reports."""
-    x = np.unique(dem.geometry.cell_vertices.reshape(-1, dem.d), axis=0)
-    top = x[:, -1] >= x[:, -1].max() - 1e-12 * np.ptp(x[:, -1])
-    candidates = x[top]
-    return candidates[np.argmin(np.abs(candidates[:, 0] - np.median(x[:, 0])))].tolist()
+    """The highest vertex of the body (largest last coordinate), the one nearest to the middle of
+    the highest vertices' first-coordinate range: the point whose vertical displacement the
+    summary reports. Reductions over the owned cells' vertices; nothing is gathered."""
+    comm = dem.comm
+    x = dem.geometry.cell_vertices[: dem.n_owned].reshape(-1, dem.d)
+    top = comm.allreduce(x[:, -1].max(initial=-np.inf), op=MPI.MAX)
+    lo = comm.allreduce(x[:, -1].min(initial=np.inf), op=MPI.MIN)
+    x = x[x[:, -1] >= top - 1e-12 * (top - lo)]
+    middle = 0.5 * (comm.allreduce(x[:, 0].min(initial=np.inf), op=MPI.MIN)
+                    + comm.allreduce(x[:, 0].max(initial=-np.inf), op=MPI.MAX))
+    best = x[np.lexsort((x[:, 0], np.abs(x[:, 0] - middle)))[0]] if len(x) else None
+    candidates = [c for c in comm.allgather(best) if c is not None]
+    return min(candidates, key=lambda c: (abs(c[0] - middle), c[0])).tolist()
 
 
 def _facet_x_ranges(geom, facets: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -60,6 +67,7 @@ def run_static(scene: Mapping, out, comm: MPI.Comm = MPI.COMM_WORLD) -> dict:
     wall = time.perf_counter()
     with io.OutputDirectory(out, comm) as directory:
         dem = simulation.build(scene, comm)
+        t_setup = comm.allreduce(time.perf_counter() - wall, op=MPI.MAX)
         options = scene["statics"]
         result = minimise_energy(dem, options.get("fixed_mean", ()), options.get("fixed_rotation", False),
                                  options.get("rtol", 1e-12))
@@ -78,7 +86,7 @@ def run_static(scene: Mapping, out, comm: MPI.Comm = MPI.COMM_WORLD) -> dict:
             "scene": scene["name"],
             "method": scene["method"],
             "analysis": "static",
-            "n_cells": dem.geometry.num_cells,
+            "n_cells": dem.geometry.num_cells_global,
             "h": scene["mesh"].get("h", float(dem.geometry.facet_diameters.max())),
             "iterations": result.iterations,
             "linear_iterations": result.linear_iterations,
@@ -111,6 +119,8 @@ def run_static(scene: Mapping, out, comm: MPI.Comm = MPI.COMM_WORLD) -> dict:
                                  directory / "final.png", "von Mises stress (Pa)",
                                  scene.get("output", {}).get("picture_scale", 1.0))
         summary["wall_time_s"] = time.perf_counter() - wall
+        summary["setup_time_s"] = t_setup
+        summary["peak_rss_mb"] = simulation.peak_rss_mb(comm)
         io.write_summary(directory / "summary.json", comm, summary)
     return summary
 

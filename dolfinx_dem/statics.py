@@ -93,7 +93,7 @@ def _constraints(dem, components, rotation):
     if rotation:
         if d != 2:
             raise ValueError("fixed_rotation is implemented for 2D bodies")
-        xc = dem.geometry.cell_centres[dem.cell_range[0] : dem.cell_range[1]]
+        xc = dem.geometry.cell_centres[: dem.n_owned]
         mass = dem.comm.allreduce(m[:, 0].sum(), op=MPI.SUM)
         xg = dem.comm.allreduce(m[:, 0] @ xc, op=MPI.SUM) / mass
         w = dem.create_vector()

@@ -22,7 +22,7 @@ def gmsh_mesh(comm, build, gdim=2):
 
 def owned_centres(dem):
     """Barycentres of the owned cells, shape (n_owned, d)."""
-    return dem.geometry.cell_centres[dem.cell_range[0] : dem.cell_range[1]]
+    return dem.geometry.cell_centres[: dem.n_owned]
 
 
 def cell_vector(dem, field):

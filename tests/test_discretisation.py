@@ -37,7 +37,7 @@ def _potential(dem, u, t):
 
 def _random_field(dem, seed):
     u = dem.create_vector()
-    x = dem.geometry.cell_centres[dem.cell_range[0] : dem.cell_range[1]]
+    x = dem.geometry.cell_centres[: dem.n_owned]
     u.array[:] = (np.cos(np.arange(dem.d) + 3 * x) + 0.1 * np.random.default_rng(seed).normal(size=x.shape)).ravel()
     return u
 
@@ -102,7 +102,7 @@ def test_force_is_minus_gradient_directional(d, scheme):
 def test_mass_and_body_force():
     comm = MPI.COMM_WORLD
     dem = _problem(2, "A", comm)
-    volume = comm.allreduce(dem.geometry.cell_volumes[dem.cell_range[0] : dem.cell_range[1]].sum())
+    volume = comm.allreduce(dem.geometry.cell_volumes[: dem.n_owned].sum())
     assert volume == pytest.approx(1.5)
     assert dem.mass.sum() == pytest.approx(2 * MATERIAL.rho * 1.5, rel=1e-13)
     prod = dem.create_vector()

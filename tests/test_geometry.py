@@ -16,7 +16,7 @@ from dolfinx_dem.geometry import compute_geometry, geometry_from_arrays
 
 def _geometry(mesh):
     V = _compat.create_vector_space(mesh, "DG", 0)
-    return compute_geometry(mesh.comm, mesh, V), V
+    return compute_geometry(mesh.comm, mesh, V)[0], V
 
 
 def _meshes(comm):
@@ -33,16 +33,16 @@ def _meshes(comm):
 @pytest.mark.mpi
 @pytest.mark.parametrize("case", range(4))
 def test_volumes_areas_normals(case):
-    mesh, volume, perimeter = _meshes(MPI.COMM_WORLD)[case]
+    comm = MPI.COMM_WORLD
+    mesh, volume, perimeter = _meshes(comm)[case]
     geom, _ = _geometry(mesh)
     d = geom.d
     N = mesh.topology.index_map(d).size_global
-    assert geom.num_cells == N
-    assert geom.owned_ranges[0] == 0 and geom.owned_ranges[-1] == N
-    assert geom.num_facets == mesh.topology.index_map(d - 1).size_global
+    assert comm.allreduce(geom.num_owned, op=MPI.SUM) == N == geom.num_cells_global
+    owned = slice(0, geom.num_owned)
 
     assert np.all(geom.cell_volumes > 0)
-    assert geom.cell_volumes.sum() == pytest.approx(volume, rel=1e-13)
+    assert comm.allreduce(geom.cell_volumes[owned].sum(), op=MPI.SUM) == pytest.approx(volume, rel=1e-13)
     # Closed cells: sum_f |f| n_{f,c} = 0.
     scale = geom.facet_areas.max()
     assert np.abs(geom.facet_area_normals.sum(axis=1)).max() < 1e-13 * scale
@@ -65,43 +65,20 @@ def test_volumes_areas_normals(case):
     assert np.abs(a1 + a2).max() < 1e-14 * scale
     assert np.all(geom.cell_facets[c[:, 0], k[:, 0]] == interior)
     assert np.all(geom.cell_facets[c[:, 1], k[:, 1]] == interior)
-    # Boundary facets: the ones DOLFINx calls exterior; their areas sum to the perimeter.
-    exterior = np.unique(np.concatenate(MPI.COMM_WORLD.allgather(
+    # Every facet of a cell below the outermost halo layer is known to be interior or boundary.
+    inner = geom.facets_of_layers(geom.cell_layer.max() - 1) if comm.size > 1 else np.arange(geom.num_facets)
+    assert np.all(geom.facet_cells[inner, 1] >= -1)
+    # Boundary facets of the owned cells: the ones DOLFINx calls exterior; their areas sum to the
+    # perimeter.
+    mine = np.intersect1d(boundary, geom.facets_of_layers(0))
+    found = np.unique(np.concatenate(comm.allgather(geom.facet_global[mine])))
+    exterior = np.unique(np.concatenate(comm.allgather(
         _compat.local_facet_global_indices(mesh, _compat.exterior_facets(mesh)))))
-    assert np.array_equal(boundary, exterior)
-    assert geom.facet_areas[boundary].sum() == pytest.approx(perimeter, rel=1e-13)
-    # Euler-type count: (d+1) N = 2 F_interior + F_boundary.
-    assert (d + 1) * N == 2 * len(interior) + len(boundary)
+    assert np.array_equal(found, exterior)
+    areas = dict(zip(geom.facet_global[mine].tolist(), geom.facet_areas[mine].tolist()))
+    areas = {k: v for a in comm.allgather(areas) for k, v in a.items()}
+    assert sum(areas.values()) == pytest.approx(perimeter, rel=1e-13)
 
-
-def test_facet_diameters_unit_square_right():
-    """h_f of eq. (13): 0.25 on the 40 axis-aligned edges, 0.25 sqrt(2) on the 16 diagonals."""
-    mesh = dolfinx.mesh.create_unit_square(MPI.COMM_SELF, 4, 4, diagonal=DiagonalType.right)
-    geom, _ = _geometry(mesh)
-    h = np.sort(geom.facet_diameters)
-    assert h.shape == (56,)
-    assert np.allclose(h[:40], 0.25, rtol=1e-14)
-    assert np.allclose(h[40:], 0.25 * math.sqrt(2), rtol=1e-14)
-    assert np.allclose(geom.facet_areas, geom.facet_diameters, rtol=1e-14)  # segments
-    assert np.allclose(geom.cell_volumes, 1 / 32, rtol=1e-13)
-    # Facet barycentres are edge midpoints: on the grid lines of spacing 1/8.
-    assert np.allclose(np.round(geom.facet_centres * 8), geom.facet_centres * 8, atol=1e-12)
-
-
-def test_facet_diameters_1d_and_3d():
-    # 1D: distance between the neighbouring barycentres, twice the half-cell at the boundary.
-    x = np.array([0.0, 0.1, 0.4, 0.5, 1.0])
-    vertices = np.stack([x[:-1], x[1:]], axis=1)[:, :, None]
-    cell_facets = np.stack([np.arange(1, 5), np.arange(0, 4)], axis=1)  # facet j opposite vertex j
-    vertex_ids = np.stack([np.arange(4), np.arange(1, 5)], axis=1)
-    geom = geometry_from_arrays(vertices, vertex_ids, cell_facets, 5, np.array([0, 4]))
-    centres = (x[:-1] + x[1:]) / 2
-    assert np.allclose(geom.cell_volumes, np.diff(x))
-    assert np.allclose(geom.facet_centres[:, 0], x)
-    expected = np.concatenate([[2 * (centres[0] - x[0])], np.diff(centres), [2 * (x[-1] - centres[-1])]])
-    assert np.allclose(geom.facet_diameters, expected, rtol=1e-14)
-    # 3D: the longest edge of each triangular face; a unit cube's faces have edges 1, 1, sqrt 2
-    # or 1, sqrt 2, sqrt 3 (interior), h = sqrt 2 or sqrt 3.
     mesh = dolfinx.mesh.create_unit_cube(MPI.COMM_SELF, 1, 1, 1)
     geom, _ = _geometry(mesh)
     h = geom.facet_diameters
@@ -116,12 +93,13 @@ def test_cell_numbering_is_dg0_numbering(case):
     """Cell c of the geometry is the cell of DG0 block dof c: interpolating x gives x_c."""
     mesh = _meshes(MPI.COMM_WORLD)[case][0]
     geom, V = _geometry(mesh)
-    start, stop = geom.owned_ranges[mesh.comm.rank], geom.owned_ranges[mesh.comm.rank + 1]
+    start, stop = geom.owned_range
     assert (start, stop) == tuple(V.dofmap.index_map.local_range)
+    assert np.array_equal(geom.cell_global[: geom.num_owned], np.arange(start, stop))
     f = dolfinx.fem.Function(V)
     f.interpolate(lambda x: x[: geom.d])
     owned = f.vector.array_r[: (stop - start) * geom.d].reshape(-1, geom.d)
-    assert np.allclose(owned, geom.cell_centres[start:stop], rtol=0, atol=1e-14)
+    assert np.allclose(owned, geom.cell_centres[: geom.num_owned], rtol=0, atol=1e-14)
 
 
 def _sorted_rows(a):
@@ -132,25 +110,26 @@ def _sorted_rows(a):
 @pytest.mark.mpi
 @pytest.mark.parametrize("case", range(4))
 def test_parallel_geometry_equals_serial(case):
-    """The gathered geometry of a distributed mesh is the serial geometry, up to numbering."""
-    par, volume, perimeter = _meshes(MPI.COMM_WORLD)[case]
+    """The geometry a process holds (owned cells and halo) is the serial geometry of the same
+    cells, up to numbering; and every facet below the outermost halo layer has the serial cells."""
+    comm = MPI.COMM_WORLD
+    par = _meshes(comm)[case][0]
     ser = _meshes(MPI.COMM_SELF)[case][0]
     gp, _ = _geometry(par)
     gs, _ = _geometry(ser)
-    assert gp.num_cells == gs.num_cells and gp.num_facets == gs.num_facets
-    assert gp.cell_volumes.sum() == pytest.approx(gs.cell_volumes.sum(), rel=1e-14)
     d = gp.d
+    key = lambda g, rows: {tuple(np.round(r, 10)) for r in rows}  # noqa: E731
     rows = lambda g: np.column_stack([g.cell_centres, g.cell_volumes])  # noqa: E731
-    assert np.allclose(_sorted_rows(rows(gp)), _sorted_rows(rows(gs)), atol=1e-12)
-    frows = lambda g: np.column_stack(  # noqa: E731
-        [g.facet_centres, g.facet_areas, g.facet_diameters, g.facet_cells[:, 1] < 0])
-    assert np.allclose(_sorted_rows(frows(gp)), _sorted_rows(frows(gs)), atol=1e-12)
+    assert key(gp, rows(gp)) <= key(gs, rows(gs))
+    inner = gp.facets_of_layers(max(gp.cell_layer.max() - 1, 0))
+    frows = lambda g, f: np.column_stack(  # noqa: E731
+        [g.facet_centres[f], g.facet_areas[f], g.facet_diameters[f], g.facet_cells[f, 1] < 0])
+    assert key(gp, frows(gp, inner)) <= key(gs, frows(gs, np.arange(gs.num_facets)))
     # Per-cell facet normals, keyed by cell barycentre then outward normal.
     keyed = lambda g: np.concatenate([  # noqa: E731
         np.repeat(g.cell_centres, d + 1, axis=0), g.facet_area_normals.reshape(-1, d)], axis=1)
-    assert np.allclose(_sorted_rows(keyed(gp)), _sorted_rows(keyed(gs)), atol=1e-12)
-    # The owned ranges partition the cells.
-    assert np.all(np.diff(gp.owned_ranges) >= 0)
-    assert len(gp.owned_ranges) == MPI.COMM_WORLD.size + 1
-    assert np.array_equal(gp.owner_of_cells(np.arange(gp.num_cells)),
-                          np.repeat(np.arange(MPI.COMM_WORLD.size), np.diff(gp.owned_ranges)))
+    assert key(gp, keyed(gp)) <= key(gs, keyed(gs))
+    # The owned cells partition the mesh.
+    owned = comm.allgather(gp.cell_global[: gp.num_owned])
+    assert np.array_equal(np.sort(np.concatenate(owned)), np.arange(gs.num_cells))
+    assert np.all(gp.cell_owner[: gp.num_owned] == comm.rank)

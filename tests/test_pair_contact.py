@@ -111,7 +111,7 @@ def test_two_discs_collide_and_separate_with_exact_energy_and_momentum(scheme):
     stepper = MEMM(dem, dt)
     first = stepper.initialise(dem.create_vector(), cell_vector(dem, approach))
     mass = dem.mass.array_r.reshape(-1, 2)
-    x = dem.geometry.cell_centres[dem.cell_range[0]:dem.cell_range[1]]
+    x = dem.geometry.cell_centres[: dem.n_owned]
 
     def momentum():
         v = 0.5 * (stepper.v_prev.array_r + stepper.v_next.array_r).reshape(-1, 2)

@@ -6,6 +6,7 @@ import pytest
 from mpi4py import MPI
 
 import dolfinx.fem
+import dolfinx.mesh
 
 from dolfinx_dem import _compat, meshes, plotting
 
@@ -93,3 +94,17 @@ def test_plot_series(tmp_path):
         plotting.plot_series(csv, ["energy"], tmp_path / "x.png")
     with pytest.raises(FileNotFoundError, match="nope.csv"):
         plotting.plot_series(tmp_path / "nope.csv", ["gap"], tmp_path / "x.png")
+
+
+def test_pictures_are_skipped_above_the_size_limit(tmp_path, monkeypatch):
+    """Pictures gather the mesh on rank 0: above PICTURE_MAX_CELLS they are not drawn at all."""
+    mesh = dolfinx.mesh.create_unit_square(MPI.COMM_WORLD, 4, 4)
+    n = mesh.topology.index_map(2).size_local
+    monkeypatch.setattr(plotting, "PICTURE_MAX_CELLS", 31)
+    assert plotting.plot_cell_field(mesh, None, np.zeros(n), tmp_path / "a.png", "v") is None
+    animation = plotting.Animation(mesh, tmp_path / "a.gif", "v")
+    animation.write(0.0, np.zeros((n, 2)), np.zeros(n))
+    animation.close()
+    assert animation.skipped and not (tmp_path / "a.png").exists() and not (tmp_path / "a.gif").exists()
+    monkeypatch.setattr(plotting, "PICTURE_MAX_CELLS", 32)
+    assert plotting.plot_cell_field(mesh, None, np.zeros(n), tmp_path / "a.png", "v") is not None
