@@ -110,6 +110,8 @@ class MEMM:
         """Start from u^0, v^0: v^{-1/2} = v^0 - dt/2 M^-1 F(u^0), v^{1/2} = v^0 + dt/2 M^-1 F(u^0)."""
         self.t0, self.n = float(t0), 0
         u0.copy(self.u)
+        for contact in getattr(self.problem, "contacts", ()):
+            contact.prepare(self.u)
         self.problem.force(self.u, self.t0, self._f)
         self.force_evaluations += 1
         self._f.pointwiseMult(self._f, self.problem.inverse_mass)
@@ -128,10 +130,13 @@ class MEMM:
         problem that has contact, integrates the smooth (affine) part at the midpoint and each
         contact correction piecewise between its events (paper §4): exactly, so the
         pseudo-energy is conserved through impacts. ``force_evaluations`` counts a step's
-        patch-only evaluations beyond the first as evaluations too.
+        patch-only evaluations beyond the first as evaluations too. Every contact model is first
+        prepared for the step's free flight (``prepare``: e.g. the pair list), whatever the rule.
         """
         out.set(0.0)
         contacts = getattr(self.problem, "contacts", ())
+        for contact in contacts:
+            contact.prepare(self.u, self.v_next, self.dt)
         split = bool(contacts) and self.quadrature == "midpoint"
         evaluations = 0
         for x, w in zip(self.nodes, self.weights):

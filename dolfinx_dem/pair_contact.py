@@ -33,8 +33,10 @@ is conserved to rounding.
 
 Broad phase: pairs are listed (a Verlet list built with a k-d tree on the displaced facet
 centres) when the centres are closer than r = max|f| + skin; the list is rebuilt when a candidate
-facet has moved more than skin/2 since the last build (checked at both ends of each step, and the
-flight is affine), so a pair that is not listed cannot touch. Cost per step: the gaps of the
+facet has moved more than skin/2 since the last build, so a pair that is not listed cannot touch.
+The check is ``prepare(u, v, dt)``, which MEMM calls before every step's force integral whatever
+its quadrature (both ends of the affine flight); every evaluation checks that the list is valid
+for its displacements and raises otherwise (never a silently incomplete list). Cost per step: the gaps of the
 listed pairs, and on steps with contact the energy rows those pairs touch (the listed patch),
 not all boundary facets. Everything is local to the contact patch and
 computed from gathered patch values on every process (as contact.RigidContact).
@@ -236,14 +238,35 @@ class PairContact:
             e_i[k], e_j[k] = h[0] / D[:, None], h[1] / D[:, None]
         return e_i, e_j
 
-    def _update_pairs(self, uc: np.ndarray, uc_end: np.ndarray) -> bool:
-        """Rebuild the list if a candidate facet moves more than skin/2 during the coming step;
-        returns whether it did (the patch changes then)."""
-        moved = max(np.einsum("ni,ni->n", x - self._reference, x - self._reference).max() for x in (uc, uc_end))
-        if moved > 0.25 * self.skin**2:
+    def prepare(self, u: PETSc.Vec, v: PETSc.Vec | None = None, dt: float = 0.0) -> None:
+        """Make the Verlet list valid for the states u + tau v, 0 <= tau <= dt (u alone without
+        v): rebuild it at u if a candidate facet would move more than skin/2 from where it was
+        at the last build. The free facet displacements are affine in tau, so checking both ends
+        covers the whole flight. ``MEMM`` calls this before every step's force integral,
+        whatever the quadrature, and at ``initialise``; call it before evaluating forces or
+        energies at displacements of your own. Collective. Arrays of patch values gathered
+        before a rebuild are invalid after it."""
+        start = time.process_time()
+        up = self.patch_values(u)
+        uc = self.free_displacements(up)
+        stale = self._stale(uc)
+        if not stale and v is not None and dt != 0.0:
+            stale = self._stale(uc + dt * (self._R @ self.patch_values(v)).reshape(-1, self.d))
+        if stale:
             self._build_pairs(uc)
-            return True
-        return False
+        self.seconds += time.process_time() - start
+
+    def _stale(self, uc: np.ndarray) -> bool:
+        """Whether a candidate facet with free displacements ``uc`` has moved more than skin/2
+        since the last list build (a pair not listed might then touch)."""
+        moved = uc - self._reference
+        return bool(np.einsum("ni,ni->n", moved, moved).max() > 0.25 * self.skin**2)
+
+    def _check_listed(self, uc: np.ndarray):
+        if self._stale(uc):
+            raise RuntimeError("contact between bodies: the candidate pair list is stale for these displacements "
+                               "(a facet moved more than skin/2 since it was built); call prepare(u) first "
+                               "(MEMM does it every step)")
 
     # -- energy and force ----------------------------------------------------------------------
     def patch_values(self, vec: PETSc.Vec) -> np.ndarray:
@@ -258,13 +281,16 @@ class PairContact:
     def _touching(self, up: np.ndarray) -> _Pairs:
         """The listed pairs with g < 0."""
         L = self.listed
-        return L.subset(np.flatnonzero(L.gaps(self.free_displacements(up)) < 0))
+        uc = self.free_displacements(up)
+        self._check_listed(uc)
+        return L.subset(np.flatnonzero(L.gaps(uc) < 0))
 
     def energy_correction(self, up: np.ndarray) -> tuple[float, float]:
         """(elastic, stabilisation) energy changes from the contact reconstructions."""
         start = time.process_time()
         L, P = self.listed, self.listed.patch
         uc = self.free_displacements(up)
+        self._check_listed(uc)
         g = np.minimum(L.gaps(uc), 0.0)
         elastic = stabilisation = 0.0
         if (g < 0).any():
@@ -279,7 +305,9 @@ class PairContact:
         """F - F_free at the patch dofs (N): the exact negative gradient of the energy change."""
         out = np.zeros_like(up)
         P = self.listed.patch
-        out[P.columns] = self._correction(self.free_displacements(up)[..., None], up[P.columns, None])[:, 0]
+        uc = self.free_displacements(up)
+        self._check_listed(uc)
+        out[P.columns] = self._correction(uc[..., None], up[P.columns, None])[:, 0]
         return out
 
     def _correction(self, uc: np.ndarray, U: np.ndarray) -> np.ndarray:
@@ -318,8 +346,8 @@ class PairContact:
         start = time.process_time()
         up, vp = self.patch_values(u), self.patch_values(v)
         uc0, uc1 = self.free_displacements(up), self.free_displacements(up + dt * vp)
-        if self._update_pairs(uc0, uc1):
-            up, vp = self.patch_values(u), self.patch_values(v)
+        self._check_listed(uc0)
+        self._check_listed(uc1)
         L = self.listed
         g0, g1 = L.gaps(uc0), L.gaps(uc1)
         p = np.flatnonzero((g0 < 0) | (g1 < 0))
@@ -368,6 +396,7 @@ class PairContact:
         partner covering it exactly; partial overlaps (facets sliding against each other) leave a
         gap of the order of the cell gap times the uncovered fraction."""
         uc = self.free_displacements(up)
+        self._check_listed(uc)
         w = self.listed.overlaps(uc)[0]
         if not (w > 0).any():
             return 0.0
@@ -385,6 +414,7 @@ class PairContact:
     def touching(self, up: np.ndarray) -> bool:
         """Whether some pair is in contact (g < 0 with a positive overlap)."""
         uc = self.free_displacements(up)
+        self._check_listed(uc)
         return bool(((self.listed.gaps(uc) < 0) & (self.listed.overlaps(uc)[0] > 0)).any())
 
     def touch_time(self, uc0: np.ndarray, uc1: np.ndarray, dt: float) -> float | None:
@@ -404,6 +434,7 @@ class PairContact:
         |(z_p . (a + delta_a)) w_p|, the force one facet of the pair exerts on the other."""
         L, P = self.listed, self.listed.patch
         uc = self.free_displacements(up)
+        self._check_listed(uc)
         g = np.minimum(L.gaps(uc), 0.0)
         w = L.overlaps(uc)[0]
         a = P.Q @ up[P.columns] + P.q

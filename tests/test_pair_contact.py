@@ -57,6 +57,7 @@ def test_force_is_the_gradient_of_the_energy_in_contact(scheme):
     c = dem.pair_contact
     rng = np.random.default_rng(5)
     u = cell_vector(dem, lambda x: approach(x, 0.013) + 1e-3 * rng.standard_normal(x.shape))
+    c.prepare(u)
     up = c.patch_values(u)
     touching = c._touching(up)
     overlap = touching.overlaps(c.free_displacements(up))[0]
@@ -86,6 +87,7 @@ def test_facet_corrections_are_the_reconstruction_the_energy_uses(scheme):
     c, ops = dem.pair_contact, dem.operators
     rng = np.random.default_rng(5)
     u = cell_vector(dem, lambda x: approach(x, 0.013) + 1e-3 * rng.standard_normal(x.shape))
+    c.prepare(u)
     up = c.patch_values(u)
     delta = c.facet_corrections(up)
     assert np.abs(delta).max() > 1e-4
@@ -151,6 +153,50 @@ def test_matching_facets_close_the_gap_exactly(scheme):
     assert c.penetration(up) < 1e-15
     if scheme == "B":
         assert np.abs(np.abs(c.facet_corrections(up)[:, 0]) - 0.003).max() < 1e-15
+
+
+@pytest.mark.mpi
+@pytest.mark.parametrize("quadrature", ["midpoint", "gauss-legendre-2"])
+def test_the_pair_list_follows_the_bodies_under_every_quadrature(quadrature):
+    """Discs 0.12 m apart (beyond the list radius at t = 0: no pair listed) approach at
+    +-0.3 m/s: the list must be rebuilt as they move, whatever rule integrates the force
+    (``prepare``, called by MEMM before every step). Before, gauss-legendre-2 never rebuilt it
+    and the discs passed through each other (left disc still at +0.3 m/s)."""
+    mesh, _, _ = meshes.create_discs(MPI.COMM_WORLD, [((0.14, 2.27), 0.1), ((0.46, 2.27), 0.1)], 0.03)
+    dem = DEMDiscretisation(mesh, SOFT, "B")
+    dem.set_contact_boundary(_compat.locate_boundary_facets(mesh, lambda x: (x[0] >= 0.14) & (x[0] <= 0.46)))
+    c = dem.pair_contact
+    assert len(c.listed) == 0
+    dt = 0.2 * dem.stable_time_step()
+    stepper = MEMM(dem, dt, quadrature)
+    stepper.initialise(dem.create_vector(), cell_vector(dem, lambda x: approach(x - [0.05, 0.0])))
+    touched = False
+    for _ in range(int(0.6 / dt)):
+        stepper.step()
+        touched |= c.touching(c.patch_values(stepper.u))
+    assert touched and c.rebuilds > 2
+    mass = dem.mass.array_r.reshape(-1, 2)[:, 0]
+    left = (dem.geometry.cell_centres[dem.cell_range[0]:dem.cell_range[1], 0] < 0.3)
+    v = 0.5 * (stepper.v_prev.array_r + stepper.v_next.array_r).reshape(-1, 2)[:, 0]
+    p_left = dem.comm.allreduce(float((mass * v)[left].sum()), op=MPI.SUM)
+    m_left = dem.comm.allreduce(float(mass[left].sum()), op=MPI.SUM)
+    assert p_left / m_left < -0.2  # it bounced back (measured -0.247 with both rules)
+
+
+def test_evaluations_refuse_a_stale_pair_list():
+    """Forces and energies at displacements the list was not prepared for raise, instead of
+    silently leaving out pairs; after ``prepare`` they are evaluated."""
+    dem, facets = two_discs(h=0.03)
+    dem.set_contact_boundary(facets)
+    u = cell_vector(dem, lambda x: approach(x, 0.05))
+    F = dem.create_vector()
+    with pytest.raises(RuntimeError, match="pair list is stale.*call prepare"):
+        dem.force(u, 0.0, F)
+    with pytest.raises(RuntimeError, match="pair list is stale"):
+        dem.energies(u, 0.0)
+    dem.pair_contact.prepare(u)
+    dem.force(u, 0.0, F)
+    assert dem.energies(u, 0.0)["elastic"] > 0.0
 
 
 @pytest.mark.mpi
