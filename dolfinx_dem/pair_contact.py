@@ -15,8 +15,8 @@ reconstruction (eq. (31)) is, with g^- = min(g, 0),
     u_f = u_f^free + sum_{f'} (w / |f|) g^- e_f,      u_f' = u_f'^free + sum_f (w / |f'|) g^- e_f',
 
 with e_f = n/2, e_f' = -n/2 for scheme B (eq. (26)-(27), theta = 1/2), and for two scheme A
-facets the directions of eq. (23)-(24) (equal normal tractions, no tangential traction; see
-``PairContact._directions``). It equals the free one when g = 0 or w = 0, so the energy is
+facets the directions of eq. (23)-(24) where they are well posed (equal normal changes of the two
+tractions on n; the scheme B rule otherwise, counted; see ``PairContact._directions``). It equals the free one when g = 0 or w = 0, so the energy is
 continuous (§3.4.3). Writing the energy rows a = Q u + q (Q = [S; J]) and
 z_p = Q_f e_f / |f| + Q_f' e_f' / |f'| for a pair p, the rows change by delta_a = sum_p c_p z_p
 with c_p = w_p g_p^-, so that
@@ -139,6 +139,7 @@ class PairContact:
             self._Ca = np.einsum("ijkl,nl->nijk", C, an) / geom.cell_volumes[cells, None, None, None]
         self.evaluations = 0
         self.rebuilds = 0
+        self._scheme_b_rule = np.empty(0, dtype=np.int64)  # pair keys i * n_facets + j, see _directions
         self.seconds = 0.0  # processor time of the contact work in force integrals and energies
         self._reference = None  # candidate cell displacements at the last list build
         zero = np.zeros((len(f), d))
@@ -219,24 +220,55 @@ class PairContact:
         """The contact corrections of a pair are u_f += (w/|f|) g^- e_f, u_f' += (w/|f'|) g^- e_f'.
 
         Scheme B (eq. (26)-(27), theta = 1/2): e_f = n/2, e_f' = -n/2. Scheme A (eq. (23)-(24)),
-        when both facets are scheme A facets: the corrections change the two cells' tractions
-        on n by s A_f e_f... with A_f x = (C : (x (x) a_f)) n / |c|: e_f = A_f^-1 n / D,
-        e_f' = A_f'^-1 n / D, D = n . A_f^-1 n - n . A_f'^-1 n, so that the tractions on n are
-        normal and equal on both sides (eq. (23)-(24)) and a fully overlapping pair closes its
-        gap; free Neumann facets already carry zero traction on n when n = n_f = -n_f'.
-        Both rules close the gap of a pair of equal facets covering each other."""
+        when both facets are scheme A facets: with A_f x = (C : (x (x) a_f)) n / |c| the change
+        of cell c's traction on n when u_f changes by x, e_f = A_f^-1 n / D, e_f' = A_f'^-1 n / D,
+        D = n . A_f^-1 n - n . A_f'^-1 n: the corrections change both cells' tractions on n by
+        the same normal vector, and n . (e_f - e_f') = 1 closes the gap of a fully overlapping
+        pair. (The tractions on n themselves are normal and equal only where the free ones
+        vanish on n, i.e. when n = n_f = -n_f': the free facets carry zero traction on their
+        own normals.)
+
+        When eq. (23)-(24) are not well posed the pair uses the scheme B rule; ``scheme_b_pairs``
+        counts such pairs (``summary.json``: ``contact_pairs_scheme_b_rule``). For isotropic C,
+        n . A_f^-1 n = cos t_f / (alpha_f (2 cos^2 t_f (lambda + mu) - lambda)), alpha_f = |f|/|c|,
+        t_f the angle between n and n_f: a cell's normal compliance has the sign of its facet
+        normal's side only if cos^2 t_f > kappa = lambda / (2 (lambda + mu)) (nu in plane
+        strain, nu/(1+nu) in plane stress). The rule of eq. (23)-(24) is used when both cells'
+        compliances have their sign (n . A_f^-1 n > 0 > n . A_f'^-1 n): then 0 < n . e_f < 1,
+        0 < -n . e_f' < 1 and |e_f| = n . e_f / cos t_f < 1/sqrt(kappa), bounded. Otherwise
+        D may vanish (unbounded corrections, an arbitrarily stiff pair), be negative (no
+        solution: the correction would open the penetration further), or be positive with one
+        facet moved further into the other body. Facing facets of equal length have
+        t_f = t_f' < 45 deg, and kappa < 1/2, so only pairs of unequal facets whose normals are
+        far from antiparallel (the longer facet tilts n towards its own normal) are affected.
+        A set-up check cannot replace this rule: every pair of facing candidate facets could
+        meet, and a curved boundary has facets of every orientation. The directions depend on
+        the pair only, so the energy stays continuous and the force its exact gradient."""
         e_i, e_j = 0.5 * n, -0.5 * n
         both_a = self.is_scheme_a[i] & self.is_scheme_a[j]
         if both_a.any():
             k = np.flatnonzero(both_a)
-            h = [np.linalg.solve(np.einsum("nijk,nj->nik", self._Ca[f[k]], n[k]), n[k][..., None])[..., 0]
-                 for f in (i, j)]
-            D = np.einsum("pi,pi->p", n[k], h[0] - h[1])
-            if not (D > 0).all():
-                raise RuntimeError("scheme A contact: a facet pair has no compliant solution of eq. (23)-(24) "
-                                   f"(D = {D.min():.3e} <= 0): use scheme B")
-            e_i[k], e_j[k] = h[0] / D[:, None], h[1] / D[:, None]
+            # A_f^-1 n = adj(A_f) n / det(A_f) (2D), so that a singular A_f is no error.
+            y, compliance = [], []
+            for f in (i, j):
+                A = np.einsum("nijk,nj->nik", self._Ca[f[k]], n[k])
+                adj_n = np.stack([A[:, 1, 1] * n[k, 0] - A[:, 0, 1] * n[k, 1],
+                                  A[:, 0, 0] * n[k, 1] - A[:, 1, 0] * n[k, 0]], axis=1)
+                det = A[:, 0, 0] * A[:, 1, 1] - A[:, 0, 1] * A[:, 1, 0]
+                y.append(np.divide(adj_n, det[:, None], out=np.zeros_like(adj_n), where=det[:, None] != 0))
+                compliance.append(np.where(det != 0, np.einsum("pi,pi->p", n[k], y[-1]), 0.0))
+            posed = (compliance[0] > 0) & (compliance[1] < 0)
+            D = compliance[0] - compliance[1]
+            a = k[posed]
+            e_i[a], e_j[a] = y[0][posed] / D[posed, None], y[1][posed] / D[posed, None]
+            self._scheme_b_rule = np.union1d(self._scheme_b_rule, i[k[~posed]] * len(self.facets) + j[k[~posed]])
         return e_i, e_j
+
+    @property
+    def scheme_b_pairs(self) -> int:
+        """How many distinct pairs of scheme A facets listed so far use the scheme B rule
+        because eq. (23)-(24) are not well posed for them (see ``_directions``)."""
+        return len(self._scheme_b_rule)
 
     def prepare(self, u: PETSc.Vec, v: PETSc.Vec | None = None, dt: float = 0.0) -> None:
         """Make the Verlet list valid for the states u + tau v, 0 <= tau <= dt (u alone without

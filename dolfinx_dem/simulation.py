@@ -381,6 +381,7 @@ class PairContactStatistics:
             "contact_candidate_facets": int(len(c.facets)),
             "contact_pairs_listed": int(len(c.listed)),
             "contact_list_rebuilds": c.rebuilds,
+            "contact_pairs_scheme_b_rule": c.scheme_b_pairs,
             "first_contact_time": self.first_contact,
             "max_penetration": self.penetration,
             "contact_seconds": c.seconds,
