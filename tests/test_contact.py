@@ -79,6 +79,40 @@ def test_energy_and_reconstruction_are_continuous_across_the_switch(scheme):
     assert abs(f_in - f_out) < 3e-9
 
 
+@pytest.mark.skip_in_parallel
+@pytest.mark.parametrize("tilt", [0.0, 0.2])
+def test_scheme_a_contact_changes_the_traction_on_the_obstacle_normal_only_along_it(tilt):
+    """Scheme A against an obstacle: the correction -g e_f, e_f = A^-1 n / (n . A^-1 n),
+    changes sigma_c n only along n, so the tangential traction (I - n n) sigma_c n is that of the
+    free reconstruction. The free facet carries sigma_c n_f = 0: the tangential traction is zero
+    when n = -n_f (tilt 0: the plate's bottom on the plane y = 0), and not otherwise (tilt 0.2
+    rad: an inclined plane under the same bottom facets)."""
+    mesh, _, tags = meshes.create_rectangle(MPI.COMM_WORLD, [0.0, 0.01], [1.0, 0.51], [8, 4], "crossed")
+    dem = DEMDiscretisation(mesh, PLATE, "A")
+    n = np.array([np.sin(tilt), np.cos(tilt)])
+    dem.set_obstacles([HalfSpace([0.0, 0.0], n, tags.find(meshes.YMIN))])
+    c = dem.contact
+    rng = np.random.default_rng(4)
+    # Stretched along x, pushed along -n (the inclined plane rises from 0.01 below the plate's
+    # left end), plus noise.
+    u = cell_vector(dem, lambda x: -(0.016 + 0.6 * np.sin(tilt)) * n + 0.05 * x[:, :1] * [[1.0, 0.0]]
+                    + 0.002 * rng.standard_normal(x.shape))
+    up = c.patch_values(u)
+    touching = np.flatnonzero((c.gaps(up) < 0) & np.isin(c.facets, dem.reconstruction.scheme_a_facets))
+    assert len(touching) >= 4
+    cells = c.cells[touching]
+    G = dem.gradient(u, 0.0)[cells]
+    sigma, free = PLATE.stress(G), PLATE.stress(G - c.gradient_correction(up)[touching])
+    tangential = [np.einsum("pi,pij,j->p", np.array([[n[1], -n[0]]]).repeat(len(cells), 0), s, n) for s in (sigma, free)]
+    normal = np.abs(np.einsum("i,pij,j->p", n, sigma, n))
+    assert normal.min() > 1.0  # in compression: the contact acts
+    assert np.abs(tangential[0] - tangential[1]).max() < 1e-12 * normal.max()
+    if tilt == 0.0:
+        assert np.abs(tangential[0]).max() < 1e-12 * normal.max()
+    else:  # measured: 0.19 of the largest free stress (1.0e-16 of the normal stress at tilt 0)
+        assert np.abs(tangential[0]).max() > 0.05 * np.abs(free).max()
+
+
 @pytest.mark.mpi
 @pytest.mark.parametrize("scheme", ["A", "B"])
 def test_bar_impact_conserves_the_pseudo_energy_through_the_impact(scheme):
