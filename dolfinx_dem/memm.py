@@ -40,11 +40,12 @@ QUADRATURES = {"midpoint": GaussLegendre(1)} | {f"gauss-legendre-{q}": GaussLege
 
 
 class InstabilityError(RuntimeError):
-    """Raised by the stability monitor; carries the step, time and a suggested time step."""
+    """Raised by the stability monitor; carries the step, time, a suggested time step and the
+    monitor's reason (the message without the advice)."""
 
-    def __init__(self, message: str, step: int, t: float, dt: float, suggested_dt: float):
+    def __init__(self, message: str, step: int, t: float, dt: float, suggested_dt: float, reason: str = ""):
         super().__init__(message)
-        self.step, self.t, self.dt, self.suggested_dt = step, t, dt, suggested_dt
+        self.step, self.t, self.dt, self.suggested_dt, self.reason = step, t, dt, suggested_dt, reason
 
 
 @dataclasses.dataclass(frozen=True)
@@ -216,7 +217,7 @@ class MEMM:
             f"MEMM is unstable at step {diag.step} (t = {diag.t:.6g}, dt = {self.dt:.6g}): {reason}. "
             f"Reduce the time step, e.g. dt = {suggested:.4g} (half the stability limit "
             f"2/sqrt(lambda_max(M^-1 K)) of the elastic operator)",
-            diag.step, diag.t, self.dt, suggested,
+            diag.step, diag.t, self.dt, suggested, reason,
         )
 
     def suggested_dt(self) -> float:
