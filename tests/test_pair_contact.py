@@ -2,6 +2,8 @@
 including the sliding force F^G, exact conservation through impacts by event splitting,
 momentum, non-penetration of matching facets, and bad input."""
 
+import json
+
 import numpy as np
 import pytest
 from mpi4py import MPI
@@ -520,3 +522,35 @@ def test_scheme_a_contact_runs_through_pairs_without_a_compliant_solution():
     disc = dem.geometry.cell_centres[dem.cell_range[0]:dem.cell_range[1], 1] > 0.0
     v = 0.5 * (stepper.v_prev.array_r + stepper.v_next.array_r).reshape(-1, 2)[:, 1]
     assert dem.comm.allreduce(float((mass * v)[disc].sum()), op=MPI.SUM) > 0.0  # moving up again
+
+
+@pytest.mark.skip_in_parallel
+def test_a_run_reports_the_pairs_that_use_the_scheme_b_rule(tmp_path, capsys):
+    """summary.json (``contact_pairs_scheme_b_rule``) and the command line report them."""
+    import gmsh
+
+    from dolfinx_dem import cli
+
+    gmsh.initialize()
+    try:
+        gmsh.option.setNumber("General.Terminal", 0)
+        disc = gmsh.model.occ.addDisk(0.0, 0.22, 0.0, 0.1, 0.1)
+        block = gmsh.model.occ.addRectangle(-0.3, -0.2, 0.0, 0.6, 0.2)
+        gmsh.model.occ.synchronize()
+        for tag, (surface, h) in enumerate(((disc, 0.015), (block, 0.05)), start=1):
+            gmsh.model.addPhysicalGroup(2, [surface], tag)
+            gmsh.model.mesh.setSize(gmsh.model.getBoundary([(2, surface)], recursive=True), h)
+        gmsh.model.mesh.generate(2)
+        gmsh.write(str(tmp_path / "disc_block.msh"))
+    finally:
+        gmsh.finalize()
+    (tmp_path / "scene.toml").write_text(
+        'method = "dem-A"\n[mesh]\ntype = "file"\npath = "disc_block.msh"\n'
+        "[material]\nE = 100.0\nnu = 0.3\nrho = 100.0\n"
+        '[contact]\nboundary = ["(y <= 0.22) & (y >= -1e-9)"]\n'
+        '[initial]\nvelocity = ["0", "where(y > 0, -0.5, 0)"]\n[time]\nend = 0.4\ncfl = 0.3\n')
+    assert cli.main(["run", str(tmp_path / "scene.toml"), "--out", str(tmp_path / "out")]) == 0
+    summary = json.loads((tmp_path / "out" / "summary.json").read_text())
+    assert summary["contact_pairs_scheme_b_rule"] > 0 and summary["pseudo_energy_rel_drift"] < 1e-13
+    assert f"note: {summary['contact_pairs_scheme_b_rule']} pairs of scheme A facets used the scheme B" in \
+        capsys.readouterr().out
