@@ -158,8 +158,7 @@ def test_matching_facets_close_the_gap_exactly(scheme):
         assert np.abs(np.abs(c.facet_corrections(up)[:, 0]) - 0.003).max() < 1e-15
 
 
-@pytest.mark.mpi
-@pytest.mark.parametrize("quadrature", ["midpoint", "gauss-legendre-2"])
+@pytest.mark.parametrize("quadrature", ["midpoint", pytest.param("gauss-legendre-2", marks=pytest.mark.mpi)])
 def test_the_pair_list_follows_the_bodies_under_every_quadrature(quadrature):
     """Discs 0.12 m apart (beyond the list radius at t = 0: no pair listed) approach at
     +-0.3 m/s: the list must be rebuilt as they move, whatever rule integrates the force
@@ -500,7 +499,6 @@ def test_scheme_a_directions_where_eq_23_24_are_well_posed():
     assert np.linalg.norm(L.e_j[posed], axis=1).max() < 1 / np.sqrt(0.3)
 
 
-@pytest.mark.mpi
 def test_scheme_a_contact_runs_through_pairs_without_a_compliant_solution():
     """The disc falls onto the block: list rebuilds meet pairs with D <= 0 (before: a
     RuntimeError at t = 0.247 s). They use the scheme B rule; the energy stays exact and the
