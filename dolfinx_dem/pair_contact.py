@@ -16,8 +16,8 @@ reconstruction (eq. (31)) is, with g^- = min(g, 0),
 
 with e_f = n/2, e_f' = -n/2 for scheme B (eq. (26)-(27), theta = 1/2), and for two scheme A
 facets the directions of eq. (23)-(24) where they are well posed (equal normal changes of the two
-tractions on n; the scheme B rule otherwise, counted; see ``PairContact._directions``). It equals the free one when g = 0 or w = 0, so the energy is
-continuous (§3.4.3). Writing the energy rows a = Q u + q (Q = [S; J]) and
+tractions on n; the scheme B rule otherwise, counted; see ``PairContact._directions``). It equals
+the free one when g = 0 or w = 0, so the energy is continuous (§3.4.3). Writing the energy rows a = Q u + q (Q = [S; J]) and
 z_p = Q_f e_f / |f| + Q_f' e_f' / |f'| for a pair p, the rows change by delta_a = sum_p c_p z_p
 with c_p = w_p g_p^-, so that
 

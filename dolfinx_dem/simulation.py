@@ -106,20 +106,22 @@ def build(scene: Mapping, comm: MPI.Comm = MPI.COMM_WORLD) -> DEMDiscretisation:
         value = bc.get("value", [0.0] * mesh.topology.dim)
         field = (lambda x, t, v=value, key=f"dirichlet[{i}].value": scenes.evaluate_field(v, x, t, key)) \
             if isinstance(value[0], str) else value
-        dirichlet.append(DirichletBC(_boundary_facets(mesh, tags, names, bc.get("boundary", "all"), f"dirichlet[{i}].boundary"), field,
-                                     bc.get("time_dependent", False)))
+        facets = _boundary_facets(mesh, tags, names, bc.get("boundary", "all"), f"dirichlet[{i}].boundary")
+        dirichlet.append(DirichletBC(facets, field, bc.get("time_dependent", False)))
     loads = scene.get("loads", {})
     body_force = loads.get("body_force")
     if "gravity" in loads:
         body_force = [material.rho * g for g in loads["gravity"]]
     scheme = scene["method"].split("-")[1]
     dem = DEMDiscretisation(mesh, material, scheme, dirichlet, body_force)
-    obstacles = [HalfSpace(ob["point"], ob["normal"], _boundary_facets(mesh, tags, names, ob["boundary"], "obstacles.boundary"),
-                           ob.get("tolerance", 0.0)) for ob in scene.get("obstacles", [])]
+    obstacles = [HalfSpace(ob["point"], ob["normal"],
+                           _boundary_facets(mesh, tags, names, ob["boundary"], f"obstacles[{k}].boundary"),
+                           ob.get("tolerance", 0.0)) for k, ob in enumerate(scene.get("obstacles", []))]
     dem.set_obstacles(obstacles)
     if "contact" in scene:
         c = scene["contact"]
-        facets = np.unique(np.concatenate([_boundary_facets(mesh, tags, names, b, "contact.boundary") for b in c["boundary"]]))
+        facets = np.unique(np.concatenate([_boundary_facets(mesh, tags, names, b, f"contact.boundary[{k}]")
+                                           for k, b in enumerate(c["boundary"])]))
         dem.set_contact_boundary(facets, c.get("self_contact", False), c.get("tolerance", 0.0))
     return dem
 

@@ -359,7 +359,8 @@ def blocks_on_a_floor(scheme="B"):
 
     dem, facets = two_blocks(scheme=scheme, y0=0.01)
     dem.set_contact_boundary(facets)
-    dem.set_obstacles([HalfSpace([0.0, 0.0], [0.0, 1.0], _compat.locate_boundary_facets(dem.mesh, lambda x: x[1] < 0.02))])
+    bottoms = _compat.locate_boundary_facets(dem.mesh, lambda x: x[1] < 0.02)
+    dem.set_obstacles([HalfSpace([0.0, 0.0], [0.0, 1.0], bottoms)])
     return dem
 
 

@@ -26,7 +26,8 @@ def test_a_dirichlet_expression_in_t_needs_time_dependent():
 
 
 @pytest.mark.parametrize("overrides, message", [
-    ({"initial.velocity": ["0 * x / 0"]}, r"scene key 'initial\.velocity\[0\]' \('0 \* x / 0'\) is not finite at t = 0: nan"),
+    ({"initial.velocity": ["0 * x / 0"]},
+     r"scene key 'initial\.velocity\[0\]' \('0 \* x / 0'\) is not finite at t = 0: nan"),
     ({"dirichlet": [{"boundary": "left", "value": ["1e-3 * sqrt(0.1 - t)"], "time_dependent": True}]},
      r"scene key 'dirichlet\[0\]\.value\[0\]' \('1e-3 \* sqrt\(0\.1 - t\)'\) is not finite at t = 0\.10"),
 ])
@@ -64,7 +65,8 @@ def write_plate_msh(path: pathlib.Path):
         gmsh.model.addPhysicalGroup(2, [body[0][1]], 7)
         curves = [c for _, c in gmsh.model.getBoundary(body, oriented=False)]
         on_hole = [c for c in curves if np.linalg.norm(np.array(gmsh.model.occ.getCenterOfMass(1, c))[:2] - 0.5) < 0.1]
-        gmsh.model.setPhysicalName(1, gmsh.model.addPhysicalGroup(1, [c for c in curves if c not in on_hole], 1), "outer")
+        outer = [c for c in curves if c not in on_hole]
+        gmsh.model.setPhysicalName(1, gmsh.model.addPhysicalGroup(1, outer, 1), "outer")
         gmsh.model.setPhysicalName(1, gmsh.model.addPhysicalGroup(1, on_hole, 4), "hole")
         gmsh.option.setNumber("Mesh.MeshSizeMax", 0.1)
         gmsh.model.mesh.generate(2)
