@@ -36,10 +36,11 @@ centres) when the centres are closer than r = max|f| + skin; the list is rebuilt
 facet has moved more than skin/2 since the last build, so a pair that is not listed cannot touch.
 The check is ``prepare(u, v, dt)``, which MEMM calls before every step's force integral whatever
 its quadrature (both ends of the affine flight); every evaluation checks that the list is valid
-for its displacements and raises otherwise (never a silently incomplete list). Cost per step: the gaps of the
-listed pairs, and on steps with contact the energy rows those pairs touch (the listed patch),
-not all boundary facets. Everything is local to the contact patch and
-computed from gathered patch values on every process (as contact.RigidContact).
+for its displacements and raises otherwise (never a silently incomplete list); so does a step
+that moves a facet by more than skin/2. Cost per step: the gaps of the listed pairs, and on
+steps with contact the energy rows those pairs touch (the listed patch), not all boundary
+facets. Everything is local to the contact patch and computed from gathered patch values on
+every process (as contact.RigidContact).
 """
 
 from __future__ import annotations
@@ -282,10 +283,17 @@ class PairContact:
         up = self.patch_values(u)
         uc = self.free_displacements(up)
         stale = self._stale(uc)
-        if not stale and v is not None and dt != 0.0:
-            stale = self._stale(uc + dt * (self._R @ self.patch_values(v)).reshape(-1, self.d))
+        moving = v is not None and dt != 0.0
+        if moving:
+            step = dt * (self._R @ self.patch_values(v)).reshape(-1, self.d)
+            stale = stale or self._stale(uc + step)
         if stale:
             self._build_pairs(uc)
+            if moving and self._stale(uc + step):
+                raise RuntimeError(
+                    f"contact between bodies: a candidate facet moves {np.linalg.norm(step, axis=1).max():.3e} m "
+                    f"in one step, more than half the Verlet skin ({self.skin:.3e} m): no pair list covers the "
+                    "step; reduce the time step or pass a larger skin")
         self.seconds += time.process_time() - start
 
     def _stale(self, uc: np.ndarray) -> bool:

@@ -553,3 +553,13 @@ def test_a_run_reports_the_pairs_that_use_the_scheme_b_rule(tmp_path, capsys):
     assert summary["contact_pairs_scheme_b_rule"] > 0 and summary["pseudo_energy_rel_drift"] < 1e-13
     assert f"note: {summary['contact_pairs_scheme_b_rule']} pairs of scheme A facets used the scheme B" in \
         capsys.readouterr().out
+
+
+def test_a_step_longer_than_the_skin_is_an_error():
+    """A facet that moves more than skin/2 in one step cannot be covered by any pair list."""
+    dem, facets = two_discs(h=0.03)
+    dem.set_contact_boundary(facets)
+    stepper = MEMM(dem, 0.1)  # 0.3 m/s x 0.1 s = 0.03 m > skin / 2 (facets of ~0.03 m)
+    stepper.initialise(dem.create_vector(), cell_vector(dem, approach))
+    with pytest.raises(RuntimeError, match="moves 3.000e-02 m in one step, more than half the Verlet skin"):
+        stepper.step()
