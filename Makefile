@@ -17,7 +17,7 @@ SYSTEM_PYTHON := /usr/bin/python3
 VENV          := .venv
 PYTHON        := $(VENV)/bin/python
 STAMP         := $(VENV)/.installed
-MPI_NP        ?= 2
+MPI_NP        ?= 2 3
 PYTEST_ARGS   ?=
 
 # Debian packages. openmpi-bin provides mpirun; the GL/EGL libraries let the
@@ -79,7 +79,8 @@ verify: | $(STAMP)
 	  echo "error: recreate it with: rm -rf $(VENV) && make setup" >&2; exit 1; }
 
 # --- tests --------------------------------------------------------------------
-# Serial run of the whole suite, then the tests marked `mpi` under mpirun.
+# Serial run of the whole suite, then the tests marked `mpi` under mpirun on each
+# process count of MPI_NP (2 and 3: an odd count finds what 2 hides).
 # pytest exit code 5 (nothing collected) is only tolerated when there are no
 # mpi-marked tests at all; any other failure is propagated.
 test: export OMP_NUM_THREADS = 1
@@ -88,8 +89,10 @@ test: setup
 	@$(PYTHON) -m pytest -q -m mpi --collect-only -p no:cacheprovider tests >/dev/null 2>&1; rc=$$?; \
 	if [ $$rc -eq 5 ]; then echo "No tests marked 'mpi': skipping the mpirun run."; exit 0; \
 	elif [ $$rc -ne 0 ]; then echo "error: collecting mpi tests failed (exit $$rc)" >&2; exit $$rc; fi; \
-	echo "mpirun -n $(MPI_NP) --oversubscribe $(PYTHON) -m pytest -q -m mpi -p no:cacheprovider $(PYTEST_ARGS) tests"; \
-	mpirun -n $(MPI_NP) --oversubscribe $(PYTHON) -m pytest -q -m mpi -p no:cacheprovider $(PYTEST_ARGS) tests
+	for np in $(MPI_NP); do \
+	  echo "mpirun -n $$np --oversubscribe $(PYTHON) -m pytest -q -m mpi -p no:cacheprovider $(PYTEST_ARGS) tests"; \
+	  mpirun -n $$np --oversubscribe $(PYTHON) -m pytest -q -m mpi -p no:cacheprovider $(PYTEST_ARGS) tests || exit $$?; \
+	done
 
 # --- demo / benchmarks ----------------------------------------------------------
 demo: setup

@@ -53,6 +53,9 @@ def _run(args) -> int:
             print(f"{summary['scene']}: {summary['n_steps']} steps of dt = {summary['dt']:.4g} s on "
                   f"{summary['n_cells']} cells in {summary['wall_time_s']:.1f} s; pseudo-energy drift "
                   f"{summary['pseudo_energy_rel_drift']:.2e}")
+            if summary.get("contact_pairs_scheme_b_rule"):
+                print(f"note: {summary['contact_pairs_scheme_b_rule']} pairs of scheme A facets used the scheme B "
+                      "contact rule, eq. (23)-(24) having no well-posed solution for them (docs/theory.md)")
         print(f"results in {out.resolve()}")
     return 0
 

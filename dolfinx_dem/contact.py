@@ -28,6 +28,7 @@ from __future__ import annotations
 
 import dataclasses
 from collections.abc import Sequence
+from typing import Protocol
 
 import numpy as np
 import scipy.sparse
@@ -52,6 +53,36 @@ def gather_patch(comm, vec: PETSc.Vec, owned_local: np.ndarray) -> np.ndarray:
     if comm.size == 1:
         return mine.copy()
     return np.concatenate(comm.allgather(mine))
+
+
+class ContactModel(Protocol):
+    """The interface of a contact model (``RigidContact``, ``pair_contact.PairContact``) that
+    ``DEMDiscretisation`` and ``MEMM`` use; nothing else of a model is called from outside.
+    All methods are collective. ``up`` are patch values (``patch_values``), valid until the
+    next ``prepare``."""
+
+    cells: np.ndarray  # cells of the candidate facets (global numbers), (n_facets,)
+
+    def prepare(self, u: PETSc.Vec, v: PETSc.Vec | None = None, dt: float = 0.0) -> None:
+        """Make the model valid for the states u + tau v, 0 <= tau <= dt (MEMM: every step)."""
+
+    def patch_values(self, vec: PETSc.Vec) -> np.ndarray:
+        """The values of ``vec`` at the patch dofs, on every process."""
+
+    def force_correction(self, up: np.ndarray) -> np.ndarray:
+        """F - F_free at the patch dofs (the exact negative gradient of ``energy_correction``)."""
+
+    def energy_correction(self, up: np.ndarray) -> tuple[float, float]:
+        """(elastic, stabilisation) energy changes of the contact reconstruction."""
+
+    def gradient_correction(self, up: np.ndarray) -> np.ndarray:
+        """Change of the gradient of each candidate's cell, (n_facets, d, d)."""
+
+    def add(self, correction: np.ndarray, out: PETSc.Vec, scale: float = 1.0) -> None:
+        """out += scale * correction on the owned patch dofs."""
+
+    def force_integral(self, u: PETSc.Vec, v: PETSc.Vec, dt: float, out: PETSc.Vec) -> int:
+        """out += int_0^dt (F - F_free)(u + tau v) dtau, exactly; returns the evaluations."""
 
 
 @dataclasses.dataclass(frozen=True)
@@ -169,6 +200,9 @@ class RigidContact:
         self.evaluations = 0
 
     # -- patch data ----------------------------------------------------------------------------
+    def prepare(self, u: PETSc.Vec, v: PETSc.Vec | None = None, dt: float = 0.0) -> None:
+        """Nothing to prepare: every candidate facet is tested at every evaluation."""
+
     def patch_values(self, vec: PETSc.Vec) -> np.ndarray:
         """Values of a distributed vector at the patch dofs, on every process."""
         return gather_patch(self.comm, vec, self._owned_local)

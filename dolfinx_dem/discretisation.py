@@ -257,6 +257,10 @@ class DEMDiscretisation:
                 if value.shape != (d,):
                     raise ValueError(f"a constant Dirichlet value needs {d} components, got {value.shape}")
                 g[index] = value
+        if not np.isfinite(g).all():
+            k = int(np.argmax(~np.isfinite(g).all(axis=1)))
+            raise ValueError(f"the Dirichlet value at t = {t:.9g} is not finite: {g[k].tolist()} on the facet at "
+                             f"{self.geometry.facet_centres[rec.dirichlet_facets[k]].tolist()}")
         return g
 
     def _update_dirichlet(self, t: float):

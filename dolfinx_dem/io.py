@@ -14,7 +14,8 @@ Files (all in the output directory):
   (``SolutionWriter``; collective).
 * ``series.csv``: one header line of column names, then one row of floats per time, written
   with ``'%.17g'`` so that they read back bit-identical (``SeriesWriter``; rank 0 writes).
-* ``summary.json`` (``write_summary``; rank 0 writes).
+* ``summary.json`` (``write_summary``; rank 0 writes): strict JSON, a number that is not finite
+  (NaN, inf) is written as ``null``.
 
 MPI: every class and function here is collective over its ``comm``; values passed to the rank-0
 writers must be the same on every rank (e.g. global reductions).
@@ -217,23 +218,33 @@ class SeriesWriter:
         return False
 
 
-def _to_json(value):
-    """JSON fallback for numpy scalars and arrays."""
-    if isinstance(value, np.generic):
-        return value.item()
+def _strict(value):
+    """``value`` with numpy scalars and arrays as Python values, paths as strings, and every
+    float that is not finite (NaN, inf) as None: strict JSON has no NaN or Infinity."""
+    if isinstance(value, Mapping):
+        return {k: _strict(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_strict(v) for v in value]
     if isinstance(value, np.ndarray):
-        return value.tolist()
+        return _strict(value.tolist())
+    if isinstance(value, np.generic):
+        return _strict(value.item())
+    if isinstance(value, float):
+        return value if math.isfinite(value) else None
     if isinstance(value, pathlib.PurePath):
         return str(value)
+    if value is None or isinstance(value, (bool, int, str)):
+        return value
     raise TypeError(f"cannot write {type(value).__name__} {value!r} to JSON")
 
 
 def write_summary(path: str | pathlib.Path, comm: MPI.Comm, data: Mapping) -> None:
-    """Write ``data`` as JSON (sorted keys, indent 2) on rank 0; numpy values become Python ones."""
+    """Write ``data`` as strict JSON (sorted keys, indent 2) on rank 0: numpy values become
+    Python ones, and numbers that are not finite (NaN, inf) are written as ``null``."""
     path = pathlib.Path(path)
 
     def write():
-        text = json.dumps(dict(data), sort_keys=True, indent=2, default=_to_json)
+        text = json.dumps(_strict(dict(data)), sort_keys=True, indent=2, allow_nan=False)
         path.write_text(text + "\n")
 
     call_on_root(comm, write)

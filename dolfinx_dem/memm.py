@@ -40,11 +40,12 @@ QUADRATURES = {"midpoint": GaussLegendre(1)} | {f"gauss-legendre-{q}": GaussLege
 
 
 class InstabilityError(RuntimeError):
-    """Raised by the stability monitor; carries the step, time and a suggested time step."""
+    """Raised by the stability monitor; carries the step, time, a suggested time step and the
+    monitor's reason (the message without the advice)."""
 
-    def __init__(self, message: str, step: int, t: float, dt: float, suggested_dt: float):
+    def __init__(self, message: str, step: int, t: float, dt: float, suggested_dt: float, reason: str = ""):
         super().__init__(message)
-        self.step, self.t, self.dt, self.suggested_dt = step, t, dt, suggested_dt
+        self.step, self.t, self.dt, self.suggested_dt, self.reason = step, t, dt, suggested_dt, reason
 
 
 @dataclasses.dataclass(frozen=True)
@@ -110,6 +111,8 @@ class MEMM:
         """Start from u^0, v^0: v^{-1/2} = v^0 - dt/2 M^-1 F(u^0), v^{1/2} = v^0 + dt/2 M^-1 F(u^0)."""
         self.t0, self.n = float(t0), 0
         u0.copy(self.u)
+        for contact in getattr(self.problem, "contacts", ()):
+            contact.prepare(self.u)
         self.problem.force(self.u, self.t0, self._f)
         self.force_evaluations += 1
         self._f.pointwiseMult(self._f, self.problem.inverse_mass)
@@ -128,10 +131,13 @@ class MEMM:
         problem that has contact, integrates the smooth (affine) part at the midpoint and each
         contact correction piecewise between its events (paper §4): exactly, so the
         pseudo-energy is conserved through impacts. ``force_evaluations`` counts a step's
-        patch-only evaluations beyond the first as evaluations too.
+        patch-only evaluations beyond the first as evaluations too. Every contact model is first
+        prepared for the step's free flight (``prepare``: e.g. the pair list), whatever the rule.
         """
         out.set(0.0)
         contacts = getattr(self.problem, "contacts", ())
+        for contact in contacts:
+            contact.prepare(self.u, self.v_next, self.dt)
         split = bool(contacts) and self.quadrature == "midpoint"
         evaluations = 0
         for x, w in zip(self.nodes, self.weights):
@@ -211,7 +217,7 @@ class MEMM:
             f"MEMM is unstable at step {diag.step} (t = {diag.t:.6g}, dt = {self.dt:.6g}): {reason}. "
             f"Reduce the time step, e.g. dt = {suggested:.4g} (half the stability limit "
             f"2/sqrt(lambda_max(M^-1 K)) of the elastic operator)",
-            diag.step, diag.t, self.dt, suggested,
+            diag.step, diag.t, self.dt, suggested, reason,
         )
 
     def suggested_dt(self) -> float:

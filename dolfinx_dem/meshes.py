@@ -1,6 +1,6 @@
 """Meshes for dolfinx_dem scenes: boxes with named sides, gmsh discs, and mesh files.
 
-Every function returns ``(mesh, cell_tags, facet_tags)``:
+Every function returns ``(mesh, cell_tags, facet_tags)`` (``read_mesh_named`` adds the tags' names):
 
 * ``create_interval``, ``create_rectangle``, ``create_box``: ``cell_tags`` is None (one body);
   ``facet_tags`` marks the boundary facets with 1..2d for the sides x=min, x=max, y=min, y=max,
@@ -8,7 +8,8 @@ Every function returns ``(mesh, cell_tags, facet_tags)``:
 * ``create_disc``, ``create_discs``: cell tag and boundary facet tag = 1-based disc number (the
   body tag). The discs are separate connected bodies that share no vertex; ``create_discs`` can
   add a frame around them (the billiard table), see its docstring.
-* ``read_mesh``: whatever tags the file holds (see its docstring).
+* ``read_mesh``, ``read_mesh_named``: whatever tags the file holds (see the docstrings), and
+  the names of the facet tags (a gmsh file's physical-group names).
 
 Meshes use ``dolfinx.mesh.GhostMode.shared_facet``. Lengths are in metres (any consistent unit).
 gmsh runs on rank 0 only; its terminal output is switched off and it is always finalised, so
@@ -240,24 +241,40 @@ def read_mesh(comm: MPI.Comm, path: str | pathlib.Path):
       lower (an empty MeshTags if there are none). The geometric dimension is the model's.
     * ``.xdmf``: the mesh named ``"mesh"`` and, when the file holds them, the MeshTags named
       ``"cell_tags"`` and ``"facet_tags"`` (None otherwise).
+
+    ``read_mesh_named`` also returns the names of the facet tags.
     """
+    return read_mesh_named(comm, path)[:3]
+
+
+def read_mesh_named(comm: MPI.Comm, path: str | pathlib.Path):
+    """``read_mesh`` plus the facet tags' names: ``(mesh, cell_tags, facet_tags, names)`` with
+    ``names`` {name: tag} from the names of a ``.msh`` file's physical groups one dimension below
+    the cells (unnamed groups are left out; a name given to several groups maps to None); empty
+    for ``.xdmf``. A relative ``path`` is relative to the working directory."""
     path = pathlib.Path(path)
     suffix = path.suffix.lower()
     if suffix not in (".msh", ".xdmf"):
         raise ValueError(f"unknown mesh file type {path.suffix!r} of {path} (use .msh or .xdmf)")
     if not comm.bcast(path.is_file() if comm.rank == 0 else None, root=0):
-        raise FileNotFoundError(f"mesh file {path} does not exist")
+        raise FileNotFoundError(f"mesh file {path} does not exist (looked for {path.resolve()})")
 
     if suffix == ".msh":
+        names = {}
 
         def build() -> int:
             gmsh.merge(str(path))
             dim = gmsh.model.getDimension()
             if not gmsh.model.getPhysicalGroups(dim):
                 raise ValueError(f"{path} has no physical groups of dimension {dim} to read")
+            for _, tag in gmsh.model.getPhysicalGroups(dim - 1):
+                name = gmsh.model.getPhysicalName(dim - 1, tag)
+                if name:
+                    names[name] = None if name in names else int(tag)
             return dim
 
-        return _mesh_from_gmsh(comm, build)
+        mesh, cell_tags, facet_tags = _mesh_from_gmsh(comm, build)
+        return mesh, cell_tags, facet_tags, comm.bcast(names, root=0)
 
     names = call_on_root(comm, _xdmf_grid_names, path)
     if "mesh" not in names:
@@ -268,4 +285,4 @@ def read_mesh(comm: MPI.Comm, path: str | pathlib.Path):
         mesh.topology.create_connectivity(tdim - 1, tdim)
         cell_tags = xdmf.read_meshtags(mesh, "cell_tags") if "cell_tags" in names else None
         facet_tags = xdmf.read_meshtags(mesh, "facet_tags") if "facet_tags" in names else None
-    return mesh, cell_tags, facet_tags
+    return mesh, cell_tags, facet_tags, {}

@@ -15,9 +15,9 @@ reconstruction (eq. (31)) is, with g^- = min(g, 0),
     u_f = u_f^free + sum_{f'} (w / |f|) g^- e_f,      u_f' = u_f'^free + sum_f (w / |f'|) g^- e_f',
 
 with e_f = n/2, e_f' = -n/2 for scheme B (eq. (26)-(27), theta = 1/2), and for two scheme A
-facets the directions of eq. (23)-(24) (equal normal tractions, no tangential traction; see
-``PairContact._directions``). It equals the free one when g = 0 or w = 0, so the energy is
-continuous (§3.4.3). Writing the energy rows a = Q u + q (Q = [S; J]) and
+facets the directions of eq. (23)-(24) where they are well posed (equal normal changes of the two
+tractions on n; the scheme B rule otherwise, counted; see ``PairContact._directions``). It equals
+the free one when g = 0 or w = 0, so the energy is continuous (§3.4.3). Writing the energy rows a = Q u + q (Q = [S; J]) and
 z_p = Q_f e_f / |f| + Q_f' e_f' / |f'| for a pair p, the rows change by delta_a = sum_p c_p z_p
 with c_p = w_p g_p^-, so that
 
@@ -33,11 +33,14 @@ is conserved to rounding.
 
 Broad phase: pairs are listed (a Verlet list built with a k-d tree on the displaced facet
 centres) when the centres are closer than r = max|f| + skin; the list is rebuilt when a candidate
-facet has moved more than skin/2 since the last build (checked at both ends of each step, and the
-flight is affine), so a pair that is not listed cannot touch. Cost per step: the gaps of the
-listed pairs, and on steps with contact the energy rows those pairs touch (the listed patch),
-not all boundary facets. Everything is local to the contact patch and
-computed from gathered patch values on every process (as contact.RigidContact).
+facet has moved more than skin/2 since the last build, so a pair that is not listed cannot touch.
+The check is ``prepare(u, v, dt)``, which MEMM calls before every step's force integral whatever
+its quadrature (both ends of the affine flight); every evaluation checks that the list is valid
+for its displacements and raises otherwise (never a silently incomplete list); so does a step
+that moves a facet by more than skin/2. Cost per step: the gaps of the listed pairs, and on
+steps with contact the energy rows those pairs touch (the listed patch), not all boundary
+facets. Everything is local to the contact patch and computed from gathered patch values on
+every process (as contact.RigidContact).
 """
 
 from __future__ import annotations
@@ -137,6 +140,7 @@ class PairContact:
             self._Ca = np.einsum("ijkl,nl->nijk", C, an) / geom.cell_volumes[cells, None, None, None]
         self.evaluations = 0
         self.rebuilds = 0
+        self._scheme_b_rule = np.empty(0, dtype=np.int64)  # pair keys i * n_facets + j, see _directions
         self.seconds = 0.0  # processor time of the contact work in force integrals and energies
         self._reference = None  # candidate cell displacements at the last list build
         zero = np.zeros((len(f), d))
@@ -217,33 +221,92 @@ class PairContact:
         """The contact corrections of a pair are u_f += (w/|f|) g^- e_f, u_f' += (w/|f'|) g^- e_f'.
 
         Scheme B (eq. (26)-(27), theta = 1/2): e_f = n/2, e_f' = -n/2. Scheme A (eq. (23)-(24)),
-        when both facets are scheme A facets: the corrections change the two cells' tractions
-        on n by s A_f e_f... with A_f x = (C : (x (x) a_f)) n / |c|: e_f = A_f^-1 n / D,
-        e_f' = A_f'^-1 n / D, D = n . A_f^-1 n - n . A_f'^-1 n, so that the tractions on n are
-        normal and equal on both sides (eq. (23)-(24)) and a fully overlapping pair closes its
-        gap; free Neumann facets already carry zero traction on n when n = n_f = -n_f'.
-        Both rules close the gap of a pair of equal facets covering each other."""
+        when both facets are scheme A facets: with A_f x = (C : (x (x) a_f)) n / |c| the change
+        of cell c's traction on n when u_f changes by x, e_f = A_f^-1 n / D, e_f' = A_f'^-1 n / D,
+        D = n . A_f^-1 n - n . A_f'^-1 n: the corrections change both cells' tractions on n by
+        the same normal vector, and n . (e_f - e_f') = 1 closes the gap of a fully overlapping
+        pair. (The tractions on n themselves are normal and equal only where the free ones
+        vanish on n, i.e. when n = n_f = -n_f': the free facets carry zero traction on their
+        own normals.)
+
+        When eq. (23)-(24) are not well posed the pair uses the scheme B rule; ``scheme_b_pairs``
+        counts such pairs (``summary.json``: ``contact_pairs_scheme_b_rule``). For isotropic C,
+        n . A_f^-1 n = cos t_f / (alpha_f (2 cos^2 t_f (lambda + mu) - lambda)), alpha_f = |f|/|c|,
+        t_f the angle between n and n_f: a cell's normal compliance has the sign of its facet
+        normal's side only if cos^2 t_f > kappa = lambda / (2 (lambda + mu)) (nu in plane
+        strain, nu/(1+nu) in plane stress). The rule of eq. (23)-(24) is used when both cells'
+        compliances have their sign (n . A_f^-1 n > 0 > n . A_f'^-1 n): then 0 < n . e_f < 1,
+        0 < -n . e_f' < 1 and |e_f| = n . e_f / cos t_f < 1/sqrt(kappa), bounded. Otherwise
+        D may vanish (unbounded corrections, an arbitrarily stiff pair), be negative (no
+        solution: the correction would open the penetration further), or be positive with one
+        facet moved further into the other body. Facing facets of equal length have
+        t_f = t_f' < 45 deg, and kappa < 1/2, so only pairs of unequal facets whose normals are
+        far from antiparallel (the longer facet tilts n towards its own normal) are affected.
+        A set-up check cannot replace this rule: every pair of facing candidate facets could
+        meet, and a curved boundary has facets of every orientation. The directions depend on
+        the pair only, so the energy stays continuous and the force its exact gradient."""
         e_i, e_j = 0.5 * n, -0.5 * n
         both_a = self.is_scheme_a[i] & self.is_scheme_a[j]
         if both_a.any():
             k = np.flatnonzero(both_a)
-            h = [np.linalg.solve(np.einsum("nijk,nj->nik", self._Ca[f[k]], n[k]), n[k][..., None])[..., 0]
-                 for f in (i, j)]
-            D = np.einsum("pi,pi->p", n[k], h[0] - h[1])
-            if not (D > 0).all():
-                raise RuntimeError("scheme A contact: a facet pair has no compliant solution of eq. (23)-(24) "
-                                   f"(D = {D.min():.3e} <= 0): use scheme B")
-            e_i[k], e_j[k] = h[0] / D[:, None], h[1] / D[:, None]
+            # A_f^-1 n = adj(A_f) n / det(A_f) (2D), so that a singular A_f is no error.
+            y, compliance = [], []
+            for f in (i, j):
+                A = np.einsum("nijk,nj->nik", self._Ca[f[k]], n[k])
+                adj_n = np.stack([A[:, 1, 1] * n[k, 0] - A[:, 0, 1] * n[k, 1],
+                                  A[:, 0, 0] * n[k, 1] - A[:, 1, 0] * n[k, 0]], axis=1)
+                det = A[:, 0, 0] * A[:, 1, 1] - A[:, 0, 1] * A[:, 1, 0]
+                y.append(np.divide(adj_n, det[:, None], out=np.zeros_like(adj_n), where=det[:, None] != 0))
+                compliance.append(np.where(det != 0, np.einsum("pi,pi->p", n[k], y[-1]), 0.0))
+            posed = (compliance[0] > 0) & (compliance[1] < 0)
+            D = compliance[0] - compliance[1]
+            a = k[posed]
+            e_i[a], e_j[a] = y[0][posed] / D[posed, None], y[1][posed] / D[posed, None]
+            self._scheme_b_rule = np.union1d(self._scheme_b_rule, i[k[~posed]] * len(self.facets) + j[k[~posed]])
         return e_i, e_j
 
-    def _update_pairs(self, uc: np.ndarray, uc_end: np.ndarray) -> bool:
-        """Rebuild the list if a candidate facet moves more than skin/2 during the coming step;
-        returns whether it did (the patch changes then)."""
-        moved = max(np.einsum("ni,ni->n", x - self._reference, x - self._reference).max() for x in (uc, uc_end))
-        if moved > 0.25 * self.skin**2:
+    @property
+    def scheme_b_pairs(self) -> int:
+        """How many distinct pairs of scheme A facets listed so far use the scheme B rule
+        because eq. (23)-(24) are not well posed for them (see ``_directions``)."""
+        return len(self._scheme_b_rule)
+
+    def prepare(self, u: PETSc.Vec, v: PETSc.Vec | None = None, dt: float = 0.0) -> None:
+        """Make the Verlet list valid for the states u + tau v, 0 <= tau <= dt (u alone without
+        v): rebuild it at u if a candidate facet would move more than skin/2 from where it was
+        at the last build. The free facet displacements are affine in tau, so checking both ends
+        covers the whole flight. ``MEMM`` calls this before every step's force integral,
+        whatever the quadrature, and at ``initialise``; call it before evaluating forces or
+        energies at displacements of your own. Collective. Arrays of patch values gathered
+        before a rebuild are invalid after it."""
+        start = time.process_time()
+        up = self.patch_values(u)
+        uc = self.free_displacements(up)
+        stale = self._stale(uc)
+        moving = v is not None and dt != 0.0
+        if moving:
+            step = dt * (self._R @ self.patch_values(v)).reshape(-1, self.d)
+            stale = stale or self._stale(uc + step)
+        if stale:
             self._build_pairs(uc)
-            return True
-        return False
+            if moving and self._stale(uc + step):
+                raise RuntimeError(
+                    f"contact between bodies: a candidate facet moves {np.linalg.norm(step, axis=1).max():.3e} m "
+                    f"in one step, more than half the Verlet skin ({self.skin:.3e} m): no pair list covers the "
+                    "step; reduce the time step or pass a larger skin")
+        self.seconds += time.process_time() - start
+
+    def _stale(self, uc: np.ndarray) -> bool:
+        """Whether a candidate facet with free displacements ``uc`` has moved more than skin/2
+        since the last list build (a pair not listed might then touch)."""
+        moved = uc - self._reference
+        return bool(np.einsum("ni,ni->n", moved, moved).max() > 0.25 * self.skin**2)
+
+    def _check_listed(self, uc: np.ndarray):
+        if self._stale(uc):
+            raise RuntimeError("contact between bodies: the candidate pair list is stale for these displacements "
+                               "(a facet moved more than skin/2 since it was built); call prepare(u) first "
+                               "(MEMM does it every step)")
 
     # -- energy and force ----------------------------------------------------------------------
     def patch_values(self, vec: PETSc.Vec) -> np.ndarray:
@@ -258,13 +321,16 @@ class PairContact:
     def _touching(self, up: np.ndarray) -> _Pairs:
         """The listed pairs with g < 0."""
         L = self.listed
-        return L.subset(np.flatnonzero(L.gaps(self.free_displacements(up)) < 0))
+        uc = self.free_displacements(up)
+        self._check_listed(uc)
+        return L.subset(np.flatnonzero(L.gaps(uc) < 0))
 
     def energy_correction(self, up: np.ndarray) -> tuple[float, float]:
         """(elastic, stabilisation) energy changes from the contact reconstructions."""
         start = time.process_time()
         L, P = self.listed, self.listed.patch
         uc = self.free_displacements(up)
+        self._check_listed(uc)
         g = np.minimum(L.gaps(uc), 0.0)
         elastic = stabilisation = 0.0
         if (g < 0).any():
@@ -279,7 +345,9 @@ class PairContact:
         """F - F_free at the patch dofs (N): the exact negative gradient of the energy change."""
         out = np.zeros_like(up)
         P = self.listed.patch
-        out[P.columns] = self._correction(self.free_displacements(up)[..., None], up[P.columns, None])[:, 0]
+        uc = self.free_displacements(up)
+        self._check_listed(uc)
+        out[P.columns] = self._correction(uc[..., None], up[P.columns, None])[:, 0]
         return out
 
     def _correction(self, uc: np.ndarray, U: np.ndarray) -> np.ndarray:
@@ -318,8 +386,8 @@ class PairContact:
         start = time.process_time()
         up, vp = self.patch_values(u), self.patch_values(v)
         uc0, uc1 = self.free_displacements(up), self.free_displacements(up + dt * vp)
-        if self._update_pairs(uc0, uc1):
-            up, vp = self.patch_values(u), self.patch_values(v)
+        self._check_listed(uc0)
+        self._check_listed(uc1)
         L = self.listed
         g0, g1 = L.gaps(uc0), L.gaps(uc1)
         p = np.flatnonzero((g0 < 0) | (g1 < 0))
@@ -368,6 +436,7 @@ class PairContact:
         partner covering it exactly; partial overlaps (facets sliding against each other) leave a
         gap of the order of the cell gap times the uncovered fraction."""
         uc = self.free_displacements(up)
+        self._check_listed(uc)
         w = self.listed.overlaps(uc)[0]
         if not (w > 0).any():
             return 0.0
@@ -385,6 +454,7 @@ class PairContact:
     def touching(self, up: np.ndarray) -> bool:
         """Whether some pair is in contact (g < 0 with a positive overlap)."""
         uc = self.free_displacements(up)
+        self._check_listed(uc)
         return bool(((self.listed.gaps(uc) < 0) & (self.listed.overlaps(uc)[0] > 0)).any())
 
     def touch_time(self, uc0: np.ndarray, uc1: np.ndarray, dt: float) -> float | None:
@@ -404,6 +474,7 @@ class PairContact:
         |(z_p . (a + delta_a)) w_p|, the force one facet of the pair exerts on the other."""
         L, P = self.listed, self.listed.patch
         uc = self.free_displacements(up)
+        self._check_listed(uc)
         g = np.minimum(L.gaps(uc), 0.0)
         w = L.overlaps(uc)[0]
         a = P.Q @ up[P.columns] + P.q

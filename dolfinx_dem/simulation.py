@@ -28,13 +28,17 @@ SERIES_COLUMNS = ("t", "kinetic", "elastic", "stabilisation", "external", "pseud
 
 
 def create_mesh(comm: MPI.Comm, spec: Mapping):
-    """(mesh, facet_tags) from the scene's mesh table."""
+    """(mesh, facet_tags, names) from the scene's mesh table; ``names`` maps the boundary names
+    the mesh defines to facet tags: the side names of the generated interval, rectangle and box
+    meshes (``scenes.SIDES`` for the mesh's dimension), a gmsh file's physical-group names, none
+    for discs and XDMF files."""
     kind = spec["type"]
     required = {"interval": ("x0", "x1", "n"), "rectangle": ("p0", "p1", "n"), "box": ("p0", "p1", "n"),
                 "disc": ("centre", "radius", "h"), "discs": ("discs", "h"), "file": ("path",)}[kind]
     for key in required:
         if key not in spec:
             raise scenes.SceneError(f"scene key 'mesh.{key}' is missing for a mesh of type {kind!r}")
+    names = {}
     if kind == "interval":
         mesh, _, tags = meshes.create_interval(comm, spec["n"], spec["x0"], spec["x1"])
     elif kind == "rectangle":
@@ -52,11 +56,15 @@ def create_mesh(comm: MPI.Comm, spec: Mapping):
         except ValueError as err:
             raise scenes.SceneError(f"scene table 'mesh': {err}") from None
     else:
-        mesh, _, tags = meshes.read_mesh(comm, spec["path"])
-    return mesh, tags
+        mesh, _, tags, names = meshes.read_mesh_named(comm, spec["path"])
+    if kind in ("interval", "rectangle", "box"):
+        names = {name: tag for name, tag in scenes.SIDES.items() if tag <= 2 * mesh.topology.dim}
+    return mesh, tags, names
 
 
-def _boundary_facets(mesh, tags, boundary, key="dirichlet.boundary") -> np.ndarray:
+def _boundary_facets(mesh, tags, names, boundary, key="dirichlet.boundary") -> np.ndarray:
+    """Process-local boundary facets of a scene's ``boundary`` entry: "all", a condition on the
+    coordinates, an integer facet tag, or a name of ``names`` (see ``create_mesh``)."""
     if boundary == "all":
         return _compat.exterior_facets(mesh)
     if isinstance(boundary, str) and any(op in boundary for op in "<>="):
@@ -67,12 +75,18 @@ def _boundary_facets(mesh, tags, boundary, key="dirichlet.boundary") -> np.ndarr
         if mesh.comm.allreduce(len(facets), op=MPI.SUM) == 0:
             raise scenes.SceneError(f"scene key '{key}': boundary condition {boundary!r} selects no facet")
         return facets
-    tag = boundary if isinstance(boundary, int) else scenes.SIDES.get(boundary)
-    if tag is None:
+    if isinstance(boundary, int):
+        tag = boundary
+    elif names.get(boundary) is not None:
+        tag = names[boundary]
+    else:
+        what = "ambiguous boundary (it names several facet groups of the mesh file)" if boundary in names \
+            else "unknown boundary"
+        known = f"one of this mesh's names: {', '.join(sorted(names))}" if names else \
+            "no name: this mesh defines none (side names belong to the interval, rectangle and box meshes)"
         raise scenes.SceneError(
-            f"scene key '{key}': unknown boundary {boundary!r} "
-            f"(use 'all', an integer facet tag, a condition such as 'y <= 0.2', or one of "
-            f"{', '.join(scenes.SIDES)})")
+            f"scene key '{key}': {what} {boundary!r} (use 'all', an integer facet tag, a condition "
+            f"such as 'y <= 0.2', or {known})")
     if tags is None:
         raise scenes.SceneError(f"the mesh has no facet tags, so boundary {boundary!r} cannot be found")
     facets = tags.find(tag)
@@ -83,28 +97,31 @@ def _boundary_facets(mesh, tags, boundary, key="dirichlet.boundary") -> np.ndarr
 
 def build(scene: Mapping, comm: MPI.Comm = MPI.COMM_WORLD) -> DEMDiscretisation:
     """The DEM discretisation a scene describes."""
-    mesh, tags = create_mesh(comm, scene["mesh"])
+    mesh, tags, names = create_mesh(comm, scene["mesh"])
     scene = scenes.validate(scene, mesh.topology.dim)
     m = scene["material"]
     material = ElasticMaterial(E=m["E"], nu=m["nu"], rho=m["rho"], plane=m.get("plane", "strain"), eta=m.get("eta"))
     dirichlet = []
-    for bc in scene.get("dirichlet", []):
+    for i, bc in enumerate(scene.get("dirichlet", [])):
         value = bc.get("value", [0.0] * mesh.topology.dim)
-        field = (lambda x, t, v=value: scenes.evaluate_field(v, x, t)) if isinstance(value[0], str) else value
-        dirichlet.append(DirichletBC(_boundary_facets(mesh, tags, bc.get("boundary", "all")), field,
-                                     bc.get("time_dependent", False)))
+        field = (lambda x, t, v=value, key=f"dirichlet[{i}].value": scenes.evaluate_field(v, x, t, key)) \
+            if isinstance(value[0], str) else value
+        facets = _boundary_facets(mesh, tags, names, bc.get("boundary", "all"), f"dirichlet[{i}].boundary")
+        dirichlet.append(DirichletBC(facets, field, bc.get("time_dependent", False)))
     loads = scene.get("loads", {})
     body_force = loads.get("body_force")
     if "gravity" in loads:
         body_force = [material.rho * g for g in loads["gravity"]]
     scheme = scene["method"].split("-")[1]
     dem = DEMDiscretisation(mesh, material, scheme, dirichlet, body_force)
-    obstacles = [HalfSpace(ob["point"], ob["normal"], _boundary_facets(mesh, tags, ob["boundary"], "obstacles.boundary"),
-                           ob.get("tolerance", 0.0)) for ob in scene.get("obstacles", [])]
+    obstacles = [HalfSpace(ob["point"], ob["normal"],
+                           _boundary_facets(mesh, tags, names, ob["boundary"], f"obstacles[{k}].boundary"),
+                           ob.get("tolerance", 0.0)) for k, ob in enumerate(scene.get("obstacles", []))]
     dem.set_obstacles(obstacles)
     if "contact" in scene:
         c = scene["contact"]
-        facets = np.unique(np.concatenate([_boundary_facets(mesh, tags, b, "contact.boundary") for b in c["boundary"]]))
+        facets = np.unique(np.concatenate([_boundary_facets(mesh, tags, names, b, f"contact.boundary[{k}]")
+                                           for k, b in enumerate(c["boundary"])]))
         dem.set_contact_boundary(facets, c.get("self_contact", False), c.get("tolerance", 0.0))
     return dem
 
@@ -252,9 +269,9 @@ def run(scene: Mapping, out: str | pathlib.Path, comm: MPI.Comm = MPI.COMM_WORLD
         u0, v0 = dem.create_vector(), dem.create_vector()
         initial = scene.get("initial", {})
         if "displacement" in initial:
-            u0.array[:] = scenes.evaluate_field(initial["displacement"], xc).T.ravel()
+            u0.array[:] = scenes.evaluate_field(initial["displacement"], xc, 0.0, "initial.displacement").T.ravel()
         if "velocity" in initial:
-            v0.array[:] = scenes.evaluate_field(initial["velocity"], xc).T.ravel()
+            v0.array[:] = scenes.evaluate_field(initial["velocity"], xc, 0.0, "initial.velocity").T.ravel()
         diag = stepper.initialise(u0, v0)
 
         output = scene.get("output", {})
@@ -299,7 +316,7 @@ def run(scene: Mapping, out: str | pathlib.Path, comm: MPI.Comm = MPI.COMM_WORLD
                     record(diag, diag.step == n_steps)
                     progress.update(diag.step, diag.t, drift / scale if scale > 0 else 0.0)
             except InstabilityError as err:
-                stable, error = False, err
+                stable, error = False, scene_instability(err, time_spec)
             if animation is not None:
                 animation.close()
 
@@ -341,6 +358,41 @@ def run(scene: Mapping, out: str | pathlib.Path, comm: MPI.Comm = MPI.COMM_WORLD
         if error is not None:
             raise error
     return summary
+
+
+def dividing_time_step(end: float, at_most: float) -> float:
+    """A time step dt <= ``at_most`` that divides ``end`` as a scene's ``time.dt`` must (to a
+    relative 1e-9), written with as few significant digits as possible: the step counts n from
+    end / at_most up to 25 % (at most 1000) more are tried, e.g. end = 1, at_most = 0.0005508
+    gives 0.0005 (2000 steps) rather than 1/1816."""
+    first = max(1, math.ceil(end / at_most - 1e-9))
+    best = None
+    for n in range(first, first + min(first // 4, 1000) + 1):
+        for digits in range(1, 18):
+            dt = float(f"{end / n:.{digits}g}")
+            if dt <= at_most and abs(end / dt - round(end / dt)) <= 1e-9 * end / dt:
+                break
+        if best is None or digits < best[0]:
+            best = (digits, dt)
+    return best[1]
+
+
+def scene_instability(error: InstabilityError, time_spec: Mapping) -> InstabilityError:
+    """The stability monitor's error with advice a scene can take: a ``time.cfl``, or a
+    ``time.dt`` that divides ``time.end`` (MEMM's own suggestion need not)."""
+    end = time_spec["end"]
+    if "cfl" in time_spec:
+        cfl = min(0.5, 0.5 * time_spec["cfl"])
+        advice = f"set time.cfl = {cfl:g}"
+        suggested = end / math.ceil(end / (cfl / time_spec["cfl"] * error.dt))
+    else:
+        suggested = dividing_time_step(end, min(error.suggested_dt, 0.5 * error.dt))
+        advice = (f"set time.dt = {suggested!r} ({round(end / suggested)} steps to time.end = {end:g}; "
+                  f"MEMM suggests at most {error.suggested_dt:.4g}, half the stability limit "
+                  "2/sqrt(lambda_max(M^-1 K)) of the elastic operator), or replace time.dt by time.cfl = 0.5")
+    return InstabilityError(f"MEMM is unstable at step {error.step} (t = {error.t:.6g}, dt = {error.dt:.6g}): "
+                            f"{error.reason}. Reduce the time step: {advice}",
+                            error.step, error.t, error.dt, suggested, error.reason)
 
 
 def fields(dem: DEMDiscretisation, stepper: MEMM) -> dict:
@@ -395,6 +447,7 @@ class PairContactStatistics:
             "contact_candidate_facets": int(len(c.facets)),
             "contact_pairs_listed": int(len(c.listed)),
             "contact_list_rebuilds": c.rebuilds,
+            "contact_pairs_scheme_b_rule": c.scheme_b_pairs,
             "first_contact_time": self.first_contact,
             "max_penetration": self.penetration,
             "contact_seconds": c.seconds,

@@ -185,7 +185,7 @@ def minimise_energy(
 
     Parameters
     ----------
-    dem : DEMDiscretisation, with obstacles if any.
+    dem : DEMDiscretisation, with obstacles if any; contact between bodies is rejected.
     fixed_mean : displacement components whose mass-weighted mean is held at zero (e.g. (0,) for
         the horizontal translation of a body on a frictionless horizontal plane).
     fixed_rotation : hold the mass-weighted mean rotation at zero (2D): a disc on a frictionless
@@ -198,6 +198,11 @@ def minimise_energy(
         raise ValueError(f"fixed_mean components must be in [0, {d}), got {list(fixed_mean)}")
     if not 0 < rtol < 1:
         raise ValueError(f"rtol must lie in (0, 1), got {rtol}")
+    if dem.pair_contact is not None:
+        # Its energy is not piecewise quadratic (the overlaps make it quartic in u), so the
+        # active-set Newton iteration below does not apply; ignoring it would be a wrong answer.
+        raise ValueError("minimise_energy handles rigid obstacles only, not contact between bodies "
+                         "(set_contact_boundary): use a dynamic run (MEMM) for contact between bodies")
     if len(dem.reconstruction.dirichlet_facets) == 0 and dem.contact is None:
         raise StaticsError("the body is free: with neither a Dirichlet condition nor an obstacle its "
                            "rigid motions are unconstrained (unconstrained rigid mode)")

@@ -113,6 +113,21 @@ def test_write_summary(tmp_path):
         io.write_summary(path, comm, {"bad": object()})
 
 
+def test_write_summary_is_strict_json_without_nan(tmp_path):
+    """NaN and inf have no strict-JSON form (Python's json writes bare NaN / Infinity, which
+    strict parsers reject): they are written as null."""
+    path = tmp_path / "summary.json"
+    data = {"drift": float("nan"), "gap": np.float64(-np.inf), "values": np.array([1.0, np.nan]),
+            "nested": {"t": [np.inf, 2]}, "ok": 1.5}
+    io.write_summary(path, MPI.COMM_SELF, data)
+
+    def reject(constant):
+        raise ValueError(f"not strict JSON: {constant}")
+
+    assert json.loads(path.read_text(), parse_constant=reject) == {
+        "drift": None, "gap": None, "values": [1.0, None], "nested": {"t": [None, 2]}, "ok": 1.5}
+
+
 @pytest.mark.mpi
 def test_output_directory_success(tmp_path):
     comm = MPI.COMM_WORLD

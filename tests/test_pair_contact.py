@@ -2,6 +2,8 @@
 including the sliding force F^G, exact conservation through impacts by event splitting,
 momentum, non-penetration of matching facets, and bad input."""
 
+import json
+
 import numpy as np
 import pytest
 from mpi4py import MPI
@@ -29,12 +31,13 @@ def approach(x, speed=0.3):
     return np.stack([np.where(x[:, 0] < 0.25, speed, -speed), np.zeros(len(x))], axis=1)
 
 
-def two_blocks(comm=MPI.COMM_WORLD, n=6, scheme="B"):
-    """Two 0.2 x 0.2 squares 0.01 apart along x with matching facets on their facing sides."""
+def two_blocks(comm=MPI.COMM_WORLD, n=6, scheme="B", y0=0.0):
+    """Two 0.2 x 0.2 squares 0.01 apart along x with matching facets on their facing sides,
+    bottoms at y = y0."""
 
     def build(gmsh):
         for x0 in (0.0, 0.21):
-            s = gmsh.model.occ.addRectangle(x0, 0.0, 0.0, 0.2, 0.2)
+            s = gmsh.model.occ.addRectangle(x0, y0, 0.0, 0.2, 0.2)
             gmsh.model.occ.synchronize()
             gmsh.model.addPhysicalGroup(2, [s], 1 if x0 == 0 else 2)
             for _, c in gmsh.model.getBoundary([(2, s)], oriented=False):
@@ -57,6 +60,7 @@ def test_force_is_the_gradient_of_the_energy_in_contact(scheme):
     c = dem.pair_contact
     rng = np.random.default_rng(5)
     u = cell_vector(dem, lambda x: approach(x, 0.013) + 1e-3 * rng.standard_normal(x.shape))
+    c.prepare(u)
     up = c.patch_values(u)
     touching = c._touching(up)
     overlap = touching.overlaps(c.free_displacements(up))[0]
@@ -86,6 +90,7 @@ def test_facet_corrections_are_the_reconstruction_the_energy_uses(scheme):
     c, ops = dem.pair_contact, dem.operators
     rng = np.random.default_rng(5)
     u = cell_vector(dem, lambda x: approach(x, 0.013) + 1e-3 * rng.standard_normal(x.shape))
+    c.prepare(u)
     up = c.patch_values(u)
     delta = c.facet_corrections(up)
     assert np.abs(delta).max() > 1e-4
@@ -151,6 +156,49 @@ def test_matching_facets_close_the_gap_exactly(scheme):
     assert c.penetration(up) < 1e-15
     if scheme == "B":
         assert np.abs(np.abs(c.facet_corrections(up)[:, 0]) - 0.003).max() < 1e-15
+
+
+@pytest.mark.parametrize("quadrature", ["midpoint", pytest.param("gauss-legendre-2", marks=pytest.mark.mpi)])
+def test_the_pair_list_follows_the_bodies_under_every_quadrature(quadrature):
+    """Discs 0.12 m apart (beyond the list radius at t = 0: no pair listed) approach at
+    +-0.3 m/s: the list must be rebuilt as they move, whatever rule integrates the force
+    (``prepare``, called by MEMM before every step). Before, gauss-legendre-2 never rebuilt it
+    and the discs passed through each other (left disc still at +0.3 m/s)."""
+    mesh, _, _ = meshes.create_discs(MPI.COMM_WORLD, [((0.14, 2.27), 0.1), ((0.46, 2.27), 0.1)], 0.03)
+    dem = DEMDiscretisation(mesh, SOFT, "B")
+    dem.set_contact_boundary(_compat.locate_boundary_facets(mesh, lambda x: (x[0] >= 0.14) & (x[0] <= 0.46)))
+    c = dem.pair_contact
+    assert len(c.listed) == 0
+    dt = 0.2 * dem.stable_time_step()
+    stepper = MEMM(dem, dt, quadrature)
+    stepper.initialise(dem.create_vector(), cell_vector(dem, lambda x: approach(x - [0.05, 0.0])))
+    touched = False
+    for _ in range(int(0.6 / dt)):
+        stepper.step()
+        touched |= c.touching(c.patch_values(stepper.u))
+    assert touched and c.rebuilds > 2
+    mass = dem.mass.array_r.reshape(-1, 2)[:, 0]
+    left = (dem.geometry.cell_centres[dem.cell_range[0]:dem.cell_range[1], 0] < 0.3)
+    v = 0.5 * (stepper.v_prev.array_r + stepper.v_next.array_r).reshape(-1, 2)[:, 0]
+    p_left = dem.comm.allreduce(float((mass * v)[left].sum()), op=MPI.SUM)
+    m_left = dem.comm.allreduce(float(mass[left].sum()), op=MPI.SUM)
+    assert p_left / m_left < -0.2  # it bounced back (measured -0.247 with both rules)
+
+
+def test_evaluations_refuse_a_stale_pair_list():
+    """Forces and energies at displacements the list was not prepared for raise, instead of
+    silently leaving out pairs; after ``prepare`` they are evaluated."""
+    dem, facets = two_discs(h=0.03)
+    dem.set_contact_boundary(facets)
+    u = cell_vector(dem, lambda x: approach(x, 0.05))
+    F = dem.create_vector()
+    with pytest.raises(RuntimeError, match="pair list is stale.*call prepare"):
+        dem.force(u, 0.0, F)
+    with pytest.raises(RuntimeError, match="pair list is stale"):
+        dem.energies(u, 0.0)
+    dem.pair_contact.prepare(u)
+    dem.force(u, 0.0, F)
+    assert dem.energies(u, 0.0)["elastic"] > 0.0
 
 
 @pytest.mark.mpi
@@ -304,6 +352,99 @@ def test_rigid_wall_and_contact_between_bodies_together():
     assert drift < 1e-13
 
 
+def blocks_on_a_floor(scheme="B"):
+    """``two_blocks`` 0.01 above the rigid floor y = 0 (candidates: the bottom sides), contact
+    between them on the facing sides: the bottom corner cells have a facet of each model."""
+    from dolfinx_dem.contact import HalfSpace
+
+    dem, facets = two_blocks(scheme=scheme, y0=0.01)
+    dem.set_contact_boundary(facets)
+    bottoms = _compat.locate_boundary_facets(dem.mesh, lambda x: x[1] < 0.02)
+    dem.set_obstacles([HalfSpace([0.0, 0.0], [0.0, 1.0], bottoms)])
+    return dem
+
+
+def _corrections_of_both_models(dem, u):
+    """delta_a of the rigid and of the pair contact on all energy rows (serial)."""
+    import scipy.sparse
+
+    ops = dem.operators
+    QF = scipy.sparse.vstack([ops.S_facet, ops.J_facet]).tocsr()
+
+    def rows(facets, delta):
+        return QF[:, (facets[:, None] * 2 + np.arange(2)).ravel()] @ delta.ravel()
+
+    r, p = dem.contact, dem.pair_contact
+    up = r.patch_values(u)
+    return (rows(r.facets, -np.minimum(r.gaps(up), 0.0)[:, None] * r.directions),
+            rows(p.facets, p.facet_corrections(p.patch_values(u))))
+
+
+@pytest.mark.skip_in_parallel
+@pytest.mark.parametrize("scheme", ["A", "B"])
+def test_rigid_and_pair_contact_on_shared_rows_is_the_sum_of_both_energy_changes(scheme):
+    """Where a cell has a facet on the obstacle and a facet against another body, the two
+    corrections touch the same energy rows. The model (docs/theory.md) is V = V_free + dV_rigid
+    + dV_pair, each dV = a . delta + |delta|^2 / 2 as if the other were absent: the energy of the
+    summed reconstruction minus the cross term delta_rigid . delta_pair. The force is its exact
+    gradient (central differences on the shared cells' dofs)."""
+    dem = blocks_on_a_floor(scheme)
+    rng = np.random.default_rng(2)
+    # The blocks pushed into each other and into the floor, offset vertically (facet ends apart,
+    # off the kinks of the overlaps) and with a little strain.
+    u = cell_vector(dem, lambda x: np.where(x[:, :1] < 0.205, [[0.008, -0.012]], [[-0.008, -0.0135]])
+                    + 1e-4 * rng.standard_normal(x.shape))
+    dem.pair_contact.prepare(u)
+    import scipy.sparse
+
+    ops = dem.operators
+    a = scipy.sparse.vstack([ops.S, ops.J]).tocsr() @ u.array
+    d_rigid, d_pair = _corrections_of_both_models(dem, u)
+    shared = (d_rigid != 0) & (d_pair != 0)
+    assert shared.any()
+    cross = float(d_rigid @ d_pair)
+    combined = 0.5 * (a + d_rigid + d_pair) @ (a + d_rigid + d_pair)
+    V = dem.energies(u, 0.0)["potential"]
+    assert V == pytest.approx(combined - cross, rel=1e-12)
+    assert abs(cross) > 1e-2 * V  # measured: 5.6e-4 J/m against V = 2.51e-2 J/m (2.2 %)
+    # The force on the dofs of the cells both corrections act on is the exact gradient of V.
+    cells = np.intersect1d(dem.contact.cells, dem.pair_contact.cells)
+    assert len(cells) > 0
+    F = dem.create_vector()
+    dem.force(u, 0.0, F)
+    h = 1e-7
+    for k in (cells[:, None] * 2 + np.arange(2)).ravel():
+        up, um = u.copy(), u.copy()
+        up.array[k] += h
+        um.array[k] -= h
+        diff = (dem.energies(up, 0.0)["potential"] - dem.energies(um, 0.0)["potential"]) / (2 * h)
+        assert abs(diff + F.array[k]) < 1e-6 * np.abs(F.array).max()
+    assert np.abs(F.array[(cells[:, None] * 2 + np.arange(2)).ravel()]).max() > 0.1 * np.abs(F.array).max()
+
+
+@pytest.mark.mpi
+def test_blocks_pushed_together_on_a_floor_conserve_the_pseudo_energy():
+    """Both models act on the bottom corner cells in the same steps; the pseudo-energy of
+    V = V_free + dV_rigid + dV_pair is conserved to rounding and V stays positive."""
+    dem = blocks_on_a_floor()
+    rigid, pair = dem.contact, dem.pair_contact
+    dt = 0.3 * dem.stable_time_step()
+    stepper = MEMM(dem, dt)
+    v = cell_vector(dem, lambda x: np.where(x[:, :1] < 0.205, [[0.3, -0.3]], [[-0.3, -0.3]]))
+    first = stepper.initialise(dem.create_vector(), v)
+    drift, both, lowest = 0.0, 0, np.inf
+    for _ in range(int(0.12 / dt)):
+        diag = stepper.step()
+        drift = max(drift, abs(diag.pseudo_energy - first.pseudo_energy) / first.mechanical)
+        lowest = min(lowest, diag.elastic + diag.stabilisation)
+        on_floor = rigid.cells[rigid.gaps(rigid.patch_values(stepper.u)) < 0]
+        touching = pair._touching(pair.patch_values(stepper.u))
+        both += len(np.intersect1d(on_floor, pair.cells[np.concatenate([touching.i, touching.j])])) > 0
+    assert both > 5  # steps in which a cell has a facet of each model in contact (measured: 15 of 20)
+    assert drift < 1e-13
+    assert lowest > -1e-12 * first.mechanical
+
+
 def test_contact_table_needs_a_dynamic_dem_scene():
     import tomllib
 
@@ -315,3 +456,110 @@ def test_contact_table_needs_a_dynamic_dem_scene():
         scenes.validate(static)
     with pytest.raises(scenes.SceneError, match="needs a DEM method"):
         scenes.validate(static | {"method": "fem-P2"})
+
+
+def disc_over_block(height: float, comm=MPI.COMM_WORLD):
+    """Scheme A, nu = 0.3: a disc of radius 0.1 (facets 0.015) whose lowest point is ``height``
+    above a block of facets 0.05. Pairs of a disc facet far round the disc and a block facet
+    have cos^2 of the disc facet's angle to n below kappa = nu: eq. (23)-(24) are not well posed
+    for them (D <= 0 for some)."""
+
+    def build(gmsh):
+        disc = gmsh.model.occ.addDisk(0.0, 0.1 + height, 0.0, 0.1, 0.1)
+        block = gmsh.model.occ.addRectangle(-0.3, -0.2, 0.0, 0.6, 0.2)
+        gmsh.model.occ.synchronize()
+        for tag, (surface, h) in enumerate(((disc, 0.015), (block, 0.05)), start=1):
+            gmsh.model.addPhysicalGroup(2, [surface], tag)
+            gmsh.model.mesh.setSize(gmsh.model.getBoundary([(2, surface)], recursive=True), h)
+        gmsh.model.mesh.generate(2)
+
+    mesh = gmsh_mesh(comm, build)
+    dem = DEMDiscretisation(mesh, ElasticMaterial(E=100.0, nu=0.3, rho=100.0), "A")
+    dem.set_contact_boundary(_compat.locate_boundary_facets(mesh, lambda x: (x[1] <= 0.1 + height) & (x[1] >= -1e-9)))
+    return dem
+
+
+def test_scheme_a_directions_where_eq_23_24_are_well_posed():
+    """Eq. (23)-(24) are used for a pair exactly when both cells' normal compliances have their
+    sign (cos^2 t > kappa = nu for both facets), with bounded directions that close the gap;
+    the other pairs use the scheme B rule (e = +-n/2) and are counted."""
+    dem = disc_over_block(0.01)
+    c = dem.pair_contact
+    L = c.listed
+    cos_i = np.einsum("pi,pi->p", L.n, c.normals[L.i])
+    cos_j = np.einsum("pi,pi->p", L.n, c.normals[L.j])
+    both_a = c.is_scheme_a[L.i] & c.is_scheme_a[L.j]
+    posed = both_a & (np.minimum(cos_i**2, cos_j**2) > 0.3)
+    rule_b = np.all(L.e_i == 0.5 * L.n, axis=1) & np.all(L.e_j == -0.5 * L.n, axis=1)
+    assert np.array_equal(rule_b, ~posed)
+    assert (both_a & ~posed).sum() == c.scheme_b_pairs > 0  # measured: 4 of 64 listed pairs
+    ni, nj = np.einsum("pi,pi->p", L.n, L.e_i)[posed], np.einsum("pi,pi->p", L.n, L.e_j)[posed]
+    assert np.abs(ni - nj - 1).max() < 1e-12
+    assert ni.min() > 0 and ni.max() < 1 and nj.max() < 0 and nj.min() > -1
+    assert np.linalg.norm(L.e_i[posed], axis=1).max() < 1 / np.sqrt(0.3)
+    assert np.linalg.norm(L.e_j[posed], axis=1).max() < 1 / np.sqrt(0.3)
+
+
+def test_scheme_a_contact_runs_through_pairs_without_a_compliant_solution():
+    """The disc falls onto the block: list rebuilds meet pairs with D <= 0 (before: a
+    RuntimeError at t = 0.247 s). They use the scheme B rule; the energy stays exact and the
+    disc bounces."""
+    dem = disc_over_block(0.12)
+    c = dem.pair_contact
+    assert len(c.listed) == 0 and c.scheme_b_pairs == 0
+    dt = 0.3 * dem.stable_time_step()
+    stepper = MEMM(dem, dt)
+    first = stepper.initialise(dem.create_vector(),
+                               cell_vector(dem, lambda x: np.where(x[:, 1:] > 0.0, [[0.0, -0.5]], [[0.0, 0.0]])))
+    drift = 0.0
+    for _ in range(int(0.6 / dt)):
+        diag = stepper.step()
+        drift = max(drift, abs(diag.pseudo_energy - first.pseudo_energy) / first.mechanical)
+    assert c.scheme_b_pairs > 0  # measured: 12
+    assert drift < 1e-13
+    mass = dem.mass.array_r.reshape(-1, 2)[:, 1]
+    disc = dem.geometry.cell_centres[dem.cell_range[0]:dem.cell_range[1], 1] > 0.0
+    v = 0.5 * (stepper.v_prev.array_r + stepper.v_next.array_r).reshape(-1, 2)[:, 1]
+    assert dem.comm.allreduce(float((mass * v)[disc].sum()), op=MPI.SUM) > 0.0  # moving up again
+
+
+@pytest.mark.skip_in_parallel
+def test_a_run_reports_the_pairs_that_use_the_scheme_b_rule(tmp_path, capsys):
+    """summary.json (``contact_pairs_scheme_b_rule``) and the command line report them."""
+    import gmsh
+
+    from dolfinx_dem import cli
+
+    gmsh.initialize()
+    try:
+        gmsh.option.setNumber("General.Terminal", 0)
+        disc = gmsh.model.occ.addDisk(0.0, 0.22, 0.0, 0.1, 0.1)
+        block = gmsh.model.occ.addRectangle(-0.3, -0.2, 0.0, 0.6, 0.2)
+        gmsh.model.occ.synchronize()
+        for tag, (surface, h) in enumerate(((disc, 0.015), (block, 0.05)), start=1):
+            gmsh.model.addPhysicalGroup(2, [surface], tag)
+            gmsh.model.mesh.setSize(gmsh.model.getBoundary([(2, surface)], recursive=True), h)
+        gmsh.model.mesh.generate(2)
+        gmsh.write(str(tmp_path / "disc_block.msh"))
+    finally:
+        gmsh.finalize()
+    (tmp_path / "scene.toml").write_text(
+        'method = "dem-A"\n[mesh]\ntype = "file"\npath = "disc_block.msh"\n'
+        "[material]\nE = 100.0\nnu = 0.3\nrho = 100.0\n"
+        '[contact]\nboundary = ["(y <= 0.22) & (y >= -1e-9)"]\n'
+        '[initial]\nvelocity = ["0", "where(y > 0, -0.5, 0)"]\n[time]\nend = 0.4\ncfl = 0.3\n')
+    assert cli.main(["run", str(tmp_path / "scene.toml"), "--out", str(tmp_path / "out")]) == 0
+    summary = json.loads((tmp_path / "out" / "summary.json").read_text())
+    assert summary["contact_pairs_scheme_b_rule"] > 0 and summary["pseudo_energy_rel_drift"] < 1e-13
+    assert f"note: {summary['contact_pairs_scheme_b_rule']} pairs of scheme A facets used the scheme B" in \
+        capsys.readouterr().out
+
+
+def test_a_step_longer_than_the_skin_is_an_error():
+    """A facet that moves more than skin/2 in one step cannot be covered by any pair list."""
+    dem, facets = two_discs(h=0.03)
+    dem.set_contact_boundary(facets)
+    stepper = MEMM(dem, 0.1)  # 0.3 m/s x 0.1 s = 0.03 m > skin / 2 (facets of ~0.03 m)
+    stepper.initialise(dem.create_vector(), cell_vector(dem, approach))
+    with pytest.raises(RuntimeError, match="moves 3.000e-02 m in one step, more than half the Verlet skin"):
+        stepper.step()

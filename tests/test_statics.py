@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 from mpi4py import MPI
 
-from dolfinx_dem import meshes, scenes, simulation
+from dolfinx_dem import _compat, meshes, scenes, simulation
 from dolfinx_dem.contact import HalfSpace
 from dolfinx_dem.discretisation import DEMDiscretisation
 from dolfinx_dem.material import ElasticMaterial
@@ -65,6 +65,19 @@ def test_free_body_is_rejected():
         minimise_energy(dem)
     with pytest.raises(ValueError, match="fixed_mean components"):
         minimise_energy(dem, fixed_mean=(3,))
+
+
+def test_contact_between_bodies_is_rejected_not_ignored():
+    """Two discs resting on a floor, pressed together by gravity and their contact boundary set:
+    minimise_energy cannot treat contact between bodies and says so (it used to minimise as if
+    the discs did not touch each other)."""
+    mesh, _, _ = meshes.create_discs(MPI.COMM_WORLD, [((0.0, 0.1), 0.1), ((0.25, 0.1), 0.1)], 0.05)
+    dem = DEMDiscretisation(mesh, ElasticMaterial(E=100.0, nu=0.2, rho=1.0), "B", body_force=[0.0, -1.0])
+    boundary = _compat.exterior_facets(mesh)
+    dem.set_obstacles([HalfSpace([0.0, 0.0], [0.0, 1.0], boundary, tolerance=1e-3)])
+    dem.set_contact_boundary(boundary)
+    with pytest.raises(ValueError, match="rigid obstacles only, not contact between bodies"):
+        minimise_energy(dem, fixed_mean=(0,))
 
 
 def test_static_scene_rejects_time_and_fem_needs_statics():

@@ -226,6 +226,12 @@ def validate(scene: Mapping, mesh_dimension: int | None = None) -> dict:
             for key in keys:
                 if key not in item:
                     raise SceneError(f"scene key '{section}[{i}].{key}' is missing")
+    for i, bc in enumerate(scene.get("dirichlet", [])):
+        for k, e in enumerate(bc.get("value", [])):
+            if isinstance(e, str) and "t" in compile(e, "<value>", "eval").co_names and not bc.get("time_dependent"):
+                raise SceneError(f"scene key 'dirichlet[{i}].value[{k}]' ({e!r}) uses t, but "
+                                 f"'dirichlet[{i}].time_dependent' is not true: the value would be frozen at "
+                                 "t = 0 (set time_dependent = true)")
     if "statics" in scene:
         for section in ("time", "initial"):
             if section in scene:
@@ -330,13 +336,21 @@ def evaluate_condition(expression: str, x: np.ndarray, key: str) -> np.ndarray:
     return eval(code, {"__builtins__": {}}, names)  # noqa: S307
 
 
-def evaluate_field(spec, x: np.ndarray, t: float = 0.0) -> np.ndarray:
-    """Evaluate a scene field (constant vector or expressions in x, y, z, t) at points x (d, n)."""
+def evaluate_field(spec, x: np.ndarray, t: float = 0.0, key: str = "field") -> np.ndarray:
+    """Evaluate a scene field (constant vector or expressions in x, y, z, t) at points x (d, n).
+    A value that is not finite (NaN, inf) is a ``SceneError`` naming the scene ``key``, the
+    expression, the time and a point."""
     d, n = x.shape
     if all(isinstance(e, str) for e in spec):
         names = dict(_NAMESPACE, t=t, **{c: x[i] for i, c in enumerate("xyz"[:d])})
         out = np.empty((d, n))
         for i, e in enumerate(spec):
-            out[i] = np.broadcast_to(eval(e, {"__builtins__": {}}, names), (n,))  # noqa: S307
+            with np.errstate(all="ignore"):  # reported below, with the key
+                out[i] = np.broadcast_to(eval(e, {"__builtins__": {}}, names), (n,))  # noqa: S307
+            bad = ~np.isfinite(out[i])
+            if bad.any():
+                k = int(np.argmax(bad))
+                raise SceneError(f"scene key '{key}[{i}]' ({e!r}) is not finite at t = {t:.9g}: {out[i, k]} at "
+                                 f"x = {x[:, k].tolist()}")
         return out
     return np.repeat(np.asarray(spec, dtype=float)[:, None], n, axis=1)
