@@ -44,11 +44,27 @@ class DirichletBC:
     time_dependent: bool = False
 
 
+@dataclasses.dataclass(frozen=True)
+class EnergyRows:
+    """The energy rows a = Q u + Q_dirichlet g a process holds (``DEMDiscretisation.rows``): the
+    elastic rows of its owned cells and the jump rows of every interior facet of its owned cells,
+    ``owned`` marking the rows that are its own (the rows of its part of the PETSc Q). Columns are
+    the held cells' dofs (``DEMDiscretisation.columns`` maps them to global dofs); ``QF`` gives
+    the rows' dependence on the facet values u_F (facet dofs)."""
+
+    Q: scipy.sparse.csr_matrix  # (rows, n_cells d)
+    Q_dirichlet: scipy.sparse.csr_matrix  # (rows, n_D d)
+    QF: scipy.sparse.csr_matrix  # (rows, n_facets d)
+    owned: np.ndarray  # (rows,) bool
+    elastic: np.ndarray  # (rows,) bool: an S row (else a J row)
+
+
 def _petsc_matrix(comm, rows: scipy.sparse.spmatrix, columns: np.ndarray, local_cols: int):
     """A distributed PETSc AIJ matrix from this process's ``rows``, whose local column j is the
     global column ``columns[j]``; ``local_cols`` is the size of the owned column block."""
     sub = rows.tocsr()
-    sub = scipy.sparse.csr_matrix((sub.data, columns[sub.indices], sub.indptr),
+    # copies: sorting must not permute the data of ``rows``, which stays in use
+    sub = scipy.sparse.csr_matrix((sub.data.copy(), columns[sub.indices], sub.indptr.copy()),
                                   shape=(sub.shape[0], int(columns.max(initial=-1)) + 1))
     sub.sort_indices()
     M = PETSc.Mat().createAIJ(
@@ -110,36 +126,52 @@ class DEMDiscretisation:
             geom, material, dirichlet_facets, scheme, geom.facets_of_layers(1), self.comm)
 
         # The jump row of an interior facet belongs to the owner of its cell with the smaller
-        # global number; this process builds the rows of its owned facets.
+        # global number. This process builds the jump rows of every interior facet of its owned
+        # cells: its own ones first (they enter Q), then the others (contact corrections need
+        # every row that a facet of an owned cell touches, see ``rows``).
         interior = geom.interior_facets
         c = geom.facet_cells[interior]
+        touches = (c < self.n_owned).any(axis=1)
         first_cell = np.where(geom.cell_global[c[:, 0]] < geom.cell_global[c[:, 1]], c[:, 0], c[:, 1])
-        jump_facets = interior[first_cell < self.n_owned]
-        jump_facets = jump_facets[np.argsort(geom.facet_global[jump_facets])]
-        self.operators: EnergyOperators = compute_energy_operators(geom, material, self.reconstruction, jump_facets)
+        owned_jumps = first_cell < self.n_owned
+        mine, others = interior[owned_jumps], interior[touches & ~owned_jumps]
+        jump_facets = np.concatenate([mine[np.argsort(geom.facet_global[mine])],
+                                      others[np.argsort(geom.facet_global[others])]])
+        self.operators: EnergyOperators = compute_energy_operators(
+            geom, material, self.reconstruction, self.n_owned, jump_facets)
         rec = self.reconstruction
         #: owned cells whose Neumann facets use scheme B under scheme A (reconstruction.py)
         self.multi_neumann_cells = rec.multi_neumann_cells[rec.multi_neumann_cells < self.n_owned]
         self.num_multi_neumann_cells = self.comm.allreduce(len(self.multi_neumann_cells), op=MPI.SUM)
         #: extrapolated interior facets (reconstruction.py), counted once: by the owner of their jump row
         self.num_extrapolated_facets = self.comm.allreduce(
-            int(np.isin(rec.stencils.extrapolated, jump_facets).sum()), op=MPI.SUM)
+            int(np.isin(rec.stencils.extrapolated, mine).sum()), op=MPI.SUM)
         ops = self.operators
 
-        # Q = [S; J] with this process's rows of S (owned cells), then of J (owned facets), as one
-        # PETSc matrix with global columns, and its transpose stored explicitly (a MatMult is
-        # faster than a MatMultTranspose): the force is -Q^T (Q w + q) + f with two MatMults
-        # (see ``force``).
+        # The energy rows a = Q u + q this process holds: S rows of the owned cells, then J rows of
+        # the interior facets of the owned cells; the first ``len(mine)`` J rows are its own.
         m = d * (d + 1) // 2
-        self._n_elastic_rows = self.n_owned * m  # local rows of Q that belong to S
-        owned_rows = np.concatenate([np.arange(self.n_owned * m), ops.S.shape[0] + np.arange(ops.J.shape[0])])
-        Q_local = scipy.sparse.vstack([ops.S, ops.J]).tocsr()[owned_rows]
-        self._Q_dirichlet = scipy.sparse.vstack([ops.S_dirichlet, ops.J_dirichlet]).tocsr()[owned_rows]
-        columns = (geom.cell_global[:, None] * d + np.arange(d)).ravel()  # local dof -> global dof
-        self.Q = _petsc_matrix(self.comm, Q_local, columns, self.n_owned * d)
+        S_rows, J_rows = self.n_owned * m, len(jump_facets) * d
+        own = np.zeros(S_rows + J_rows, dtype=bool)
+        own[: S_rows + len(mine) * d] = True
+        self.columns = (geom.cell_global[:, None] * d + np.arange(d)).ravel()  # local dof -> global dof
+        self.rows = EnergyRows(
+            Q=scipy.sparse.vstack([ops.S, ops.J]).tocsr(),
+            Q_dirichlet=scipy.sparse.vstack([ops.S_dirichlet, ops.J_dirichlet]).tocsr(),
+            QF=scipy.sparse.vstack([ops.S_facet, ops.J_facet]).tocsr(),
+            owned=own,
+            elastic=np.arange(S_rows + J_rows) < S_rows,
+        )
+
+        # Q = [S; J] with this process's own rows, as one PETSc matrix with global columns, and
+        # its transpose stored explicitly (a MatMult is faster than a MatMultTranspose): the
+        # force is -Q^T (Q w + q) + f with two MatMults (see ``force``).
+        self._n_elastic_rows = S_rows  # local rows of Q that belong to S
+        self._Q_dirichlet = self.rows.Q_dirichlet[own]
+        self.Q = _petsc_matrix(self.comm, self.rows.Q[own], self.columns, self.n_owned * d)
         self._QT = self.Q.transpose(PETSc.Mat())  # MatTranspose into a new matrix
-        self.grad = _petsc_matrix(self.comm, ops.grad[: self.n_owned * d * d], columns, self.n_owned * d)
-        self._grad_dirichlet = ops.grad_dirichlet[: self.n_owned * d * d]
+        self.grad = _petsc_matrix(self.comm, ops.grad, self.columns, self.n_owned * d)
+        self._grad_dirichlet = ops.grad_dirichlet
         self._K = None
 
         volumes = geom.cell_volumes[: self.n_owned]
@@ -294,7 +326,7 @@ class DEMDiscretisation:
         out.aypx(-1.0, self._rhs)
         if contact:
             for c in self.contacts:
-                c.add(c.force_correction(c.patch_values(u)), out)
+                c.add_force(u, out)
         return out
 
     def energies(self, u: PETSc.Vec, t: float) -> dict[str, float]:
@@ -306,16 +338,13 @@ class DEMDiscretisation:
         a = self._a.array
         a += self._q
         nS = self._n_elastic_rows
-        local = np.array([a[:nS] @ a[:nS], a[nS:] @ a[nS:], self.body_force.array_r @ u.array_r])
+        local = np.array([0.5 * (a[:nS] @ a[:nS]), 0.5 * (a[nS:] @ a[nS:]), self.body_force.array_r @ u.array_r])
+        for c in self.contacts:  # this process's part of the contact energy changes
+            local[:2] += c.energy_correction(c.patch_values(u))
         if self.comm.size > 1:
             self.comm.Allreduce(MPI.IN_PLACE, local, op=MPI.SUM)
-        e = {"elastic": 0.5 * local[0], "stabilisation": 0.5 * local[1], "external": -local[2]}
+        e = {"elastic": local[0], "stabilisation": local[1], "external": -local[2]}
         e["potential"] = e["elastic"] + e["stabilisation"] + e["external"]
-        for c in self.contacts:
-            elastic, stabilisation = c.energy_correction(c.patch_values(u))
-            e["elastic"] += elastic
-            e["stabilisation"] += stabilisation
-            e["potential"] += elastic + stabilisation
         return e
 
     def gradient(self, u: PETSc.Vec, t: float) -> np.ndarray:
@@ -323,10 +352,9 @@ class DEMDiscretisation:
         self._update_dirichlet(t)
         self.grad.mult(u, self._grad_vec)
         G = (self._grad_vec.array + self._grad_dirichlet @ self._g).reshape(self.n_owned, self.d, self.d)
-        start, stop = self.cell_range
         for c in self.contacts:
-            mine = (c.cells >= start) & (c.cells < stop)
-            np.add.at(G, c.cells[mine] - start, c.gradient_correction(c.patch_values(u))[mine])
+            cells, change = c.gradient_correction(c.patch_values(u))
+            np.add.at(G, cells, change)
         return G
 
     def stress(self, u: PETSc.Vec, t: float) -> np.ndarray:
@@ -388,6 +416,23 @@ class DEMDiscretisation:
     def stable_time_step(self) -> float:
         """dt_max = 2 / sqrt(lambda_max(M^-1 K)), the linear stability limit of MEMM (leapfrog)."""
         return 2.0 / np.sqrt(self.eigenvalues(1, largest=True, rtol=1e-8)[0])
+
+    def halo_exchange(self, owned: np.ndarray) -> np.ndarray:
+        """Per-cell values of the owned cells, (n_owned, k), extended to the held cells (n_cells, k)
+        by their owners' values (a ghost update of a PETSc vector with block size k). Integer
+        values come back exact (they travel as float64). Collective."""
+        owned = np.asarray(owned)
+        k = owned.shape[1]
+        geom = self.geometry
+        vec = PETSc.Vec().createGhost(np.asarray(geom.cell_global[self.n_owned:], dtype=PETSc.IntType),
+                                      size=(self.n_owned * k, PETSc.DECIDE), bsize=k, comm=self.comm)
+        with vec.localForm() as local:
+            local.array[: self.n_owned * k] = owned.ravel()
+        vec.ghostUpdate(PETSc.InsertMode.INSERT, PETSc.ScatterMode.FORWARD)
+        with vec.localForm() as local:
+            out = local.array.reshape(-1, k).astype(owned.dtype)
+        vec.destroy()
+        return out
 
     # -- DOLFINx functions -------------------------------------------------------------------
     def scalar_function(self, values: np.ndarray, name: str) -> dolfinx.fem.Function:

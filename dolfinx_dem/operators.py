@@ -49,14 +49,14 @@ def mandel_stiffness(material: ElasticMaterial, d: int) -> np.ndarray:
 class EnergyOperators:
     """Global sparse operators (rows for all cells/facets), built on every process."""
 
-    grad: scipy.sparse.csr_matrix  # (N d d, N d): cell gradients G_c (homogeneous part)
-    grad_dirichlet: scipy.sparse.csr_matrix  # (N d d, n_D d): G_c from the Dirichlet values g
-    S: scipy.sparse.csr_matrix  # (N m, N d)
-    S_dirichlet: scipy.sparse.csr_matrix  # (N m, n_D d)
+    grad: scipy.sparse.csr_matrix  # (n d d, N d): cell gradients G_c (homogeneous part)
+    grad_dirichlet: scipy.sparse.csr_matrix  # (n d d, n_D d): G_c from the Dirichlet values g
+    S: scipy.sparse.csr_matrix  # (n m, N d), n = num_cells of compute_energy_operators
+    S_dirichlet: scipy.sparse.csr_matrix  # (n m, n_D d)
     J: scipy.sparse.csr_matrix  # (Fi d, N d), rows ordered as ``jump_facets``
     J_dirichlet: scipy.sparse.csr_matrix  # (Fi d, n_D d)
     jump_facets: np.ndarray  # (Fi,) interior facets, in the row order of J
-    S_facet: scipy.sparse.csr_matrix  # (N m, F d): S = S_facet (R u + D g)
+    S_facet: scipy.sparse.csr_matrix  # (n m, F d): S = S_facet (R u + D g)
     J_facet: scipy.sparse.csr_matrix  # (Fi d, F d): gradient part of J, J = J_facet (R u + D g) + jumps of u_C
 
 
@@ -74,18 +74,20 @@ def facet_gradient(geom: MeshGeometry) -> scipy.sparse.csr_matrix:
 
 
 def compute_energy_operators(
-    geom: MeshGeometry, material: ElasticMaterial, rec: Reconstruction, jump_facets: np.ndarray
+    geom: MeshGeometry, material: ElasticMaterial, rec: Reconstruction, num_cells: int, jump_facets: np.ndarray
 ) -> EnergyOperators:
-    """S, J and the gradient, as in the module docstring; J rows follow ``jump_facets``."""
+    """S and the gradient for the first ``num_cells`` cells, J for ``jump_facets`` (in that row
+    order), as in the module docstring. Columns: the held cells' dofs."""
     d, N = geom.d, geom.num_cells
     Gf = facet_gradient(geom)
-    grad = (Gf @ rec.R).tocsr()
-    grad_D = (Gf @ rec.D).tocsr()
+    cell_rows = np.arange(num_cells * d * d)
+    grad = (Gf[cell_rows] @ rec.R).tocsr()
+    grad_D = (Gf[cell_rows] @ rec.D).tocsr()
 
     L = np.linalg.cholesky(mandel_stiffness(material, d))
     block = L.T @ mandel(d)  # (m, d*d)
     W = scipy.sparse.kron(
-        scipy.sparse.diags(np.sqrt(geom.cell_volumes)), scipy.sparse.csr_matrix(block)
+        scipy.sparse.diags(np.sqrt(geom.cell_volumes[:num_cells])), scipy.sparse.csr_matrix(block)
     ).tocsr()
 
     # Jump of the P1 reconstructions (10) at x_f, eq. (12): direct part + gradient part.
@@ -114,7 +116,7 @@ def compute_energy_operators(
     ).tocsr()
     weight = material.stabilisation * geom.facet_areas[jump_facets] / geom.facet_diameters[jump_facets]
     sqrt_w = scipy.sparse.diags(np.repeat(np.sqrt(weight), d))
-    S_facet = (W @ Gf).tocsr()
+    S_facet = (W @ Gf[cell_rows]).tocsr()
     J_facet = (sqrt_w @ X @ Gf).tocsr()
     return EnergyOperators(
         S_facet=S_facet,

@@ -1,4 +1,4 @@
-"""Frictionless contact between deformable bodies (paper §3.4, eq. (22)-(34)), 2D.
+"""Frictionless contact between deformable bodies (paper §3.4, eq. (22)-(34)), 2D, distributed.
 
 Candidate facets are declared boundary facets; out of contact they keep their free
 reconstruction u_f^free = R_f u (+ D_f g): u_c for scheme B facets (the facet translates with its
@@ -16,31 +16,42 @@ reconstruction (eq. (31)) is, with g^- = min(g, 0),
 
 with e_f = n/2, e_f' = -n/2 for scheme B (eq. (26)-(27), theta = 1/2), and for two scheme A
 facets the directions of eq. (23)-(24) where they are well posed (equal normal changes of the two
-tractions on n; the scheme B rule otherwise, counted; see ``PairContact._directions``). It equals
-the free one when g = 0 or w = 0, so the energy is continuous (§3.4.3). Writing the energy rows a = Q u + q (Q = [S; J]) and
-z_p = Q_f e_f / |f| + Q_f' e_f' / |f'| for a pair p, the rows change by delta_a = sum_p c_p z_p
-with c_p = w_p g_p^-, so that
+tractions on n; the scheme B rule otherwise, counted; see ``_directions``). It equals the free
+one when g = 0 or w = 0, so the energy is continuous (§3.4.3). Writing the energy rows
+a = Q u + q (Q = [S; J]) and z_p = Q_f e_f / |f| + Q_f' e_f' / |f'| for a pair p, the rows
+change by delta_a = sum_p c_p z_p with c_p = w_p g_p^-, so that
 
     V = 1/2 |a + delta_a|^2,     -dV/du = -Q^T (a + delta_a) - sum_p (z_p . (a + delta_a)) dc_p/du,
     dc_p/du = w_p dg_p/du + g_p dw_p/du      (on pairs with g_p < 0),
 
-the exact gradient; g_p dw_p/du is the sliding force F^G of eq. (34). Along a MEMM free flight
-u + tau v, g_p and the four facet-end projections are affine in tau: c_p is a quadratic and the
-force correction a cubic between the events where a gap changes sign or a facet end crosses the
-end of the other facet's projection (paper §4). The force integral is split at those events and
-integrated by 2-point Gauss-Legendre on each piece, which is exact for cubics: the pseudo-energy
-is conserved to rounding.
+the exact gradient; g_p dw_p/du is the sliding force F^G of eq. (34).
+
+Distributed (patch.py). Every process owns the candidate facets of its owned cells and knows those
+of its first halo layer that touch its own energy rows (its *local* facets). Its pair list holds
+every pair with a local facet (partners anywhere: the *ghost* facets are copies of the candidate
+facets of other processes near its own, received when the list is built). Each process sums the
+energy change over its own rows, and the force terms -Q^T delta_a of its own rows and
+-(z_p . (a + delta_a)) dc_p/du restricted to the z_p entries of its own rows: the processes' parts
+add up to the exact gradient, since z_p . (a + delta_a) is a sum over rows. Forces reach the
+distributed force vector by a reverse scatter of the patch dofs.
+
+Events (paper §4). Along a MEMM free flight u + tau v, g_p and the four facet-end projections are
+affine in tau, so c_p is a quadratic and a pair's force term a cubic between the events where its
+gap changes sign or a facet end crosses the end of the other facet's projection, or where a pair
+sharing one of its rows has such an event. Each pair's term is integrated by 2-point
+Gauss-Legendre on the pieces cut by those events only (an impact elsewhere does not split it),
+and the rows' term -Q^T delta_a, linear in the c_p, by 2-point Gauss-Legendre on each pair's own
+pieces: exact, so the pseudo-energy is conserved to rounding.
 
 Broad phase: pairs are listed (a Verlet list built with a k-d tree on the displaced facet
-centres) when the centres are closer than r = max|f| + skin; the list is rebuilt when a candidate
-facet has moved more than skin/2 since the last build, so a pair that is not listed cannot touch.
-The check is ``prepare(u, v, dt)``, which MEMM calls before every step's force integral whatever
-its quadrature (both ends of the affine flight); every evaluation checks that the list is valid
-for its displacements and raises otherwise (never a silently incomplete list); so does a step
-that moves a facet by more than skin/2. Cost per step: the gaps of the listed pairs, and on
-steps with contact the energy rows those pairs touch (the listed patch), not all boundary
-facets. Everything is local to the contact patch and computed from gathered patch values on
-every process (as contact.RigidContact).
+centres) when the centres are closer than r = max|f| + skin. Each process sends the records of
+its own candidate facets to the processes whose bounding box of local facets (grown by r) meets
+the box of its own facets; the boxes are gathered (one box per process). The list is rebuilt on
+every process when a candidate facet anywhere has moved more than skin/2 since the last build
+(one logical reduction per step in ``prepare``): then no unlisted pair can touch. ``prepare``
+checks both ends of the coming step (the flight is affine); every evaluation checks that the list
+is valid for its displacements and raises otherwise (never a silently incomplete list); so does
+a step that moves a facet by more than skin/2.
 """
 
 from __future__ import annotations
@@ -51,12 +62,75 @@ import time
 import numpy as np
 import scipy.sparse
 import scipy.spatial
+from mpi4py import MPI
 from petsc4py import PETSc
 
-from dolfinx_dem.contact import gather_patch
+from dolfinx_dem.halo import owned_facet_marks
+from dolfinx_dem.patch import PatchScatter, piecewise_midpoints
 
 #: Gauss-Legendre 2-point nodes on [0, 1]: exact for the cubic force correction on each piece.
 _GL2 = 0.5 + np.array([-0.5, 0.5]) / np.sqrt(3.0)
+
+
+@dataclasses.dataclass
+class _Facets:
+    """Candidate facets (local ones first, then ghosts): global facet number ``key``, owner,
+    body, barycentre, outward unit normal, length, end points, global vertex numbers, scheme A
+    data (the tensor C a_f / |c| of ``PairContact._directions``), and the free reconstruction
+    u_f = R_f u + lift as d rows of M (global dof, value) entries (dof -1: padding)."""
+
+    key: np.ndarray  # (n,)
+    index: np.ndarray  # (n,) the facet's number among all candidates (own facets numbered by rank)
+    owner: np.ndarray  # (n,)
+    body: np.ndarray  # (n,)
+    centre: np.ndarray  # (n, d)
+    normal: np.ndarray  # (n, d)
+    length: np.ndarray  # (n,)
+    ends: np.ndarray  # (n, d, d) vertex coordinates
+    vertex_ids: np.ndarray  # (n, d)
+    scheme_a: np.ndarray  # (n,) bool
+    Ca: np.ndarray  # (n, d, d, d)
+    R_dofs: np.ndarray  # (n, d, M) global dofs, -1 padding
+    R_values: np.ndarray  # (n, d, M)
+    lift: np.ndarray  # (n, d)
+
+    FLOATS = ("centre", "normal", "length", "ends", "Ca", "R_values", "lift")
+    INTS = ("key", "index", "owner", "body", "vertex_ids", "scheme_a", "R_dofs")
+
+    def __len__(self) -> int:
+        return len(self.key)
+
+    def take(self, k: np.ndarray) -> _Facets:
+        return _Facets(**{f.name: getattr(self, f.name)[k] for f in dataclasses.fields(self)})
+
+    def records(self) -> tuple[np.ndarray, np.ndarray]:
+        """(float rows, integer rows): one row per facet, to send to other processes."""
+        n = len(self)
+        flat = lambda a: a.reshape(n, int(np.prod(a.shape[1:], dtype=np.int64)))  # noqa: E731
+        floats = np.concatenate([flat(getattr(self, name)) for name in self.FLOATS], axis=1)
+        ints = np.concatenate([flat(getattr(self, name)).astype(np.int64) for name in self.INTS], axis=1)
+        return floats, ints
+
+    def from_records(self, floats: np.ndarray, ints: np.ndarray) -> _Facets:
+        """Facets from ``records`` rows, shaped like this instance's arrays."""
+        out, k = {}, 0
+        for name in self.FLOATS:
+            shape = getattr(self, name).shape[1:]
+            width = int(np.prod(shape, dtype=np.int64))
+            out[name] = floats[:, k : k + width].reshape((-1,) + shape)
+            k += width
+        k = 0
+        for name in self.INTS:
+            template = getattr(self, name)
+            width = int(np.prod(template.shape[1:], dtype=np.int64))
+            out[name] = ints[:, k : k + width].reshape((-1,) + template.shape[1:]).astype(template.dtype)
+            k += width
+        return _Facets(**out)
+
+    @staticmethod
+    def concatenate(parts: list[_Facets]) -> _Facets:
+        return _Facets(**{f.name: np.concatenate([getattr(p, f.name) for p in parts])
+                          for f in dataclasses.fields(_Facets)})
 
 
 class PairContact:
@@ -73,151 +147,218 @@ class PairContact:
 
     def __init__(self, dem, facets, self_contact: bool = False, skin: float | None = None,
                  tolerance: float = 0.0):
-        from dolfinx_dem import _compat
-
-        geom, rec, ops, d = dem.geometry, dem.reconstruction, dem.operators, dem.d
+        geom, rec, d = dem.geometry, dem.reconstruction, dem.d
         if d != 2:
             raise ValueError(f"contact between deformable bodies is implemented in 2D, not {d}D")
         self.dem, self.comm, self.d = dem, dem.comm, d
-        f = np.unique(np.concatenate(self.comm.allgather(
-            _compat.local_facet_global_indices(dem.mesh, np.asarray(facets, dtype=np.int32)))))
-        if f.size == 0:
+        if not (np.isfinite(tolerance) and tolerance >= 0):
+            raise ValueError(f"the penetration tolerance must be >= 0, got {tolerance}")
+        facets = np.asarray(facets, dtype=np.int32)
+        marks = dem.halo_exchange(owned_facet_marks(dem.mesh, facets, np.zeros(len(facets), dtype=np.int64)))
+        cell, j = np.nonzero((marks >= 0) & (geom.cell_layer <= 1)[:, None])
+        f = geom.cell_facets[cell, j]
+        owned = cell < dem.n_owned
+        if self.comm.allreduce(int(owned.sum()), op=MPI.SUM) == 0:
             raise ValueError("the contact boundary has no facet (check its tag)")
-        if (geom.facet_cells[f, 1] >= 0).any():
-            bad = f[geom.facet_cells[f, 1] >= 0][0]
-            raise ValueError(f"contact facets must be boundary facets; facet {bad} at "
-                             f"{geom.facet_centres[bad].tolist()} is interior")
-        if np.isin(f, rec.dirichlet_facets).any():
+        interior = geom.facet_cells[f[owned], 1] >= 0
+        bad = [b for part in self.comm.allgather(geom.facet_centres[f[owned][interior][:1]].tolist()) for b in part]
+        if bad:
+            raise ValueError(f"contact facets must be boundary facets; the facet at {bad[0]} is interior")
+        if self.comm.allreduce(bool(np.isin(f[owned], rec.dirichlet_facets).any()), op=MPI.LOR):
             raise ValueError("contact facets must not carry a Dirichlet condition")
         if dem._time_dependent:
             raise ValueError("contact with time-dependent Dirichlet conditions is not supported")
-        if not (np.isfinite(tolerance) and tolerance >= 0):
-            raise ValueError(f"the penetration tolerance must be >= 0, got {tolerance}")
-        _check_bodies_share_no_vertex(geom, dem.body_labels)
-        _check_bodies_do_not_overlap(geom, dem.body_labels)
-        self.facets = f
-        self.cells = cells = geom.facet_cells[f, 0]
-        self.bodies = dem.body_labels[cells]
+        _check_bodies_share_no_vertex(dem)
+        _check_bodies_do_not_overlap(dem)
         self.self_contact = bool(self_contact)
         self.tolerance = float(tolerance)
-        an = geom.facet_area_normals[cells, geom.facet_local[f, 0]]
-        self.lengths = np.linalg.norm(an, axis=1)
-        self.normals = an / self.lengths[:, None]
-        self.centres = geom.facet_centres[f]
-        mask = np.ones((len(f), d + 1), dtype=bool)
-        mask[np.arange(len(f)), geom.facet_local[f, 0]] = False
-        self.vertices = geom.cell_vertices[cells][mask].reshape(len(f), d, d)  # (nf, 2 ends, d)
-        self.skin = float(self.lengths.max() if skin is None else skin)
+
+        # The energy rows this process owns that candidate facets touch, and the local facets:
+        # the own ones, then the first-layer ones that touch an own row.
+        rows = dem.rows
+        dofs = (f[:, None] * d + np.arange(d)).ravel()
+        QF = rows.QF[rows.owned][:, dofs].tocsc()
+        touches = np.diff(QF.indptr).reshape(-1, d).sum(axis=1) > 0
+        keep = owned | touches
+        order = np.lexsort((geom.facet_global[f], ~owned))
+        order = order[keep[order]]
+        self.num_own = int(owned.sum())
+        self.facets, self.cells = f[order], cell[order]  # the local facets, own first
+        # Candidate numbers: the own facets of rank r after those of ranks < r; the first-layer
+        # ones get their owners' numbers through the halo.
+        first = self.comm.exscan(self.num_own) or 0
+        numbers = np.full(marks.shape, -1, dtype=np.int64)
+        numbers[cell[order][: self.num_own], j[order][: self.num_own]] = first + np.arange(self.num_own)
+        numbers = dem.halo_exchange(numbers[: dem.n_owned])[cell[order], j[order]]
+        self._facets = self._local_records(order, f, cell, numbers)
+        self.num_facets = self.comm.allreduce(self.num_own, op=MPI.SUM)
+        self._facet_vector = PETSc.Vec().createMPI((self.num_own * d, PETSc.DECIDE), comm=self.comm)
+        dofs = (self.facets[:, None] * d + np.arange(d)).ravel()
+        own_rows = np.flatnonzero(rows.owned)
+        QF = rows.QF[own_rows][:, dofs].tocsr()
+        touched = np.unique(QF.tocoo().row)
+        self._QF = QF[touched].tocsc()  # (own rows touched, local facet dofs)
+        self._Q = rows.Q[own_rows[touched]]  # held-dof columns
+        self._q = rows.Q_dirichlet[own_rows[touched]] @ dem.dirichlet_values(0.0).ravel()
+        self._is_elastic_row = rows.elastic[own_rows[touched]]
+        an = geom.facet_area_normals[self.cells, geom.facet_local[self.facets, 0]]
+        self._grad_weights = an / geom.cell_volumes[self.cells, None]
+        lengths = self.comm.allreduce(self._facets.length.max(initial=0.0), op=MPI.MAX)
+        self.skin = float(lengths if skin is None else skin)
         if not self.skin > 0:
             raise ValueError(f"the Verlet skin must be > 0, got {skin}")
-        self.radius = float(self.lengths.max()) + self.skin
+        self.radius = lengths + self.skin
 
-        # Energy rows touched by the candidate facets' values, and the contact patch.
-        nf = len(f)
-        dofs = (f[:, None] * d + np.arange(d)).ravel()
-        QF = scipy.sparse.vstack([ops.S_facet[:, dofs], ops.J_facet[:, dofs]]).tocsr()
-        rows = np.unique(QF.tocoo().row)
-        Q = scipy.sparse.vstack([ops.S, ops.J]).tocsr()
-        g = dem.dirichlet_values(0.0).ravel()
-        q = np.concatenate([ops.S_dirichlet @ g, ops.J_dirichlet @ g])
-        R = rec.R[dofs]
-        # The dofs any contact of these facets can involve (global dof numbers); a step only
-        # gathers the part of it it needs (the patch, see _set_patch).
-        self._universe = np.unique(np.concatenate([Q[rows].indices, R.indices]))
-        self._Q = Q[rows][:, self._universe].tocsr()
-        self._q = q[rows]
-        self._QF = QF[rows].tocsc()  # (rows, nf d); columns are sliced at list builds
-        self._is_elastic_row = rows < ops.S.shape[0]
-        # Free reconstructions u_f = R_f u + D_f g of the candidates (u_c for scheme B facets).
-        self._R_universe = R[:, self._universe].tocsr()
-        self._kinematic = np.unique(self._R_universe.indices)  # positions in the universe
-        self._R_lift = (rec.D[dofs] @ g).reshape(nf, d)
-        self._grad_weights = an / geom.cell_volumes[cells, None]
-        self.is_scheme_a = np.isin(f, rec.scheme_a_facets)
-        if self.is_scheme_a.any():
-            C = dem.material.elasticity_tensor(d)
-            # A_f x = (C : (x (x) a_f)) n / |c| for the pair's normal n: einsum with C and a_f.
-            self._Ca = np.einsum("ijkl,nl->nijk", C, an) / geom.cell_volumes[cells, None, None, None]
         self.evaluations = 0
         self.rebuilds = 0
-        self._scheme_b_rule = np.empty(0, dtype=np.int64)  # pair keys i * n_facets + j, see _directions
+        self._scheme_b_rule = np.empty(0, dtype=np.int64)  # keys of pairs under the B rule (own ones)
         self.seconds = 0.0  # processor time of the contact work in force integrals and energies
-        self._reference = None  # candidate cell displacements at the last list build
-        zero = np.zeros((len(f), d))
-        self._build_pairs(zero)
-        g0, w0 = self.listed.gaps(zero), self.listed.overlaps(zero)[0]
-        deep = (g0 < -self.tolerance) & (w0 > 0)
+        zero = dem.create_vector()
+        self._build(zero)
+        up = self.patch_values(zero)
+        g, w = self._state(np.arange(len(self.listed)), *self._pair_displacements(up))[:2]
+        deep = (g < -self.tolerance) & (w > 0)
+        found = None
         if deep.any():
-            k = int(np.argmin(np.where(deep, g0, np.inf)))
-            i, j = self.listed.i[k], self.listed.j[k]
-            raise ValueError(f"bodies {self.bodies[i]} and {self.bodies[j]} overlap at t = 0: facets at "
-                             f"{self.centres[i].tolist()} and {self.centres[j].tolist()} interpenetrate by "
-                             f"{-g0[k]:.3e} m (tolerance {self.tolerance:g} m)")
+            k = int(np.argmin(np.where(deep, g, np.inf)))
+            F, L = self.facets_all, self.listed
+            found = (float(g[k]), int(F.body[L.i[k]]), int(F.body[L.j[k]]), F.centre[L.i[k]].tolist(),
+                     F.centre[L.j[k]].tolist())
+        found = [x for x in self.comm.allgather(found) if x is not None]
+        if found:
+            g, bi, bj, xi, xj = min(found)
+            raise ValueError(f"bodies {bi} and {bj} overlap at t = 0: facets at {xi} and {xj} interpenetrate by "
+                             f"{-g:.3e} m (tolerance {self.tolerance:g} m)")
+
+    def _local_records(self, order, f, cell, numbers) -> _Facets:
+        """The candidate records of the local facets ``f[order]`` (cells ``cell[order]``,
+        candidate numbers ``numbers``)."""
+        dem, geom, rec, d = self.dem, self.dem.geometry, self.dem.reconstruction, self.d
+        f, cell = f[order], cell[order]
+        n = len(f)
+        an = geom.facet_area_normals[cell, geom.facet_local[f, 0]]
+        length = np.linalg.norm(an, axis=1)
+        mask = np.ones((n, d + 1), dtype=bool)
+        mask[np.arange(n), geom.facet_local[f, 0]] = False
+        R = rec.R[(f[:, None] * d + np.arange(d)).ravel()].tocsr()
+        width = self.comm.allreduce(int(np.diff(R.indptr).max(initial=0)), op=MPI.MAX)
+        R_dofs = np.full((n * d, width), -1, dtype=np.int64)
+        R_values = np.zeros((n * d, width))
+        counts = np.diff(R.indptr)
+        rank = np.arange(R.nnz) - np.repeat(R.indptr[:-1], counts)
+        rows = np.repeat(np.arange(n * d), counts)
+        R_dofs[rows, rank] = dem.columns[R.indices]
+        R_values[rows, rank] = R.data
+        scheme_a = np.isin(f, rec.scheme_a_facets)
+        C = dem.material.elasticity_tensor(d)
+        # A_f x = (C : (x (x) a_f)) n / |c| for the pair's normal n: einsum with C and a_f.
+        Ca = np.einsum("ijkl,nl->nijk", C, an) / geom.cell_volumes[cell, None, None, None]
+        return _Facets(
+            key=geom.facet_global[f], index=numbers, owner=geom.cell_owner[cell], body=geom.cell_bodies[cell],
+            centre=geom.facet_centres[f], normal=an / length[:, None], length=length,
+            ends=geom.cell_vertices[cell][mask].reshape(n, d, d),
+            vertex_ids=geom.cell_vertex_ids[cell][mask].reshape(n, d), scheme_a=scheme_a,
+            Ca=np.where(scheme_a[:, None, None, None], Ca, 0.0),
+            R_dofs=R_dofs.reshape(n, d, width), R_values=R_values.reshape(n, d, width),
+            lift=(rec.D[(f[:, None] * d + np.arange(d)).ravel()] @ dem.dirichlet_values(0.0).ravel()).reshape(n, d),
+        )
 
     # -- broad phase ---------------------------------------------------------------------------
-    def _build_pairs(self, uc: np.ndarray):
-        """The Verlet list of facing facet pairs with centres closer than ``radius``, for the
-        candidate cell displacements ``uc`` (n_facets, d)."""
-        tree = scipy.spatial.cKDTree(self.centres + uc)
-        pairs = tree.query_pairs(self.radius, output_type="ndarray")
+    def _build(self, u: PETSc.Vec):
+        """The Verlet list at displacements ``u``: ghost records from the processes whose own
+        facets may come near this process's local facets, then the facing pairs with a local
+        facet whose displaced centres are closer than ``radius`` (collective)."""
+        comm, d = self.comm, self.d
+        local = self._facets
+        # Free displacements of the local facets at u, through a scatter of their dofs only.
+        scatter = PatchScatter(self.dem.create_vector(), np.unique(local.R_dofs[local.R_dofs >= 0]))
+        up = scatter.gather(u)
+        uc = _free(local, scatter.dofs, up)
+        x = local.centre + uc
+        own = slice(0, self.num_own)
+        empty = np.array([np.inf] * d + [-np.inf] * d)
+        box_own = np.concatenate([x[own].min(axis=0), x[own].max(axis=0)]) if self.num_own else empty
+        box_local = np.concatenate([x.min(axis=0), x.max(axis=0)]) if len(x) else empty
+        boxes = np.array(comm.allgather(np.concatenate([box_own, box_local])))
+        r = self.radius
+        meets = np.all(boxes[:, 2 * d : 3 * d] - r <= box_own[d:], axis=1) & \
+            np.all(box_own[:d] <= boxes[:, 3 * d :] + r, axis=1)
+        meets[comm.rank] = False
+        floats, ints = local.take(np.arange(self.num_own)).records()
+        floats = np.concatenate([floats, uc[own]], axis=1)  # with the sender's displacements
+        targets = np.flatnonzero(meets)
+        send = [(floats, ints) if q in targets else None for q in range(comm.size)]
+        received = [m for m in comm.alltoall(send) if m is not None]
+        if received:
+            rf = np.concatenate([m[0] for m in received])
+            ri = np.concatenate([m[1] for m in received])
+            new = ~np.isin(ri[:, 0], local.key)
+            ghosts = local.from_records(rf[new, :-d], ri[new])
+            uc_ghosts = rf[new, -d:]
+        else:
+            ghosts, uc_ghosts = local.take(np.empty(0, dtype=np.int64)), np.zeros((0, d))
+        F = _Facets.concatenate([local, ghosts])
+        ucF = np.concatenate([uc, uc_ghosts])
+        nl = len(local)
+
+        tree = scipy.spatial.cKDTree(F.centre + ucF)
+        pairs = tree.query_pairs(r, output_type="ndarray")
         i, j = pairs[:, 0], pairs[:, 1]
-        keep = np.einsum("pi,pi->p", self.normals[i], self.normals[j]) < 0  # facing facets only
-        same = self.bodies[i] == self.bodies[j]
+        keep = (i < nl) | (j < nl)  # with a local facet
+        keep &= np.einsum("pi,pi->p", F.normal[i], F.normal[j]) < 0  # facing facets only
+        same = F.body[i] == F.body[j]
         if self.self_contact:
-            shared = (np.abs(self.vertices[i][:, :, None] - self.vertices[j][:, None]).sum(-1) == 0).any((1, 2))
+            shared = (F.vertex_ids[i][:, :, None] == F.vertex_ids[j][:, None]).any(axis=(1, 2))
             keep &= ~(same & shared)
         else:
             keep &= ~same
         i, j = i[keep], j[keep]
-        n = self.lengths[i, None] * self.normals[i] - self.lengths[j, None] * self.normals[j]
+        swap = F.key[i] > F.key[j]  # the facet with the smaller global number first: one order
+        i, j = np.where(swap, j, i), np.where(swap, i, j)  # on every process
+        o = np.lexsort((F.key[j], F.key[i]))
+        i, j = i[o], j[o]
+        n = F.length[i, None] * F.normal[i] - F.length[j, None] * F.normal[j]
         n /= np.linalg.norm(n, axis=1)[:, None]
         t = np.stack([-n[:, 1], n[:, 0]], axis=1)
-        e_i, e_j = self._directions(i, j, n)
-        # z_p = Q_f e_f / |f| + Q_f' e_f' / |f'|: columns of a sparse (rows, P) matrix.
-        P, d = len(i), self.d
-        cols = np.repeat(np.arange(P), 2 * d)
-        rows = np.concatenate([i[:, None] * d + np.arange(d), j[:, None] * d + np.arange(d)], axis=1).ravel()
-        vals = np.concatenate([e_i / self.lengths[i, None], e_j / self.lengths[j, None]], axis=1).ravel()
-        facets = np.unique(np.concatenate([i, j]))
-        facet_dofs = (facets[:, None] * d + np.arange(d)).ravel()
-        N = scipy.sparse.csr_matrix((vals, (rows, cols)), shape=(len(self.facets) * d, P))[facet_dofs]
-        Z = (self._QF[:, facet_dofs] @ N).tocsr()  # only the listed facets' columns: O(listed)
-        # The listed patch: the energy rows the pairs touch and the patch dofs those rows and
-        # the pairs' cells read. Contact work per step only involves these.
-        rows = np.unique(Z.tocoo().row)
-        Q = self._Q[rows]
-        columns = np.unique(np.concatenate([Q.indices, self._R_universe[facet_dofs].indices]))
-        self._set_patch(np.union1d(self._kinematic, columns))
-        Q = Q[:, columns].tocsr()
-        R = self._R_universe[:, columns].tocsr()
-        columns = np.searchsorted(self._patch_in_universe, columns)  # now positions in the patch
+        e_i, e_j = self._directions(F, i, j, n)
+
+        # z_p restricted to the own rows: the local facets' entries only.
+        P = len(i)
+        cols, rows_, vals = [], [], []
+        for side, e in ((i, e_i), (j, e_j)):
+            mine = side < nl
+            rows_.append((side[mine, None] * d + np.arange(d)).ravel())
+            cols.append(np.repeat(np.flatnonzero(mine), d))
+            vals.append((e[mine] / F.length[side[mine], None]).ravel())
+        N = scipy.sparse.csr_matrix((np.concatenate(vals), (np.concatenate(rows_), np.concatenate(cols))),
+                                    shape=(nl * d, P))
+        Z = (self._QF @ N).tocsr()  # (own rows touched, P)
+
+        # The patch: the own rows' held dofs and the reconstruction dofs of every known facet
+        # (the ghosts' too: their motion decides when the list is stale).
+        row_dofs = self.dem.columns[np.unique(self._Q.indices)]
+        facet_dofs = F.R_dofs[F.R_dofs >= 0]
+        patch = np.unique(np.concatenate([row_dofs, facet_dofs]))
+        self.scatter = PatchScatter(self.dem.create_vector(), patch)
+        Qp = scipy.sparse.csr_matrix((self._Q.data, np.searchsorted(patch, self.dem.columns[self._Q.indices]),
+                                      self._Q.indptr), shape=(self._Q.shape[0], len(patch)))
+        self.facets_all = F
+        self._R = _reconstruction_matrix(F, patch)  # (n_facets d, patch)
+        self._RT = self._R.T.tocsr()
+        # The facet corrections of the known facets, from their owners (outputs).
+        self._facet_values = PatchScatter(self._facet_vector, (F.index[:, None] * d + np.arange(d)).ravel())
+        self._lift = F.lift
         self.listed = _Pairs(
             i=i, j=j, n=n, t=t, e_i=e_i, e_j=e_j,
-            d0=np.einsum("pi,pi->p", self.centres[j] - self.centres[i], n),
-            si=np.sort(np.einsum("pki,pi->pk", self.vertices[i], t), axis=1),  # (P, 2): lo, hi
-            sj=np.sort(np.einsum("pki,pi->pk", self.vertices[j], t), axis=1),
-            patch=_ListedPatch(
-                columns=columns, Z=Z[rows], ZT=Z[rows].T.tocsr(), Q=Q, QT=Q.T.tocsr(), q=self._q[rows],
-                elastic=self._is_elastic_row[rows], RT=R.T.tocsr(), local=self._patch_local[columns]),
+            d0=np.einsum("pi,pi->p", F.centre[j] - F.centre[i], n),
+            si=np.sort(np.einsum("pki,pi->pk", F.ends[i], t), axis=1),  # (P, 2): lo, hi
+            sj=np.sort(np.einsum("pki,pi->pk", F.ends[j], t), axis=1),
+            Z=Z, ZT=Z.T.tocsr(), N=(Z.T @ Z).tocsr(), Q=Qp, QT=Qp.T.tocsr(),
         )
-        self._reference = uc.copy()
+        self._reference = ucF.copy()
         self.rebuilds += 1
 
-    def _set_patch(self, positions: np.ndarray):
-        """The patch: the universe dofs at ``positions`` (the free reconstructions' dofs and the
-        listed pairs' patch). ``patch_values`` gathers these; arrays of patch values are valid
-        until the next list build."""
-        self._patch_in_universe = positions
-        self.patch = self._universe[positions]
-        self._R = self._R_universe[:, positions].tocsr()
-        start, stop = self.dem.cell_range
-        d = self.d
-        self._owned = (self.patch >= start * d) & (self.patch < stop * d)
-        self._owned_local = (self.patch[self._owned] - start * d).astype(np.int32)
-        self._patch_local = np.full(len(self.patch), -1, dtype=np.int32)  # patch -> local dof
-        self._patch_local[self._owned] = self._owned_local
-
-    def _directions(self, i: np.ndarray, j: np.ndarray, n: np.ndarray):
+    def _directions(self, F: _Facets, i: np.ndarray, j: np.ndarray, n: np.ndarray):
         """The contact corrections of a pair are u_f += (w/|f|) g^- e_f, u_f' += (w/|f'|) g^- e_f'.
 
         Scheme B (eq. (26)-(27), theta = 1/2): e_f = n/2, e_f' = -n/2. Scheme A (eq. (23)-(24)),
@@ -246,13 +387,13 @@ class PairContact:
         meet, and a curved boundary has facets of every orientation. The directions depend on
         the pair only, so the energy stays continuous and the force its exact gradient."""
         e_i, e_j = 0.5 * n, -0.5 * n
-        both_a = self.is_scheme_a[i] & self.is_scheme_a[j]
+        both_a = F.scheme_a[i] & F.scheme_a[j]
         if both_a.any():
             k = np.flatnonzero(both_a)
             # A_f^-1 n = adj(A_f) n / det(A_f) (2D), so that a singular A_f is no error.
             y, compliance = [], []
             for f in (i, j):
-                A = np.einsum("nijk,nj->nik", self._Ca[f[k]], n[k])
+                A = np.einsum("nijk,nj->nik", F.Ca[f[k]], n[k])
                 adj_n = np.stack([A[:, 1, 1] * n[k, 0] - A[:, 0, 1] * n[k, 1],
                                   A[:, 0, 0] * n[k, 1] - A[:, 1, 0] * n[k, 0]], axis=1)
                 det = A[:, 0, 0] * A[:, 1, 1] - A[:, 0, 1] * A[:, 1, 0]
@@ -262,248 +403,353 @@ class PairContact:
             D = compliance[0] - compliance[1]
             a = k[posed]
             e_i[a], e_j[a] = y[0][posed] / D[posed, None], y[1][posed] / D[posed, None]
-            self._scheme_b_rule = np.union1d(self._scheme_b_rule, i[k[~posed]] * len(self.facets) + j[k[~posed]])
+            counted = k[~posed][F.owner[i[k[~posed]]] == self.comm.rank]  # the first facet's owner counts it
+            keys = F.key[i[counted]] * (2**31) + F.key[j[counted]]
+            self._scheme_b_rule = np.union1d(self._scheme_b_rule, keys)
         return e_i, e_j
+
+    @property
+    def num_pairs(self) -> int:
+        """Listed pairs, each counted once (by the owner of its first facet); collective."""
+        first = self.listed.i < self.num_own
+        return self.comm.allreduce(int(first.sum()), op=MPI.SUM)
 
     @property
     def scheme_b_pairs(self) -> int:
         """How many distinct pairs of scheme A facets listed so far use the scheme B rule
-        because eq. (23)-(24) are not well posed for them (see ``_directions``)."""
-        return len(self._scheme_b_rule)
+        because eq. (23)-(24) are not well posed for them (see ``_directions``); collective."""
+        return self.comm.allreduce(len(self._scheme_b_rule), op=MPI.SUM)
 
     def prepare(self, u: PETSc.Vec, v: PETSc.Vec | None = None, dt: float = 0.0) -> None:
         """Make the Verlet list valid for the states u + tau v, 0 <= tau <= dt (u alone without
-        v): rebuild it at u if a candidate facet would move more than skin/2 from where it was
-        at the last build. The free facet displacements are affine in tau, so checking both ends
-        covers the whole flight. ``MEMM`` calls this before every step's force integral,
-        whatever the quadrature, and at ``initialise``; call it before evaluating forces or
-        energies at displacements of your own. Collective. Arrays of patch values gathered
-        before a rebuild are invalid after it."""
+        v): rebuild it at u on every process if a candidate facet anywhere would move more than
+        skin/2 from where it was at the last build. The free facet displacements are affine in
+        tau, so checking both ends covers the whole flight. ``MEMM`` calls this before every
+        step's force integral, whatever the quadrature, and at ``initialise``; call it before
+        evaluating forces or energies at displacements of your own. Collective (one logical
+        reduction). Arrays of patch values gathered before a rebuild are invalid after it."""
         start = time.process_time()
         up = self.patch_values(u)
         uc = self.free_displacements(up)
-        stale = self._stale(uc)
+        stale = self._moved(uc)
         moving = v is not None and dt != 0.0
         if moving:
             step = dt * (self._R @ self.patch_values(v)).reshape(-1, self.d)
-            stale = stale or self._stale(uc + step)
-        if stale:
-            self._build_pairs(uc)
-            if moving and self._stale(uc + step):
-                raise RuntimeError(
-                    f"contact between bodies: a candidate facet moves {np.linalg.norm(step, axis=1).max():.3e} m "
-                    f"in one step, more than half the Verlet skin ({self.skin:.3e} m): no pair list covers the "
-                    "step; reduce the time step or pass a larger skin")
+            stale = stale or self._moved(uc + step)
+        if self.comm.allreduce(stale, op=MPI.LOR):
+            self._build(u)
+            if moving:
+                up, vp = self.patch_values(u), self.patch_values(v)
+                uc, step = self.free_displacements(up), dt * (self._R @ vp).reshape(-1, self.d)
+                too_far = self._moved(uc + step)
+                if self.comm.allreduce(too_far, op=MPI.LOR):
+                    raise RuntimeError(
+                        f"contact between bodies: a candidate facet moves "
+                        f"{self.comm.allreduce(float(np.linalg.norm(step, axis=1).max(initial=0)), op=MPI.MAX):.3e} m "
+                        f"in one step, more than half the Verlet skin ({self.skin:.3e} m): no pair list covers the "
+                        "step; reduce the time step or pass a larger skin")
         self.seconds += time.process_time() - start
 
-    def _stale(self, uc: np.ndarray) -> bool:
-        """Whether a candidate facet with free displacements ``uc`` has moved more than skin/2
-        since the last list build (a pair not listed might then touch)."""
+    def _moved(self, uc: np.ndarray) -> bool:
+        """Whether a facet known here (local or ghost) with free displacements ``uc`` has moved
+        more than skin/2 since the last list build (a pair not listed might then touch)."""
         moved = uc - self._reference
-        return bool(np.einsum("ni,ni->n", moved, moved).max() > 0.25 * self.skin**2)
+        return bool(np.einsum("ni,ni->n", moved, moved).max(initial=0.0) > 0.25 * self.skin**2)
 
     def _check_listed(self, uc: np.ndarray):
-        if self._stale(uc):
+        if self._moved(uc):
             raise RuntimeError("contact between bodies: the candidate pair list is stale for these displacements "
                                "(a facet moved more than skin/2 since it was built); call prepare(u) first "
                                "(MEMM does it every step)")
 
     # -- energy and force ----------------------------------------------------------------------
     def patch_values(self, vec: PETSc.Vec) -> np.ndarray:
-        """Values of a distributed vector at the patch dofs, on every process."""
-        return gather_patch(self.comm, vec, self._owned_local)
+        """The values of ``vec`` at the patch dofs (collective); valid until the next rebuild."""
+        return self.scatter.gather(vec)
 
     def free_displacements(self, up: np.ndarray) -> np.ndarray:
-        """Free reconstructions u_f of the candidates (their cells' u_c in scheme B), (n_facets, d),
+        """Free reconstructions u_f of the known candidate facets (local, then ghosts), (n, d),
         from patch values ``up``."""
-        return (self._R @ up).reshape(-1, self.d) + self._R_lift
+        return (self._R @ up).reshape(-1, self.d) + self._lift
 
-    def _touching(self, up: np.ndarray) -> _Pairs:
-        """The listed pairs with g < 0."""
-        L = self.listed
+    def _pair_displacements(self, up: np.ndarray):
         uc = self.free_displacements(up)
         self._check_listed(uc)
-        return L.subset(np.flatnonzero(L.gaps(uc) < 0))
+        return uc[self.listed.i], uc[self.listed.j]
+
+    def _state(self, p, ui, uj):
+        """Gap g, overlap w and its slope ds of the pairs ``p`` for their facets' free
+        displacements ui, uj (one row per entry)."""
+        L = self.listed
+        n, t = L.n[p], L.t[p]
+        g = L.d0[p] + np.einsum("ei,ei->e", uj - ui, n)
+        ti, tj = np.einsum("ei,ei->e", ui, t), np.einsum("ei,ei->e", uj, t)
+        lo_i, hi_i = L.si[p, 0] + ti, L.si[p, 1] + ti
+        lo_j, hi_j = L.sj[p, 0] + tj, L.sj[p, 1] + tj
+        w = np.minimum(hi_i, hi_j) - np.maximum(lo_i, lo_j)
+        ds = (hi_i <= hi_j).astype(float) - (lo_i >= lo_j).astype(float)
+        inside = w > 0
+        return g, np.where(inside, w, 0.0), np.where(inside, ds, 0.0)
 
     def energy_correction(self, up: np.ndarray) -> tuple[float, float]:
-        """(elastic, stabilisation) energy changes from the contact reconstructions."""
+        """(elastic, stabilisation) energy changes of this process's own rows (not reduced)."""
         start = time.process_time()
-        L, P = self.listed, self.listed.patch
-        uc = self.free_displacements(up)
-        self._check_listed(uc)
-        g = np.minimum(L.gaps(uc), 0.0)
+        L = self.listed
+        g, w, _ = self._state(np.arange(len(L)), *self._pair_displacements(up))
         elastic = stabilisation = 0.0
         if (g < 0).any():
-            a = P.Q @ up[P.columns] + P.q
-            delta = P.Z @ (L.overlaps(uc)[0] * g)
+            a = L.Q @ up + self._q
+            delta = L.Z @ (w * np.minimum(g, 0.0))
             change = a * delta + 0.5 * delta**2
-            elastic, stabilisation = float(change[P.elastic].sum()), float(change[~P.elastic].sum())
+            elastic, stabilisation = float(change[self._is_elastic_row].sum()), float(change[~self._is_elastic_row].sum())
         self.seconds += time.process_time() - start
         return elastic, stabilisation
 
     def force_correction(self, up: np.ndarray) -> np.ndarray:
-        """F - F_free at the patch dofs (N): the exact negative gradient of the energy change."""
-        out = np.zeros_like(up)
-        P = self.listed.patch
-        uc = self.free_displacements(up)
-        self._check_listed(uc)
-        out[P.columns] = self._correction(uc[..., None], up[P.columns, None])[:, 0]
-        return out
+        """This process's part of F - F_free at the patch dofs: the terms of its own rows (the
+        exact negative gradient of the energy change, summed over processes)."""
+        L = self.listed
+        ui, uj = self._pair_displacements(up)
+        p = np.arange(len(L))
+        self.evaluations += 1
+        g, w, ds = self._state(p, ui, uj)
+        c = w * np.minimum(g, 0.0)
+        if not (c < 0).any():
+            return np.zeros_like(up)
+        a = L.Q @ up + self._q
+        delta = L.Z @ c
+        mu = np.where(g < 0, L.ZT @ (a + delta), 0.0)
+        return -(L.QT @ delta) + self._facet_force(p, mu, g, w, ds)
 
-    def _correction(self, uc: np.ndarray, U: np.ndarray) -> np.ndarray:
-        """F - F_free on the listed patch for K states: free facet reconstructions uc
-        (nf, d, K) and the listed patch's values U (n_columns, K); returns (n_columns, K)."""
-        self.evaluations += U.shape[1]
-        L, P = self.listed, self.listed.patch
-        g = np.minimum(L.gaps(uc), 0.0)  # (P, K)
-        out = np.zeros_like(U)
-        if (g < 0).any():
-            w, ds = L.overlaps(uc)
-            a = P.Q @ U + P.q[:, None]
-            delta = P.Z @ (w * g)
-            mu = np.where(g < 0, P.ZT @ (a + delta), 0.0)
-            out -= P.QT @ delta
-            # dc/du_f' = w n - g ds_i t, dc/du_f = -(that); F -= R^T (mu dc/du_F).
-            dc = mu[:, None] * (w[:, None] * L.n[..., None] - (g * ds)[:, None] * L.t[..., None])
-            facet_force = np.zeros(uc.shape)
-            np.add.at(facet_force, L.i, dc)
-            np.add.at(facet_force, L.j, -dc)
-            out += P.RT @ facet_force.reshape(-1, U.shape[1])
-        return out
+    def _facet_force(self, p, mu, g, w, ds):
+        """R^T of the facet forces -mu dc_p/du of the entries (pairs p): dc/du_f' = w n - g ds t,
+        dc/du_f = -(that)."""
+        L = self.listed
+        dc = mu[:, None] * (w[:, None] * L.n[p] - (g * ds)[:, None] * L.t[p])
+        facet_force = np.zeros((len(self.facets_all), self.d))
+        np.add.at(facet_force, L.i[p], dc)
+        np.add.at(facet_force, L.j[p], -dc)
+        return self._RT @ facet_force.ravel()
 
-    def add(self, correction: np.ndarray, out: PETSc.Vec, scale: float = 1.0):
-        """out += scale * correction on the owned patch dofs."""
-        out.array[self._owned_local] += scale * correction[self._owned]
+    def add_force(self, u: PETSc.Vec, out: PETSc.Vec) -> None:
+        """out += F - F_free at u (collective)."""
+        self.scatter.add(self.force_correction(self.patch_values(u)), out)
 
     # -- events --------------------------------------------------------------------------------
     def force_integral(self, u: PETSc.Vec, v: PETSc.Vec, dt: float, out: PETSc.Vec) -> int:
         """out += int_0^dt (F - F_free)(u + tau v) dtau, split at the events and integrated by
-        2-point Gauss-Legendre on each piece; returns the number of patch force evaluations.
-
-        Events (paper §4): for the pairs with g < 0 somewhere in the step, the times where g
-        changes sign or a facet end crosses an end of the other facet (the kinks of w); all are
-        roots of affine functions of tau."""
+        2-point Gauss-Legendre on each piece (module docstring); returns the largest number of
+        pieces of a pair's integral (collective)."""
         start = time.process_time()
-        up, vp = self.patch_values(u), self.patch_values(v)
-        uc0, uc1 = self.free_displacements(up), self.free_displacements(up + dt * vp)
-        self._check_listed(uc0)
-        self._check_listed(uc1)
         L = self.listed
-        g0, g1 = L.gaps(uc0), L.gaps(uc1)
-        p = np.flatnonzero((g0 < 0) | (g1 < 0))
-        if len(p) == 0:
-            self.seconds += time.process_time() - start
-            return 0
-        pairs = L.subset(p)
-        e0, e1 = pairs.crossings(uc0), pairs.crossings(uc1)
-        values0, values1 = np.concatenate([g0[p], e0]), np.concatenate([g1[p], e1])
-        crossing = values0 * values1 < 0
-        tau = dt * values0[crossing] / (values0[crossing] - values1[crossing])
-        tau = np.concatenate([[0.0], np.unique(tau[(tau > 0) & (tau < dt)]), [dt]])
-        # All Gauss points of all pieces at once, as columns, on the listed patch.
-        length = np.diff(tau)
-        nodes = (tau[:-1, None] + _GL2[None, :] * length[:, None]).ravel()
-        weights = np.repeat(0.5 * length, len(_GL2))
-        P = L.patch
-        U = up[P.columns, None] + vp[P.columns, None] * nodes
-        UC = uc0[..., None] + (self._R @ vp).reshape(-1, self.d)[..., None] * nodes
-        F = self._correction(UC, U) @ weights
-        mine = P.local >= 0
-        out.array[P.local[mine]] += F[mine]
+        up, vp = self.patch_values(u), self.patch_values(v)
+        ui0, uj0 = self._pair_displacements(up)
+        vc = (self._R @ vp).reshape(-1, self.d)
+        vi, vj = vc[L.i], vc[L.j]
+        self._check_listed(self.free_displacements(up) + dt * vc)
+        p = np.arange(len(L))
+        g0, g1 = self._state(p, ui0, uj0)[0], self._state(p, ui0 + dt * vi, uj0 + dt * vj)[0]
+        touching = np.flatnonzero((g0 < 0) | (g1 < 0))
+        result = np.zeros_like(up)
+        pieces = 0
+        if touching.size:
+            # Events of each touching pair: its gap's and the facet ends' sign changes.
+            tau = self._events(touching, ui0, uj0, vi, vj, dt)  # (len(touching), 5), inf if none
+            a0, a1 = L.Q @ up + self._q, L.Q @ vp
+
+            # Rows' term: int c_p dtau on each pair's own pieces (c_p is quadratic there).
+            rows_ = np.repeat(np.arange(len(touching)), tau.shape[1])
+            finite = np.isfinite(tau.ravel())
+            mid, length = piecewise_midpoints(rows_[finite], tau.ravel()[finite], len(touching), dt)
+            nodes, weights = _gauss_points(mid, length)
+            e = np.repeat(touching, nodes.shape[1])
+            s = nodes.ravel()
+            g, w, _ = self._state(e, ui0[e] + s[:, None] * vi[e], uj0[e] + s[:, None] * vj[e])
+            c_int = np.zeros(len(L))
+            np.add.at(c_int, e, weights.ravel() * w * np.minimum(g, 0.0))
+            result -= L.QT @ (L.Z @ c_int)
+
+            # Pairs' term: each touching pair on the pieces cut by the events of the pairs that
+            # share an own row with it.
+            N = L.N[touching].tocoo()  # entries (k, p'): pair touching[k] and its neighbour p'
+            on = np.isin(N.col, touching)
+            k_of, nb, value = N.row[on], N.col[on], N.data[on]
+            nb_t = np.searchsorted(touching, nb)
+            times = tau[nb_t]
+            k_rep = np.repeat(k_of, times.shape[1])
+            finite = np.isfinite(times.ravel())
+            if len(k_of):
+                mid, length = piecewise_midpoints(k_rep[finite], times.ravel()[finite], len(touching), dt)
+                nodes, weights = _gauss_points(mid, length)
+                K = nodes.shape[1]
+                e = np.repeat(touching, K)
+                s = nodes.ravel()
+                g, w, ds = self._state(e, ui0[e] + s[:, None] * vi[e], uj0[e] + s[:, None] * vj[e])
+                mu = ((L.ZT @ a0)[touching, None] + nodes * (L.ZT @ a1)[touching, None]).ravel()
+                # + sum_p' N_{p p'} c_p'(tau) at the pair's nodes
+                entry = np.repeat(np.arange(len(k_of)), K)  # (entries of N) x (nodes)
+                node = (k_of[:, None] * K + np.arange(K)).ravel()  # flat node index of pair k
+                q = np.repeat(nb, K)
+                sq = s[node]
+                gq, wq, _ = self._state(q, ui0[q] + sq[:, None] * vi[q], uj0[q] + sq[:, None] * vj[q])
+                np.add.at(mu, node, value[entry] * wq * np.minimum(gq, 0.0))
+                mu = np.where(g < 0, mu, 0.0) * weights.ravel()
+                result += self._facet_force(e, mu, g, w, ds)
+                pieces = max(pieces, int((length > 0).sum(axis=1).max()))
+        self.scatter.add(result, out)
         self.seconds += time.process_time() - start
-        return 2 * (len(tau) - 1)
+        self.evaluations += 2 * pieces
+        return 2 * pieces
+
+    def _events(self, p, ui, uj, vi, vj, dt) -> np.ndarray:
+        """Times in (0, dt) where the gap or a difference of facet ends of pairs ``p`` changes
+        sign (affine in tau), (len(p), 5), inf where there is none."""
+        L = self.listed
+        n, t = L.n[p], L.t[p]
+        dn = lambda x: np.einsum("ei,ei->e", x, n)  # noqa: E731
+        dt_ = lambda x: np.einsum("ei,ei->e", x, t)  # noqa: E731
+        g0 = L.d0[p] + dn(uj[p] - ui[p])
+        gs = dn(vj[p] - vi[p])
+        ti, tj, si, sj = dt_(ui[p]), dt_(uj[p]), dt_(vi[p]), dt_(vj[p])
+        v0 = np.stack([g0, L.si[p, 1] + ti - L.sj[p, 1] - tj, L.si[p, 0] + ti - L.sj[p, 0] - tj,
+                       L.si[p, 1] + ti - L.sj[p, 0] - tj, L.sj[p, 1] + tj - L.si[p, 0] - ti], axis=1)
+        rate = np.stack([gs, si - sj, si - sj, si - sj, sj - si], axis=1)
+        v1 = v0 + dt * rate
+        with np.errstate(divide="ignore", invalid="ignore"):
+            tau = np.where(v0 * v1 < 0, -v0 / rate, np.inf)
+        return np.where((tau > 0) & (tau < dt), tau, np.inf)
 
     # -- outputs -------------------------------------------------------------------------------
     def facet_corrections(self, up: np.ndarray) -> np.ndarray:
-        """u_f - u_f^free of every candidate facet (eq. (31), directions of ``_directions``),
-        shape (n_facets, d)."""
-        pairs = self._touching(up)
-        uc = self.free_displacements(up)
-        c = pairs.overlaps(uc)[0] * pairs.gaps(uc)
-        delta = np.zeros((len(self.facets), self.d))
-        np.add.at(delta, pairs.i, (c / self.lengths[pairs.i])[:, None] * pairs.e_i)
-        np.add.at(delta, pairs.j, (c / self.lengths[pairs.j])[:, None] * pairs.e_j)
-        return delta
+        """u_f - u_f^free of the local facets (eq. (31), directions of ``_directions``), (n_local, d):
+        complete for the own facets (every pair of an own facet is listed here)."""
+        L = self.listed
+        p = np.arange(len(L))
+        g, w, _ = self._state(p, *self._pair_displacements(up))
+        c = w * np.minimum(g, 0.0)
+        delta = np.zeros((len(self.facets_all), self.d))
+        np.add.at(delta, L.i, (c / self.facets_all.length[L.i])[:, None] * L.e_i)
+        np.add.at(delta, L.j, (c / self.facets_all.length[L.j])[:, None] * L.e_j)
+        return delta[: len(self.facets)]
 
-    def gradient_correction(self, up: np.ndarray) -> np.ndarray:
-        """Change of the gradient (eq. (8)) of each candidate's cell, shape (n_facets, d, d)."""
-        return np.einsum("ni,nj->nij", self.facet_corrections(up), self._grad_weights)
+    def gradient_correction(self, up: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(owned cells, change of their gradient (eq. (8))) of the own candidates, (n, d, d)."""
+        own = slice(0, self.num_own)
+        return self.cells[own], np.einsum("ni,nj->nij", self.facet_corrections(up)[own], self._grad_weights[own])
 
     def penetration(self, up: np.ndarray) -> float:
         """Largest interpenetration (m, >= 0) of the contact-aware facet reconstructions: over the
-        candidate facets, the overlap-weighted mean over their partners of the reconstructed gap
-        (x_f' + u_f' - x_f - u_f) . n, negated. Eq. (31) makes it zero when each facet has one
-        partner covering it exactly; partial overlaps (facets sliding against each other) leave a
-        gap of the order of the cell gap times the uncovered fraction."""
-        uc = self.free_displacements(up)
-        self._check_listed(uc)
-        w = self.listed.overlaps(uc)[0]
-        if not (w > 0).any():
-            return 0.0
-        pairs = self.listed.subset(np.flatnonzero(w > 0))
-        w = w[w > 0]
-        uf = uc + self.facet_corrections(up)
-        i, j = pairs.i, pairs.j
-        gap = np.einsum("pi,pi->p", self.centres[j] + uf[j] - self.centres[i] - uf[i], pairs.n)
-        nf = len(self.facets)
-        weight = np.bincount(i, w, nf) + np.bincount(j, w, nf)
-        mean = np.bincount(i, w * gap, nf) + np.bincount(j, w * gap, nf)
-        touched = weight > 0
-        return float(max(0.0, -(mean[touched] / weight[touched]).min()))
+        own facets, the overlap-weighted mean over their partners of the reconstructed gap
+        (x_f' + u_f' - x_f - u_f) . n, negated (collective). Eq. (31) makes it zero when each
+        facet has one partner covering it exactly; partial overlaps (facets sliding against each
+        other) leave a gap of the order of the cell gap times the uncovered fraction. The
+        corrections of the partners come from their owners (a scatter over the candidates)."""
+        L, F = self.listed, self.facets_all
+        p = np.arange(len(L))
+        g, w, _ = self._state(p, *self._pair_displacements(up))
+        uf = self.free_displacements(up) + self._corrections_everywhere(up)
+        worst = 0.0
+        pairs = np.flatnonzero(w > 0)
+        if len(pairs):
+            i, j = L.i[pairs], L.j[pairs]
+            gap = np.einsum("pi,pi->p", F.centre[j] + uf[j] - F.centre[i] - uf[i], L.n[pairs])
+            nf = len(F)
+            ww = w[pairs]
+            weight = np.bincount(i, ww, nf) + np.bincount(j, ww, nf)
+            mean = np.bincount(i, ww * gap, nf) + np.bincount(j, ww * gap, nf)
+            own = np.zeros(nf, dtype=bool)
+            own[: self.num_own] = True
+            touched = (weight > 0) & own
+            if touched.any():
+                worst = float(max(0.0, -(mean[touched] / weight[touched]).min()))
+        return self.comm.allreduce(worst, op=MPI.MAX)
+
+    def _corrections_everywhere(self, up: np.ndarray) -> np.ndarray:
+        """Facet corrections of every known facet (local and ghost), each from its owner (a
+        scatter of the candidates' vector; collective)."""
+        self._facet_vector.array[:] = self.facet_corrections(up)[: self.num_own].ravel()
+        return self._facet_values.gather(self._facet_vector).reshape(-1, self.d)
+
+    def pair_states(self, up: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Gap g and overlap w of the pairs listed on this process (``listed``; indices into
+        ``facets_all``: the local facets, then the ghosts)."""
+        g, w, _ = self._state(np.arange(len(self.listed)), *self._pair_displacements(up))
+        return g, w
+
+    def touching_cells(self, up: np.ndarray) -> np.ndarray:
+        """The local cells with a local facet in a touching pair (g < 0, w > 0)."""
+        g, w = self.pair_states(up)
+        on = (g < 0) & (w > 0)
+        facets = np.concatenate([self.listed.i[on], self.listed.j[on]])
+        return np.unique(self.cells[facets[facets < len(self.facets)]])
 
     def touching(self, up: np.ndarray) -> bool:
-        """Whether some pair is in contact (g < 0 with a positive overlap)."""
-        uc = self.free_displacements(up)
-        self._check_listed(uc)
-        return bool(((self.listed.gaps(uc) < 0) & (self.listed.overlaps(uc)[0] > 0)).any())
-
-    def touch_time(self, uc0: np.ndarray, uc1: np.ndarray, dt: float) -> float | None:
-        """For a step between the free facet displacements ``uc0`` (no contact) and ``uc1``
-        (``free_displacements``): the time tau in [0, dt] at which the first pair touching at
-        the end closed its gap (gaps are affine along the step); None if no pair touches."""
+        """Whether some pair is in contact (g < 0 with a positive overlap), anywhere (collective)."""
         L = self.listed
-        g0, g1 = L.gaps(uc0), L.gaps(uc1)
-        touching = (g1 < 0) & (L.overlaps(uc1)[0] > 0)
-        if not touching.any():
-            return None
-        g0, g1 = np.maximum(g0[touching], 0.0), g1[touching]
-        return float(dt * (g0 / (g0 - g1)).min())
+        g, w, _ = self._state(np.arange(len(L)), *self._pair_displacements(up))
+        return self.comm.allreduce(bool(((g < 0) & (w > 0)).any()), op=MPI.LOR)
+
+    def touch_time(self, u0: PETSc.Vec, u1: PETSc.Vec, dt: float) -> float | None:
+        """For a step from displacements ``u0`` (no contact) to ``u1``: the time tau in [0, dt]
+        at which the first pair touching at the end closed its gap (gaps are affine along the
+        step); None if no pair touches (collective)."""
+        L = self.listed
+        p = np.arange(len(L))
+        g0 = self._state(p, *self._pair_displacements(self.patch_values(u0)))[0]
+        g1, w1, _ = self._state(p, *self._pair_displacements(self.patch_values(u1)))
+        touching = (g1 < 0) & (w1 > 0)
+        first = np.inf
+        if touching.any():
+            g0, g1 = np.maximum(g0[touching], 0.0), g1[touching]
+            first = float(dt * (g0 / (g0 - g1)).min())
+        first = self.comm.allreduce(first, op=MPI.MIN)
+        return None if first == np.inf else first
 
     def contact_force(self, up: np.ndarray) -> float:
-        """Sum over touching pairs of the normal contact force magnitude (N, per unit thickness):
-        |(z_p . (a + delta_a)) w_p|, the force one facet of the pair exerts on the other."""
-        L, P = self.listed, self.listed.patch
-        uc = self.free_displacements(up)
-        self._check_listed(uc)
-        g = np.minimum(L.gaps(uc), 0.0)
-        w = L.overlaps(uc)[0]
-        a = P.Q @ up[P.columns] + P.q
-        return float(np.abs(np.where(g < 0, P.ZT @ (a + P.Z @ (w * g)), 0.0) * w).sum())
+        """Sum over touching pairs of the normal contact force (N, per unit thickness),
+        (z_p . (a + delta_a)) w_p, the force one facet of the pair exerts on the other,
+        compression counted positive (collective: the own rows' parts are summed)."""
+        L = self.listed
+        g, w, _ = self._state(np.arange(len(L)), *self._pair_displacements(up))
+        c = w * np.minimum(g, 0.0)
+        total = 0.0
+        if (c < 0).any():
+            a = L.Q @ up + self._q
+            mu = L.ZT @ (a + L.Z @ c)
+            total = float(np.where(g < 0, mu * w, 0.0).sum())
+        return self.comm.allreduce(total, op=MPI.SUM)
 
 
-@dataclasses.dataclass(frozen=True)
-class _ListedPatch:
-    """The part of the contact patch the listed pairs touch: patch dofs ``columns``, the energy
-    rows (Q, QT = Q^T, q, which are elastic rows) restricted to them, the columns z_p of
-    Z (and ZT), RT = R^T of the candidates' free reconstructions on ``columns``, and the
-    process-local dof of each column (-1 if another process owns it)."""
+def _gauss_points(mid: np.ndarray, length: np.ndarray):
+    """2-point Gauss-Legendre nodes and weights of the pieces (mid, length), (n, 2 K) each."""
+    start = mid - 0.5 * length
+    nodes = (start[..., None] + _GL2 * length[..., None]).reshape(len(mid), len(_GL2) * mid.shape[1])
+    weights = np.repeat(0.5 * length, len(_GL2), axis=1)
+    return nodes, weights
 
-    columns: np.ndarray
-    Z: scipy.sparse.csr_matrix
-    ZT: scipy.sparse.csr_matrix
-    Q: scipy.sparse.csr_matrix
-    QT: scipy.sparse.csr_matrix
-    q: np.ndarray
-    elastic: np.ndarray
-    RT: scipy.sparse.csr_matrix
-    local: np.ndarray
+
+def _free(F: _Facets, patch: np.ndarray, up: np.ndarray) -> np.ndarray:
+    """Free facet displacements R_f u + lift of the facets ``F`` from values ``up`` at ``patch``."""
+    return (_reconstruction_matrix(F, patch) @ up).reshape(-1, F.lift.shape[1]) + F.lift
+
+
+def _reconstruction_matrix(F: _Facets, patch: np.ndarray) -> scipy.sparse.csr_matrix:
+    """R of the facets ``F`` on the patch dofs ``patch`` (sorted global dofs), (n d, len(patch))."""
+    n, d, width = F.R_dofs.shape
+    rows = np.repeat(np.arange(n * d), width)
+    dofs = F.R_dofs.reshape(-1)
+    keep = dofs >= 0
+    return scipy.sparse.csr_matrix((F.R_values.reshape(-1)[keep], (rows[keep], np.searchsorted(patch, dofs[keep]))),
+                                   shape=(n * d, len(patch)))
 
 
 @dataclasses.dataclass(frozen=True)
 class _Pairs:
-    """Facet pairs (f_i, f_j) of the Verlet list, vectorised: the common normal n and tangent t,
-    the correction directions e_i, e_j (``PairContact._directions``), the reference gap d0, the
-    tangential facet ends si, sj (lo, hi), and (for the whole list) the listed patch."""
+    """Facet pairs (f_i, f_j) of the Verlet list (indices into ``PairContact.facets_all``),
+    vectorised: the common normal n and tangent t, the correction directions e_i, e_j
+    (``PairContact._directions``), the reference gap d0, the tangential facet ends si, sj
+    (lo, hi); Z = the z_p on the own rows touched (rows, P), its transpose, N = Z^T Z, and the
+    own rows Q on the patch dofs."""
 
     i: np.ndarray
     j: np.ndarray
@@ -514,82 +760,86 @@ class _Pairs:
     d0: np.ndarray
     si: np.ndarray
     sj: np.ndarray
-    patch: _ListedPatch | None = None
+    Z: scipy.sparse.csr_matrix
+    ZT: scipy.sparse.csr_matrix
+    N: scipy.sparse.csr_matrix
+    Q: scipy.sparse.csr_matrix
+    QT: scipy.sparse.csr_matrix
 
     def __len__(self) -> int:
         return len(self.i)
 
-    def subset(self, p: np.ndarray) -> _Pairs:
-        """The pairs ``p`` (without Z)."""
-        return _Pairs(self.i[p], self.j[p], self.n[p], self.t[p], self.e_i[p], self.e_j[p], self.d0[p],
-                      self.si[p], self.sj[p])
 
-    def gaps(self, uc: np.ndarray) -> np.ndarray:
-        """g = d0 + (u_c' - u_c) . n for candidate cell displacements uc, shape (nf, d) or
-        (nf, d, K) for K states; returns (P,) or (P, K)."""
-        x = np.einsum("pi...,pi->p...", uc[self.j] - uc[self.i], self.n)
-        return (self.d0 if x.ndim == 1 else self.d0[:, None]) + x
-
-    def ends(self, uc: np.ndarray):
-        """Tangential facet ends (lo_i, hi_i, lo_j, hi_j), displaced by their cells."""
-        ti = np.einsum("pi...,pi->p...", uc[self.i], self.t)
-        tj = np.einsum("pi...,pi->p...", uc[self.j], self.t)
-        si, sj = (self.si, self.sj) if ti.ndim == 1 else (self.si[:, None], self.sj[:, None])
-        return si[..., 0] + ti, si[..., 1] + ti, sj[..., 0] + tj, sj[..., 1] + tj
-
-    def overlaps(self, uc: np.ndarray):
-        """w and its slope ds_i: dw/du_c = ds_i t, dw/du_c' = -ds_i t (0 without overlap)."""
-        lo_i, hi_i, lo_j, hi_j = self.ends(uc)
-        w = np.minimum(hi_i, hi_j) - np.maximum(lo_i, lo_j)
-        ds_i = (hi_i <= hi_j).astype(float) - (lo_i >= lo_j).astype(float)
-        inside = w > 0
-        return np.where(inside, w, 0.0), np.where(inside, ds_i, 0.0)
-
-    def crossings(self, uc: np.ndarray) -> np.ndarray:
-        """The differences of facet ends whose sign changes are the kinks of w, (4 P,)."""
-        lo_i, hi_i, lo_j, hi_j = self.ends(uc)
-        return np.concatenate([hi_i - hi_j, lo_i - lo_j, hi_i - lo_j, hi_j - lo_i])
-
-
-def _check_bodies_do_not_overlap(geom, labels: np.ndarray):
+def _check_bodies_do_not_overlap(dem):
     """No boundary vertex of a body may lie strictly inside a cell of another body (in the
-    reference configuration): point-in-simplex tests against the cells near each vertex."""
-    d = geom.d
-    bf = geom.boundary_facets
+    reference configuration). Each process sends the boundary vertices of its owned cells to the
+    processes whose box of owned cells contains them, which test them against their owned cells
+    near them (point in simplex). Collective."""
+    geom, d, comm = dem.geometry, dem.d, dem.comm
+    owned = slice(0, dem.n_owned)
+    bf = np.intersect1d(geom.boundary_facets, geom.facets_of_layers(0))
     cells, local = geom.facet_cells[bf, 0], geom.facet_local[bf, 0]
     mask = np.ones((len(bf), d + 1), dtype=bool)
     mask[np.arange(len(bf)), local] = False
     points = geom.cell_vertices[cells][mask].reshape(-1, d)
-    bodies = np.repeat(labels[cells], d)
-    radius = np.linalg.norm(geom.cell_vertices - geom.cell_centres[:, None], axis=2).max()
-    near = scipy.spatial.cKDTree(points).sparse_distance_matrix(
-        scipy.spatial.cKDTree(geom.cell_centres), radius, output_type="ndarray")
-    k, c = near["i"], near["j"]
-    other = labels[c] != bodies[k]
-    k, c = k[other], c[other]
-    if len(k) == 0:
-        return
-    v = geom.cell_vertices[c]  # (m, d+1, d)
-    lam = np.linalg.solve(np.swapaxes(v[:, 1:] - v[:, :1], 1, 2), (points[k] - v[:, 0])[..., None])[..., 0]
-    lam = np.concatenate([1 - lam.sum(axis=1, keepdims=True), lam], axis=1)
-    inside = lam.min(axis=1) > 1e-10
-    if inside.any():
-        m = int(np.flatnonzero(inside)[0])
-        raise ValueError(f"bodies {bodies[k[m]]} and {labels[c[m]]} overlap at t = 0: a boundary vertex of body "
-                         f"{bodies[k[m]]} at {points[k[m]].tolist()} lies inside body {labels[c[m]]}")
+    bodies = np.repeat(geom.cell_bodies[cells], d)
+    x = geom.cell_vertices[owned].reshape(-1, d)
+    empty = np.array([np.inf] * d + [-np.inf] * d)
+    box = np.concatenate([x.min(axis=0), x.max(axis=0)]) if len(x) else empty
+    boxes = np.array(comm.allgather(box))
+    send = []
+    for q in range(comm.size):
+        inside = np.all((points >= boxes[q, :d]) & (points <= boxes[q, d:]), axis=1)
+        send.append((points[inside], bodies[inside]))
+    received = comm.alltoall(send)
+    points = np.concatenate([r[0] for r in received])
+    bodies = np.concatenate([r[1] for r in received])
+    found = None
+    if len(points) and dem.n_owned:
+        centres = geom.cell_centres[owned]
+        radius = np.linalg.norm(geom.cell_vertices[owned] - centres[:, None], axis=2).max()
+        near = scipy.spatial.cKDTree(points).sparse_distance_matrix(
+            scipy.spatial.cKDTree(centres), radius, output_type="ndarray")
+        k, c = near["i"], near["j"]
+        other = geom.cell_bodies[c] != bodies[k]
+        k, c = k[other], c[other]
+        if len(k):
+            v = geom.cell_vertices[c]  # (m, d+1, d)
+            lam = np.linalg.solve(np.swapaxes(v[:, 1:] - v[:, :1], 1, 2), (points[k] - v[:, 0])[..., None])[..., 0]
+            lam = np.concatenate([1 - lam.sum(axis=1, keepdims=True), lam], axis=1)
+            inside = lam.min(axis=1) > 1e-10
+            if inside.any():
+                m = int(np.flatnonzero(inside)[0])
+                found = (int(bodies[k[m]]), int(geom.cell_bodies[c[m]]), points[k[m]].tolist())
+    found = [f for f in comm.allgather(found) if f is not None]
+    if found:
+        a, b, point = min(found)
+        raise ValueError(f"bodies {a} and {b} overlap at t = 0: a boundary vertex of body {a} at {point} "
+                         f"lies inside body {b}")
 
 
-def _check_bodies_share_no_vertex(geom, labels: np.ndarray):
+def _check_bodies_share_no_vertex(dem):
     """Separate bodies (connected through facets) must not share a vertex: contact between them
-    would be undefined at the shared point."""
-    d = geom.d
-    x = geom.cell_vertices.reshape(-1, d)
-    body = np.repeat(labels, d + 1)
-    _, vertex = np.unique(x, axis=0, return_inverse=True)
-    pairs = np.unique(np.stack([vertex.ravel(), body], axis=1), axis=0)
-    counts = np.bincount(pairs[:, 0])
-    if (counts > 1).any():
-        k = int(np.flatnonzero(counts > 1)[0])
-        point = x[np.flatnonzero(vertex.ravel() == k)[0]]
-        raise ValueError(f"bodies share the vertex {point.tolist()}: bodies in contact must be meshed "
+    would be undefined at the shared point. The boundary vertices of the owned cells meet at the
+    process their coordinates hash to. Collective."""
+    geom, d, comm = dem.geometry, dem.d, dem.comm
+    bf = np.intersect1d(geom.boundary_facets, geom.facets_of_layers(0))
+    cells, local = geom.facet_cells[bf, 0], geom.facet_local[bf, 0]
+    mask = np.ones((len(bf), d + 1), dtype=bool)
+    mask[np.arange(len(bf)), local] = False
+    x = geom.cell_vertices[cells][mask].reshape(-1, d) + 0.0  # + 0.0: no -0.0
+    body = np.repeat(geom.cell_bodies[cells], d)
+    rows = np.unique(np.concatenate([x, body[:, None]], axis=1), axis=0)
+    bits = np.ascontiguousarray(rows[:, :d]).view(np.uint64)
+    mixed = np.zeros(len(rows), dtype=np.uint64)
+    for k in range(d):
+        mixed = (mixed * np.uint64(1000003)) ^ bits[:, k]
+    home = (mixed % np.uint64(comm.size)).astype(np.int64)
+    received = comm.alltoall([rows[home == q] for q in range(comm.size)])
+    rows = np.unique(np.concatenate(received), axis=0)
+    same = np.all(rows[1:, :d] == rows[:-1, :d], axis=1)
+    point = rows[1:][same][0, :d].tolist() if same.any() else None
+    shared = [p for p in comm.allgather(point) if p is not None]
+    if shared:
+        raise ValueError(f"bodies share the vertex {min(shared)}: bodies in contact must be meshed "
                          "separately (no common vertex)")

@@ -145,10 +145,10 @@ def contact_values(dem: DEMDiscretisation, u) -> list[float]:
     if dem.contact is not None:
         c = dem.contact
         up = c.patch_values(u)
-        gap, k = c.contact_gap(up)
+        gap, x = c.contact_gap(up)
         values += [gap, c.contact_pressure(up)]
         if dem.d == 1:
-            values.append(float(dem.geometry.facet_centres[c.facets[k], 0] + c.facet_displacements(up)[k, 0]))
+            values.append(x)
     if dem.pair_contact is not None:
         c = dem.pair_contact
         up = c.patch_values(u)
@@ -186,8 +186,9 @@ class Probes:
         # Each process proposes its nearest owned cell (key: distance rounded relative to the
         # mesh extent, then position); the smallest key over the processes wins.
         xc = dem.geometry.cell_centres[: dem.n_owned]
-        lo = dem.comm.allreduce(xc.min(axis=0, initial=np.inf), op=MPI.MIN)
-        hi = dem.comm.allreduce(xc.max(axis=0, initial=-np.inf), op=MPI.MAX)
+        lo, hi = xc.min(axis=0, initial=np.inf), xc.max(axis=0, initial=-np.inf)
+        dem.comm.Allreduce(MPI.IN_PLACE, lo, op=MPI.MIN)
+        dem.comm.Allreduce(MPI.IN_PLACE, hi, op=MPI.MAX)
         keys = np.full((len(specs), 1 + dem.d), np.inf)
         cells = np.zeros(len(specs), dtype=np.int64)
         for i, x in enumerate(points[:, : dem.d]):
@@ -337,8 +338,9 @@ def run(scene: Mapping, out: str | pathlib.Path, comm: MPI.Comm = MPI.COMM_WORLD
             "pseudo_energy_rel_drift": drift / scale if scale > 0 else 0.0,
             "pseudo_energy_initial": E0,
             "max_mechanical_energy": scale,
-            "force_evaluations": stepper.force_evaluations,
-            "max_force_evaluations_per_step": stepper.max_step_evaluations,
+            # contact work is split per process (its pairs' events): the busiest process counts
+            "force_evaluations": comm.allreduce(stepper.force_evaluations, op=MPI.MAX),
+            "max_force_evaluations_per_step": comm.allreduce(stepper.max_step_evaluations, op=MPI.MAX),
             "stable": stable,
             # With time-dependent Dirichlet data the boundary does work: no conservation then.
             "conservative": not any(bc.get("time_dependent", False) for bc in scene.get("dirichlet", [])),
@@ -347,7 +349,7 @@ def run(scene: Mapping, out: str | pathlib.Path, comm: MPI.Comm = MPI.COMM_WORLD
             "extrapolated_facets": dem.num_extrapolated_facets,
         }
         if dem.contact is not None:
-            summary["contact_candidate_facets"] = int(len(dem.contact.facets))
+            summary["contact_candidate_facets"] = dem.contact.num_facets
             summary["min_contact_gap"] = min_gap
         if dem.pair_contact is not None:
             summary.update(pair_stats.summary(t_stepping))
@@ -423,19 +425,19 @@ class PairContactStatistics:
         v = 0.5 * (stepper.v_prev.array_r + stepper.v_next.array_r).reshape(-1, dem.d)
         self.p_scale = dem.comm.allreduce(float(np.abs(m * v).sum()), op=MPI.SUM)
         self.momentum_change = 0.0
-        self.free = len(dem.reconstruction.dirichlet_facets) == 0
+        self.free = dem.comm.allreduce(len(dem.reconstruction.dirichlet_facets), op=MPI.SUM) == 0
         self.dem = dem
-        self.previous = None  # free facet displacements of the previous step
+        self.previous = None  # the displacement of the previous step
 
     def record(self, t: float, stepper: MEMM, values: Mapping[str, float]):
         """Update with the state at ``t`` and its series ``values`` (``contact_columns``)."""
         contact = self.dem.pair_contact
-        free = contact.free_displacements(contact.patch_values(stepper.u))
-        if self.first_contact is None and self.previous is not None:
-            tau = contact.touch_time(self.previous, free, stepper.dt)
-            if tau is not None:
-                self.first_contact = t - stepper.dt + tau
-        self.previous = free
+        if self.first_contact is None:
+            if self.previous is not None:
+                tau = contact.touch_time(self.previous, stepper.u, stepper.dt)
+                if tau is not None:
+                    self.first_contact = t - stepper.dt + tau
+            self.previous = stepper.u.copy()
         self.penetration = max(self.penetration, values["penetration"])
         if self.free:
             p = np.array([values[f"momentum_{'xyz'[i]}"] for i in range(self.dem.d)])
@@ -443,15 +445,17 @@ class PairContactStatistics:
 
     def summary(self, stepping_seconds: float) -> dict:
         c = self.dem.pair_contact
+        comm = self.dem.comm
         out = {
-            "contact_candidate_facets": int(len(c.facets)),
-            "contact_pairs_listed": int(len(c.listed)),
+            "contact_candidate_facets": c.num_facets,
+            "contact_pairs_listed": c.num_pairs,
             "contact_list_rebuilds": c.rebuilds,
             "contact_pairs_scheme_b_rule": c.scheme_b_pairs,
             "first_contact_time": self.first_contact,
             "max_penetration": self.penetration,
-            "contact_seconds": c.seconds,
-            "contact_fraction": c.seconds / stepping_seconds if stepping_seconds > 0 else 0.0,
+            "contact_seconds": comm.allreduce(c.seconds, op=MPI.MAX),
+            "contact_fraction": comm.allreduce(c.seconds / stepping_seconds if stepping_seconds > 0 else 0.0,
+                                               op=MPI.MAX),
         }
         if self.free:
             out["momentum_rel_change"] = self.momentum_change / self.p_scale if self.p_scale > 0 else 0.0

@@ -95,26 +95,7 @@ def run_static(scene: Mapping, out, comm: MPI.Comm = MPI.COMM_WORLD) -> dict:
             "processes": comm.size,
         }
         if dem.contact is not None:
-            c = dem.contact
-            up = c.patch_values(u)
-            areas = dem.geometry.facet_areas[c.facets]
-            pressure = c.reaction_pressures(up)
-            # facets held on a kink of the potential (statics.minimise_energy) carry their multiplier
-            pressure[result.pinned] = result.kink_forces[result.pinned] / areas[result.pinned]
-            x = dem.geometry.facet_centres[c.facets]
-            _write_pressure(directory / "contact_pressure.csv", comm, x, pressure)
-            touching = pressure > 0
-            summary["max_contact_pressure"] = float(pressure.max())
-            summary["contact_half_width_last"] = hertz.contact_half_width_last(x[:, 0], pressure)
-            summary["contact_facets"] = int(touching.sum())
-            summary["kink_facets"] = int(result.pinned.sum())
-            summary["contact_force"] = float((pressure * areas).sum())
-            if dem.d == 2 and touching.sum() >= 3:
-                x_start, x_end = _facet_x_ranges(dem.geometry, c.facets)
-                moments = hertz.facet_pressure_moments(x_start, x_end, pressure * areas)
-                summary["contact_half_width"] = hertz.contact_half_width_moments(*moments)[0]
-                a, p0, _ = hertz.contact_half_width_fit(x[:, 0], pressure)
-                summary["contact_half_width_fit"], summary["fitted_max_pressure"] = a, p0
+            summary.update(_contact_summary(dem, u, result, directory / "contact_pressure.csv"))
         plotting.plot_cell_field(dem.mesh, u.array_r.reshape(-1, dem.d), dem.von_mises(u, 0.0),
                                  directory / "final.png", "von Mises stress (Pa)",
                                  scene.get("output", {}).get("picture_scale", 1.0))
@@ -122,6 +103,40 @@ def run_static(scene: Mapping, out, comm: MPI.Comm = MPI.COMM_WORLD) -> dict:
         summary["setup_time_s"] = t_setup
         summary["peak_rss_mb"] = simulation.peak_rss_mb(comm)
         io.write_summary(directory / "summary.json", comm, summary)
+    return summary
+
+
+def _contact_summary(dem, u, result, path: pathlib.Path) -> dict:
+    """The contact figures of a static DEM solution and the file of facet pressures. The own
+    facets' pressures are gathered on rank 0 for the file and the half-width fits: output of a
+    static contact zone, not a step of the computation."""
+    c, comm, geom = dem.contact, dem.comm, dem.geometry
+    own = c.facets[: c.num_own]
+    areas = geom.facet_areas[own]
+    pressure = c.reactions(u) / areas
+    # facets held on a kink of the potential (statics.minimise_energy) carry their multiplier
+    pressure[result.pinned] = result.kink_forces[result.pinned] / areas[result.pinned]
+    x = geom.facet_centres[own]
+    x_start, x_end = _facet_x_ranges(geom, own)
+    parts = comm.gather((x, pressure, areas, x_start, x_end), root=0)
+
+    def figures():
+        x, p, areas, x0, x1 = (np.concatenate(a) for a in zip(*parts))
+        _write_pressure(path, comm, x, p)
+        touching = p > 0
+        out = {"max_contact_pressure": float(p.max()),
+               "contact_half_width_last": hertz.contact_half_width_last(x[:, 0], p),
+               "contact_facets": int(touching.sum()),
+               "contact_force": float((p * areas).sum())}
+        if dem.d == 2 and touching.sum() >= 3:
+            moments = hertz.facet_pressure_moments(x0, x1, p * areas)
+            out["contact_half_width"] = hertz.contact_half_width_moments(*moments)[0]
+            a, p0, _ = hertz.contact_half_width_fit(x[:, 0], p)
+            out["contact_half_width_fit"], out["fitted_max_pressure"] = a, p0
+        return out
+
+    summary = io.call_on_root(comm, figures)
+    summary["kink_facets"] = comm.allreduce(int(result.pinned.sum()), op=MPI.SUM)
     return summary
 
 

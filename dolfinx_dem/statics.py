@@ -71,8 +71,8 @@ class StaticResult:
     energy: float
     contact_facets: int
     wall_time_s: float
-    pinned: np.ndarray  # candidate facets held at g_f = 0 on a kink of V (bool, per candidate)
-    kink_forces: np.ndarray  # contact force (N/m) of each pinned facet, -mu_f; 0 elsewhere
+    pinned: np.ndarray  # own candidate facets held at g_f = 0 on a kink of V (bool, per own candidate)
+    kink_forces: np.ndarray  # contact force (N/m) of each own pinned facet, -mu_f; 0 elsewhere
 
     @property
     def gradient_reduction(self) -> float:
@@ -107,20 +107,13 @@ def _constraints(dem, components, rotation):
 
 
 def _hessian(dem, active):
-    """K plus the contact correction for the active set, as a new PETSc matrix."""
+    """K plus the contact correction for the own facets' active set, as a new PETSc matrix."""
     H = dem.K.copy()
     c = dem.contact
-    if c is None or not active.any():
+    if c is None or not dem.comm.allreduce(bool(active.any()), op=MPI.LOR):
         return H
     H.setOption(PETSc.Mat.Option.NEW_NONZERO_ALLOCATION_ERR, False)
-    C = c.hessian_correction(active).tocsr()
-    C.eliminate_zeros()
-    owned = np.flatnonzero(c._owned)
-    for i in owned:
-        lo, hi = C.indptr[i], C.indptr[i + 1]
-        if hi > lo:
-            H.setValues([int(c.patch[i])], c.patch[C.indices[lo:hi]].astype(PETSc.IntType), C.data[lo:hi],
-                        addv=PETSc.InsertMode.ADD_VALUES)
+    c.add_hessian(H, active)
     H.assemble()
     return H
 
@@ -162,16 +155,17 @@ def _constrained(H, normals):
     return shell, P
 
 
-def _gap_gradient(dem, f: int, directions) -> PETSc.Vec:
-    """P grad g_f: the gradient of candidate facet f's gap (a row of R_n on the contact patch),
-    projected onto the subspace of the linear constraints."""
-    c = dem.contact
-    r = c._Rn[[f]]  # dense or sparse (contact._compact)
-    row = (r.toarray() if scipy.sparse.issparse(r) else np.asarray(r)).ravel()
-    vec = dem.create_vector()
-    c.add(row, vec)
+def _gap_gradient(dem, facet: tuple[int, int], directions) -> PETSc.Vec:
+    """P grad g_f for the candidate ``facet`` = (owner rank, own index): the gradient of its gap
+    projected onto the subspace of the linear constraints (collective)."""
+    vec = dem.contact.gap_gradient(*facet)
     _project(vec, directions)
     return vec
+
+
+def _global(comm, mask: np.ndarray) -> list[tuple[int, int]]:
+    """The (rank, own index) of the own facets set in ``mask``, on every process, in rank order."""
+    return [(r, int(k)) for r, ks in enumerate(comm.allgather(np.flatnonzero(mask))) for k in ks]
 
 
 def minimise_energy(
@@ -203,12 +197,14 @@ def minimise_energy(
         # active-set Newton iteration below does not apply; ignoring it would be a wrong answer.
         raise ValueError("minimise_energy handles rigid obstacles only, not contact between bodies "
                          "(set_contact_boundary): use a dynamic run (MEMM) for contact between bodies")
-    if len(dem.reconstruction.dirichlet_facets) == 0 and dem.contact is None:
+    comm = dem.comm
+    if comm.allreduce(len(dem.reconstruction.dirichlet_facets), op=MPI.SUM) == 0 and dem.contact is None:
         raise StaticsError("the body is free: with neither a Dirichlet condition nor an obstacle its "
                            "rigid motions are unconstrained (unconstrained rigid mode)")
     start = time.perf_counter()
     c = dem.contact
     directions = _constraints(dem, fixed_mean, fixed_rotation)
+    same = lambda x, y: comm.allreduce(bool(np.array_equal(x, y)), op=MPI.LAND)  # noqa: E731
 
     zero, rhs, u = dem.create_vector(), dem.create_vector(), dem.create_vector()  # u starts at 0
     force = dem.create_vector()
@@ -220,8 +216,9 @@ def minimise_energy(
     if c is not None:
         # Start from the facets touching the obstacle at u = 0 (smallest gap); the iteration
         # adds the facets the solution pushes into it and releases those it lifts off.
-        g = c.gaps(c.patch_values(zero))
-        active = g <= g.min() + 1e-9 * dem.geometry.facet_diameters[c.facets].min()
+        g = c.own_gaps(zero)
+        h = comm.allreduce(dem.geometry.facet_diameters[c.facets[: c.num_own]].min(initial=np.inf), op=MPI.MIN)
+        active = g <= comm.allreduce(g.min(initial=np.inf), op=MPI.MIN) + 1e-9 * h
         pinned = np.zeros_like(active)
         history = [active.copy()]
     ksp = PETSc.KSP().create(dem.comm)
@@ -232,7 +229,7 @@ def minimise_energy(
     ksp.setFromOptions()
     linear_iterations = 0
     step, trial = dem.create_vector(), dem.create_vector()
-    multipliers = np.zeros(0)
+    multipliers, facets = np.zeros(0), []
 
     def potential(vec):
         return dem.energies(vec, 0.0)["potential"]
@@ -247,6 +244,10 @@ def minimise_energy(
                                f"(KSP reason {ksp.getConvergedReason()}): a rigid mode may be unconstrained "
                                "(missing Dirichlet condition, obstacle contact or fixed_mean component)")
 
+    def pinned_values(values: np.ndarray) -> np.ndarray:
+        """Per-facet values of the own facets -> the pinned facets' values, in ``facets`` order."""
+        return np.concatenate(comm.allgather(values[pinned])) if facets else np.zeros(0)
+
     for iteration in range(1, max_iterations + 1):
         # Newton step of the quadratic piece A at u: H_A d = F_A(u), with the pinned facets (if
         # any) held on the obstacle, g_C(u + d) = 0, by Lagrange multipliers mu:
@@ -254,7 +255,7 @@ def minimise_energy(
         H = _hessian(dem, active) if c is not None else dem.K
         dem.force(u, 0.0, rhs, contact=False)
         if c is not None:
-            c.add(c.force_correction(c.patch_values(u), active), rhs)
+            c.add_force(u, rhs, active)
         operator, preconditioner = _constrained(H, directions)
         _project(rhs, directions)
         ksp.setOperators(operator, preconditioner)
@@ -262,15 +263,18 @@ def minimise_energy(
         if c is None:
             step.copy(u)
             break
-        facets = np.flatnonzero(pinned)
-        if facets.size:
+        facets = _global(comm, pinned)
+        if facets:
             gradients = [_gap_gradient(dem, f, directions) for f in facets]
             Z = [dem.create_vector() for _ in facets]
             for b, z in zip(gradients, Z):
                 solve(b, z, iteration)
-            rows = c._Rn[facets]
-            S = np.array([rows @ c.patch_values(z) for z in Z]).T
-            multipliers = np.linalg.solve(S, c.gaps(c.patch_values(u))[facets] + rows @ c.patch_values(step))
+            own = np.flatnonzero(pinned)
+            S = np.concatenate(comm.allgather(np.array(
+                [[c.gap_gradient_dot(k, c.patch_values(z)) for z in Z] for k in own]).reshape(len(own), len(Z))))
+            step_dot = pinned_values(np.array([c.gap_gradient_dot(k, c.patch_values(step)) if p else 0.0
+                                               for k, p in enumerate(pinned)]))
+            multipliers = np.linalg.solve(S, pinned_values(c.own_gaps(u)) + step_dot)
             for m, z in zip(multipliers, Z):
                 step.axpy(-m, z)
             for m, b in zip(multipliers, gradients):
@@ -279,8 +283,7 @@ def minimise_energy(
         # does not change, a shorter one when it overshoots a switch. The first step onto newly
         # pinned facets is taken in full (it moves them onto the obstacle).
         slope, v0, alpha = -rhs.dot(step), potential(u), 1.0
-        entering = facets.size and np.abs(c.gaps(c.patch_values(u))[facets]).max() > \
-            1e-12 * dem.geometry.facet_diameters[c.facets].min()
+        entering = bool(facets) and np.abs(pinned_values(c.own_gaps(u))).max() > 1e-12 * h
         while not entering:
             u.copy(trial)
             trial.axpy(alpha, step)
@@ -288,26 +291,27 @@ def minimise_energy(
                 break
             alpha *= 0.5
         u.axpy(alpha, step)
-        new = (c.gaps(c.patch_values(u)) < 0) & ~pinned
-        if not (new | pinned).any():
+        new = (c.own_gaps(u) < 0) & ~pinned
+        if not comm.allreduce(bool((new | pinned).any()), op=MPI.LOR):
             raise StaticsError("no facet is in contact at the solution: the obstacle does not hold the "
                                "body (check the contact candidate boundary and the load direction)")
-        converged = alpha == 1.0 and np.array_equal(new, active)
-        if converged and facets.size:
+        converged = alpha == 1.0 and same(new, active)
+        if converged and facets:
             # Kink conditions of the pinned facets (g_f = 0): the directional derivatives of V
             # towards lifting off (-mu_f) and towards pressing in (mu_f + r_f, r_f the force the
             # facet would carry in contact) must both be >= 0.
-            _, _, a, delta = c._state(c.patch_values(u), active | pinned)
-            reaction = (c._Y.T @ (a - delta))[facets]
+            reaction = pinned_values(c.reactions(u, active | pinned))
             lift, press = multipliers > 0, multipliers + reaction < 0
             if lift.any() or press.any():
                 converged = False
-                pinned[facets[lift | press]] = False
-                new[facets[press]] = True
-        elif not converged and any(np.array_equal(new, old) for old in history):
+                own = np.flatnonzero(pinned)
+                mine = np.array([r == comm.rank for r, _ in facets])
+                pinned[own[(lift | press)[mine]]] = False
+                new[own[press[mine]]] = True
+        elif not converged and any(same(new, old) for old in history):
             # The active set returns to an earlier state: V has its minimum on (or across) a
             # contact switch. Hold the facets that keep switching on the obstacle (g_f = 0).
-            first = next(k for k, old in enumerate(history) if np.array_equal(new, old))
+            first = next(k for k, old in enumerate(history) if same(new, old))
             switching = np.zeros_like(new)
             for old in history[first:]:
                 switching |= old != new
@@ -327,12 +331,14 @@ def minimise_energy(
     # multiplier forces (= grad V itself when no facet is pinned).
     dem.force(u, 0.0, force, contact=False)
     if c is not None:
-        c.add(c.force_correction(c.patch_values(u), active), force)
+        c.add_force(u, force, active)
     _project(force, directions)
-    kink_forces = np.zeros(len(c.facets)) if c is not None else np.zeros(0)
-    for f, m in zip(np.flatnonzero(pinned), multipliers if pinned.any() else []):
-        force.axpy(-m, _gap_gradient(dem, f, directions))
-        kink_forces[f] = -m
+    kink_forces = np.zeros(c.num_own) if c is not None else np.zeros(0)
+    facets = _global(comm, pinned) if c is not None else []
+    for (r, k), m in zip(facets, multipliers if facets else []):
+        force.axpy(-m, _gap_gradient(dem, (r, k), directions))
+        if r == comm.rank:
+            kink_forces[k] = -m
     return StaticResult(
         u=u,
         iterations=iteration,
@@ -340,7 +346,7 @@ def minimise_energy(
         gradient_norm_initial=norm0,
         gradient_norm=force.norm(),
         energy=dem.energies(u, 0.0)["potential"],
-        contact_facets=int((active | pinned).sum()) if c is not None else 0,
+        contact_facets=comm.allreduce(int((active | pinned).sum()), op=MPI.SUM) if c is not None else 0,
         wall_time_s=time.perf_counter() - start,
         pinned=pinned.copy() if c is not None else np.zeros(0, dtype=bool),
         kink_forces=kink_forces,
