@@ -8,6 +8,25 @@ integral is exact (Marazzato, Ern, Mariotti, Monasse, CMAME 2019): the midpoint 
 linear elasticity, whose force is affine in tau. Velocities live at half steps; the two sequences
 (even and odd) are started consistently, v^{+-1/2} = v^0 +- dt/2 M^{-1} F(u^0), so that the
 parasitic (-1)^n mode is not excited.
+
+A step costs one pass over the energy rows. The elastic force is F(w, t) = -Q^T (Q w + q(t)) + f
+(discretisation.py), and the energy rows r = Q w + q give the elastic and stabilisation energies
+1/2 |r|^2, split by rows. The stepper keeps y^n = Q u^n (the homogeneous rows; u minus the mean
+translation of each free body). Along the flight u^n + tau v^{n+1/2} they are affine in tau:
+
+    y^{n+1} = y^n + dt Q v^{n+1/2},    int_0^dt -Q^T Q (u^n + tau v^{n+1/2}) dtau = -dt/2 Q^T (y^n + y^{n+1}),
+
+which is r^{n+1} = 2 r_mid - r^n for the midpoint residual r_mid, written as an increment. One
+pass over Q (factored.py) gives y^{n+1} and z^{n+1} = Q^T y^{n+1}, z^n is kept from the step
+before, and the energies at t_{n+1} are 1/2 |y^{n+1} + q(t_{n+1})|^2: no further product. (y is
+stored divided by dt, so that its increment is Q v^{n+1/2} with no scaling pass.) The recurrence
+adds the rounding of each step: every ``refresh_every`` steps y^{n+1} is recomputed from u^{n+1}
+by a true product instead. All other terms of the integral, the loads f - Q^T q(t) at the
+quadrature nodes and the contact corrections, are the step's ``impulse``. One compiled kernel
+then updates u and v and sums the kinetic, pseudo-kinetic and external terms, and a single
+Allreduce reduces them with the energies: a step synchronises three times (the ghost updates of
+v^{n+1/2} and of Q^T y, and the reduction); contact adds the gathers of its patch values and
+free bodies the reduction of their mean velocity.
 """
 
 from __future__ import annotations
@@ -16,7 +35,17 @@ import dataclasses
 import math
 
 import numpy as np
+from mpi4py import MPI
 from petsc4py import PETSc
+
+from dolfinx_dem.kernels import ffi, lib, pointer
+
+#: Default number of steps between true products for the energy rows (see the module docstring
+#: and docs/bench/README.md for the drift with and without).
+REFRESH_EVERY = 1000
+
+_FORWARD = dict(addv=PETSc.InsertMode.INSERT_VALUES, mode=PETSc.ScatterMode.FORWARD)
+_REVERSE = dict(addv=PETSc.InsertMode.ADD_VALUES, mode=PETSc.ScatterMode.REVERSE)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -67,7 +96,8 @@ class Diagnostics:
 
 
 class MEMM:
-    """The MEMM stepper for a problem offering ``force``, ``energies``, ``mass``, ``create_vector``.
+    """The MEMM stepper for a ``DEMDiscretisation`` (``force``, ``energies``, ``factored``,
+    ``load``, ``lift``, ``mass``, ``contacts``).
 
     Parameters
     ----------
@@ -76,38 +106,70 @@ class MEMM:
     quadrature : name in ``QUADRATURES`` (default "midpoint").
     growth_limit : the stability monitor's bound on the mechanical energy relative to the
         conserved budget (see ``check_stability``).
+    refresh_every : steps between true products for the energy rows; 0 never refreshes them.
+
+    ``u``, ``v_prev`` (v^{n-1/2}) and ``v_next`` (v^{n+1/2}) are the state, with ghost dofs (their
+    global form has the layout of ``problem.create_vector()``); change them only through
+    ``initialise``, which also recomputes the energy rows.
     """
 
-    def __init__(self, problem, dt: float, quadrature: str = "midpoint", growth_limit: float = 10.0):
+    def __init__(self, problem, dt: float, quadrature: str = "midpoint", growth_limit: float = 10.0,
+                 refresh_every: int = REFRESH_EVERY):
         if not (isinstance(dt, (int, float)) and math.isfinite(dt) and dt > 0):
             raise ValueError(f"time step dt must be a positive number, got {dt!r}")
         if quadrature not in QUADRATURES:
             raise ValueError(f"unknown quadrature {quadrature!r}; choose from {sorted(QUADRATURES)}")
         if not growth_limit > 1:
             raise ValueError(f"growth_limit must be > 1, got {growth_limit}")
+        if not (isinstance(refresh_every, int) and refresh_every >= 0):
+            raise ValueError(f"refresh_every must be an integer >= 0, got {refresh_every!r}")
         self.problem = problem
         self.dt = float(dt)
         self.quadrature = quadrature
         self.nodes, self.weights = QUADRATURES[quadrature].nodes_weights
         self.growth_limit = growth_limit
-        self.u = problem.create_vector()
-        self.v_prev = problem.create_vector()  # v^{n-1/2}
-        self.v_next = problem.create_vector()  # v^{n+1/2}
-        self._w = problem.create_vector()
-        self._f = problem.create_vector()
-        self._integral = problem.create_vector()
+        self.refresh_every = refresh_every
         self.t0 = 0.0
         self.n = 0
         self.force_evaluations = 0
         self.max_step_evaluations = 0
         self.budget = 0.0
 
+        K = self._K = problem.factored
+        self.u = K.create_vector()
+        self.v_prev = K.create_vector()  # v^{n-1/2}
+        self.v_next = K.create_vector()  # v^{n+1/2}: the kernel reads it at the ghost dofs
+        self._x = K.create_vector()  # the kernel's input when not v^{n+1/2} itself (free bodies, refresh)
+        self._z = [K.create_vector(), K.create_vector()]  # Q^T y^n, and Q^T y^{n+1} accumulated
+        self._y = np.zeros(K.n_rows)  # the homogeneous energy rows Q u^n, divided by dt
+        self._sums = np.zeros(7)  # local: |y|^2 (S, J rows), kinetic, pseudo-kinetic, f.u, lift (S, J)
+        self._impulse = problem.create_vector()
+        self._f = problem.create_vector()
+        self._load = None  # dt (f - Q^T q) when constant and not zero
+        self._lift = None  # (rows, values) of a constant q that is not zero
+        self._parallel = problem.comm.size > 1
+        self._ghosts = [K.local_array(z)[K.n_owned:] for z in self._z]  # zeroed before accumulating
+        # the cells' d dofs share a mass: the kernel reads one per cell
+        mass = problem.mass.array_r
+        self._block = problem.d if np.all(mass.reshape(-1, problem.d) == mass[:: problem.d, None]) else 1
+        self._mass = np.ascontiguousarray(mass[:: self._block])
+        self._minv = np.ascontiguousarray(problem.inverse_mass.array_r[:: self._block])
+        # kernel arguments, once: gram[x, z] reads x and accumulates Q^T y into z
+        self._gram = {(id(x), id(z)): K.bind(x, self._y, z, self._sums)
+                      for x in (self.u, self.v_prev, self.v_next, self._x) for z in self._z}
+        self._p = {id(v): pointer(v.array) for v in (self.u, self.v_prev, self.v_next, *self._z, self._impulse)}
+        self._p[id(None)] = ffi.NULL  # no impulse
+        self._p_mass, self._p_minv, self._p_sums = pointer(self._mass), pointer(self._minv), pointer(self._sums)
+        force = problem.body_force.array  # f . u is the external potential's share; skipped when f = 0
+        self._p_body_force = pointer(force) if force.any() else ffi.NULL
+
     @property
     def t(self) -> float:
         return self.t0 + self.n * self.dt
 
     def initialise(self, u0: PETSc.Vec, v0: PETSc.Vec, t0: float = 0.0) -> Diagnostics:
-        """Start from u^0, v^0: v^{-1/2} = v^0 - dt/2 M^-1 F(u^0), v^{1/2} = v^0 + dt/2 M^-1 F(u^0)."""
+        """Start from u^0, v^0: v^{-1/2} = v^0 - dt/2 M^-1 F(u^0), v^{1/2} = v^0 + dt/2 M^-1 F(u^0),
+        and the energy rows y^0 = Q u^0 by a true product."""
         self.t0, self.n = float(t0), 0
         u0.copy(self.u)
         self.problem.force(self.u, self.t0, self._f)
@@ -117,60 +179,138 @@ class MEMM:
         self.v_prev.axpy(-0.5 * self.dt, self._f)
         v0.copy(self.v_next)
         self.v_next.axpy(0.5 * self.dt, self._f)
-        diag = self.diagnostics()
+        self._load = self._lift = None
+        if not self.problem.time_dependent:
+            load = self.problem.load(self.t0)
+            if load.array_r.any():
+                self._load = load.copy()
+                self._load.scale(self.dt)
+                self._p[id(self._load)] = pointer(self._load.array)
+            rows, values = self.problem.lift(self.t0)
+            if values.any():
+                self._lift = (rows, values.copy())
+        for z in self._z:
+            with z.localForm() as local:
+                local.set(0.0)
+        self._sums.fill(0.0)
+        self._advance_residual(self.u, 0, refresh=True)
+        M, f = self.problem.mass.array_r, self.problem.body_force.array_r
+        vp, vn = self.v_prev.array_r, self.v_next.array_r
+        self._sums[2:5] = [0.125 * np.dot(M, (vp + vn) ** 2), 0.5 * np.dot(M * vp, vn), np.dot(f, self.u.array_r)]
+        diag = self._reduce()
         self.budget = diag.mechanical
         return diag
 
-    def force_integral(self, out: PETSc.Vec) -> PETSc.Vec:
-        """int_0^dt F(u^n + tau v^{n+1/2}, t_n + tau) dtau (eq. (35b)).
+    def step(self) -> Diagnostics:
+        """Advance one step (eq. (35a)-(35b)) and return the diagnostics at the new time."""
+        refresh = self.refresh_every > 0 and (self.n + 1) % self.refresh_every == 0
+        self._sums.fill(0.0)
+        if refresh:
+            self.u.axpy(self.dt, self.v_next)  # (35a) first: y^{n+1} from u^{n+1} by a true product
+            self._advance_residual(self.u, 1, refresh=True)
+        else:
+            self._advance_residual(self.v_next, 1, refresh=False)
+        impulse = self.impulse()
+        z_old, z_new = self._z
+        p = self._p
+        lib.dem_memm_update(len(self._mass), self._block, self.dt, 0.5 * self.dt**2, p[id(z_old)], p[id(z_new)],
+                            p[id(impulse)], self._p_mass, self._p_minv, p[id(self.u)], p[id(self.v_next)],
+                            p[id(self.v_prev)], self._p_body_force, 0 if refresh else 1, self._p_sums + 2)
+        self.u.stateIncrease()  # written by the kernel: PETSc's cached norms are stale
+        self.v_prev.stateIncrease()
+        self._ghosts[0].fill(0.0)  # z_old becomes the next accumulator, ghost entries too
+        self.v_prev, self.v_next = self.v_next, self.v_prev
+        self._z = [z_new, z_old]
+        self._ghosts.reverse()
+        self.n += 1
+        diag = self._reduce()
+        self.check_stability(diag)
+        return diag
 
-        Gauss-Legendre rules evaluate the whole force at their nodes. The midpoint rule, with a
-        problem that has contact, integrates the smooth (affine) part at the midpoint and each
-        contact correction piecewise between its events (paper §4): exactly, so the
-        pseudo-energy is conserved through impacts. ``force_evaluations`` counts a step's
-        patch-only evaluations beyond the first as evaluations too.
+    def _advance_residual(self, vec: PETSc.Vec, k: int, refresh: bool):
+        """y <- y + Q vec (a velocity), or y = Q vec / dt (a displacement) when ``refresh``; then
+        self._z[k] += Q^T y, with the contributions of other processes; free bodies' mean
+        translations removed from vec first (``relative_displacement``)."""
+        x = self.problem.relative_displacement(vec, out=self._x)
+        if self._parallel:
+            x.ghostUpdate(**_FORWARD)
+        self._gram[id(x), id(self._z[k])](0.0 if refresh else 1.0, 1.0 / self.dt if refresh else 1.0)
+        if self._parallel:
+            self._z[k].ghostUpdate(**_REVERSE)
+
+    def impulse(self) -> PETSc.Vec | None:
+        """The part of int_0^dt F(u^n + tau v^{n+1/2}, t_n + tau) dtau (eq. (35b)) that ``step``
+        does not take from the energy rows: the load f - Q^T q(t) and the contact corrections
+        (None when both are zero). Gauss-Legendre rules evaluate them at their nodes (a
+        time-dependent load costs a Q^T product per node). The midpoint rule, with a problem
+        that has contact, integrates each contact correction piecewise between its events
+        (paper §4): exactly, so the pseudo-energy is conserved through impacts.
+        ``force_evaluations`` counts the quadrature nodes (the affine part is evaluated there
+        through y) and a step's patch-only evaluations beyond the first as evaluations too.
         """
-        out.set(0.0)
-        contacts = getattr(self.problem, "contacts", ())
+        contacts = self.problem.contacts
         split = bool(contacts) and self.quadrature == "midpoint"
-        evaluations = 0
-        for x, w in zip(self.nodes, self.weights):
-            tau = x * self.dt
-            self.u.copy(self._w)
-            self._w.axpy(tau, self.v_next)
-            self.problem.force(self._w, self.t + tau, self._f, contact=not split)
-            evaluations += 1
-            out.axpy(w * self.dt, self._f)
-        if split:
-            for contact in contacts:
+        evaluations = len(self.nodes)
+        if self.problem.time_dependent:
+            out = self._impulse
+            out.set(0.0)
+            for x, w in zip(self.nodes, self.weights):
+                out.axpy(w * self.dt, self.problem.load(self.t + x * self.dt))
+        elif contacts:
+            out = self._impulse
+            if self._load is None:
+                out.set(0.0)
+            else:
+                self._load.copy(out)
+        else:
+            out = self._load
+        for contact in contacts:
+            if split:
                 evaluations += max(contact.force_integral(self.u, self.v_next, self.dt, out) - 1, 0)
+            else:
+                up, vp = contact.patch_values(self.u), contact.patch_values(self.v_next)
+                for x, w in zip(self.nodes, self.weights):
+                    contact.add(contact.force_correction(up + x * self.dt * vp), out, scale=w * self.dt)
         self.force_evaluations += evaluations
         self.max_step_evaluations = max(self.max_step_evaluations, evaluations)
         return out
 
-    def step(self) -> Diagnostics:
-        """Advance one step (eq. (35a)-(35b)) and return the diagnostics at the new time."""
-        self.force_integral(self._integral)
-        self.u.axpy(self.dt, self.v_next)  # (35a)
-        self._integral.pointwiseMult(self._integral, self.problem.inverse_mass)
-        self.v_prev.axpy(2.0, self._integral)  # (35b): v_prev becomes v^{n+3/2}
-        self.v_prev, self.v_next = self.v_next, self.v_prev
-        self.n += 1
-        diag = self.diagnostics()
-        self.check_stability(diag)
-        return diag
+    def _reduce(self) -> Diagnostics:
+        """Diagnostics at t_n from the local sums of the kernels: the lift's share of the energy
+        rows, one Allreduce, the contact corrections (computed from gathered patch values, the
+        same on every process)."""
+        s = self._sums
+        lift = self.problem.lift(self.t) if self.problem.time_dependent else self._lift
+        if lift is not None:
+            rows, values = lift
+            lib.dem_lift_sums(len(rows), pointer(rows), pointer(values), pointer(self._y), self.dt,
+                              self._K.n_elastic, self._p_sums + 5)
+        if self._parallel:
+            self.problem.comm.Allreduce(MPI.IN_PLACE, s, op=MPI.SUM)
+        elastic = 0.5 * (self.dt**2 * s[0] + s[5])
+        stabilisation = 0.5 * (self.dt**2 * s[1] + s[6])
+        for c in self.problem.contacts:
+            de, ds = c.energy_correction(c.patch_values(self.u))
+            elastic += de
+            stabilisation += ds
+        external = -s[4]
+        return Diagnostics(step=self.n, t=self.t, kinetic=s[2], elastic=elastic, stabilisation=stabilisation,
+                           external=external, pseudo_kinetic=s[3],
+                           pseudo_energy=s[3] + elastic + stabilisation + external)
 
     def diagnostics(self) -> Diagnostics:
-        """Energies at t_n, reduced over all processes."""
+        """Energies at t_n recomputed from u^n by true products (``problem.energies``), reduced
+        over all processes: a check of the values ``step`` returns, not used by it."""
         e = self.problem.energies(self.u, self.t)
         M = self.problem.mass
-        self.v_prev.copy(self._w)
-        self._w.axpy(1.0, self.v_next)
-        self._w.scale(0.5)
-        self._f.pointwiseMult(self._w, M)
-        kinetic = 0.5 * self._f.dot(self._w)
-        self._f.pointwiseMult(self.v_prev, M)
-        pseudo_kinetic = 0.5 * self._f.dot(self.v_next)
+        w, m = self.problem.create_vector(), self.problem.create_vector()
+        self.v_prev.copy(w)
+        w.axpy(1.0, self.v_next)
+        w.scale(0.5)
+        m.pointwiseMult(w, M)
+        kinetic = 0.5 * m.dot(w)
+        m.pointwiseMult(self.v_prev, M)
+        pseudo_kinetic = 0.5 * m.dot(self.v_next)
         return Diagnostics(
             step=self.n,
             t=self.t,

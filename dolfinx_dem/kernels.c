@@ -1,0 +1,110 @@
+/* Compiled kernels of dolfinx_dem (built at install by cffi, see _build_kernels.py).
+ *
+ * They work on process-local arrays only; communication (ghost updates, reductions) is the
+ * caller's. Q is held as a CSR matrix of its local rows with local column numbers (owned dofs
+ * first, then ghosts); "sums" arguments are accumulated into (+=), never overwritten.
+ */
+#include <math.h>
+#include <stdint.h>
+
+/* (Q x)_i for the CSR row [a, b): two accumulators break the dependency chain of the sum. */
+static inline double row_dot(int32_t a, int32_t b, const int32_t *restrict cols,
+                             const double *restrict vals, const double *restrict x)
+{
+  double t0 = 0.0, t1 = 0.0;
+  int32_t k = a;
+  for (; k + 1 < b; k += 2)
+  {
+    t0 += vals[k] * x[cols[k]];
+    t1 += vals[k + 1] * x[cols[k + 1]];
+  }
+  if (k < b)
+    t0 += vals[k] * x[cols[k]];
+  return t0 + t1;
+}
+
+/* K = Q^T Q applied in one pass over the rows of Q:
+ *   y_i <- alpha y_i + scale (Q x)_i   for every local row i,
+ *   z   += Q^T y                        (z has the local columns, ghosts included),
+ *   sums[0] += sum of y_i^2 over the rows i < n_elastic, sums[1] over the others. */
+void dem_gram_apply(int64_t n_rows, int64_t n_elastic, const int32_t *restrict rowptr,
+                    const int32_t *restrict cols, const double *restrict vals,
+                    const double *restrict x, double *restrict y, double alpha, double scale,
+                    double *restrict z, double *restrict sums)
+{
+  double s0 = 0.0, s1 = 0.0;
+  for (int64_t i = 0; i < n_rows; ++i)
+  {
+    const int32_t a = rowptr[i], b = rowptr[i + 1];
+    const double yi = alpha * y[i] + scale * row_dot(a, b, cols, vals, x);
+    y[i] = yi;
+    for (int32_t k = a; k < b; ++k)
+      z[cols[k]] += vals[k] * yi;
+    if (i < n_elastic)
+      s0 += yi * yi;
+    else
+      s1 += yi * yi;
+  }
+  sums[0] += s0;
+  sums[1] += s1;
+}
+
+/* The sums of dem_gram_apply for the rows scale y + q instead of scale y, given the n entries of
+ * q that are not zero (local rows ``rows``, values ``q``): adds q (2 scale y_r + q) to sums[0]
+ * (rows r < n_elastic) or sums[1]. */
+void dem_lift_sums(int64_t n, const int32_t *restrict rows, const double *restrict q,
+                   const double *restrict y, double scale, int64_t n_elastic,
+                   double *restrict sums)
+{
+  for (int64_t k = 0; k < n; ++k)
+  {
+    const int32_t r = rows[k];
+    sums[r >= n_elastic] += q[k] * (2.0 * scale * y[r] + q[k]);
+  }
+}
+
+/* One MEMM step on n_blocks blocks of bs dofs (a cell's d components share its mass):
+ *   impulse_i = load_i - c (z_old_i + z_new_i)          (load may be NULL: zero)
+ *   v_new_i   = v_prev_i + 2 minv_b impulse_i             (35b)
+ *   u_i      += dt v_next_i                               (35a), if advance
+ *   sums[0]  += 1/2 m_b ((v_next_i + v_new_i) / 2)^2      kinetic energy of vbar
+ *   sums[1]  += 1/2 m_b v_next_i v_new_i                  pseudo-kinetic energy
+ *   sums[2]  += f_i u_i                                   (f may be NULL)
+ * then v_prev_i <- v_new_i and z_old_i <- 0 (ready to accumulate the next Q^T y). */
+void dem_memm_update(int64_t n_blocks, int32_t bs, double dt, double c, double *restrict z_old,
+                     const double *restrict z_new, const double *restrict load,
+                     const double *restrict mass, const double *restrict minv,
+                     double *restrict u, const double *restrict v_next,
+                     double *restrict v_prev, const double *restrict f, int32_t advance,
+                     double *restrict sums)
+{
+  double kinetic = 0.0, pseudo = 0.0, external = 0.0;
+  for (int64_t b = 0; b < n_blocks; ++b)
+  {
+    const double two_minv = 2.0 * minv[b];
+    double k2 = 0.0, p2 = 0.0;
+    for (int32_t j = 0; j < bs; ++j)
+    {
+      const int64_t i = b * bs + j;
+      double impulse = -c * (z_old[i] + z_new[i]);
+      if (load)
+        impulse += load[i];
+      const double vn = v_next[i];
+      const double v_new = v_prev[i] + two_minv * impulse;
+      const double vbar = vn + v_new;
+      k2 += vbar * vbar;
+      p2 += vn * v_new;
+      if (advance)
+        u[i] += dt * vn;
+      if (f)
+        external += f[i] * u[i];
+      v_prev[i] = v_new;
+      z_old[i] = 0.0;
+    }
+    kinetic += mass[b] * k2;
+    pseudo += mass[b] * p2;
+  }
+  sums[0] += 0.125 * kinetic;
+  sums[1] += 0.5 * pseudo;
+  sums[2] += external;
+}
