@@ -19,6 +19,9 @@ ffibuilder.cdef(
                          const double *z_new, const double *load, const double *mass,
                          const double *minv, double *u, const double *v_next, double *v_prev,
                          const double *f, int32_t advance, double *sums);
+    void dem_gram_abs_rowsums(int64_t n_out, const int32_t *qt_ptr, const int32_t *qt_rows,
+                              const double *qt_vals, const int32_t *rowptr, const int32_t *cols,
+                              const double *vals, const double *x, double *r, double *acc);
     """
 )
 # -O3, no -march=native: the module must run on any x86-64 the package is installed for.

@@ -108,3 +108,40 @@ void dem_memm_update(int64_t n_blocks, int32_t bs, double dt, double c, double *
   sums[1] += 0.5 * pseudo;
   sums[2] += external;
 }
+
+/* Row sums of |Q^T Q| weighted by x, for the stable time step bound:
+ *   r_i = sum_j |(Q^T Q)_ij| x_j   for each of the n_out rows i,
+ * where row i of Q^T is (qt_ptr, qt_rows, qt_vals) (rows k of Q with Q_ki != 0, as indices into
+ * the CSR (rowptr, cols, vals) of those rows of Q), whose column numbers index x. acc: zeros of
+ * the length of x (workspace, left zero). Row i of Q^T Q is accumulated in acc, then harvested:
+ * the first visit of a column j adds |acc_j| x_j and zeroes acc_j, so later visits add 0 (no
+ * branch, no list). Every sum follows the order of the CSR arrays: equal arrays, equal bits. */
+void dem_gram_abs_rowsums(int64_t n_out, const int32_t *restrict qt_ptr,
+                          const int32_t *restrict qt_rows, const double *restrict qt_vals,
+                          const int32_t *restrict rowptr, const int32_t *restrict cols,
+                          const double *restrict vals, const double *restrict x,
+                          double *restrict r, double *restrict acc)
+{
+  for (int64_t i = 0; i < n_out; ++i)
+  {
+    for (int32_t p = qt_ptr[i]; p < qt_ptr[i + 1]; ++p)
+    {
+      const int32_t k = qt_rows[p];
+      const double a = qt_vals[p];
+      for (int32_t q = rowptr[k]; q < rowptr[k + 1]; ++q)
+        acc[cols[q]] += a * vals[q];
+    }
+    double s = 0.0;
+    for (int32_t p = qt_ptr[i]; p < qt_ptr[i + 1]; ++p)
+    {
+      const int32_t k = qt_rows[p];
+      for (int32_t q = rowptr[k]; q < rowptr[k + 1]; ++q)
+      {
+        const int32_t j = cols[q];
+        s += fabs(acc[j]) * x[j];
+        acc[j] = 0.0;
+      }
+    }
+    r[i] = s;
+  }
+}

@@ -349,11 +349,12 @@ class MEMM:
         suggested = self.suggested_dt()
         raise InstabilityError(
             f"MEMM is unstable at step {diag.step} (t = {diag.t:.6g}, dt = {self.dt:.6g}): {reason}. "
-            f"Reduce the time step, e.g. dt = {suggested:.4g} (half the stability limit "
-            f"2/sqrt(lambda_max(M^-1 K)) of the elastic operator)",
+            f"Reduce the time step, e.g. dt = {suggested:.4g} (half the stable time step of the elastic "
+            f"operator, 2/sqrt(lambda_max(M^-1 K)) with a guaranteed bound on lambda_max)",
             diag.step, diag.t, self.dt, suggested,
         )
 
     def suggested_dt(self) -> float:
+        """Half the problem's ``stable_time_step()`` (a bound: cheap, and cached by the problem)."""
         stable = getattr(self.problem, "stable_time_step", None)
         return 0.5 * stable() if stable is not None else 0.5 * self.dt
