@@ -188,7 +188,8 @@ class DEMDiscretisation:
         # summed over ranks; row n_free of ``_means`` stays 0 for the cells of clamped bodies.
         n_free = int(free.sum())
         index = np.where(free, np.cumsum(free) - 1, n_free)  # body -> its row in _means
-        self._body_of_cell = index[owned]
+        self._body_of_cell = index[owned].astype(np.int32)
+        self._free_body_mass = body_mass[free]
         cells = np.flatnonzero(free[owned])
         weights = self.material.rho * geom.cell_volumes[start:stop][cells] / body_mass[owned[cells]]
         mean_operator = scipy.sparse.csr_matrix((weights, (index[owned[cells]], cells)), shape=(n_free, self.n_owned))
@@ -196,6 +197,13 @@ class DEMDiscretisation:
         self._mean_operator = mean_operator.toarray() if n_free == 1 else mean_operator
         self._means = np.zeros((n_free + 1, d))
         self._shifted = self.create_vector()
+
+    @property
+    def free_bodies(self) -> tuple[np.ndarray, np.ndarray]:
+        """The bodies without Dirichlet facets (see ``_setup_free_bodies``): for each owned cell
+        the number of its free body, n_free for the cells of clamped bodies, (n_owned,) int32;
+        and the mass of each free body (kg, kg/m in 2D), (n_free,)."""
+        return self._body_of_cell, self._free_body_mass
 
     def relative_displacement(self, u: PETSc.Vec, out: PETSc.Vec | None = None) -> PETSc.Vec:
         """u minus the mean translation of each free body (see ``_setup_free_bodies``), written

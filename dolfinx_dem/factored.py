@@ -72,19 +72,22 @@ class FactoredStiffness:
         with v.localForm() as local:
             return local.array
 
-    def bind(self, x: PETSc.Vec, y: np.ndarray, z: PETSc.Vec, sums: np.ndarray):
+    def bind(self, x: PETSc.Vec, y: np.ndarray, z: PETSc.Vec, sums: np.ndarray,
+             shift_index: np.ndarray | None = None, shift: np.ndarray | None = None):
         """``apply(alpha, scale)``: y <- alpha y + scale Q x, z += Q^T y (local part, ghosts
         included) and sums[0], sums[1] += the squares of y over the elastic and the
         stabilisation rows; x and z are vectors of ``create_vector``, y has ``n_rows`` entries,
-        sums at least 2. Pointers are taken once: the arrays must keep their addresses."""
+        sums at least 2. With ``shift_index`` (int32, one per local dof, ghosts included), x_j -
+        shift[shift_index[j]] replaces x_j. Pointers are taken once: the arrays must keep their
+        addresses."""
         if y.shape != (self.n_rows,) or y.dtype != np.float64:
             raise ValueError(f"y needs {self.n_rows} float64 entries")
         px, pz = pointer(self.local_array(x)), pointer(self.local_array(z))
-        py, ps = pointer(y), pointer(sums)
+        py, ps, pi, pshift = pointer(y), pointer(sums), pointer(shift_index), pointer(shift)
         rowptr, cols, vals = self._csr
         n_rows, n_elastic, kernel = self.n_rows, self.n_elastic, lib.dem_gram_apply
 
         def apply(alpha: float, scale: float):
-            kernel(n_rows, n_elastic, rowptr, cols, vals, px, py, alpha, scale, pz, ps)
+            kernel(n_rows, n_elastic, rowptr, cols, vals, px, pi, pshift, py, alpha, scale, pz, ps)
 
         return apply

@@ -23,20 +23,44 @@ static inline double row_dot(int32_t a, int32_t b, const int32_t *restrict cols,
   return t0 + t1;
 }
 
+/* The same for x_j - shift[shift_index[j]] (x shifted by a value per group of columns). */
+static inline double row_dot_shifted(int32_t a, int32_t b, const int32_t *restrict cols,
+                                     const double *restrict vals, const double *restrict x,
+                                     const int32_t *restrict shift_index,
+                                     const double *restrict shift)
+{
+  double t0 = 0.0, t1 = 0.0;
+  int32_t k = a;
+  for (; k + 1 < b; k += 2)
+  {
+    const int32_t j0 = cols[k], j1 = cols[k + 1];
+    t0 += vals[k] * (x[j0] - shift[shift_index[j0]]);
+    t1 += vals[k + 1] * (x[j1] - shift[shift_index[j1]]);
+  }
+  if (k < b)
+    t0 += vals[k] * (x[cols[k]] - shift[shift_index[cols[k]]]);
+  return t0 + t1;
+}
+
 /* K = Q^T Q applied in one pass over the rows of Q:
  *   y_i <- alpha y_i + scale (Q x)_i   for every local row i,
  *   z   += Q^T y                        (z has the local columns, ghosts included),
- *   sums[0] += sum of y_i^2 over the rows i < n_elastic, sums[1] over the others. */
+ *   sums[0] += sum of y_i^2 over the rows i < n_elastic, sums[1] over the others.
+ * With shift_index (NULL: none), x_j - shift[shift_index[j]] replaces x_j (a translation per
+ * free body, removed for rounding: Q annihilates it). */
 void dem_gram_apply(int64_t n_rows, int64_t n_elastic, const int32_t *restrict rowptr,
                     const int32_t *restrict cols, const double *restrict vals,
-                    const double *restrict x, double *restrict y, double alpha, double scale,
+                    const double *restrict x, const int32_t *restrict shift_index,
+                    const double *restrict shift, double *restrict y, double alpha, double scale,
                     double *restrict z, double *restrict sums)
 {
   double s0 = 0.0, s1 = 0.0;
   for (int64_t i = 0; i < n_rows; ++i)
   {
     const int32_t a = rowptr[i], b = rowptr[i + 1];
-    const double yi = alpha * y[i] + scale * row_dot(a, b, cols, vals, x);
+    const double qx = shift_index ? row_dot_shifted(a, b, cols, vals, x, shift_index, shift)
+                                  : row_dot(a, b, cols, vals, x);
+    const double yi = alpha * y[i] + scale * qx;
     y[i] = yi;
     for (int32_t k = a; k < b; ++k)
       z[cols[k]] += vals[k] * yi;
@@ -70,12 +94,14 @@ void dem_lift_sums(int64_t n, const int32_t *restrict rows, const double *restri
  *   sums[0]  += 1/2 m_b ((v_next_i + v_new_i) / 2)^2      kinetic energy of vbar
  *   sums[1]  += 1/2 m_b v_next_i v_new_i                  pseudo-kinetic energy
  *   sums[2]  += f_i u_i                                   (f may be NULL)
+ *   momentum[body_b bs + j] += m_b v_new_i                (body may be NULL)
  * then v_prev_i <- v_new_i and z_old_i <- 0 (ready to accumulate the next Q^T y). */
 void dem_memm_update(int64_t n_blocks, int32_t bs, double dt, double c, double *restrict z_old,
                      const double *restrict z_new, const double *restrict load,
                      const double *restrict mass, const double *restrict minv,
                      double *restrict u, const double *restrict v_next,
                      double *restrict v_prev, const double *restrict f, int32_t advance,
+                     const int32_t *restrict body, double *restrict momentum,
                      double *restrict sums)
 {
   double kinetic = 0.0, pseudo = 0.0, external = 0.0;
@@ -100,6 +126,8 @@ void dem_memm_update(int64_t n_blocks, int32_t bs, double dt, double c, double *
         external += f[i] * u[i];
       v_prev[i] = v_new;
       z_old[i] = 0.0;
+      if (body)
+        momentum[body[b] * bs + j] += mass[b] * v_new;
     }
     kinetic += mass[b] * k2;
     pseudo += mass[b] * p2;

@@ -25,8 +25,9 @@ by a true product instead. All other terms of the integral, the loads f - Q^T q(
 quadrature nodes and the contact corrections, are the step's ``impulse``. One compiled kernel
 then updates u and v and sums the kinetic, pseudo-kinetic and external terms, and a single
 Allreduce reduces them with the energies: a step synchronises three times (the ghost updates of
-v^{n+1/2} and of Q^T y, and the reduction); contact adds the gathers of its patch values and
-free bodies the reduction of their mean velocity.
+v^{n+1/2} and of Q^T y, and the reduction); contact adds the gathers of its patch values. The
+kernel also sums the momentum of each free body: the pass over Q subtracts its mean velocity
+from v^{n+1/2} at the next step (for rounding, as ``relative_displacement`` does for u).
 """
 
 from __future__ import annotations
@@ -142,24 +143,45 @@ class MEMM:
         self._x = K.create_vector()  # the kernel's input when not v^{n+1/2} itself (free bodies, refresh)
         self._z = [K.create_vector(), K.create_vector()]  # Q^T y^n, and Q^T y^{n+1} accumulated
         self._y = np.zeros(K.n_rows)  # the homogeneous energy rows Q u^n, divided by dt
-        self._sums = np.zeros(7)  # local: |y|^2 (S, J rows), kinetic, pseudo-kinetic, f.u, lift (S, J)
+        d = problem.d
+        body, body_mass = problem.free_bodies
+        self._n_free = len(body_mass)
+        # local sums: |y|^2 (S, J rows), kinetic, pseudo-kinetic, f.u, lift (S, J), then the
+        # momentum of each free body (and a last slot for the cells of clamped bodies)
+        self._sums = np.zeros(7 + (self._n_free + 1) * d if self._n_free else 7)
         self._impulse = problem.create_vector()
         self._f = problem.create_vector()
         self._load = None  # dt (f - Q^T q) when constant and not zero
         self._lift = None  # (rows, values) of a constant q that is not zero
         self._parallel = problem.comm.size > 1
         self._ghosts = [K.local_array(z)[K.n_owned:] for z in self._z]  # zeroed before accumulating
-        # the cells' d dofs share a mass: the kernel reads one per cell
+        # the kernel reads one mass per cell
         mass = problem.mass.array_r
-        self._block = problem.d if np.all(mass.reshape(-1, problem.d) == mass[:: problem.d, None]) else 1
-        self._mass = np.ascontiguousarray(mass[:: self._block])
-        self._minv = np.ascontiguousarray(problem.inverse_mass.array_r[:: self._block])
-        # kernel arguments, once: gram[x, z] reads x and accumulates Q^T y into z
-        self._gram = {(id(x), id(z)): K.bind(x, self._y, z, self._sums)
+        if not np.all(mass.reshape(-1, d) == mass[::d, None]):
+            raise ValueError("MEMM needs the d dofs of a cell to share their mass")
+        self._mass = np.ascontiguousarray(mass[::d])
+        self._minv = np.ascontiguousarray(problem.inverse_mass.array_r[::d])
+        self._body = self._shift_index = self._means = None
+        if self._n_free:
+            self._body = np.ascontiguousarray(body, dtype=np.int32)
+            self._body_mass = np.repeat(body_mass, d)
+            self._means = np.zeros((self._n_free + 1) * d)  # mean velocity of each free body; 0 for clamped
+            index = K.create_vector()  # slot of each dof in _means, ghosts included
+            index.array[:] = (self._body[:, None] * d + np.arange(d)).ravel()
+            if self._parallel:
+                index.ghostUpdate(**_FORWARD)
+            self._shift_index = K.local_array(index).astype(np.int32)
+            index.destroy()
+        # kernel arguments, once: gram[x, z] reads x (a velocity: minus its free bodies' mean
+        # velocity) and accumulates Q^T y into z
+        self._gram = {(id(x), id(z)): K.bind(x, self._y, z, self._sums, *((self._shift_index, self._means)
+                                                                          if x in velocities else ()))
+                      for velocities in [(self.v_prev, self.v_next)]
                       for x in (self.u, self.v_prev, self.v_next, self._x) for z in self._z}
         self._p = {id(v): pointer(v.array) for v in (self.u, self.v_prev, self.v_next, *self._z, self._impulse)}
         self._p[id(None)] = ffi.NULL  # no impulse
         self._p_mass, self._p_minv, self._p_sums = pointer(self._mass), pointer(self._minv), pointer(self._sums)
+        self._p_body = pointer(self._body)
         force = problem.body_force.array  # f . u is the external potential's share; skipped when f = 0
         self._p_body_force = pointer(force) if force.any() else ffi.NULL
 
@@ -197,6 +219,8 @@ class MEMM:
         M, f = self.problem.mass.array_r, self.problem.body_force.array_r
         vp, vn = self.v_prev.array_r, self.v_next.array_r
         self._sums[2:5] = [0.125 * np.dot(M, (vp + vn) ** 2), 0.5 * np.dot(M * vp, vn), np.dot(f, self.u.array_r)]
+        if self._n_free:
+            np.add.at(self._sums[7:], self._shift_index[: len(vn)], M * vn)
         diag = self._reduce()
         self.budget = diag.mechanical
         return diag
@@ -213,9 +237,10 @@ class MEMM:
         impulse = self.impulse()
         z_old, z_new = self._z
         p = self._p
-        lib.dem_memm_update(len(self._mass), self._block, self.dt, 0.5 * self.dt**2, p[id(z_old)], p[id(z_new)],
+        lib.dem_memm_update(len(self._mass), self.problem.d, self.dt, 0.5 * self.dt**2, p[id(z_old)], p[id(z_new)],
                             p[id(impulse)], self._p_mass, self._p_minv, p[id(self.u)], p[id(self.v_next)],
-                            p[id(self.v_prev)], self._p_body_force, 0 if refresh else 1, self._p_sums + 2)
+                            p[id(self.v_prev)], self._p_body_force, 0 if refresh else 1, self._p_body,
+                            self._p_sums + 7, self._p_sums + 2)
         self.u.stateIncrease()  # written by the kernel: PETSc's cached norms are stale
         self.v_prev.stateIncrease()
         self._ghosts[0].fill(0.0)  # z_old becomes the next accumulator, ghost entries too
@@ -228,10 +253,11 @@ class MEMM:
         return diag
 
     def _advance_residual(self, vec: PETSc.Vec, k: int, refresh: bool):
-        """y <- y + Q vec (a velocity), or y = Q vec / dt (a displacement) when ``refresh``; then
-        self._z[k] += Q^T y, with the contributions of other processes; free bodies' mean
-        translations removed from vec first (``relative_displacement``)."""
-        x = self.problem.relative_displacement(vec, out=self._x)
+        """y <- y + Q vec (the velocity v^{n+1/2}), or y = Q vec / dt (a displacement) when
+        ``refresh``; then self._z[k] += Q^T y, with the contributions of other processes. The
+        mean translation of each free body is removed from vec first: for a velocity, by the
+        kernel (the means of the last reduction), for a displacement by ``relative_displacement``."""
+        x = self.problem.relative_displacement(vec, out=self._x) if refresh else vec
         if self._parallel:
             x.ghostUpdate(**_FORWARD)
         self._gram[id(x), id(self._z[k])](0.0 if refresh else 1.0, 1.0 / self.dt if refresh else 1.0)
@@ -287,6 +313,9 @@ class MEMM:
                               self._K.n_elastic, self._p_sums + 5)
         if self._parallel:
             self.problem.comm.Allreduce(MPI.IN_PLACE, s, op=MPI.SUM)
+        if self._n_free:
+            n = len(self._body_mass)
+            np.divide(s[7 : 7 + n], self._body_mass, out=self._means[:n])  # the clamped slot stays 0
         elastic = 0.5 * (self.dt**2 * s[0] + s[5])
         stabilisation = 0.5 * (self.dt**2 * s[1] + s[6])
         for c in self.problem.contacts:
