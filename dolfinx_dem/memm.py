@@ -229,12 +229,12 @@ class MEMM:
         """Advance one step (eq. (35a)-(35b)) and return the diagnostics at the new time."""
         refresh = self.refresh_every > 0 and (self.n + 1) % self.refresh_every == 0
         self._sums.fill(0.0)
+        impulse = self.impulse()  # from u^n and v^{n+1/2}
         if refresh:
-            self.u.axpy(self.dt, self.v_next)  # (35a) first: y^{n+1} from u^{n+1} by a true product
+            self.u.axpy(self.dt, self.v_next)  # (35a) here: y^{n+1} from u^{n+1} by a true product
             self._advance_residual(self.u, 1, refresh=True)
         else:
             self._advance_residual(self.v_next, 1, refresh=False)
-        impulse = self.impulse()
         z_old, z_new = self._z
         p = self._p
         lib.dem_memm_update(len(self._mass), self.problem.d, self.dt, 0.5 * self.dt**2, p[id(z_old)], p[id(z_new)],
