@@ -327,6 +327,11 @@ class MEMM:
                            external=external, pseudo_kinetic=s[3],
                            pseudo_energy=s[3] + elastic + stabilisation + external)
 
+    def energy_rows(self) -> np.ndarray:
+        """The homogeneous energy rows Q u^n (free bodies' mean translations removed) that the
+        recurrence carries, the process's rows of Q (a copy): the energies are 1/2 |rows + q|^2."""
+        return self.dt * self._y
+
     def diagnostics(self) -> Diagnostics:
         """Energies at t_n recomputed from u^n by true products (``problem.energies``), reduced
         over all processes: a check of the values ``step`` returns, not used by it."""
