@@ -36,18 +36,13 @@ import dataclasses
 import math
 
 import numpy as np
-from mpi4py import MPI
 from petsc4py import PETSc
 
-from dolfinx_dem.kernels import ffi, lib, pointer
+from dolfinx_dem.memm_state import EXTERNAL, KINETIC, LIFT_J, LIFT_S, PSEUDO, ROWS_J, ROWS_S, StepState
 
 #: Default number of steps between true products for the energy rows (see the module docstring
 #: and docs/bench/README.md for the drift with and without).
 REFRESH_EVERY = 1000
-
-_FORWARD = dict(addv=PETSc.InsertMode.INSERT_VALUES, mode=PETSc.ScatterMode.FORWARD)
-_REVERSE = dict(addv=PETSc.InsertMode.ADD_VALUES, mode=PETSc.ScatterMode.REVERSE)
-
 
 @dataclasses.dataclass(frozen=True)
 class GaussLegendre:
@@ -136,54 +131,22 @@ class MEMM:
         self.max_step_evaluations = 0
         self.budget = 0.0
 
-        K = self._K = problem.factored
-        self.u = K.create_vector()
-        self.v_prev = K.create_vector()  # v^{n-1/2}
-        self.v_next = K.create_vector()  # v^{n+1/2}: the kernel reads it at the ghost dofs
-        self._x = K.create_vector()  # the kernel's input when not v^{n+1/2} itself (free bodies, refresh)
-        self._z = [K.create_vector(), K.create_vector()]  # Q^T y^n, and Q^T y^{n+1} accumulated
-        self._y = np.zeros(K.n_rows)  # the homogeneous energy rows Q u^n, divided by dt
-        d = problem.d
-        body, body_mass = problem.free_bodies
-        self._n_free = len(body_mass)
-        # local sums: |y|^2 (S, J rows), kinetic, pseudo-kinetic, f.u, lift (S, J), then the
-        # momentum of each free body (and a last slot for the cells of clamped bodies)
-        self._sums = np.zeros(7 + (self._n_free + 1) * d if self._n_free else 7)
-        self._impulse = problem.create_vector()
-        self._f = problem.create_vector()
-        self._load = None  # dt (f - Q^T q) when constant and not zero
-        self._lift = None  # (rows, values) of a constant q that is not zero
-        self._parallel = problem.comm.size > 1
-        self._ghosts = [K.local_array(z)[K.n_owned:] for z in self._z]  # zeroed before accumulating
-        # the kernel reads one mass per cell
-        mass = problem.mass.array_r
-        if not np.all(mass.reshape(-1, d) == mass[::d, None]):
-            raise ValueError("MEMM needs the d dofs of a cell to share their mass")
-        self._mass = np.ascontiguousarray(mass[::d])
-        self._minv = np.ascontiguousarray(problem.inverse_mass.array_r[::d])
-        self._body = self._shift_index = self._means = None
-        if self._n_free:
-            self._body = np.ascontiguousarray(body, dtype=np.int32)
-            self._body_mass = np.repeat(body_mass, d)
-            self._means = np.zeros((self._n_free + 1) * d)  # mean velocity of each free body; 0 for clamped
-            index = K.create_vector()  # slot of each dof in _means, ghosts included
-            index.array[:] = (self._body[:, None] * d + np.arange(d)).ravel()
-            if self._parallel:
-                index.ghostUpdate(**_FORWARD)
-            self._shift_index = K.local_array(index).astype(np.int32)
-            index.destroy()
-        # kernel arguments, once: gram[x, z] reads x (a velocity: minus its free bodies' mean
-        # velocity) and accumulates Q^T y into z
-        self._gram = {(id(x), id(z)): K.bind(x, self._y, z, self._sums, *((self._shift_index, self._means)
-                                                                          if x in velocities else ()))
-                      for velocities in [(self.v_prev, self.v_next)]
-                      for x in (self.u, self.v_prev, self.v_next, self._x) for z in self._z}
-        self._p = {id(v): pointer(v.array) for v in (self.u, self.v_prev, self.v_next, *self._z, self._impulse)}
-        self._p[id(None)] = ffi.NULL  # no impulse
-        self._p_mass, self._p_minv, self._p_sums = pointer(self._mass), pointer(self._minv), pointer(self._sums)
-        self._p_body = pointer(self._body)
-        force = problem.body_force.array  # f . u is the external potential's share; skipped when f = 0
-        self._p_body_force = pointer(force) if force.any() else ffi.NULL
+        self._state = StepState(problem, self.dt)
+
+    @property
+    def u(self) -> PETSc.Vec:
+        """u^n (with ghost dofs)."""
+        return self._state.u
+
+    @property
+    def v_prev(self) -> PETSc.Vec:
+        """v^{n-1/2} (with ghost dofs)."""
+        return self._state.v_prev
+
+    @property
+    def v_next(self) -> PETSc.Vec:
+        """v^{n+1/2} (with ghost dofs)."""
+        return self._state.v_next
 
     @property
     def t(self) -> float:
@@ -193,76 +156,32 @@ class MEMM:
         """Start from u^0, v^0: v^{-1/2} = v^0 - dt/2 M^-1 F(u^0), v^{1/2} = v^0 + dt/2 M^-1 F(u^0),
         and the energy rows y^0 = Q u^0 by a true product."""
         self.t0, self.n = float(t0), 0
-        u0.copy(self.u)
-        self.problem.force(self.u, self.t0, self._f)
+        f = self.problem.create_vector()
+        self.problem.force(u0, self.t0, f)
         self.force_evaluations += 1
-        self._f.pointwiseMult(self._f, self.problem.inverse_mass)
+        f.pointwiseMult(f, self.problem.inverse_mass)
+        u0.copy(self.u)
         v0.copy(self.v_prev)
-        self.v_prev.axpy(-0.5 * self.dt, self._f)
+        self.v_prev.axpy(-0.5 * self.dt, f)
         v0.copy(self.v_next)
-        self.v_next.axpy(0.5 * self.dt, self._f)
-        self._load = self._lift = None
-        if not self.problem.time_dependent:
-            load = self.problem.load(self.t0)
-            if load.array_r.any():
-                self._load = load.copy()
-                self._load.scale(self.dt)
-                self._p[id(self._load)] = pointer(self._load.array)
-            rows, values = self.problem.lift(self.t0)
-            if values.any():
-                self._lift = (rows, values.copy())
-        for z in self._z:
-            with z.localForm() as local:
-                local.set(0.0)
-        self._sums.fill(0.0)
-        self._advance_residual(self.u, 0, refresh=True)
-        M, f = self.problem.mass.array_r, self.problem.body_force.array_r
-        vp, vn = self.v_prev.array_r, self.v_next.array_r
-        self._sums[2:5] = [0.125 * np.dot(M, (vp + vn) ** 2), 0.5 * np.dot(M * vp, vn), np.dot(f, self.u.array_r)]
-        if self._n_free:
-            np.add.at(self._sums[7:], self._shift_index[: len(vn)], M * vn)
-        diag = self._reduce()
+        self.v_next.axpy(0.5 * self.dt, f)
+        self._state.restart(self.t0)
+        diag = self._diagnostics()
         self.budget = diag.mechanical
         return diag
 
     def step(self) -> Diagnostics:
         """Advance one step (eq. (35a)-(35b)) and return the diagnostics at the new time."""
         refresh = self.refresh_every > 0 and (self.n + 1) % self.refresh_every == 0
-        self._sums.fill(0.0)
         impulse = self.impulse()  # from u^n and v^{n+1/2}
         if refresh:
             self.u.axpy(self.dt, self.v_next)  # (35a) here: y^{n+1} from u^{n+1} by a true product
-            self._advance_residual(self.u, 1, refresh=True)
-        else:
-            self._advance_residual(self.v_next, 1, refresh=False)
-        z_old, z_new = self._z
-        p = self._p
-        lib.dem_memm_update(len(self._mass), self.problem.d, self.dt, 0.5 * self.dt**2, p[id(z_old)], p[id(z_new)],
-                            p[id(impulse)], self._p_mass, self._p_minv, p[id(self.u)], p[id(self.v_next)],
-                            p[id(self.v_prev)], self._p_body_force, 0 if refresh else 1, self._p_body,
-                            self._p_sums + 7, self._p_sums + 2)
-        self.u.stateIncrease()  # written by the kernel: PETSc's cached norms are stale
-        self.v_prev.stateIncrease()
-        self._ghosts[0].fill(0.0)  # z_old becomes the next accumulator, ghost entries too
-        self.v_prev, self.v_next = self.v_next, self.v_prev
-        self._z = [z_new, z_old]
-        self._ghosts.reverse()
+        self._state.advance_rows(refresh)
+        self._state.update(impulse, advance=not refresh)  # (35a), (35b)
         self.n += 1
-        diag = self._reduce()
+        diag = self._diagnostics()
         self.check_stability(diag)
         return diag
-
-    def _advance_residual(self, vec: PETSc.Vec, k: int, refresh: bool):
-        """y <- y + Q vec (the velocity v^{n+1/2}), or y = Q vec / dt (a displacement) when
-        ``refresh``; then self._z[k] += Q^T y, with the contributions of other processes. The
-        mean translation of each free body is removed from vec first: for a velocity, by the
-        kernel (the means of the last reduction), for a displacement by ``relative_displacement``."""
-        x = self.problem.relative_displacement(vec, out=self._x) if refresh else vec
-        if self._parallel:
-            x.ghostUpdate(**_FORWARD)
-        self._gram[id(x), id(self._z[k])](0.0 if refresh else 1.0, 1.0 / self.dt if refresh else 1.0)
-        if self._parallel:
-            self._z[k].ghostUpdate(**_REVERSE)
 
     def impulse(self) -> PETSc.Vec | None:
         """The part of int_0^dt F(u^n + tau v^{n+1/2}, t_n + tau) dtau (eq. (35b)) that ``step``
@@ -277,19 +196,20 @@ class MEMM:
         contacts = self.problem.contacts
         split = bool(contacts) and self.quadrature == "midpoint"
         evaluations = len(self.nodes)
+        load = self._state.load
         if self.problem.time_dependent:
-            out = self._impulse
+            out = self._state.impulse
             out.set(0.0)
             for x, w in zip(self.nodes, self.weights):
                 out.axpy(w * self.dt, self.problem.load(self.t + x * self.dt))
         elif contacts:
-            out = self._impulse
-            if self._load is None:
+            out = self._state.impulse
+            if load is None:
                 out.set(0.0)
             else:
-                self._load.copy(out)
+                load.copy(out)
         else:
-            out = self._load
+            out = load
         for contact in contacts:
             if split:
                 evaluations += max(contact.force_integral(self.u, self.v_next, self.dt, out) - 1, 0)
@@ -301,36 +221,25 @@ class MEMM:
         self.max_step_evaluations = max(self.max_step_evaluations, evaluations)
         return out
 
-    def _reduce(self) -> Diagnostics:
-        """Diagnostics at t_n from the local sums of the kernels: the lift's share of the energy
-        rows, one Allreduce, the contact corrections (computed from gathered patch values, the
-        same on every process)."""
-        s = self._sums
-        lift = self.problem.lift(self.t) if self.problem.time_dependent else self._lift
-        if lift is not None:
-            rows, values = lift
-            lib.dem_lift_sums(len(rows), pointer(rows), pointer(values), pointer(self._y), self.dt,
-                              self._K.n_elastic, self._p_sums + 5)
-        if self._parallel:
-            self.problem.comm.Allreduce(MPI.IN_PLACE, s, op=MPI.SUM)
-        if self._n_free:
-            n = len(self._body_mass)
-            np.divide(s[7 : 7 + n], self._body_mass, out=self._means[:n])  # the clamped slot stays 0
-        elastic = 0.5 * (self.dt**2 * s[0] + s[5])
-        stabilisation = 0.5 * (self.dt**2 * s[1] + s[6])
+    def _diagnostics(self) -> Diagnostics:
+        """Diagnostics at t_n from the reduced sums of the step's kernels and the contact
+        corrections (computed from gathered patch values, the same on every process)."""
+        s = self._state.reduce(self.t)
+        elastic = 0.5 * (self.dt**2 * s[ROWS_S] + s[LIFT_S])
+        stabilisation = 0.5 * (self.dt**2 * s[ROWS_J] + s[LIFT_J])
         for c in self.problem.contacts:
             de, ds = c.energy_correction(c.patch_values(self.u))
             elastic += de
             stabilisation += ds
-        external = -s[4]
-        return Diagnostics(step=self.n, t=self.t, kinetic=s[2], elastic=elastic, stabilisation=stabilisation,
-                           external=external, pseudo_kinetic=s[3],
-                           pseudo_energy=s[3] + elastic + stabilisation + external)
+        external = -s[EXTERNAL]
+        return Diagnostics(step=self.n, t=self.t, kinetic=s[KINETIC], elastic=elastic, stabilisation=stabilisation,
+                           external=external, pseudo_kinetic=s[PSEUDO],
+                           pseudo_energy=s[PSEUDO] + elastic + stabilisation + external)
 
     def energy_rows(self) -> np.ndarray:
         """The homogeneous energy rows Q u^n (free bodies' mean translations removed) that the
         recurrence carries, the process's rows of Q (a copy): the energies are 1/2 |rows + q|^2."""
-        return self.dt * self._y
+        return self.dt * self._state.y
 
     def diagnostics(self) -> Diagnostics:
         """Energies at t_n recomputed from u^n by true products (``problem.energies``), reduced
