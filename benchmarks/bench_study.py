@@ -155,7 +155,9 @@ def measure_size(n: int, rounds: int) -> dict:
 
 
 def measure_mpi(n: int, batches: int, steps: int) -> dict | None:
-    """Wall time per MEMM step on the processes of COMM_WORLD (best batch, barrier-synchronised)."""
+    """Wall time per MEMM step on the processes of COMM_WORLD (best batch, barrier-synchronised),
+    with the elastic force by PETSc's two MatMults and a bare ``K.mult`` (the memory-bandwidth
+    reference: its speed-up is what a bandwidth-bound step can reach) in the same batches."""
     from mpi4py import MPI
 
     from dolfinx_dem.memm import MEMM
@@ -165,7 +167,9 @@ def measure_mpi(n: int, batches: int, steps: int) -> dict | None:
     memm = MEMM(dem, 0.3 / (n * c))
     memm.initialise(_smooth_state(dem), dem.create_vector())
     out = dem.create_vector()
-    per_step, per_force, cpu_step = [], [], []
+    per_step, per_force, cpu_step, per_matmult = [], [], [], []
+    K = dem.K  # after the set-up's memory measurement
+    load_before = os.getloadavg()[0]
     for _ in range(batches):
         comm.Barrier()
         t, cpu = time.perf_counter(), time.process_time()
@@ -179,12 +183,19 @@ def measure_mpi(n: int, batches: int, steps: int) -> dict | None:
             dem.force(memm.u, 0.0, out)
         comm.Barrier()
         per_force.append((time.perf_counter() - t) / steps)
+        t = time.perf_counter()
+        for _ in range(steps):
+            K.mult(memm.u, out)
+        comm.Barrier()
+        per_matmult.append((time.perf_counter() - t) / steps)
     peak = comm.allreduce(_peak_rss_bytes(), op=MPI.MAX)
     cpu_step = comm.allreduce(min(cpu_step), op=MPI.MAX)  # CPU seconds of the slowest rank
     if comm.rank != 0:
         return None
     return {"processes": comm.size, "n": n, "cells": dem.geometry.num_cells, "steps_per_batch": steps,
             "batches": batches, "step_seconds": min(per_step), "force_seconds": min(per_force),
+            "matmult_seconds": min(per_matmult), "matmult_seconds_median": statistics.median(per_matmult),
+            "force_seconds_median": statistics.median(per_force), "load_average_before": load_before,
             "step_seconds_median": statistics.median(per_step), "step_cpu_seconds_slowest_rank": cpu_step,
             "load_average_after": os.getloadavg()[0], "setup_wall_seconds": setup["wall"],
             "peak_rss_bytes_per_process": peak}
@@ -508,7 +519,9 @@ def main(argv=None) -> dict:
         "memory_bytes_per_cell": largest["memory_bytes_per_cell"],
         "mpi_speedup_2": mpi_runs[0]["step_seconds"] / mpi_runs[1]["step_seconds"],
         "mpi": {"runs": mpi_runs, "speedup_2": mpi_runs[0]["step_seconds"] / mpi_runs[1]["step_seconds"],
-                "force_speedup_2": mpi_runs[0]["force_seconds"] / mpi_runs[1]["force_seconds"]},
+                "force_speedup_2": mpi_runs[0]["force_seconds"] / mpi_runs[1]["force_seconds"],
+                "matmult_speedup_2": mpi_runs[0]["matmult_seconds"] / mpi_runs[1]["matmult_seconds"],
+                "speedup_2_median": mpi_runs[0]["step_seconds_median"] / mpi_runs[1]["step_seconds_median"]},
         "contact_fraction_billiard": billiard["contact_fraction"],
         "billiard": billiard,
         "bar_impact_dem_step": bar,
