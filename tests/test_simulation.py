@@ -126,6 +126,23 @@ def test_both_dt_and_cfl_or_an_unknown_boundary_are_rejected(tmp_path):
     assert (tmp_path / "b" / io.INCOMPLETE).exists()
 
 
+def test_stable_step_from_the_bound_or_the_eigenvalue(tmp_path):
+    """time.cfl is a fraction of the bound's stable step by default, of SLEPc's with
+    time.stable_step = "eigenvalue" (for stability studies); the key needs time.cfl."""
+    dts = {}
+    for method in ("bound", "eigenvalue"):
+        scene = scenes.load("cantilever", {"time.end": 0.01, "time.stable_step": method})
+        dts[method] = simulation.run(scene, tmp_path / method, MPI.COMM_SELF, quiet=True)["dt"]
+    dem = simulation.build(scenes.load("cantilever"), MPI.COMM_SELF)
+    for method, dt in dts.items():
+        assert 0.45 * dem.stable_time_step(method) < dt <= 0.5 * dem.stable_time_step(method)
+    assert dts["bound"] < dts["eigenvalue"]
+    with pytest.raises(scenes.SceneError, match="'time.stable_step' goes with 'time.cfl'"):
+        scenes.load("bar-impact", {"time.stable_step": "eigenvalue"})
+    with pytest.raises(scenes.SceneError, match="one of bound, eigenvalue"):
+        scenes.load("cantilever", {"time.stable_step": "lanczos"})
+
+
 @pytest.mark.skip_in_parallel
 def test_cli(tmp_path):
     listing = subprocess.run([CLI, "list"], capture_output=True, text=True, check=True).stdout
