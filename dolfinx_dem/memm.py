@@ -220,6 +220,24 @@ class MEMM:
             diag.step, diag.t, self.dt, suggested, reason,
         )
 
+    # -- checkpoint -------------------------------------------------------------------------------
+    def state(self) -> dict:
+        """The complete state of the stepper: the vectors u^n, v^{n-1/2}, v^{n+1/2} (this
+        process's entries) and t0, n, dt, the stability budget and the evaluation counters."""
+        return {
+            "u": self.u, "v_prev": self.v_prev, "v_next": self.v_next,
+            "t0": self.t0, "n": self.n, "dt": self.dt, "budget": self.budget,
+            "force_evaluations": self.force_evaluations, "max_step_evaluations": self.max_step_evaluations,
+        }
+
+    def restore(self, u: np.ndarray, v_prev: np.ndarray, v_next: np.ndarray, t0: float, n: int,
+                budget: float, force_evaluations: int, max_step_evaluations: int) -> None:
+        """Continue from a ``state()``: this process's entries of the vectors (arrays), the
+        scalars as stored. The next ``step`` then computes what it would have without the stop."""
+        self.u.array[:], self.v_prev.array[:], self.v_next.array[:] = u, v_prev, v_next
+        self.t0, self.n, self.budget = float(t0), int(n), float(budget)
+        self.force_evaluations, self.max_step_evaluations = int(force_evaluations), int(max_step_evaluations)
+
     def suggested_dt(self) -> float:
         stable = getattr(self.problem, "stable_time_step", None)
         return 0.5 * stable() if stable is not None else 0.5 * self.dt
