@@ -129,7 +129,9 @@ def read_state(folder: pathlib.Path, comm: MPI.Comm, header: Mapping, keys: np.n
         with np.load(data / f"cells-{r}.npz") as f:
             for name in stored:
                 stored[name].append(f[name])
-    stored = {name: np.concatenate(a) if a else np.zeros((0,) + centres.shape[1:]) for name, a in stored.items()}
+    # a process may read no file (more processes now than then): empty rows of the right shapes
+    empty = {name: np.zeros((0,) + centres.shape[1:]) for name in stored} | {"key": np.zeros(0, dtype=np.int64)}
+    stored = {name: np.concatenate(a) if a else empty[name] for name, a in stored.items()}
     stored["key"] = stored["key"].astype(np.int64)
     n_global = comm.allreduce(len(keys), op=MPI.SUM)
     values = _redistribute(comm, stored, np.asarray(keys, dtype=np.int64), n_global)

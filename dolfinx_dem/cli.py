@@ -13,6 +13,7 @@ import os
 import pathlib
 import signal
 import sys
+import time
 
 from mpi4py import MPI
 
@@ -48,7 +49,24 @@ def _print(*args, **kwargs):
         os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
 
 
+#: Seconds the processes of an MPI run wait for each other to report the same error.
+AGREEMENT_SECONDS = 10.0
+_GUARD = None  # a duplicate of COMM_WORLD (main), see _error
+
+
 def _error(comm, message: str) -> None:
+    """Print an error on rank 0. Under MPI, input errors are found on every process (the
+    checks are collective); one found on some processes only is a bug that would leave the
+    others waiting in a collective and these in MPI_Finalize, for ever: if the processes have
+    not all reported an error within ``AGREEMENT_SECONDS`` (a barrier on a communicator of its
+    own), this one prints its message and aborts the run."""
+    if comm.size > 1:
+        request, deadline = _GUARD.Ibarrier(), time.monotonic() + AGREEMENT_SECONDS
+        while not request.Test():
+            if time.monotonic() > deadline:
+                print(f"dolfinx-dem: error on process {comm.rank} only: {message}", file=sys.stderr, flush=True)
+                comm.Abort(2)
+            time.sleep(0.01)
     if comm.rank == 0:
         print(f"dolfinx-dem: error: {message}", file=sys.stderr)
 
@@ -176,7 +194,10 @@ def run_state(directory: pathlib.Path, summary: dict | None) -> str:
 
 
 def main(argv: list[str] | None = None) -> int:
+    global _GUARD
     _quiet_compiler_logging()
+    if _GUARD is None and MPI.COMM_WORLD.size > 1:
+        _GUARD = MPI.COMM_WORLD.Dup()  # for _error's agreement only
     parser = argparse.ArgumentParser(prog="dolfinx-dem", description=__doc__,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
     sub = parser.add_subparsers(dest="command", required=True)
