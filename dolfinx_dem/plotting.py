@@ -131,8 +131,8 @@ def animate_solution(xdmf: str | pathlib.Path, filename: str | pathlib.Path, fie
         blocks = reader.read()
         grid = pyvista.UnstructuredGrid(blocks[field])
         grid.cell_data["u"] = blocks["displacement"].cell_data["displacement"]
-        u = grid.cell_data_to_point_data().point_data["u"]
-        grid.points = grid.points + scale * u
+        u = grid.cell_data_to_point_data().point_data["u"].reshape(grid.n_points, -1)  # 1D: one component
+        grid.points[:, : u.shape[1]] += scale * u
         grid.cell_data[title] = grid.cell_data[field]
         flat = 2 if np.ptp(grid.points[:, 2]) == 0 else 3
         _show(plotter, grid, title, flat, name="body", reset=k == 0)
