@@ -236,3 +236,27 @@ def test_an_unstable_run_has_no_checkpoint_and_a_static_run_cannot_resume(tmp_pa
     with pytest.raises(checkpoint.CheckpointError, match="has no checkpoint"):
         simulation.resume(tmp_path / "u", MPI.COMM_SELF)
     assert io.INCOMPLETE in {p.name for p in (tmp_path / "u").iterdir()}
+
+
+@pytest.mark.skip_in_parallel
+def test_resume_refuses_a_changed_mesh_file(tmp_path, capsys):
+    """A scene of mesh type "file" is hashed with the file's content."""
+    import dolfinx.io
+
+    from dolfinx_dem import meshes
+
+    def write_mesh(n):
+        mesh, _, _ = meshes.create_rectangle(MPI.COMM_SELF, [0.0, 0.0], [1.0, 0.1], [n, 2])
+        with dolfinx.io.XDMFFile(MPI.COMM_SELF, str(tmp_path / "beam.xdmf"), "w") as f:
+            f.write_mesh(mesh)
+
+    write_mesh(10)
+    (tmp_path / "beam.toml").write_text(
+        '[mesh]\ntype = "file"\npath = "beam.xdmf"\n[material]\nE = 1000.0\nnu = 0.3\nrho = 1.0\n'
+        '[[dirichlet]]\nboundary = "x <= 0.0"\n[loads]\nbody_force = [0.0, -0.1]\n[time]\nend = 0.01\ndt = 0.001\n')
+    assert cli.main(["run", str(tmp_path / "beam.toml"), "--out", str(tmp_path / "out"), "--quiet"]) == 0
+    assert cli.main(["resume", str(tmp_path / "out"), "--set", "time.end=0.02", "--quiet"]) == 0
+    write_mesh(12)
+    assert cli.main(["resume", str(tmp_path / "out"), "--set", "time.end=0.03", "--quiet"]) == 2
+    assert ("the scene differs from the checkpoint's in mesh.path (the mesh file's content)"
+            in capsys.readouterr().err)

@@ -36,6 +36,8 @@ def test_builtin_scene_output_contract(name, tempdir):
     assert summary["n_steps"] * summary["dt"] == pytest.approx(SHORT[name], rel=1e-12)
     if MPI.COMM_WORLD.rank == 0:
         assert not (out / io.INCOMPLETE).exists()
+        assert {p.name for p in out.iterdir()} <= set(io.RUN_FILES)  # what --overwrite removes
+        assert summary["status"] == "completed" and (out / "checkpoint" / "checkpoint.json").is_file()
         for f in ("summary.json", "series.csv", "solution.xdmf", "solution.h5", "final.png"):
             assert (out / f).stat().st_size > 0, f
         data = _series(out / "series.csv")
