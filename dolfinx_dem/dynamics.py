@@ -132,16 +132,18 @@ class DynamicRun:
         """Integrate to ``time.end`` into ``output``; returns the summary (``status``)."""
         with runcontrol.Interrupts(self.comm) as interrupts, output as directory:
             status, error = self._integrate(directory, interrupts)
-            summary = self._summary(status, error)
-            io.write_summary(directory / "summary.json", self.comm, summary)
             if status == "interrupted":
-                # Under mpirun, SIGKILL follows SIGTERM within a second or so: say it before the pictures.
+                # Under mpirun, SIGKILL follows SIGTERM within a second or so: the summary and the
+                # note before the pictures (the summary is written again after them).
+                io.write_summary(directory / "summary.json", self.comm, self._summary(status, error))
                 note = (f"interrupted by {interrupts.name} at step {self.stepper.n} (t = {self.stepper.t:.9g}); "
                         f"outputs closed and checkpoint written; continue with: dolfinx-dem resume {directory}")
                 output.keep_incomplete(note)
                 if self.comm.rank == 0 and not self.quiet:
                     print(f"dolfinx-dem: {note}", file=sys.stderr, flush=True)
             self._pictures(directory, animation=status != "interrupted")
+            summary = self._summary(status, error)
+            io.write_summary(directory / "summary.json", self.comm, summary)
             if error is not None:
                 raise error
         return summary

@@ -119,10 +119,10 @@ def test_a_killed_run_reads_back_up_to_its_last_output(tmp_path):
 # -- the pieces -------------------------------------------------------------------------------------
 
 def test_interrupts_win_over_a_library_that_resets_the_handler():
-    """``import gmsh`` sets SIGINT to SIG_DFL; the run's handler is put back at the next step,
-    and the handlers found on entry are restored on exit."""
+    """``import gmsh`` sets SIGINT to SIG_DFL; the run's handler is put back at the next check
+    (here every step: interval 0), and the handlers found on entry are restored on exit."""
     before = [signal.getsignal(s) for s in runcontrol.SIGNALS]
-    with runcontrol.Interrupts(MPI.COMM_SELF) as interrupts:
+    with runcontrol.Interrupts(MPI.COMM_SELF, interval=0.0) as interrupts:
         assert not interrupts.requested()
         signal.signal(signal.SIGINT, signal.SIG_DFL)  # what gmsh.py does at import
         assert not interrupts.requested()
@@ -134,18 +134,25 @@ def test_interrupts_win_over_a_library_that_resets_the_handler():
 
 
 @pytest.mark.mpi
-def test_every_process_stops_after_the_same_step():
-    """One process is signalled; all agree one call later (the reduction is non-blocking)."""
+@pytest.mark.parametrize("interval", [0.0, 60.0])
+def test_every_process_stops_after_the_same_step(interval):
+    """One process is signalled after step 5; all stop after the same step. With checks at
+    every step (interval 0): at the next check, one later under MPI (the reduction is
+    non-blocking). With checks far apart in time (60 s) the steps between checks double, so
+    the stop comes later, but at the same step everywhere (rank 0's count, agreed)."""
     comm = MPI.COMM_WORLD
     answers = []
-    with runcontrol.Interrupts(comm) as interrupts:
-        for step in range(6):
-            if step == 2 and comm.rank == comm.size - 1:
+    with runcontrol.Interrupts(comm, interval) as interrupts:
+        for step in range(40):
+            if step == 5 and comm.rank == comm.size - 1:
                 os.kill(os.getpid(), signal.SIGTERM)
             answers.append(interrupts.requested())
-    stop = answers.index(True)
-    assert stop == (2 if comm.size == 1 else 3)
-    assert comm.allgather(stop) == [stop] * comm.size
+    first = answers.index(True)
+    if interval == 0.0:
+        assert first == (5 if comm.size == 1 else 6)
+    else:
+        assert 5 <= first <= 4 * 6
+    assert comm.allgather(first) == [first] * comm.size
 
 
 class _Stream(io.StringIO):
