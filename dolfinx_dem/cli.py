@@ -143,7 +143,8 @@ def summary_line(summary: dict) -> str:
     """The one-line account of a run: steps, time, and the energy balance as it applies."""
     if summary.get("analysis") == "static":
         return (f"{summary['scene']} ({summary['method']}, static): {summary['iterations']} iterations in "
-                f"{summary['wall_time_s']:.1f} s; top vertical displacement {summary['top_vertical_displacement']:.5g} m")
+                f"{summary['wall_time_s']:.1f} s; top vertical displacement "
+                f"{summary['top_vertical_displacement']:.5g} m")
     status = "" if summary["status"] == "completed" else f" ({summary['status']})"
     energy = (f"pseudo-energy drift {summary['pseudo_energy_rel_drift']:.2e}" if summary["conservative"] else
               f"not conservative (moving boundary data): pseudo-energy change {summary['pseudo_energy_rel_drift']:.2e}")

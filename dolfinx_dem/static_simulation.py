@@ -1,9 +1,10 @@
 """The static runner (a scene with a ``statics`` table): DEM energy minimisation, or the DOLFINx P2
 FEM reference for the Hertz disc (method ``fem-P2``). ``StaticRun(scene, comm)`` sets up and checks
 the model before any folder is touched, ``run(output)`` solves and writes. Same output contract
-as a dynamic run (status ``completed``), with one state at t = 0, plus ``contact_pressure.csv`` (facet or boundary positions and pressures) and the
-summary keys ``contact_half_width``, ``contact_half_width_last``, ``top_vertical_displacement``,
-``max_contact_pressure``, ``h`` and ``iterations``.
+as a dynamic run (status ``completed``), with one state at t = 0, plus ``contact_pressure.csv``
+(facet or boundary positions and pressures) and the summary keys ``contact_half_width``,
+``contact_half_width_last``, ``top_vertical_displacement``, ``max_contact_pressure``, ``h`` and
+``iterations``.
 
 The contact half-width ``contact_half_width`` is the moment measure of the contact pressure,
 ``a = 2 sqrt(integral (x - xc)^2 p / integral p)`` (``hertz.contact_half_width_moments``; exactly a

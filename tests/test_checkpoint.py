@@ -209,7 +209,8 @@ def test_resume_errors_name_the_problem(tmp_path, capsys):
     refused([str(tmp_path / "empty")], f"{tmp_path / 'empty'} has no checkpoint")
     refused([str(out), "--set", "material.E=1000"],
             "the scene differs from the checkpoint's in material.E: a resumed run may only change time.end")
-    refused([str(out), "--set", "time.end=0.051"], "time.end = 0.051 is not a multiple of the run's time step dt = 0.005")
+    refused([str(out), "--set", "time.end=0.051"],
+            "time.end = 0.051 is not a multiple of the run's time step dt = 0.005")
     refused([str(out), "--set", "time.end=0.05"], "the checkpoint is at step 10 (t = 0.05), not before time.end = 0.05")
     refused([str(out), "--set", "time.quadrature=gauss-legendre-2"], "the scene differs from the checkpoint's in "
             "time.quadrature")

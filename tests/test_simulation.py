@@ -185,8 +185,10 @@ def _snapshot(folder: pathlib.Path) -> dict:
     (["bar-impact", "--set", 'obstacles=[{point=[6.0], normal=[1.0], boundary="left"}]'],
      "obstacle 0 intersects the body at t = 0"),
     (["bar-wave", "--set", "dirichlet=[{boundary=9}]"], "boundary 9 (tag 9) has no facet"),
-    (["block", "--set", 'contact={boundary=["all"]}'], "contact between deformable bodies is implemented in 2D, not 3D"),
-    (["cantilever", "--set", 'probes=[{name="p", point=[5.0, 0.0], component=1}]'], "probe 'p' at [5.0, 0.0] is outside"),
+    (["block", "--set", 'contact={boundary=["all"]}'],
+     "contact between deformable bodies is implemented in 2D, not 3D"),
+    (["cantilever", "--set", 'probes=[{name="p", point=[5.0, 0.0], component=1}]'],
+     "probe 'p' at [5.0, 0.0] is outside"),
     (["bar-wave", "--set", 'initial.velocity=["0 * x / 0"]'], "is not finite at t = 0"),
     (["two-disks", "--set", "mesh.h=0.05", "--set", 'contact.boundary=["y > 100"]'], "selects no facet"),
 ])
