@@ -38,6 +38,8 @@ def run(scene: Mapping, out: str | pathlib.Path, comm: MPI.Comm = MPI.COMM_WORLD
     progress lines. ``checkpoint_every``: steps between checkpoints of a dynamic run (besides
     the one at an interrupt and at the end). Input errors are raised before ``out`` is touched.
     """
+    if "statics" in scene and checkpoint_every is not None:
+        raise ValueError("a static scene has no time steps to checkpoint (drop --checkpoint-every)")
     output = io.OutputDirectory(out, comm, overwrite=overwrite)
     output.check()
     if "statics" in scene:

@@ -71,6 +71,7 @@ def test_a_stopped_run_resumes_bit_identical(name, tempdir, monkeypatch):
     stop(monkeypatch, crash, crash=True)
     with pytest.raises(RuntimeError, match="crash after step"):
         simulation.run(scene, parts, comm, quiet=True, checkpoint_every=every)
+    comm.barrier()  # a failing run makes no collective call on its way out: rank 0 may still be closing
     assert (parts / "INCOMPLETE").exists() and series_rows(parts / "series.csv") == crash + 1
     assert json.loads((parts / "checkpoint" / "checkpoint.json").read_text())["step"] == every
 
@@ -228,12 +229,20 @@ def test_resume_errors_name_the_problem(tmp_path, capsys):
 
 
 @pytest.mark.skip_in_parallel
-def test_an_unstable_run_has_no_checkpoint_and_a_static_run_cannot_resume(tmp_path):
+def test_an_unstable_run_has_no_checkpoint_and_a_static_run_cannot_resume(tmp_path, capsys):
     with pytest.raises(Exception, match="unstable"):
         simulation.run(scenes.load("bar-wave", {"time.cfl": 1.2, "time.end": 20.0}), tmp_path / "u", MPI.COMM_SELF,
                        quiet=True)
     assert not (tmp_path / "u" / "checkpoint").exists()
-    assert json.loads((tmp_path / "u" / "summary.json").read_text())["status"] == "unstable"
+    summary = json.loads((tmp_path / "u" / "summary.json").read_text())
+    assert summary["status"] == "unstable"
+    assert cli.run_state(tmp_path / "u", summary).startswith(
+        "UNSTABLE: the stability monitor stopped the run: MEMM is unstable at step")
+    assert cli.main(["run", "hertz", "--checkpoint-every", "5", "--out", str(tmp_path / "h"), "--quiet"]) == 2
+    assert "a static scene has no time steps to checkpoint" in capsys.readouterr().err
+    assert not (tmp_path / "h").exists()
+    with pytest.raises(SystemExit, match="2"):
+        cli.main(["run", "bar-wave", "--checkpoint-every", "0", "--quiet"])
     with pytest.raises(checkpoint.CheckpointError, match="has no checkpoint"):
         simulation.resume(tmp_path / "u", MPI.COMM_SELF)
     assert io.INCOMPLETE in {p.name for p in (tmp_path / "u").iterdir()}

@@ -181,6 +181,7 @@ def test_output_directory_refuses_another_run_and_overwrite_removes_only_run_fil
         with io.OutputDirectory(path, comm):
             pass
     assert sorted(p.name for p in path.iterdir()) == before  # refused: nothing touched
+    comm.barrier()  # every rank has looked before rank 0 removes
     with io.OutputDirectory(path, comm, overwrite=True):
         assert sorted(p.name for p in path.iterdir()) == [io.INCOMPLETE, "notes.txt"]
     assert sorted(p.name for p in path.iterdir()) == ["notes.txt"]
@@ -197,6 +198,7 @@ def test_output_directory_resume_and_keep_incomplete(tmp_path):
         io.call_on_root(comm, lambda: [(path / f).write_text("x") for f in ("series.csv", "energies.png")])
         output.keep_incomplete("interrupted at step 3")
     assert (path / io.INCOMPLETE).read_text() == "interrupted at step 3\n"
+    comm.barrier()  # every rank has looked before rank 0 removes
     with io.OutputDirectory(path, comm, resume=True):
         # the derived files go, the series stays to be appended to
         assert sorted(p.name for p in path.iterdir()) == [io.INCOMPLETE, "series.csv"]
