@@ -97,7 +97,7 @@ test: setup
 
 # --- demo / benchmarks ----------------------------------------------------------
 demo: setup
-	$(VENV)/bin/dolfinx-dem run cantilever --out results/cantilever
+	$(VENV)/bin/dolfinx-dem run cantilever --out results/cantilever --overwrite
 	@echo "Results of the cantilever scene are in $(CURDIR)/results/cantilever"
 
 # The studies of docs/bench/README.md (~30 min; needs ~12 GB for the 1e6-cell MPI run).

@@ -141,7 +141,8 @@ def run_dem_runner(method, n, dt, t_end, workdir, name="bar-impact", allow_unsta
     folder = pathlib.Path(workdir) / f"{name}-{method}-n{n}-dt{dt:.6g}"
     error = None
     try:
-        summary = simulation.run(_dem_scene(method, n, dt, t_end, name), folder, MPI.COMM_WORLD, quiet=True)
+        summary = simulation.run(_dem_scene(method, n, dt, t_end, name), folder, MPI.COMM_WORLD, quiet=True,
+                                 overwrite=True)
     except memm.InstabilityError as err:
         if not allow_unstable:
             raise

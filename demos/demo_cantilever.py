@@ -133,7 +133,7 @@ omega_eb = 1.8751**2 * np.sqrt(E_plane * I_beam / (rho * A_beam * L**4))
 
 # +
 dem_folder = out_folder / "dem"
-summary_dem = simulation.run(scene, dem_folder, comm, quiet=True)
+summary_dem = simulation.run(scene, dem_folder, comm, quiet=True, overwrite=True)
 wall_dem = summary_dem["wall_time_s"]
 
 series = None

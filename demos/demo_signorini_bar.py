@@ -184,7 +184,7 @@ def run(name, overrides, allow_unstable=False):
                                              else f"{k.rsplit('.', 1)[-1]}{v}" for k, v in key[1]])
     error = None
     try:
-        summary = simulation.run(scene, folder, comm, quiet=True)
+        summary = simulation.run(scene, folder, comm, quiet=True, overwrite=True)
     except memm.InstabilityError as err:
         if not allow_unstable:
             raise

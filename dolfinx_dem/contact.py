@@ -27,8 +27,8 @@ every piece (paper §4); only the patch is sub-integrated.
 from __future__ import annotations
 
 import dataclasses
-from collections.abc import Sequence
-from typing import Protocol
+from collections.abc import Mapping, Sequence
+from typing import Protocol, runtime_checkable
 
 import numpy as np
 import scipy.sparse
@@ -55,12 +55,20 @@ def gather_patch(comm, vec: PETSc.Vec, owned_local: np.ndarray) -> np.ndarray:
     return np.concatenate(comm.allgather(mine))
 
 
+@runtime_checkable
 class ContactModel(Protocol):
     """The interface of a contact model (``RigidContact``, ``pair_contact.PairContact``) that
-    ``DEMDiscretisation`` and ``MEMM`` use; nothing else of a model is called from outside.
+    ``DEMDiscretisation``, ``MEMM``, ``statics`` and the checkpoints use; nothing else of a model
+    is called from outside but its outputs (the series columns and summary figures of a run).
     All methods are collective. ``up`` are patch values (``patch_values``), valid until the
-    next ``prepare``."""
+    next ``prepare``.
 
+    Three groups: the dynamics (``prepare`` ... ``force_integral``), the statics of a piecewise
+    quadratic potential (``gaps`` ... ``add_hessian_correction``: rigid obstacles; contact
+    between bodies raises ``NotImplementedError`` there, its energy is quartic), and the
+    checkpoint (``checkpoint_state``, ``restore_state``)."""
+
+    facets: np.ndarray  # candidate facets (global numbers), (n_facets,)
     cells: np.ndarray  # cells of the candidate facets (global numbers), (n_facets,)
 
     def prepare(self, u: PETSc.Vec, v: PETSc.Vec | None = None, dt: float = 0.0) -> None:
@@ -69,8 +77,9 @@ class ContactModel(Protocol):
     def patch_values(self, vec: PETSc.Vec) -> np.ndarray:
         """The values of ``vec`` at the patch dofs, on every process."""
 
-    def force_correction(self, up: np.ndarray) -> np.ndarray:
-        """F - F_free at the patch dofs (the exact negative gradient of ``energy_correction``)."""
+    def force_correction(self, up: np.ndarray, active: np.ndarray | None = None) -> np.ndarray:
+        """F - F_free at the patch dofs (the exact negative gradient of ``energy_correction``);
+        ``active`` imposes the candidate facets in contact (statics), default: those with g < 0."""
 
     def energy_correction(self, up: np.ndarray) -> tuple[float, float]:
         """(elastic, stabilisation) energy changes of the contact reconstruction."""
@@ -83,6 +92,29 @@ class ContactModel(Protocol):
 
     def force_integral(self, u: PETSc.Vec, v: PETSc.Vec, dt: float, out: PETSc.Vec) -> int:
         """out += int_0^dt (F - F_free)(u + tau v) dtau, exactly; returns the evaluations."""
+
+    def gaps(self, up: np.ndarray) -> np.ndarray:
+        """Gap g_f of each candidate facet (m), affine in u: g = r . u + g0."""
+
+    def gap_gradients(self, facets: np.ndarray) -> np.ndarray:
+        """The rows r_f = dg_f/du of the candidates ``facets`` (indices into ``facets``) on the
+        patch dofs, shape (len(facets), n_patch); ``add`` puts a row into a vector."""
+
+    def reactions(self, up: np.ndarray, active: np.ndarray | None = None) -> np.ndarray:
+        """Normal contact force (N) on each candidate facet with the set ``active`` in contact
+        (default g < 0); 0 on the other facets."""
+
+    def add_hessian_correction(self, active: np.ndarray, H: PETSc.Mat) -> None:
+        """H += d^2 V/du^2 - K on this process's rows, for the set ``active`` in contact; H is
+        left unassembled (call ``H.assemble()``)."""
+
+    def checkpoint_state(self) -> dict[str, np.ndarray]:
+        """The model's state that is not a function of u (e.g. the pair list) and its counters,
+        as numpy arrays, the same on every process (``checkpoint.py``)."""
+
+    def restore_state(self, state: Mapping[str, np.ndarray]) -> None:
+        """Restore ``checkpoint_state`` of a model of the same scene, possibly set up on another
+        number of processes (facets are matched by position)."""
 
 
 @dataclasses.dataclass(frozen=True)
@@ -239,9 +271,7 @@ class RigidContact:
         free body's translations); r_f reproduces translations, so its resultant is
         (y_f . a') n and the pressure (y_f . a') / |f|. The pressures of all facets add up to
         the total reaction, which balances the load at equilibrium."""
-        active, _, a, delta = self._state(up)
-        reaction = np.where(active, self._YT @ (a - delta), 0.0)
-        return reaction / self.dem.geometry.facet_areas[self.facets]
+        return self.reactions(up) / self.dem.geometry.facet_areas[self.facets]
 
     def hessian_correction(self, active: np.ndarray) -> scipy.sparse.csr_matrix:
         """d^2 V / du^2 - K on the patch (patch x patch) for a fixed set of facets in contact:
@@ -319,3 +349,34 @@ class RigidContact:
         area = self.dem.geometry.facet_areas[self.facets]
         snn = np.einsum("ni,nij,nj->n", self.normals, stress, self.normals)
         return float(-(area * snn).sum() / area.sum())
+
+    # -- statics (ContactModel): thin wrappers over the patch operators --------------------------
+    def reactions(self, up: np.ndarray, active: np.ndarray | None = None) -> np.ndarray:
+        """Normal contact force (N) on each candidate facet, y_f . (a + delta_a) for the facets
+        of ``active`` (default g < 0), 0 elsewhere (see ``reaction_pressures``)."""
+        active, _, a, delta = self._state(up, active)
+        return np.where(active, self._YT @ (a - delta), 0.0)
+
+    def gap_gradients(self, facets: np.ndarray) -> np.ndarray:
+        """Rows r_f = dg_f/du of the candidates ``facets`` on the patch, (len(facets), n_patch)."""
+        rows = self._Rn[np.asarray(facets, dtype=np.int64)]
+        return rows.toarray() if scipy.sparse.issparse(rows) else np.array(rows)
+
+    def add_hessian_correction(self, active: np.ndarray, H: PETSc.Mat) -> None:
+        """H += ``hessian_correction(active)`` on the owned patch rows (global dof numbers);
+        H must accept new nonzeros and is left unassembled."""
+        C = self.hessian_correction(active).tocsr()
+        C.eliminate_zeros()
+        for i in np.flatnonzero(self._owned):
+            lo, hi = C.indptr[i], C.indptr[i + 1]
+            if hi > lo:
+                H.setValues([int(self.patch[i])], self.patch[C.indices[lo:hi]].astype(PETSc.IntType),
+                            C.data[lo:hi], addv=PETSc.InsertMode.ADD_VALUES)
+
+    # -- checkpoint (ContactModel) -----------------------------------------------------------------
+    def checkpoint_state(self) -> dict[str, np.ndarray]:
+        """Only a counter: every candidate is tested at every evaluation, nothing else persists."""
+        return {"evaluations": np.array([self.evaluations], dtype=np.int64)}
+
+    def restore_state(self, state: Mapping[str, np.ndarray]) -> None:
+        self.evaluations = int(state["evaluations"][0])

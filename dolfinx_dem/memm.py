@@ -304,6 +304,35 @@ class MEMM:
             diag.step, diag.t, self.dt, suggested, reason,
         )
 
+    # -- checkpoint -------------------------------------------------------------------------------
+    def state(self) -> dict:
+        """The complete state of the stepper: the vectors u^n, v^{n-1/2}, v^{n+1/2} (this
+        process's entries), t0, n, dt, the stability budget, the evaluation counters, and
+        ``recurrence``, what the energy-row recurrence carries on this process (memm_state.py)."""
+        return {
+            "u": self.u, "v_prev": self.v_prev, "v_next": self.v_next,
+            "t0": self.t0, "n": self.n, "dt": self.dt, "budget": self.budget,
+            "force_evaluations": self.force_evaluations, "max_step_evaluations": self.max_step_evaluations,
+            "recurrence": self._state.recurrence(),
+        }
+
+    def restore(self, u: np.ndarray, v_prev: np.ndarray, v_next: np.ndarray, t0: float, n: int,
+                budget: float, force_evaluations: int, max_step_evaluations: int,
+                recurrence: dict[str, np.ndarray] | None = None) -> None:
+        """Continue from a ``state()``: this process's entries of the vectors (arrays), the
+        scalars as stored. With the ``recurrence`` of the same rows (same partition) the next
+        ``step`` computes bit for bit what it would have without the stop; without it the energy
+        rows are recomputed from u^n by a true product (as at a refresh: a difference in the last
+        bits)."""
+        self.u.array[:], self.v_prev.array[:], self.v_next.array[:] = u, v_prev, v_next
+        self.t0, self.n, self.budget = float(t0), int(n), float(budget)
+        self.force_evaluations, self.max_step_evaluations = int(force_evaluations), int(max_step_evaluations)
+        if recurrence is not None:
+            self._state.restore_recurrence(self.t, **recurrence)
+        else:
+            self._state.restart(self.t)
+            self._state.reduce(self.t)  # the free bodies' mean velocities of v^{n+1/2}
+
     def suggested_dt(self) -> float:
         """Half the problem's ``stable_time_step()`` (a bound: cheap, and cached by the problem)."""
         stable = getattr(self.problem, "stable_time_step", None)

@@ -105,6 +105,26 @@ class StepState:
         if self._body is not None:
             np.add.at(self.sums[MOMENTA:], self._slot[: len(vn)], M * vn)
 
+    def recurrence(self) -> dict[str, np.ndarray]:
+        """What the recurrence carries besides u and v (copies, this process's): the rows y^n,
+        the owned entries of z^n = Q^T y^n and the free bodies' mean velocities. With them a
+        restored step is bit-identical to the step that was not stopped."""
+        return {"y": self.y.copy(), "z": self.rows.local_array(self._z[0])[: self.rows.n_owned].copy(),
+                "means": np.zeros(0) if self._means is None else self._means.copy()}
+
+    def restore_recurrence(self, t0: float, y: np.ndarray, z: np.ndarray, means: np.ndarray):
+        """Continue from ``recurrence()`` of the same rows (the same partition), after u and v
+        are set: ``restart(t0)`` for the constant loads, then the stored y, z^n and means."""
+        if y.shape != self.y.shape or len(z) != self.rows.n_owned:
+            raise ValueError("the stored recurrence belongs to other energy rows")
+        self.restart(t0)
+        self.y[:] = y
+        for v in self._z:
+            self.rows.local_array(v)[:] = 0.0
+        self.rows.local_array(self._z[0])[: self.rows.n_owned] = z
+        if self._means is not None:
+            self._means[:] = means
+
     def advance_rows(self, refresh: bool):
         """y^{n+1} from y^n and v^{n+1/2}, or (``refresh``, after u += dt v^{n+1/2}) from u^{n+1} by
         a true product; z^{n+1} = Q^T y^{n+1}. Resets the sums first."""

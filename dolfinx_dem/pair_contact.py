@@ -341,8 +341,11 @@ class PairContact:
         self.seconds += time.process_time() - start
         return elastic, stabilisation
 
-    def force_correction(self, up: np.ndarray) -> np.ndarray:
-        """F - F_free at the patch dofs (N): the exact negative gradient of the energy change."""
+    def force_correction(self, up: np.ndarray, active: np.ndarray | None = None) -> np.ndarray:
+        """F - F_free at the patch dofs (N): the exact negative gradient of the energy change.
+        An imposed ``active`` set belongs to statics, which this model does not support."""
+        if active is not None:
+            self._no_statics()
         out = np.zeros_like(up)
         P = self.listed.patch
         uc = self.free_displacements(up)
@@ -479,6 +482,51 @@ class PairContact:
         w = L.overlaps(uc)[0]
         a = P.Q @ up[P.columns] + P.q
         return float(np.abs(np.where(g < 0, P.ZT @ (a + P.Z @ (w * g)), 0.0) * w).sum())
+
+    # -- statics (ContactModel): not supported --------------------------------------------------
+    def _no_statics(self):
+        raise NotImplementedError("statics with contact between bodies is not supported: its energy is not "
+                                  "piecewise quadratic (the overlaps make it quartic in u)")
+
+    def gaps(self, up: np.ndarray) -> np.ndarray:
+        self._no_statics()
+
+    def gap_gradients(self, facets: np.ndarray) -> np.ndarray:
+        self._no_statics()
+
+    def reactions(self, up: np.ndarray, active: np.ndarray | None = None) -> np.ndarray:
+        self._no_statics()
+
+    def add_hessian_correction(self, active: np.ndarray, H: PETSc.Mat) -> None:
+        self._no_statics()
+
+    # -- checkpoint (ContactModel) ----------------------------------------------------------------
+    def checkpoint_state(self) -> dict[str, np.ndarray]:
+        """The pair list, as the candidate displacements it was built at (``reference``, rows in
+        the order of ``centres``, the facet barycentres), the pairs of scheme A facets that used
+        the scheme B rule (rows of two facet positions), and the counters."""
+        nf = len(self.facets)
+        return {
+            "centres": self.centres,
+            "reference": self._reference,
+            "scheme_b_rule": np.stack([self._scheme_b_rule // nf, self._scheme_b_rule % nf], axis=1),
+            "counters": np.array([self.rebuilds, self.evaluations], dtype=np.int64),
+            "seconds": np.array([self.seconds]),
+        }
+
+    def restore_state(self, state) -> None:
+        """Rebuild the list at the stored ``reference`` (the same list on the same facets), the
+        facets matched by barycentre (another process count numbers them differently)."""
+        from dolfinx_dem.matching import match_points
+
+        index = match_points(state["centres"], self.centres, 1e-9 * self.lengths.min())
+        position = np.empty_like(index)
+        position[index] = np.arange(len(index))  # stored facet -> this model's facet
+        self._build_pairs(np.asarray(state["reference"])[index])
+        pairs = np.sort(position[np.asarray(state["scheme_b_rule"], dtype=np.int64)], axis=1)
+        self._scheme_b_rule = np.unique(pairs[:, 0] * len(self.facets) + pairs[:, 1])
+        self.rebuilds, self.evaluations = (int(x) for x in state["counters"])
+        self.seconds = float(state["seconds"][0])
 
 
 @dataclasses.dataclass(frozen=True)

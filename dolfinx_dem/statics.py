@@ -52,7 +52,6 @@ import time
 from collections.abc import Sequence
 
 import numpy as np
-import scipy.sparse
 from mpi4py import MPI
 from petsc4py import PETSc
 
@@ -113,14 +112,7 @@ def _hessian(dem, active):
     if c is None or not active.any():
         return H
     H.setOption(PETSc.Mat.Option.NEW_NONZERO_ALLOCATION_ERR, False)
-    C = c.hessian_correction(active).tocsr()
-    C.eliminate_zeros()
-    owned = np.flatnonzero(c._owned)
-    for i in owned:
-        lo, hi = C.indptr[i], C.indptr[i + 1]
-        if hi > lo:
-            H.setValues([int(c.patch[i])], c.patch[C.indices[lo:hi]].astype(PETSc.IntType), C.data[lo:hi],
-                        addv=PETSc.InsertMode.ADD_VALUES)
+    c.add_hessian_correction(active, H)
     H.assemble()
     return H
 
@@ -166,10 +158,8 @@ def _gap_gradient(dem, f: int, directions) -> PETSc.Vec:
     """P grad g_f: the gradient of candidate facet f's gap (a row of R_n on the contact patch),
     projected onto the subspace of the linear constraints."""
     c = dem.contact
-    r = c._Rn[[f]]  # dense or sparse (contact._compact)
-    row = (r.toarray() if scipy.sparse.issparse(r) else np.asarray(r)).ravel()
     vec = dem.create_vector()
-    c.add(row, vec)
+    c.add(c.gap_gradients([f])[0], vec)
     _project(vec, directions)
     return vec
 
@@ -268,7 +258,7 @@ def minimise_energy(
             Z = [dem.create_vector() for _ in facets]
             for b, z in zip(gradients, Z):
                 solve(b, z, iteration)
-            rows = c._Rn[facets]
+            rows = c.gap_gradients(facets)
             S = np.array([rows @ c.patch_values(z) for z in Z]).T
             multipliers = np.linalg.solve(S, c.gaps(c.patch_values(u))[facets] + rows @ c.patch_values(step))
             for m, z in zip(multipliers, Z):
@@ -297,8 +287,7 @@ def minimise_energy(
             # Kink conditions of the pinned facets (g_f = 0): the directional derivatives of V
             # towards lifting off (-mu_f) and towards pressing in (mu_f + r_f, r_f the force the
             # facet would carry in contact) must both be >= 0.
-            _, _, a, delta = c._state(c.patch_values(u), active | pinned)
-            reaction = (c._Y.T @ (a - delta))[facets]
+            reaction = c.reactions(c.patch_values(u), active | pinned)[facets]
             lift, press = multipliers > 0, multipliers + reaction < 0
             if lift.any() or press.any():
                 converged = False

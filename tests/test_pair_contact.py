@@ -563,3 +563,23 @@ def test_a_step_longer_than_the_skin_is_an_error():
     stepper.initialise(dem.create_vector(), cell_vector(dem, approach))
     with pytest.raises(RuntimeError, match="moves 3.000e-02 m in one step, more than half the Verlet skin"):
         stepper.step()
+
+
+def test_both_contact_models_satisfy_the_contact_model_protocol():
+    """RigidContact and PairContact offer every member of ``ContactModel`` with its parameters,
+    and statics gets a clear refusal from contact between bodies."""
+    import inspect
+
+    from dolfinx_dem.contact import ContactModel
+
+    dem = blocks_on_a_floor()
+    members = [m for m in vars(ContactModel) if not m.startswith("_") and callable(getattr(ContactModel, m))]
+    assert {"gaps", "gap_gradients", "reactions", "add_hessian_correction", "checkpoint_state",
+            "restore_state", "prepare", "force_integral"} <= set(members)
+    for model in dem.contacts:
+        assert isinstance(model, ContactModel)
+        for name in members:
+            expected = list(inspect.signature(getattr(ContactModel, name)).parameters)[1:]
+            assert list(inspect.signature(getattr(model, name)).parameters) == expected, (model, name)
+    with pytest.raises(NotImplementedError, match="statics with contact between bodies"):
+        dem.pair_contact.gaps(dem.pair_contact.patch_values(dem.create_vector()))

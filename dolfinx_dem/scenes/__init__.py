@@ -293,6 +293,12 @@ def load(name_or_path: str, overrides: Mapping[str, object] | None = None) -> di
         p = pathlib.Path(scene["mesh"].get("path", ""))
         if not p.is_absolute():
             scene["mesh"]["path"] = str((path.parent / p).resolve())
+    return override(scene, overrides)
+
+
+def override(scene: Mapping, overrides: Mapping[str, object] | None = None) -> dict:
+    """A validated copy of ``scene`` with the dotted-key ``overrides`` applied."""
+    scene = copy.deepcopy(dict(scene))
     for key, value in (overrides or {}).items():
         set_key(scene, key, value)
     return validate(scene)
