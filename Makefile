@@ -8,7 +8,8 @@
 #
 # `make setup` is idempotent and takes a few seconds once everything is done:
 # apt-get only runs if dpkg reports a package missing, and pip only runs when
-# pyproject.toml or constraints.txt is newer than .venv/.installed.
+# pyproject.toml, constraints.txt or the C kernels (dolfinx_dem/kernels.c, built by cffi at
+# install) are newer than .venv/.installed.
 
 SHELL := /bin/bash
 .DEFAULT_GOAL := setup
@@ -68,7 +69,7 @@ apt:
 $(PYTHON): | apt
 	$(SYSTEM_PYTHON) -m venv --system-site-packages $(VENV)
 
-$(STAMP): pyproject.toml constraints.txt | $(PYTHON)
+$(STAMP): pyproject.toml setup.py constraints.txt dolfinx_dem/kernels.c dolfinx_dem/_build_kernels.py | $(PYTHON)
 	$(PYTHON) -m pip install --disable-pip-version-check -q \
 	  -c constraints.txt --no-build-isolation -e . $(PIP_PACKAGES)
 	@touch $@
@@ -96,7 +97,7 @@ test: setup
 
 # --- demo / benchmarks ----------------------------------------------------------
 demo: setup
-	$(VENV)/bin/dolfinx-dem run cantilever --out results/cantilever
+	$(VENV)/bin/dolfinx-dem run cantilever --out results/cantilever --overwrite
 	@echo "Results of the cantilever scene are in $(CURDIR)/results/cantilever"
 
 # The studies of docs/bench/README.md (~30 min; needs ~12 GB for the 1e6-cell MPI run).

@@ -17,7 +17,8 @@ triangles: 2 N^2 cells, vertices of valence 4 and 8), the same meshes for every 
 Methods:
 
 * ``dem``: DEM scheme A (``DEMDiscretisation``, DirichletBC on both x-ends) with MEMM (midpoint
-  rule), dt = CFL * ``dem.stable_time_step()``; cell displacements, 2 unknowns per cell.
+  rule), dt = CFL * ``dem.stable_time_step()`` (from the guaranteed bound on lambda_max, what a
+  scene with ``time.cfl`` uses); cell displacements, 2 unknowns per cell.
 * ``p1-explicit``: ``FEMCentralDifference``, P1, lumped (row-sum) mass, central differences,
   dt = CFL * its own limit 2 / sqrt(lambda_max(m^-1 K)); 2 unknowns per vertex.
 * ``p2-newmark``: ``FEMElastodynamics`` with degree 2, consistent mass, implicit Newmark
@@ -37,7 +38,8 @@ finite-element function evaluated at the barycentre.
 Times are CPU times of this process (``time.process_time``; OpenMP/BLAS threads set to 1), so that
 the other jobs on the shared 2-core machine affect them less than wall times; each run is repeated
 (up to 3 times, while the repeats take under 3 s) and the best set-up and best stepping time are
-kept. Set-up: DEM = ``DEMDiscretisation`` + ``stable_time_step`` + ``MEMM.initialise``; P1 = the
+kept. Set-up: DEM = ``DEMDiscretisation`` + ``stable_time_step`` (the bound) + ``MEMM`` and its
+``initialise``; P1 = the
 constructor (assembly, row sums, SLEPc lambda_max); P2 = the constructor (assembly, LU
 factorisation, initial acceleration). Stepping: the step loop alone; a MEMM step always evaluates
 the energies (its stability monitor), the FEM loops do not.
@@ -45,7 +47,9 @@ the energies (its stability monitor), the FEM loops do not.
 Stability sweep (one mesh, N = 16; 5 periods): the relative energy error max_t |E(t) - E(0)| /
 E(0) (E = kinetic + elastic, + stabilisation for the DEM; kinetic energy from v^n, the DEM's from
 (v^{n-1/2} + v^{n+1/2}) / 2) and the drift of each scheme's invariant (DEM pseudo-energy,
-central-difference modified energy, Newmark energy) against dt / dt_stable. Explicit methods at
+central-difference modified energy, Newmark energy) against dt / dt_stable, dt_stable being each
+explicit scheme's true limit (the DEM's from SLEPc, ``stable_time_step("eigenvalue")``; its bound
+is reported next to it). Explicit methods at
 CFL 0.5 ... 1.2 (P1 run with ``allow_unstable=True`` at and above 1); a run fails when the MEMM
 monitor raises ``memm.InstabilityError`` (DEM) or when E exceeds 10 E(0) (P1, the MEMM default
 growth limit). Newmark at dt = 0.5 ... 16 times the P1 limit of the same mesh.
@@ -170,11 +174,11 @@ def build_dem(mesh, left, right):
                              dirichlet=[DirichletBC(left, zero), DirichletBC(right, zero)])
 
 
-def start_dem(dem, cfl: float, growth_limit: float = GROWTH_LIMIT):
-    """MEMM at dt = cfl * dem.stable_time_step(), started from u(0), v(0) = 0."""
+def start_dem(dem, cfl: float, growth_limit: float = GROWTH_LIMIT, method: str = "bound"):
+    """MEMM at dt = cfl * dem.stable_time_step(method), started from u(0), v(0) = 0."""
     from dolfinx_dem.memm import MEMM
 
-    dt_stable = dem.stable_time_step()
+    dt_stable = dem.stable_time_step(method)
     memm = MEMM(dem, cfl * dt_stable, growth_limit=growth_limit)
     u0 = dem.create_vector()
     u0.array[:] = exact(dem.geometry.cell_centres[: dem.n_owned], 0.0).ravel()
@@ -277,7 +281,7 @@ def sweep_dem(n: int, cfl: float, t_end: float, history: bool = False) -> dict:
 
     mesh, left, right = create_mesh(n)
     dem = build_dem(mesh, left, right)
-    memm, dt_stable, d0 = start_dem(dem, cfl)
+    memm, dt_stable, d0 = start_dem(dem, cfl, method="eigenvalue")
     e_err = drift = 0.0
     failure, series = None, []
     for _ in range(math.ceil(t_end / memm.dt - 1e-9)):
@@ -290,7 +294,7 @@ def sweep_dem(n: int, cfl: float, t_end: float, history: bool = False) -> dict:
         drift = max(drift, abs(diag.pseudo_energy - d0.pseudo_energy) / d0.mechanical)
         if history:
             series.append((diag.t, (diag.mechanical - d0.mechanical) / d0.mechanical))
-    return dict(cfl=cfl, dt=memm.dt, dt_stable=dt_stable, energy_rel_error_max=e_err,
+    return dict(cfl=cfl, dt=memm.dt, dt_stable=dt_stable, dt_bound=dem.stable_time_step(), energy_rel_error_max=e_err,
                 invariant_drift_max=drift, failed=failure is not None, failure=failure, series=series)
 
 
@@ -498,8 +502,10 @@ def write_markdown(res: dict, path: pathlib.Path) -> None:
     sw = res["stability"]
     lines += ["", "## Stability and energy", "", "![stability](wave2d_stability.png)", "",
               "![energy](wave2d_energy.png)", "",
-              f"Sweep on N = {sw['n']} ({sw['cells']} cells) over {sw['t_end']:g} s. dt_stable: DEM "
-              f"{sw['dt_stable']['dem']:.4g} s, P1 {sw['dt_stable']['p1-explicit']:.4g} s.", "",
+              f"Sweep on N = {sw['n']} ({sw['cells']} cells) over {sw['t_end']:g} s. dt_stable (the true "
+              f"limits): DEM {sw['dt_stable']['dem']:.4g} s (SLEPc), P1 {sw['dt_stable']['p1-explicit']:.4g} s. "
+              f"The DEM's bound (`stable_time_step()`, used by the work-precision runs and by `time.cfl`): "
+              f"{sw['dt_bound_dem']:.4g} s, {sw['dt_bound_dem'] / sw['dt_stable']['dem']:.3f} x the limit.", "",
               "| method | dt / dt_stable | dt (s) | max energy error | invariant drift | failed at (step, t) |",
               "|---|---|---|---|---|---|"]
     for m in METHODS:
@@ -508,17 +514,15 @@ def write_markdown(res: dict, path: pathlib.Path) -> None:
                          f"{r['invariant_drift_max']:.1e} | {failure_text(r['failure'])} |")
     lines += ["", "## Observations", ""] + [f"- {s}" for s in res["observations"]] + [
         "",
-        "Notes (from separate measurements on N = 64 and 128, same machine, CPU time):",
+        "Notes:",
         "",
-        "- A DEM step costs three products with the rectangular energy operator Q = [S; J] (force: Q and "
-        "Q^T; the MEMM stability monitor's energies: Q again); on N = 64 the DEM stiffness has about 42 "
-        "nonzeros per row against about 14 for P1, and a MEMM step took 1.87 ms against 0.18 ms for a P1 "
-        "central-difference step (force 0.91 ms, energies 0.60 ms). With twice the unknowns, a 0.66 x "
-        "time step and an error about 2.3 x that of P1 on the same mesh, the DEM needs several times "
-        "the CPU time of P1 for a given error on this smooth wave.",
-        "- Both explicit set-ups are dominated by the SLEPc lambda_max of m^-1 K (N = 128: 6.2 s of the "
-        "6.3 s P1 constructor; 2.8 s for the DEM's `stable_time_step` after a 1.9 s constructor). An "
-        "element-wise bound would make it cheap at the price of a slightly conservative dt.",
+        "- A DEM step is one pass over the rectangular energy operator Q = [S; J] (y += Q v, Q^T y in "
+        "the same pass; the energies of the stability monitor are the squares of y, no further "
+        "product) plus one vector update (memm.py, factored.py). Q has about 21 nonzeros per "
+        "unknown against about 14 for P1's K, and the DEM has twice the unknowns of P1 on a mesh.",
+        "- The DEM's set-up bounds lambda_max of M^-1 K in a few passes over Q (stability.py); P1's "
+        "constructor still asks SLEPc for its lambda_max, which dominates its set-up on the finer "
+        "meshes (N = 128: 6.2 s of 6.3 s before this run).",
         "- At CFL 0.9 the P1 lumped-mass (too soft) and central-difference (too fast) phase errors "
         "partly cancel; the P1 error at CFL 0.5 is about the same (N = 32: 2.0e-4 against 2.4e-4), "
         "and so is the DEM's (N = 32: 7.2e-4 at 0.5, 6.3e-4 at 0.9): both are dominated by space.",
@@ -546,7 +550,7 @@ def observations(res: dict) -> list[str]:
         stable = [r["cfl"] for r in sw["runs"][m] if not r["failed"]]
         values = ", ".join(format(r["cfl"], "g") for r in sw["runs"][m])
         obs.append(f"{m}: stable up to dt / dt_stable = {max(stable):g}, stopped from "
-                   f"{min(fails) if fails else 'never'} (sweep values {values}).")
+                   f"{min(fails) if fails else 'never'} (sweep values {values}; dt_stable = the true limit).")
     nm = sw["runs"]["p2-newmark"]
     obs.append(f"P2 Newmark never fails (dt up to {max(r['cfl'] for r in nm):g} x the P1 limit); its energy error "
                f"stays below {max(r['energy_rel_error_max'] for r in nm):.1e}.")
@@ -610,7 +614,8 @@ def main(argv=None) -> int:
         for r in rows:
             r.pop("series")
     stability = {"n": sweep_n, "cells": 2 * sweep_n**2, "t_end": sweep_t, "runs": sweep_runs,
-                 "dt_stable": {"dem": sweep_runs["dem"][0]["dt_stable"], "p1-explicit": dt_p1}}
+                 "dt_stable": {"dem": sweep_runs["dem"][0]["dt_stable"], "p1-explicit": dt_p1},
+                 "dt_bound_dem": sweep_runs["dem"][0]["dt_bound"]}
 
     command = "python benchmarks/bench_wave2d.py" + (" --quick" if args.quick else "")
     res = {"quick": args.quick, "command": command, "machine": platform.machine(),

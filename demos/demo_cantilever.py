@@ -133,7 +133,7 @@ omega_eb = 1.8751**2 * np.sqrt(E_plane * I_beam / (rho * A_beam * L**4))
 
 # +
 dem_folder = out_folder / "dem"
-summary_dem = simulation.run(scene, dem_folder, comm, quiet=True)
+summary_dem = simulation.run(scene, dem_folder, comm, quiet=True, overwrite=True)
 wall_dem = summary_dem["wall_time_s"]
 
 series = None
@@ -148,7 +148,8 @@ t_dem, tip_dem = series["t"], series["tip_uy"]
 # The undamped motion is a sum of the modes of $K x = \omega^2 M x$. The lumped mass is
 # diagonal, so the symmetric matrix $M^{-1/2} K M^{-1/2}$ has the eigenvalues $\omega^2$.
 # SLEPc finds the smallest ones by shift-and-invert around 0 (a direct LU solve, MUMPS in
-# parallel), in `DEMDiscretisation.eigenvalues`; `stable_time_step` uses its largest one.
+# parallel), in `DEMDiscretisation.eigenvalues`; `stable_time_step("eigenvalue")` uses its
+# largest one (by default `stable_time_step()` uses a guaranteed upper bound on it instead).
 
 
 # +

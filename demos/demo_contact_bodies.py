@@ -72,7 +72,7 @@ def run(name, overrides):
     """Run scene ``name`` with ``overrides``; returns (summary, series as a structured array)."""
     scene = scenes.load(name, overrides)
     folder = out_folder / "_".join([name] + [f"{k}={v}" for k, v in overrides.items() if k in ("mesh.h", "method")])
-    summary = simulation.run(scene, folder, comm, quiet=True)
+    summary = simulation.run(scene, folder, comm, quiet=True, overwrite=True)
     series = np.genfromtxt(folder / "series.csv", delimiter=",", names=True) if comm.rank == 0 else None
     return summary, series, folder
 

@@ -193,7 +193,7 @@ for method in methods:
         run_scene = scenes.load("hertz", {"mesh.h": h, "method": method})
         cpu = time.process_time()
         try:
-            summary = simulation.run(run_scene, run_folder(method, h), comm)
+            summary = simulation.run(run_scene, run_folder(method, h), comm, overwrite=True)
         except StaticsError as error:  # reported on the validation page, not hidden
             failures[method].append((h, str(error)))
             mesh_sizes[method].remove(h)

@@ -112,6 +112,16 @@ def dg0_cell_dofs(V) -> tuple[np.ndarray, int, int]:
     return np.asarray(imap.local_to_global(local), dtype=np.int64), int(start), int(stop)
 
 
+def owned_original_cells(V) -> np.ndarray:
+    """Index in the input mesh (DOLFINx's original cell index) of each owned cell, in the order
+    of the owned DG0 dofs (dolfinx_dem's cell order), shape (n_owned,): the same cell has the
+    same index on any number of processes."""
+    n = V.mesh.topology.index_map(V.mesh.topology.dim).size_local
+    out = np.empty(n, dtype=np.int64)
+    out[cell_dofs(V)[:n]] = np.asarray(V.mesh.topology.original_cell_index[:n], dtype=np.int64)
+    return out
+
+
 def cell_dofs(V) -> np.ndarray:
     """The (block) dof of each process-local cell in a DG0 space, shape (n_cells_local,)."""
     return np.asarray(V.dofmap.list.array, dtype=np.int32)

@@ -27,8 +27,8 @@ every piece (paper §4); only the patch is sub-integrated.
 from __future__ import annotations
 
 import dataclasses
-from collections.abc import Sequence
-from typing import Protocol
+from collections.abc import Mapping, Sequence
+from typing import Protocol, runtime_checkable
 
 import numpy as np
 import scipy.sparse
@@ -49,44 +49,74 @@ def _compact(A: scipy.sparse.spmatrix):
     return A.toarray() if A.shape[0] * A.shape[1] <= _DENSE_ENTRIES else A.tocsr()
 
 
-def gather_patch(comm, vec: PETSc.Vec, owned_local: np.ndarray) -> np.ndarray:
-    """The values of ``vec`` at a patch of global dofs, on every process: each process gives its
-    owned patch entries (local indices ``owned_local``, in ascending global order), and ranks own
-    ascending dof ranges, so the concatenation is in patch order."""
-    mine = vec.array_r[owned_local]
-    if comm.size == 1:
-        return mine.copy()
-    return np.concatenate(comm.allgather(mine))
-
-
+@runtime_checkable
 class ContactModel(Protocol):
     """The interface of a contact model (``RigidContact``, ``pair_contact.PairContact``) that
-    ``DEMDiscretisation`` and ``MEMM`` use; nothing else of a model is called from outside.
-    All methods are collective. ``up`` are patch values (``patch_values``), valid until the
-    next ``prepare``."""
+    ``DEMDiscretisation``, ``MEMM``, ``statics`` and the checkpoints use; nothing else of a model
+    is called from outside but its outputs (the series columns and summary figures of a run).
+    Methods that take PETSc vectors are collective; ``up`` are this process's patch values
+    (``patch_values``: its candidate facets' stencils and rows, gathered by a VecScatter),
+    valid until the next ``prepare``. Each process owns the candidate facets of its owned cells
+    (the first ``num_own`` of ``cells``).
 
-    cells: np.ndarray  # cells of the candidate facets (global numbers), (n_facets,)
+    Three groups: the dynamics (``prepare`` ... ``force_integral``), the statics of a piecewise
+    quadratic potential (``own_gaps`` ... ``gap_gradient_dot``: rigid obstacles; contact between
+    bodies raises ``NotImplementedError`` there, its energy is quartic), and the checkpoint
+    (``checkpoint_state``, ``restore_state``)."""
+
+    cells: np.ndarray  # local cells of the candidate facets (own first), (n_facets,)
+    num_own: int  # candidate facets of owned cells
 
     def prepare(self, u: PETSc.Vec, v: PETSc.Vec | None = None, dt: float = 0.0) -> None:
         """Make the model valid for the states u + tau v, 0 <= tau <= dt (MEMM: every step)."""
 
     def patch_values(self, vec: PETSc.Vec) -> np.ndarray:
-        """The values of ``vec`` at the patch dofs, on every process."""
+        """The values of ``vec`` at this process's patch dofs."""
 
-    def force_correction(self, up: np.ndarray) -> np.ndarray:
-        """F - F_free at the patch dofs (the exact negative gradient of ``energy_correction``)."""
-
-    def energy_correction(self, up: np.ndarray) -> tuple[float, float]:
-        """(elastic, stabilisation) energy changes of the contact reconstruction."""
-
-    def gradient_correction(self, up: np.ndarray) -> np.ndarray:
-        """Change of the gradient of each candidate's cell, (n_facets, d, d)."""
+    def force_correction(self, up: np.ndarray, active: np.ndarray | None = None) -> np.ndarray:
+        """This process's part of F - F_free at the patch dofs (the exact negative gradient of
+        ``energy_correction``, summed over processes by ``add``); ``active`` imposes the
+        candidates in contact (statics), default: those with g < 0."""
 
     def add(self, correction: np.ndarray, out: PETSc.Vec, scale: float = 1.0) -> None:
-        """out += scale * correction on the owned patch dofs."""
+        """out += scale * correction (patch values; a reverse scatter)."""
+
+    def add_force(self, u: PETSc.Vec, out: PETSc.Vec, active: np.ndarray | None = None) -> None:
+        """out += F - F_free at u; ``active`` (over the own facets) as in ``force_correction``."""
+
+    def energy_correction(self, up: np.ndarray) -> tuple[float, float]:
+        """This process's part of the (elastic, stabilisation) energy changes (sum over processes)."""
+
+    def gradient_correction(self, up: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(local cells, change of their gradients (n, d, d)) for the touching facets."""
 
     def force_integral(self, u: PETSc.Vec, v: PETSc.Vec, dt: float, out: PETSc.Vec) -> int:
         """out += int_0^dt (F - F_free)(u + tau v) dtau, exactly; returns the evaluations."""
+
+    def own_gaps(self, u: PETSc.Vec) -> np.ndarray:
+        """Gaps g_f of the own candidate facets at u (m), affine in u."""
+
+    def reactions(self, u: PETSc.Vec, active: np.ndarray | None = None) -> np.ndarray:
+        """Normal contact force on each own facet with the set ``active`` (all candidate
+        facets of the process) in contact, default g < 0; 0 on the others."""
+
+    def add_hessian(self, H: PETSc.Mat, active: np.ndarray) -> None:
+        """H += d^2 V/du^2 - K on this process's rows for the set ``active`` in contact; H is
+        left unassembled."""
+
+    def gap_gradient(self, rank: int, k: int) -> PETSc.Vec:
+        """dg/du of own facet ``k`` of process ``rank`` as a distributed vector."""
+
+    def gap_gradient_dot(self, k: int, up: np.ndarray) -> float:
+        """dg_k/du . v for own facet ``k`` and the patch values ``up`` of v."""
+
+    def checkpoint_state(self) -> dict[str, np.ndarray]:
+        """The model's state that is not a function of u (e.g. the pair list) and its counters,
+        this process's arrays (``checkpoint.py``: read back by the same partition only)."""
+
+    def restore_state(self, state: Mapping[str, np.ndarray] | None) -> None:
+        """Restore ``checkpoint_state`` of the same partition; None (another partition): set the
+        state up again from the restored displacements at the next ``prepare``."""
 
 
 @dataclasses.dataclass(frozen=True)
@@ -257,6 +287,10 @@ class RigidContact:
         coefficient = np.where(active[own], self._YQ @ up + self._Yq - self._G @ w, 0.0)
         return self._Z @ w + self._RnT_own @ coefficient
 
+    def add(self, correction: np.ndarray, out: PETSc.Vec, scale: float = 1.0) -> None:
+        """out += scale * correction (patch values; a reverse scatter, collective)."""
+        self.scatter.add(correction, out, scale)
+
     def add_force(self, u: PETSc.Vec, out: PETSc.Vec, active: np.ndarray | None = None) -> None:
         """out += F - F_free at u (collective). ``active``, a bool array over the own facets,
         imposes the set of facets in contact (statics); default: those with g < 0."""
@@ -399,3 +433,12 @@ class RigidContact:
         snn = np.einsum("ni,nij,nj->n", self.normals[own], stress, self.normals[own])
         total = self.comm.allreduce(np.array([-(area * snn).sum(), area.sum()]), op=MPI.SUM)
         return float(total[0] / total[1])
+
+    # -- checkpoint (ContactModel) ----------------------------------------------------------------
+    def checkpoint_state(self) -> dict[str, np.ndarray]:
+        """Only a counter: every candidate is tested at every evaluation, nothing else persists."""
+        return {"evaluations": np.array([self.evaluations], dtype=np.int64)}
+
+    def restore_state(self, state: Mapping[str, np.ndarray] | None) -> None:
+        if state is not None:
+            self.evaluations = int(state["evaluations"][0])

@@ -7,7 +7,9 @@ matrices in the layout of the DG0 ``Function.vector``, and then offers
 - ``force(u, t, out)``: F = -dV/du (eq. (15)-(17)) plus the body force;
 - ``energies(u, t)``: elastic (11), stabilisation (13) and external potential, summed over ranks;
 - ``stress(u, t)``, ``von_mises(u, t)``: cellwise stress of eq. (9) for the owned cells;
-- ``mass``: the lumped mass rho |c| of each owned dof.
+- ``mass``: the lumped mass rho |c| of each owned dof;
+- ``factored``: K = Q^T Q applied in one pass over Q, for time stepping (factored.py);
+- ``stable_time_step()``: from a guaranteed bound on lambda_max(M^-1 K) (stability.py).
 """
 
 from __future__ import annotations
@@ -22,7 +24,8 @@ from petsc4py import PETSc
 
 import dolfinx.fem
 
-from dolfinx_dem import _compat
+from dolfinx_dem import _compat, stability
+from dolfinx_dem.factored import FactoredStiffness
 from dolfinx_dem.geometry import MeshGeometry, compute_geometry
 from dolfinx_dem.halo import owned_facet_marks
 from dolfinx_dem.material import ElasticMaterial
@@ -109,7 +112,6 @@ class DEMDiscretisation:
         self.geometry, facet_marks = compute_geometry(self.comm, mesh, self.V, marks)
         geom = self.geometry
         self.n_owned = geom.num_owned
-        self.cell_range = geom.owned_range  # global numbers of the owned cells
 
         # Dirichlet facets held here, and the condition of each (owned cells' marks decide).
         mark = facet_marks["dirichlet"]
@@ -162,17 +164,21 @@ class DEMDiscretisation:
             owned=own,
             elastic=np.arange(S_rows + J_rows) < S_rows,
         )
+        # S, J and their facet and Dirichlet parts now live in ``rows`` (one copy, not two)
+        self.operators = ops = dataclasses.replace(ops, S=None, S_dirichlet=None, J=None, J_dirichlet=None,
+                                                   S_facet=None, J_facet=None)
 
-        # Q = [S; J] with this process's own rows, as one PETSc matrix with global columns, and
-        # its transpose stored explicitly (a MatMult is faster than a MatMultTranspose): the
-        # force is -Q^T (Q w + q) + f with two MatMults (see ``force``).
+        # Q = [S; J] with this process's own rows, as one PETSc matrix with global columns: the
+        # force is -Q^T (Q w + q) + f (see ``force``). Time stepping uses its local rows in
+        # factored form (``factored``); Q^T is never stored.
         self._n_elastic_rows = S_rows  # local rows of Q that belong to S
         self._Q_dirichlet = self.rows.Q_dirichlet[own]
         self.Q = _petsc_matrix(self.comm, self.rows.Q[own], self.columns, self.n_owned * d)
-        self._QT = self.Q.transpose(PETSc.Mat())  # MatTranspose into a new matrix
         self.grad = _petsc_matrix(self.comm, ops.grad, self.columns, self.n_owned * d)
         self._grad_dirichlet = ops.grad_dirichlet
         self._K = None
+        self._factored = None
+        self._stable_dt = {}
 
         volumes = geom.cell_volumes[: self.n_owned]
         self.mass = self.create_vector()
@@ -219,7 +225,8 @@ class DEMDiscretisation:
         # summed over ranks; row n_free of ``_means`` stays 0 for the cells of clamped bodies.
         n_free = int(free.sum())
         index = np.where(free, np.cumsum(free) - 1, n_free)  # body -> its row in _means
-        self._body_of_cell = index[owned]
+        self._body_of_cell = index[owned].astype(np.int32)
+        self._free_body_mass = body_mass[free]
         cells = np.flatnonzero(free[owned])
         weights = self.material.rho * geom.cell_volumes[cells] / body_mass[owned[cells]]
         mean_operator = scipy.sparse.csr_matrix((weights, (index[owned[cells]], cells)), shape=(n_free, self.n_owned))
@@ -228,8 +235,16 @@ class DEMDiscretisation:
         self._means = np.zeros((n_free + 1, d))
         self._shifted = self.create_vector()
 
-    def relative_displacement(self, u: PETSc.Vec) -> PETSc.Vec:
-        """u minus the mean translation of each free body (see ``_setup_free_bodies``)."""
+    @property
+    def free_bodies(self) -> tuple[np.ndarray, np.ndarray]:
+        """The bodies without Dirichlet facets (see ``_setup_free_bodies``): for each owned cell
+        the number of its free body, n_free for the cells of clamped bodies, (n_owned,) int32;
+        and the mass of each free body (kg, kg/m in 2D), (n_free,)."""
+        return self._body_of_cell, self._free_body_mass
+
+    def relative_displacement(self, u: PETSc.Vec, out: PETSc.Vec | None = None) -> PETSc.Vec:
+        """u minus the mean translation of each free body (see ``_setup_free_bodies``), written
+        into ``out`` (default: a vector of the discretisation's own); u itself if no body is free."""
         n_free = self._mean_operator.shape[0]
         if n_free == 0:
             return u
@@ -238,8 +253,9 @@ class DEMDiscretisation:
         if self.comm.size > 1:
             self.comm.Allreduce(MPI.IN_PLACE, means, op=MPI.SUM)
         self._means[:n_free] = means
-        np.subtract(ua, self._means[self._body_of_cell], out=self._shifted.array.reshape(-1, self.d))
-        return self._shifted
+        out = self._shifted if out is None else out
+        np.subtract(ua, self._means[self._body_of_cell], out=out.array.reshape(-1, self.d))
+        return out
 
     def set_obstacles(self, obstacles) -> None:
         """Frictionless contact with rigid half-spaces (``contact.HalfSpace``), see contact.py."""
@@ -265,8 +281,16 @@ class DEMDiscretisation:
         """The stiffness K = Q^T Q = S^T S + J^T J (PETSc, rows of the owned dofs), built on first
         use by a PETSc product: time stepping applies Q^T Q in factored form and never needs it."""
         if self._K is None:
-            self._K = self._QT.matMult(self.Q)
+            self._K = self.Q.transposeMatMult(self.Q)
         return self._K
+
+    @property
+    def factored(self) -> FactoredStiffness:
+        """K = Q^T Q applied in one pass over the local rows of Q (factored.py), built on first
+        use: MEMM keeps the energy rows Q w from step to step with it."""
+        if self._factored is None:
+            self._factored = FactoredStiffness(self.Q, self._n_elastic_rows)
+        return self._factored
 
     # -- vectors -----------------------------------------------------------------------------
     def create_vector(self) -> PETSc.Vec:
@@ -302,9 +326,29 @@ class DEMDiscretisation:
         self._g = g
         self._q = self._Q_dirichlet @ g  # (local rows of Q,)
         self._a.array[:] = self._q
-        self._QT.mult(self._a, self._rhs)
+        self.Q.multTranspose(self._a, self._rhs)
         self._rhs.aypx(-1.0, self.body_force)
         self._lift_time = t
+
+    @property
+    def time_dependent(self) -> bool:
+        """Whether some Dirichlet data depend on time (then the lift q(t) and ``load`` do)."""
+        return self._time_dependent
+
+    def load(self, t: float) -> PETSc.Vec:
+        """f - Q^T q(t): the force at u = 0 without contact (body force and Dirichlet lift), the
+        owned dofs. The returned vector is the discretisation's own: read it before the next call
+        with another t. A time-dependent lift costs a Q^T product per new t."""
+        self._update_dirichlet(t)
+        return self._rhs
+
+    def lift(self, t: float) -> tuple[np.ndarray, np.ndarray]:
+        """q(t) = [s(t); j(t)], the Dirichlet part of the energy rows Q w + q(t), on the local rows
+        that Dirichlet values reach: (local row indices (int32), values); q is zero elsewhere."""
+        self._update_dirichlet(t)
+        if not hasattr(self, "_lift_rows"):
+            self._lift_rows = np.flatnonzero(np.diff(self._Q_dirichlet.indptr)).astype(np.int32)
+        return self._lift_rows, self._q[self._lift_rows]
 
     # -- forces and energies -----------------------------------------------------------------
     def force(self, u: PETSc.Vec, t: float, out: PETSc.Vec, contact: bool = True) -> PETSc.Vec:
@@ -315,14 +359,14 @@ class DEMDiscretisation:
         The force is applied in factored form rather than as -K w: in floating point Q^T Q w and
         K w differ by the rounding of K, of relative size eps (omega_max / omega_1)^2 for smooth
         fields, which showed as pseudo-energy drifts of 8e-12 (1D bar, 800 cells) and 8e-13
-        (cantilever) against 2e-14 and 5e-15 in factored form. Q = [S; J] is one PETSc matrix
-        and Q^T is stored explicitly, so this is two MatMults with about half the nonzeros of K
-        each (docs/bench/README.md).
+        (cantilever) against 2e-14 and 5e-15 in factored form. Q = [S; J] is one PETSc matrix:
+        this is a MatMult and a MatMultTranspose. (A MEMM step does not call it: it applies the
+        local rows of Q in one pass, ``factored``.)
         """
         self._update_dirichlet(t)
         w = self.relative_displacement(u)
         self.Q.mult(w, self._a)
-        self._QT.mult(self._a, out)
+        self.Q.multTranspose(self._a, out)
         out.aypx(-1.0, self._rhs)
         if contact:
             for c in self.contacts:
@@ -413,9 +457,27 @@ class DEMDiscretisation:
         A.destroy()
         return np.sort(values)[-n:] if largest else np.sort(values)[:n]
 
-    def stable_time_step(self) -> float:
-        """dt_max = 2 / sqrt(lambda_max(M^-1 K)), the linear stability limit of MEMM (leapfrog)."""
-        return 2.0 / np.sqrt(self.eigenvalues(1, largest=True, rtol=1e-8)[0])
+    def stable_time_step(self, method: str = "bound") -> float:
+        """The linear stability limit of MEMM (leapfrog), dt_max = 2 / sqrt(lambda_max(M^-1 K)) (s),
+        of the elastic operator without contact; computed once per method.
+
+        method "bound": lambda_max replaced by a guaranteed upper bound (stability.py), so the
+        step is at most the limit (0.85-1 times it on the built-in scenes) and costs a few
+        passes over Q (seconds at 1e6 cells). "eigenvalue": SLEPc's lambda_max to rtol 1e-8, the
+        limit itself, for stability studies (minutes at 1e5 cells: its time grows about
+        quadratically with the cells).
+        """
+        if method not in ("bound", "eigenvalue"):
+            raise ValueError(f"unknown stable time step method {method!r}; choose 'bound' or 'eigenvalue'")
+        if method not in self._stable_dt:
+            if method == "bound":
+                QT = self.Q.transpose(PETSc.Mat())  # for the bound's passes only
+                lam = stability.largest_eigenvalue_bound(self.factored, QT, self.inverse_mass)
+                QT.destroy()
+            else:
+                lam = self.eigenvalues(1, largest=True, rtol=1e-8)[0]
+            self._stable_dt[method] = 2.0 / np.sqrt(lam)
+        return self._stable_dt[method]
 
     def halo_exchange(self, owned: np.ndarray) -> np.ndarray:
         """Per-cell values of the owned cells, (n_owned, k), extended to the held cells (n_cells, k)

@@ -1,17 +1,29 @@
-"""Output of dolfinx_dem runs: XDMF fields, a CSV time series, a JSON summary.
+"""Output of dolfinx_dem runs: the output folder, XDMF fields, a CSV time series, a JSON summary.
 
-Completed-output contract
--------------------------
-A run writes straight into its output directory, inside ``OutputDirectory``: on entry it writes
-a marker file ``INCOMPLETE`` (and removes a stale ``error.txt``), on a clean exit it removes the
-marker. A directory without ``INCOMPLETE`` therefore holds the complete output of a run that
-finished; a directory with ``INCOMPLETE`` is from a run that is still going, crashed or was
-killed, and if the run raised, ``error.txt`` holds the exception and its traceback.
+Output folder contract
+----------------------
+A run writes straight into its output folder, inside ``OutputDirectory``:
 
-Files (all in the output directory):
+* Before: the folder may be missing, empty, or hold files that are not a run's; a folder holding
+  another run (any of ``RUN_FILES``) is refused unless ``overwrite``, which removes that run's
+  files first (and only those), so no stale file survives. The caller builds and checks
+  everything before entering, so an error in the input leaves the folder as it was.
+* During: a marker file ``INCOMPLETE``. On a clean exit the marker is removed, unless the run
+  keeps it with a note (``keep_incomplete``: an interrupted run, to be resumed); if the run
+  raised, every failing rank appends the exception and its traceback to ``error.txt``. A folder
+  without ``INCOMPLETE`` therefore holds the complete output of a run that finished.
+* Resuming (``resume=True``): the folder must hold the run; the files derived from the whole
+  run (summary, pictures) are removed, the series and solution are appended to.
+
+Files (all in the output folder):
 
 * ``solution.xdmf`` + ``solution.h5``: the mesh once, then DG0 fields (cell-centred) per time
-  (``SolutionWriter``; collective).
+  (``SolutionWriter``; collective). The HDF5 file is closed and reopened after every output
+  time, and only then does ``solution.xdmf`` (replaced atomically) name that time: a run killed
+  by ``kill -9`` leaves a pair that reads back up to its last output time. While a run writes,
+  DOLFINx's working files ``.solution.xdmf`` and ``.solution.h5`` (a link) are there too. A
+  resumed run writes the mesh again (as ``mesh_1``, ``mesh_2``, ...: its processes may number
+  the cells differently) and its times refer to it.
 * ``series.csv``: one header line of column names, then one row of floats per time, written
   with ``'%.17g'`` so that they read back bit-identical (``SeriesWriter``; rank 0 writes).
 * ``summary.json`` (``write_summary``; rank 0 writes): strict JSON, a number that is not finite
@@ -25,9 +37,13 @@ from __future__ import annotations
 
 import json
 import math
+import os
 import pathlib
 import pickle
+import re
+import shutil
 import traceback
+import xml.etree.ElementTree as ElementTree
 from collections.abc import Callable, Mapping, Sequence
 
 import numpy as np
@@ -38,6 +54,16 @@ import dolfinx.io
 
 INCOMPLETE = "INCOMPLETE"
 ERROR = "error.txt"
+#: Every file and folder that a run (or ``dolfinx-dem show``) writes into its output folder.
+RUN_FILES = (INCOMPLETE, ERROR, "summary.json", "series.csv", "solution.xdmf", "solution.h5", "final.png",
+             "animation.gif", "contact_pressure.csv", "energies.png", "probes.png", "checkpoint",
+             ".solution.xdmf", ".solution.h5", "solution.xdmf.tmp")
+#: The files derived from a whole run, removed when it is resumed (the resumed run rewrites them).
+DERIVED_FILES = ("summary.json", "final.png", "animation.gif", "energies.png", "probes.png")
+
+
+class OutputFolderError(ValueError):
+    """The output folder cannot take this run (it holds another one); the message says what to do."""
 
 
 def call_on_root(comm: MPI.Comm, fn: Callable, *args):
@@ -65,25 +91,54 @@ def call_on_root(comm: MPI.Comm, fn: Callable, *args):
 
 
 class OutputDirectory:
-    """Context manager for a run's output directory under the ``INCOMPLETE`` marker contract.
+    """Context manager for a run's output folder under the contract of the module docstring.
 
-    ``path``: the directory, created (with parents) if needed; existing files are overwritten by
-    the run's writers, other files are left alone. The context value is the directory as a
-    ``pathlib.Path``. On an exception each failing rank appends it with its traceback to
-    ``error.txt`` and the marker stays; no collective call is made then, so a run failing on
-    only some ranks cannot hang here.
+    ``path``: the folder, created (with parents) if needed. ``overwrite``: replace another run
+    held there. ``resume``: continue the run held there. ``check`` refuses what entering would
+    refuse without touching anything (call it before the set-up); entering checks again, clears
+    the old run's files if ``overwrite`` (or the derived files if ``resume``), and writes the
+    marker. The context value is the folder as a ``pathlib.Path``. On an exception each failing
+    rank appends it with its traceback to ``error.txt`` and the marker stays; no collective call
+    is made then, so a run failing on only some ranks cannot hang here.
     """
 
-    def __init__(self, path: str | pathlib.Path, comm: MPI.Comm):
+    def __init__(self, path: str | pathlib.Path, comm: MPI.Comm, overwrite: bool = False, resume: bool = False):
         self.path = pathlib.Path(path)
         self.comm = comm
+        self.overwrite, self.resume = overwrite, resume
+        self._note = None
+
+    def _check(self) -> list[pathlib.Path]:
+        """The run files present in the folder; raises if the run may not go there."""
+        if self.path.exists() and not self.path.is_dir():
+            raise NotADirectoryError(f"output path {self.path} exists and is not a directory")
+        present = [self.path / name for name in RUN_FILES if os.path.lexists(self.path / name)]
+        if self.resume or not present or self.overwrite:
+            return present
+        hint = (f"or `dolfinx-dem resume {self.path}` to continue it" if (self.path / "checkpoint").exists()
+                else "or another --out")
+        raise OutputFolderError(
+            f"output folder {self.path} holds another run ({', '.join(p.name for p in present)}): pass "
+            f"--overwrite to replace it (its files are removed first), {hint}")
+
+    def check(self) -> None:
+        """Raise (on every rank) if entering would refuse the folder; touches nothing."""
+        call_on_root(self.comm, self._check)
+
+    def keep_incomplete(self, note: str) -> None:
+        """Write ``note`` into the ``INCOMPLETE`` marker now and leave it there on a clean exit
+        (e.g. an interrupted run, which may be killed before it exits)."""
+        self._note = note.rstrip("\n") + "\n"
+        call_on_root(self.comm, (self.path / INCOMPLETE).write_text, self._note)
 
     def __enter__(self) -> pathlib.Path:
         def start():
-            if self.path.exists() and not self.path.is_dir():
-                raise NotADirectoryError(f"output path {self.path} exists and is not a directory")
+            present = self._check()
             self.path.mkdir(parents=True, exist_ok=True)
-            (self.path / ERROR).unlink(missing_ok=True)
+            remove = [p for p in present if self.overwrite or p.name == ERROR or
+                      (self.resume and p.name in DERIVED_FILES)]
+            for p in remove:
+                shutil.rmtree(p) if p.is_dir() and not p.is_symlink() else p.unlink()
             (self.path / INCOMPLETE).write_text("dolfinx_dem run in progress or failed\n")
 
         call_on_root(self.comm, start)
@@ -93,7 +148,8 @@ class OutputDirectory:
         if exc_type is None:
             self.comm.barrier()
             if self.comm.rank == 0:
-                (self.path / INCOMPLETE).unlink()
+                if self._note is None:
+                    (self.path / INCOMPLETE).unlink()
             self.comm.barrier()
         else:
             message = "".join(traceback.format_exception(exc_type, exc, tb))
@@ -105,17 +161,49 @@ class OutputDirectory:
 class SolutionWriter:
     """Context manager writing DG0 Functions over time to ``directory/solution.xdmf`` (+ ``.h5``).
 
-    The mesh is written once on construction. Collective over ``comm`` (the mesh's communicator).
+    The mesh is written once on construction. ``resume_writes``: append to the file of a run
+    whose first ``resume_writes`` output times are kept (later ones, written after its last
+    checkpoint, are removed) and write the mesh again for the new times (see the module
+    docstring). ``writes`` counts the output times in the file. Collective over ``comm`` (the
+    mesh's communicator).
+
+    Kill-safety: DOLFINx rewrites its XML file in place at every write (a run killed then left
+    an empty ``solution.xdmf``) and HDF5 writes its metadata at close. So DOLFINx writes the
+    working pair ``.solution.xdmf`` + ``.solution.h5`` (a symbolic link to ``solution.h5``), and
+    after each output time the HDF5 file is closed and reopened and ``solution.xdmf`` is
+    replaced atomically by the working XML: it only ever names times whose data are on disk.
     """
 
-    def __init__(self, comm: MPI.Comm, directory: str | pathlib.Path, mesh):
+    def __init__(self, comm: MPI.Comm, directory: str | pathlib.Path, mesh, resume_writes: int | None = None):
         directory = pathlib.Path(directory)
         if not directory.is_dir():
             raise FileNotFoundError(f"output directory {directory} does not exist")
         self.path = directory / "solution.xdmf"
-        self._mesh = mesh
-        self._xdmf = dolfinx.io.XDMFFile(comm, str(self.path), "w")
-        self._xdmf.write_mesh(mesh)
+        self._work = directory / WORK_XDMF
+        self._comm, self._mesh = comm, mesh
+        if resume_writes is None:
+            call_on_root(comm, _start_work_files, self.path, None)
+            self._xdmf = dolfinx.io.XDMFFile(comm, str(self._work), "w")
+            self._xdmf.write_mesh(mesh)
+            self._mesh_xpath = "/Xdmf/Domain/Grid[@GridType='Uniform'][1]"
+        else:
+            name = call_on_root(comm, _start_work_files, self.path, resume_writes)
+            self._xdmf = dolfinx.io.XDMFFile(comm, str(self._work), "a")
+            original, mesh.name = mesh.name, name
+            try:
+                self._xdmf.write_mesh(mesh)
+            finally:
+                mesh.name = original
+            self._mesh_xpath = f"/Xdmf/Domain/Grid[@Name='{name}'][1]"
+        self.writes = resume_writes or 0
+        self._reopen()
+
+    def _reopen(self) -> None:
+        """Close the file (HDF5 then writes all it holds), open it again to append, and publish
+        the XML that names what is now on disk."""
+        self._xdmf.close()
+        self._xdmf = dolfinx.io.XDMFFile(self._comm, str(self._work), "a")
+        call_on_root(self._comm, _publish, self._work, self.path)
 
     def write(self, t: float, fields: Mapping[str, dolfinx.fem.Function]) -> None:
         """Write ``fields`` (name -> DG0 Function on the writer's mesh) at time ``t`` (s).
@@ -135,10 +223,22 @@ class SolutionWriter:
                 raise ValueError(f"field {name!r} is not defined on the writer's mesh")
         for name, f in fields.items():
             f.name = name
-            self._xdmf.write_function(f, float(t))
+            self._xdmf.write_function(f, float(t), self._mesh_xpath)
+        self._reopen()
+        self.writes += 1
 
     def close(self) -> None:
+        if self._xdmf is None:
+            return
         self._xdmf.close()
+        self._xdmf = None
+
+        def finish():
+            _publish(self._work, self.path)
+            for work in (self._work, self._work.with_suffix(".h5")):
+                work.unlink(missing_ok=True)
+
+        call_on_root(self._comm, finish)
 
     def __enter__(self) -> SolutionWriter:
         return self
@@ -152,7 +252,8 @@ class SeriesWriter:
     """Context manager writing a CSV time series (rank 0 writes, all ranks call).
 
     ``columns``: column names (unique, no commas), e.g. ``("t", "kinetic_energy")``. Rows are
-    flushed to disk every ``flush_every`` rows and on close.
+    flushed to disk every ``flush_every`` rows and on close. ``append_at``: continue an
+    existing file with these columns from that byte (a ``position``), dropping what follows.
     """
 
     def __init__(
@@ -161,6 +262,7 @@ class SeriesWriter:
         path: str | pathlib.Path,
         columns: Sequence[str],
         flush_every: int = 10,
+        append_at: int | None = None,
     ):
         columns = tuple(columns)
         if not columns:
@@ -180,9 +282,23 @@ class SeriesWriter:
         self._rows = 0
         self._file = None
 
+        self._comm = comm
+
         def start():
-            self._file = open(self.path, "w")
-            self._file.write(",".join(columns) + "\n")
+            if append_at is None:
+                self._file = open(self.path, "w")
+                self._file.write(",".join(columns) + "\n")
+                return
+            self._file = open(self.path, "r+")
+            header = self._file.readline().rstrip("\n")
+            if header != ",".join(columns):
+                self._file.close()
+                raise ValueError(f"{self.path} has the columns {header!r}, not {','.join(columns)!r}")
+            if not len(header) < append_at <= self.path.stat().st_size:
+                self._file.close()
+                raise ValueError(f"{self.path} has {self.path.stat().st_size} bytes, cannot continue at {append_at}")
+            self._file.truncate(append_at)
+            self._file.seek(append_at)
 
         call_on_root(comm, start)
 
@@ -204,6 +320,15 @@ class SeriesWriter:
             self._rows += 1
             if self._rows % self._flush_every == 0:
                 self._file.flush()
+
+    def position(self) -> int:
+        """Flush and return the size of the file in bytes, where a resumed run continues
+        (``append_at``); the same on every rank."""
+        size = None
+        if self._file is not None:
+            self._file.flush()
+            size = self._file.tell()
+        return self._comm.bcast(size, root=0)
 
     def close(self) -> None:
         if self._file is not None:
@@ -248,3 +373,51 @@ def write_summary(path: str | pathlib.Path, comm: MPI.Comm, data: Mapping) -> No
         path.write_text(text + "\n")
 
     call_on_root(comm, write)
+
+
+#: DOLFINx's working XML file and the name under which it writes solution.h5 (see SolutionWriter).
+WORK_XDMF = ".solution.xdmf"
+
+
+def _publish(work: pathlib.Path, path: pathlib.Path) -> None:
+    """Replace ``path`` atomically by the working XML, its HDF5 references renamed."""
+    text = re.sub(r">\s*\.solution\.h5:", ">solution.h5:", work.read_text())
+    path.with_suffix(".xdmf.tmp").write_text(text)
+    os.replace(path.with_suffix(".xdmf.tmp"), path)
+
+
+def _start_work_files(path: pathlib.Path, resume_writes: int | None) -> str | None:
+    """The working pair of ``SolutionWriter`` next to ``path`` (solution.xdmf): the link
+    ``.solution.h5`` -> ``solution.h5``, and for a resumed run the working XML made from
+    ``path`` truncated to ``resume_writes`` output times (``truncate_xdmf``), whose unused
+    mesh name is returned. Serial (rank 0)."""
+    work = path.parent / WORK_XDMF
+    for stale in (work, work.with_suffix(".h5")):
+        stale.unlink(missing_ok=True)
+    os.symlink("solution.h5", work.with_suffix(".h5"))
+    if resume_writes is None:
+        return None
+    name = truncate_xdmf(path, resume_writes)
+    work.write_text(re.sub(r">\s*solution\.h5:", ">.solution.h5:", path.read_text()))
+    return name
+
+
+def truncate_xdmf(path: pathlib.Path, writes: int) -> str:
+    """Keep the first ``writes`` output times of an XDMF file written by ``SolutionWriter`` (and
+    delete the HDF5 datasets of the others); returns an unused name for a mesh. Serial (rank 0),
+    with the file closed."""
+    ElementTree.register_namespace("xi", "http://www.w3.org/2001/XInclude")
+    tree = ElementTree.parse(path)
+    domain = tree.getroot().find("Domain")
+    stale = []
+    for collection in domain.findall("Grid[@GridType='Collection']"):
+        for grid in collection.findall("Grid")[writes:]:
+            stale += [item.text.strip().split(":", 1)[1] for item in grid.iter("DataItem")]
+            collection.remove(grid)
+    meshes = {grid.get("Name") for grid in domain.findall("Grid[@GridType='Uniform']")}
+    name = next(f"mesh_{k}" for k in range(1, len(meshes) + 2) if f"mesh_{k}" not in meshes)
+    tree.write(path, xml_declaration=True, encoding="utf-8")
+    from dolfinx_dem import _hdf5
+
+    _hdf5.delete(path.with_suffix(".h5"), stale + [f"/Mesh/{name}"])
+    return name

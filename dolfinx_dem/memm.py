@@ -8,6 +8,26 @@ integral is exact (Marazzato, Ern, Mariotti, Monasse, CMAME 2019): the midpoint 
 linear elasticity, whose force is affine in tau. Velocities live at half steps; the two sequences
 (even and odd) are started consistently, v^{+-1/2} = v^0 +- dt/2 M^{-1} F(u^0), so that the
 parasitic (-1)^n mode is not excited.
+
+A step costs one pass over the energy rows. The elastic force is F(w, t) = -Q^T (Q w + q(t)) + f
+(discretisation.py), and the energy rows r = Q w + q give the elastic and stabilisation energies
+1/2 |r|^2, split by rows. The stepper keeps y^n = Q u^n (the homogeneous rows; u minus the mean
+translation of each free body). Along the flight u^n + tau v^{n+1/2} they are affine in tau:
+
+    y^{n+1} = y^n + dt Q v^{n+1/2},    int_0^dt -Q^T Q (u^n + tau v^{n+1/2}) dtau = -dt/2 Q^T (y^n + y^{n+1}),
+
+which is r^{n+1} = 2 r_mid - r^n for the midpoint residual r_mid, written as an increment. One
+pass over Q (factored.py) gives y^{n+1} and z^{n+1} = Q^T y^{n+1}, z^n is kept from the step
+before, and the energies at t_{n+1} are 1/2 |y^{n+1} + q(t_{n+1})|^2: no further product. (y is
+stored divided by dt, so that its increment is Q v^{n+1/2} with no scaling pass.) The recurrence
+adds the rounding of each step: every ``refresh_every`` steps y^{n+1} is recomputed from u^{n+1}
+by a true product instead. All other terms of the integral, the loads f - Q^T q(t) at the
+quadrature nodes and the contact corrections, are the step's ``impulse``. One compiled kernel
+then updates u and v and sums the kinetic, pseudo-kinetic and external terms, and a single
+Allreduce reduces them with the energies: a step synchronises three times (the ghost updates of
+v^{n+1/2} and of Q^T y, and the reduction); contact adds the gathers of its patch values. The
+kernel also sums the momentum of each free body: the pass over Q subtracts its mean velocity
+from v^{n+1/2} at the next step (for rounding, as ``relative_displacement`` does for u).
 """
 
 from __future__ import annotations
@@ -18,6 +38,12 @@ import math
 import numpy as np
 from petsc4py import PETSc
 
+from dolfinx_dem.memm_state import (CONTACT_J, CONTACT_S, EXTERNAL, KINETIC, LIFT_J, LIFT_S, PSEUDO, ROWS_J, ROWS_S,
+                                    StepState)
+
+#: Default number of steps between true products for the energy rows (see the module docstring
+#: and docs/bench/README.md for the drift with and without).
+REFRESH_EVERY = 1000
 
 @dataclasses.dataclass(frozen=True)
 class GaussLegendre:
@@ -68,7 +94,8 @@ class Diagnostics:
 
 
 class MEMM:
-    """The MEMM stepper for a problem offering ``force``, ``energies``, ``mass``, ``create_vector``.
+    """The MEMM stepper for a ``DEMDiscretisation`` (``force``, ``energies``, ``factored``,
+    ``load``, ``lift``, ``mass``, ``contacts``).
 
     Parameters
     ----------
@@ -77,106 +104,165 @@ class MEMM:
     quadrature : name in ``QUADRATURES`` (default "midpoint").
     growth_limit : the stability monitor's bound on the mechanical energy relative to the
         conserved budget (see ``check_stability``).
+    refresh_every : steps between true products for the energy rows; 0 never refreshes them.
+
+    ``u``, ``v_prev`` (v^{n-1/2}) and ``v_next`` (v^{n+1/2}) are the state, with ghost dofs (their
+    global form has the layout of ``problem.create_vector()``); change them only through
+    ``initialise``, which also recomputes the energy rows.
     """
 
-    def __init__(self, problem, dt: float, quadrature: str = "midpoint", growth_limit: float = 10.0):
+    def __init__(self, problem, dt: float, quadrature: str = "midpoint", growth_limit: float = 10.0,
+                 refresh_every: int = REFRESH_EVERY):
         if not (isinstance(dt, (int, float)) and math.isfinite(dt) and dt > 0):
             raise ValueError(f"time step dt must be a positive number, got {dt!r}")
         if quadrature not in QUADRATURES:
             raise ValueError(f"unknown quadrature {quadrature!r}; choose from {sorted(QUADRATURES)}")
         if not growth_limit > 1:
             raise ValueError(f"growth_limit must be > 1, got {growth_limit}")
+        if not (isinstance(refresh_every, int) and refresh_every >= 0):
+            raise ValueError(f"refresh_every must be an integer >= 0, got {refresh_every!r}")
         self.problem = problem
         self.dt = float(dt)
         self.quadrature = quadrature
         self.nodes, self.weights = QUADRATURES[quadrature].nodes_weights
         self.growth_limit = growth_limit
-        self.u = problem.create_vector()
-        self.v_prev = problem.create_vector()  # v^{n-1/2}
-        self.v_next = problem.create_vector()  # v^{n+1/2}
-        self._w = problem.create_vector()
-        self._f = problem.create_vector()
-        self._integral = problem.create_vector()
+        self.refresh_every = refresh_every
         self.t0 = 0.0
         self.n = 0
         self.force_evaluations = 0
         self.max_step_evaluations = 0
         self.budget = 0.0
 
+        self._state = StepState(problem, self.dt)
+
+    @property
+    def u(self) -> PETSc.Vec:
+        """u^n (with ghost dofs)."""
+        return self._state.u
+
+    @property
+    def v_prev(self) -> PETSc.Vec:
+        """v^{n-1/2} (with ghost dofs)."""
+        return self._state.v_prev
+
+    @property
+    def v_next(self) -> PETSc.Vec:
+        """v^{n+1/2} (with ghost dofs)."""
+        return self._state.v_next
+
     @property
     def t(self) -> float:
         return self.t0 + self.n * self.dt
 
     def initialise(self, u0: PETSc.Vec, v0: PETSc.Vec, t0: float = 0.0) -> Diagnostics:
-        """Start from u^0, v^0: v^{-1/2} = v^0 - dt/2 M^-1 F(u^0), v^{1/2} = v^0 + dt/2 M^-1 F(u^0)."""
+        """Start from u^0, v^0: v^{-1/2} = v^0 - dt/2 M^-1 F(u^0), v^{1/2} = v^0 + dt/2 M^-1 F(u^0),
+        and the energy rows y^0 = Q u^0 by a true product."""
         self.t0, self.n = float(t0), 0
-        u0.copy(self.u)
-        for contact in getattr(self.problem, "contacts", ()):
-            contact.prepare(self.u)
-        self.problem.force(self.u, self.t0, self._f)
+        f = self.problem.create_vector()
+        for contact in self.problem.contacts:
+            contact.prepare(u0)
+        self.problem.force(u0, self.t0, f)
         self.force_evaluations += 1
-        self._f.pointwiseMult(self._f, self.problem.inverse_mass)
+        f.pointwiseMult(f, self.problem.inverse_mass)
+        u0.copy(self.u)
         v0.copy(self.v_prev)
-        self.v_prev.axpy(-0.5 * self.dt, self._f)
+        self.v_prev.axpy(-0.5 * self.dt, f)
         v0.copy(self.v_next)
-        self.v_next.axpy(0.5 * self.dt, self._f)
-        diag = self.diagnostics()
+        self.v_next.axpy(0.5 * self.dt, f)
+        self._state.restart(self.t0)
+        diag = self._diagnostics()
         self.budget = diag.mechanical
         return diag
 
-    def force_integral(self, out: PETSc.Vec) -> PETSc.Vec:
-        """int_0^dt F(u^n + tau v^{n+1/2}, t_n + tau) dtau (eq. (35b)).
+    def step(self) -> Diagnostics:
+        """Advance one step (eq. (35a)-(35b)) and return the diagnostics at the new time."""
+        refresh = self.refresh_every > 0 and (self.n + 1) % self.refresh_every == 0
+        impulse = self.impulse()  # from u^n and v^{n+1/2}
+        if refresh:
+            self.u.axpy(self.dt, self.v_next)  # (35a) here: y^{n+1} from u^{n+1} by a true product
+        self._state.advance_rows(refresh)
+        self._state.update(impulse, advance=not refresh)  # (35a), (35b)
+        self.n += 1
+        diag = self._diagnostics()
+        self.check_stability(diag)
+        return diag
 
-        Gauss-Legendre rules evaluate the whole force at their nodes. The midpoint rule, with a
-        problem that has contact, integrates the smooth (affine) part at the midpoint and each
-        contact correction piecewise between its events (paper §4): exactly, so the
-        pseudo-energy is conserved through impacts. ``force_evaluations`` counts a step's
-        patch-only evaluations beyond the first as evaluations too. Every contact model is first
-        prepared for the step's free flight (``prepare``: e.g. the pair list), whatever the rule.
+    def impulse(self) -> PETSc.Vec | None:
+        """The part of int_0^dt F(u^n + tau v^{n+1/2}, t_n + tau) dtau (eq. (35b)) that ``step``
+        does not take from the energy rows: the load f - Q^T q(t) and the contact corrections
+        (None when both are zero). Gauss-Legendre rules evaluate them at their nodes (a
+        time-dependent load costs a Q^T product per node). The midpoint rule, with a problem
+        that has contact, integrates each contact correction piecewise between its events
+        (paper §4): exactly, so the pseudo-energy is conserved through impacts.
+        ``force_evaluations`` counts the quadrature nodes (the affine part is evaluated there
+        through y) and a step's patch-only evaluations beyond the first as evaluations too.
+        Every contact model is first prepared for the step's free flight (``prepare``: e.g. the
+        pair list), whatever the rule.
         """
-        out.set(0.0)
-        contacts = getattr(self.problem, "contacts", ())
+        contacts = self.problem.contacts
         for contact in contacts:
             contact.prepare(self.u, self.v_next, self.dt)
         split = bool(contacts) and self.quadrature == "midpoint"
-        evaluations = 0
-        for x, w in zip(self.nodes, self.weights):
-            tau = x * self.dt
-            self.u.copy(self._w)
-            self._w.axpy(tau, self.v_next)
-            self.problem.force(self._w, self.t + tau, self._f, contact=not split)
-            evaluations += 1
-            out.axpy(w * self.dt, self._f)
-        if split:
-            for contact in contacts:
+        evaluations = len(self.nodes)
+        load = self._state.load
+        if self.problem.time_dependent:
+            out = self._state.impulse
+            out.set(0.0)
+            for x, w in zip(self.nodes, self.weights):
+                out.axpy(w * self.dt, self.problem.load(self.t + x * self.dt))
+        elif contacts:
+            out = self._state.impulse
+            if load is None:
+                out.set(0.0)
+            else:
+                load.copy(out)
+        else:
+            out = load
+        for contact in contacts:
+            if split:
                 evaluations += max(contact.force_integral(self.u, self.v_next, self.dt, out) - 1, 0)
+            else:
+                up, vp = contact.patch_values(self.u), contact.patch_values(self.v_next)
+                for x, w in zip(self.nodes, self.weights):
+                    contact.add(contact.force_correction(up + x * self.dt * vp), out, scale=w * self.dt)
         self.force_evaluations += evaluations
         self.max_step_evaluations = max(self.max_step_evaluations, evaluations)
         return out
 
-    def step(self) -> Diagnostics:
-        """Advance one step (eq. (35a)-(35b)) and return the diagnostics at the new time."""
-        self.force_integral(self._integral)
-        self.u.axpy(self.dt, self.v_next)  # (35a)
-        self._integral.pointwiseMult(self._integral, self.problem.inverse_mass)
-        self.v_prev.axpy(2.0, self._integral)  # (35b): v_prev becomes v^{n+3/2}
-        self.v_prev, self.v_next = self.v_next, self.v_prev
-        self.n += 1
-        diag = self.diagnostics()
-        self.check_stability(diag)
-        return diag
+    def _diagnostics(self) -> Diagnostics:
+        """Diagnostics at t_n from the sums of the step's kernels and of the contact models'
+        energy changes (each process's part), reduced together by one Allreduce."""
+        sums = self._state.sums
+        for c in self.problem.contacts:
+            de, ds = c.energy_correction(c.patch_values(self.u))
+            sums[CONTACT_S] += de
+            sums[CONTACT_J] += ds
+        s = self._state.reduce(self.t)
+        elastic = 0.5 * (self.dt**2 * s[ROWS_S] + s[LIFT_S]) + s[CONTACT_S]
+        stabilisation = 0.5 * (self.dt**2 * s[ROWS_J] + s[LIFT_J]) + s[CONTACT_J]
+        external = -s[EXTERNAL]
+        return Diagnostics(step=self.n, t=self.t, kinetic=s[KINETIC], elastic=elastic, stabilisation=stabilisation,
+                           external=external, pseudo_kinetic=s[PSEUDO],
+                           pseudo_energy=s[PSEUDO] + elastic + stabilisation + external)
+
+    def energy_rows(self) -> np.ndarray:
+        """The homogeneous energy rows Q u^n (free bodies' mean translations removed) that the
+        recurrence carries, the process's rows of Q (a copy): the energies are 1/2 |rows + q|^2."""
+        return self.dt * self._state.y
 
     def diagnostics(self) -> Diagnostics:
-        """Energies at t_n, reduced over all processes."""
+        """Energies at t_n recomputed from u^n by true products (``problem.energies``), reduced
+        over all processes: a check of the values ``step`` returns, not used by it."""
         e = self.problem.energies(self.u, self.t)
         M = self.problem.mass
-        self.v_prev.copy(self._w)
-        self._w.axpy(1.0, self.v_next)
-        self._w.scale(0.5)
-        self._f.pointwiseMult(self._w, M)
-        kinetic = 0.5 * self._f.dot(self._w)
-        self._f.pointwiseMult(self.v_prev, M)
-        pseudo_kinetic = 0.5 * self._f.dot(self.v_next)
+        w, m = self.problem.create_vector(), self.problem.create_vector()
+        self.v_prev.copy(w)
+        w.axpy(1.0, self.v_next)
+        w.scale(0.5)
+        m.pointwiseMult(w, M)
+        kinetic = 0.5 * m.dot(w)
+        m.pointwiseMult(self.v_prev, M)
+        pseudo_kinetic = 0.5 * m.dot(self.v_next)
         return Diagnostics(
             step=self.n,
             t=self.t,
@@ -215,11 +301,41 @@ class MEMM:
         suggested = self.suggested_dt()
         raise InstabilityError(
             f"MEMM is unstable at step {diag.step} (t = {diag.t:.6g}, dt = {self.dt:.6g}): {reason}. "
-            f"Reduce the time step, e.g. dt = {suggested:.4g} (half the stability limit "
-            f"2/sqrt(lambda_max(M^-1 K)) of the elastic operator)",
+            f"Reduce the time step, e.g. dt = {suggested:.4g} (half the stable time step of the elastic "
+            f"operator, 2/sqrt(lambda_max(M^-1 K)) with a guaranteed bound on lambda_max)",
             diag.step, diag.t, self.dt, suggested, reason,
         )
 
+    # -- checkpoint -------------------------------------------------------------------------------
+    def state(self) -> dict:
+        """The complete state of the stepper: the vectors u^n, v^{n-1/2}, v^{n+1/2} (this
+        process's entries), t0, n, dt, the stability budget, the evaluation counters, and
+        ``recurrence``, what the energy-row recurrence carries on this process (memm_state.py)."""
+        return {
+            "u": self.u, "v_prev": self.v_prev, "v_next": self.v_next,
+            "t0": self.t0, "n": self.n, "dt": self.dt, "budget": self.budget,
+            "force_evaluations": self.force_evaluations, "max_step_evaluations": self.max_step_evaluations,
+            "recurrence": self._state.recurrence(),
+        }
+
+    def restore(self, u: np.ndarray, v_prev: np.ndarray, v_next: np.ndarray, t0: float, n: int,
+                budget: float, force_evaluations: int, max_step_evaluations: int,
+                recurrence: dict[str, np.ndarray] | None = None) -> None:
+        """Continue from a ``state()``: this process's entries of the vectors (arrays), the
+        scalars as stored. With the ``recurrence`` of the same rows (same partition) the next
+        ``step`` computes bit for bit what it would have without the stop; without it the energy
+        rows are recomputed from u^n by a true product (as at a refresh: a difference in the last
+        bits)."""
+        self.u.array[:], self.v_prev.array[:], self.v_next.array[:] = u, v_prev, v_next
+        self.t0, self.n, self.budget = float(t0), int(n), float(budget)
+        self.force_evaluations, self.max_step_evaluations = int(force_evaluations), int(max_step_evaluations)
+        if recurrence is not None:
+            self._state.restore_recurrence(self.t, **recurrence)
+        else:
+            self._state.restart(self.t)
+            self._state.reduce(self.t)  # the free bodies' mean velocities of v^{n+1/2}
+
     def suggested_dt(self) -> float:
+        """Half the problem's ``stable_time_step()`` (a bound: cheap, and cached by the problem)."""
         stable = getattr(self.problem, "stable_time_step", None)
         return 0.5 * stable() if stable is not None else 0.5 * self.dt

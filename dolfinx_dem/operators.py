@@ -47,7 +47,9 @@ def mandel_stiffness(material: ElasticMaterial, d: int) -> np.ndarray:
 
 @dataclasses.dataclass(frozen=True)
 class EnergyOperators:
-    """Global sparse operators (rows for all cells/facets), built on every process."""
+    """Sparse operators of the cells and facets a process holds. ``DEMDiscretisation`` stacks
+    S, J and their parts into its ``rows`` and keeps only ``grad``, ``grad_dirichlet`` and
+    ``jump_facets`` here (the others are None there)."""
 
     grad: scipy.sparse.csr_matrix  # (n d d, N d): cell gradients G_c (homogeneous part)
     grad_dirichlet: scipy.sparse.csr_matrix  # (n d d, n_D d): G_c from the Dirichlet values g

@@ -57,6 +57,7 @@ a step that moves a facet by more than skin/2.
 from __future__ import annotations
 
 import dataclasses
+from collections.abc import Mapping
 import time
 
 import numpy as np
@@ -505,9 +506,12 @@ class PairContact:
         self.seconds += time.process_time() - start
         return elastic, stabilisation
 
-    def force_correction(self, up: np.ndarray) -> np.ndarray:
+    def force_correction(self, up: np.ndarray, active: np.ndarray | None = None) -> np.ndarray:
         """This process's part of F - F_free at the patch dofs: the terms of its own rows (the
-        exact negative gradient of the energy change, summed over processes)."""
+        exact negative gradient of the energy change, summed over processes). An imposed
+        ``active`` set belongs to statics, which this model does not support."""
+        if active is not None:
+            self._no_statics()
         L = self.listed
         ui, uj = self._pair_displacements(up)
         p = np.arange(len(L))
@@ -531,8 +535,14 @@ class PairContact:
         np.add.at(facet_force, L.j[p], -dc)
         return self._RT @ facet_force.ravel()
 
-    def add_force(self, u: PETSc.Vec, out: PETSc.Vec) -> None:
+    def add(self, correction: np.ndarray, out: PETSc.Vec, scale: float = 1.0) -> None:
+        """out += scale * correction (patch values; a reverse scatter, collective)."""
+        self.scatter.add(correction, out, scale)
+
+    def add_force(self, u: PETSc.Vec, out: PETSc.Vec, active: np.ndarray | None = None) -> None:
         """out += F - F_free at u (collective)."""
+        if active is not None:
+            self._no_statics()
         self.scatter.add(self.force_correction(self.patch_values(u)), out)
 
     # -- events --------------------------------------------------------------------------------
@@ -639,7 +649,7 @@ class PairContact:
 
     def penetration(self, up: np.ndarray) -> float:
         """Largest interpenetration (m, >= 0) of the contact-aware facet reconstructions: over the
-        own facets, the overlap-weighted mean over their partners of the reconstructed gap
+        own facets, the overlap-weighted mean over their touching partners (g < 0) of the reconstructed gap
         (x_f' + u_f' - x_f - u_f) . n, negated (collective). Eq. (31) makes it zero when each
         facet has one partner covering it exactly; partial overlaps (facets sliding against each
         other) leave a gap of the order of the cell gap times the uncovered fraction. The
@@ -649,7 +659,7 @@ class PairContact:
         g, w, _ = self._state(p, *self._pair_displacements(up))
         uf = self.free_displacements(up) + self._corrections_everywhere(up)
         worst = 0.0
-        pairs = np.flatnonzero(w > 0)
+        pairs = np.flatnonzero((w > 0) & (g < 0))  # the touching pairs: the others correct nothing
         if len(pairs):
             i, j = L.i[pairs], L.j[pairs]
             gap = np.einsum("pi,pi->p", F.centre[j] + uf[j] - F.centre[i] - uf[i], L.n[pairs])
@@ -716,8 +726,50 @@ class PairContact:
         if (c < 0).any():
             a = L.Q @ up + self._q
             mu = L.ZT @ (a + L.Z @ c)
-            total = float(np.where(g < 0, mu * w, 0.0).sum())
+            touching = g < 0  # summed alone: the sum must not depend on the pairs listed around them
+            total = float((mu * w)[touching].sum())
         return self.comm.allreduce(total, op=MPI.SUM)
+
+    # -- statics (ContactModel): not supported --------------------------------------------------
+    @staticmethod
+    def _no_statics():
+        raise NotImplementedError("statics with contact between bodies is not supported: its energy is not "
+                                  "piecewise quadratic (the overlaps make it quartic in u)")
+
+    def own_gaps(self, u: PETSc.Vec) -> np.ndarray:
+        self._no_statics()
+
+    def reactions(self, u: PETSc.Vec, active: np.ndarray | None = None) -> np.ndarray:
+        self._no_statics()
+
+    def add_hessian(self, H: PETSc.Mat, active: np.ndarray) -> None:
+        self._no_statics()
+
+    def gap_gradient(self, rank: int, k: int) -> PETSc.Vec:
+        self._no_statics()
+
+    def gap_gradient_dot(self, k: int, up: np.ndarray) -> float:
+        self._no_statics()
+
+    # -- checkpoint (ContactModel) ----------------------------------------------------------------
+    def checkpoint_state(self) -> dict[str, np.ndarray]:
+        """This process's counters and the keys of the pairs that used the scheme B rule. The
+        list itself is not stored: the restored model rebuilds it at the restored displacements,
+        which changes the forces by nothing (pairs that are listed but do not touch add exact
+        zeros, and the directions e_f depend on the reference geometry only)."""
+        return {"scheme_b_rule": self._scheme_b_rule,
+                "counters": np.array([self.rebuilds, self.evaluations], dtype=np.int64),
+                "seconds": np.array([self.seconds])}
+
+    def restore_state(self, state: Mapping[str, np.ndarray] | None) -> None:
+        """The list is rebuilt at the next ``prepare``; the counters and the scheme B pairs are
+        those of the same partition's ``checkpoint_state``, or start again (None: another
+        partition)."""
+        self._reference = np.full_like(self._reference, np.inf)
+        if state is not None:
+            self._scheme_b_rule = np.asarray(state["scheme_b_rule"], dtype=np.int64)
+            self.rebuilds, self.evaluations = (int(x) for x in state["counters"])
+            self.seconds = float(state["seconds"][0])
 
 
 def _gauss_points(mid: np.ndarray, length: np.ndarray):

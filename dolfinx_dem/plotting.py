@@ -122,39 +122,35 @@ def plot_cell_field(
     return str(filename)
 
 
-class Animation:
-    """An animated GIF of the deformed mesh coloured by a cell field, one frame per ``write``.
+def animate_solution(xdmf: str | pathlib.Path, filename: str | pathlib.Path, field: str, title: str,
+                     scale: float = 1.0) -> int:
+    """An animated GIF of the cell field ``field`` of a ``solution.xdmf`` (``io.SolutionWriter``)
+    on the mesh deformed by ``scale`` times its ``displacement``, one frame per output time.
 
-    Collective over ``mesh.comm`` (rank 0 renders off-screen); arguments as ``plot_cell_field``.
-    The colour scale of each frame spans that frame's values; the frame shows the time. Above
-    ``PICTURE_MAX_CELLS`` cells nothing is drawn and no file is written (``skipped``).
+    Serial: VTK reads the file (so a resumed run, whose output times refer to several meshes,
+    animates as one). The points move by the mean displacement of the cells around them, as in
+    ``plot_cell_field``; the colour scale of each frame spans that frame's values, the frame
+    shows the time. Returns the number of frames.
     """
-
-    def __init__(self, mesh, filename: str | pathlib.Path, title: str, scale: float = 1.0):
-        self.filename = pathlib.Path(filename)
-        _check_output(self.filename, scale)
-        self.mesh, self.title, self.scale = mesh, title, scale
-        self.frames = 0
-        self._plotter = None
-        self.skipped = too_large(mesh)
-        if mesh.comm.rank == 0 and not self.skipped:
-            self._plotter = pyvista.Plotter(off_screen=True, window_size=(800, 640))
-            self._plotter.open_gif(str(self.filename))
-
-    def write(self, t: float, displacement: np.ndarray, values: np.ndarray) -> None:
-        if self.skipped:
-            return
-        grid = _grid(self.mesh, displacement, values, self.title, self.scale)
-        if grid is not None:
-            _show(self._plotter, grid, self.title, self.mesh.geometry.dim, name="body", reset=self.frames == 0)
-            self._plotter.add_text(f"t = {t:.4g} s", position="upper_left", color="black", name="time")
-            self._plotter.write_frame()
-        self.frames += 1
-
-    def close(self) -> None:
-        if self._plotter is not None:
-            self._plotter.close()
-            self._plotter = None
+    filename = pathlib.Path(filename)
+    _check_output(filename, scale)
+    reader = pyvista.get_reader(str(xdmf))
+    plotter = pyvista.Plotter(off_screen=True, window_size=(800, 640))
+    plotter.open_gif(str(filename))
+    for k, t in enumerate(reader.time_values):
+        reader.set_active_time_value(t)
+        blocks = reader.read()
+        grid = pyvista.UnstructuredGrid(blocks[field])
+        grid.cell_data["u"] = blocks["displacement"].cell_data["displacement"]
+        u = grid.cell_data_to_point_data().point_data["u"].reshape(grid.n_points, -1)  # 1D: one component
+        grid.points[:, : u.shape[1]] += scale * u
+        grid.cell_data[title] = grid.cell_data[field]
+        flat = 2 if np.ptp(grid.points[:, 2]) == 0 else 3
+        _show(plotter, grid, title, flat, name="body", reset=k == 0)
+        plotter.add_text(f"t = {t:.4g} s", position="upper_left", color="black", name="time")
+        plotter.write_frame()
+    plotter.close()
+    return len(reader.time_values)
 
 
 def _check_output(filename: pathlib.Path, scale: float):

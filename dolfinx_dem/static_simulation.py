@@ -1,8 +1,10 @@
-"""Run a static scene (a ``statics`` table): DEM energy minimisation, or the DOLFINx P2 FEM
-reference for the Hertz disc (method ``fem-P2``). Same output contract as a dynamic run, with one
-state at t = 0, plus ``contact_pressure.csv`` (facet or boundary positions and pressures) and the
-summary keys ``contact_half_width``, ``contact_half_width_last``, ``top_vertical_displacement``,
-``max_contact_pressure``, ``h`` and ``iterations``.
+"""The static runner (a scene with a ``statics`` table): DEM energy minimisation, or the DOLFINx P2
+FEM reference for the Hertz disc (method ``fem-P2``). ``StaticRun(scene, comm)`` sets up and checks
+the model before any folder is touched, ``run(output)`` solves and writes. Same output contract
+as a dynamic run (status ``completed``), with one state at t = 0, plus ``contact_pressure.csv``
+(facet or boundary positions and pressures) and the summary keys ``contact_half_width``,
+``contact_half_width_last``, ``top_vertical_displacement``, ``max_contact_pressure``, ``h`` and
+``iterations``.
 
 The contact half-width ``contact_half_width`` is the moment measure of the contact pressure,
 ``a = 2 sqrt(integral (x - xc)^2 p / integral p)`` (``hertz.contact_half_width_moments``; exactly a
@@ -24,7 +26,8 @@ from collections.abc import Mapping
 import numpy as np
 from mpi4py import MPI
 
-from dolfinx_dem import hertz, io, plotting, scenes, simulation
+from dolfinx_dem import hertz, io, model, plotting, scenes
+from dolfinx_dem.run_statistics import peak_rss_mb
 from dolfinx_dem.statics import minimise_energy
 
 
@@ -60,25 +63,47 @@ def _write_pressure(path: pathlib.Path, comm, x: np.ndarray, p: np.ndarray):
         np.savetxt(path, np.c_[x[order], p[order]], delimiter=",", header=header, comments="", fmt="%.17g")
 
 
-def run_static(scene: Mapping, out, comm: MPI.Comm = MPI.COMM_WORLD) -> dict:
-    """Solve a static scene and write its outputs into ``out``; returns the summary."""
-    if scene["method"] == "fem-P2":
-        return run_fem_hertz(scene, out, comm)
-    wall = time.perf_counter()
-    with io.OutputDirectory(out, comm) as directory:
-        dem = simulation.build(scene, comm)
-        t_setup = comm.allreduce(time.perf_counter() - wall, op=MPI.MAX)
+class StaticRun:
+    """A static scene, set up (the DEM model, or the check of a ``fem-P2`` scene) and ready to run."""
+
+    def __init__(self, scene: Mapping, comm: MPI.Comm = MPI.COMM_WORLD):
+        self.wall = time.perf_counter()
+        self.scene, self.comm = scene, comm
+        if scene["method"] == "fem-P2":
+            mesh, loads = scene["mesh"], scene.get("loads", {})
+            force = loads.get("body_force", [0.0, 0.0])
+            if mesh["type"] != "disc" or abs(force[0]) > 0 or force[1] >= 0 or mesh["centre"] != [0.0, mesh["radius"]]:
+                raise scenes.SceneError("method 'fem-P2' solves the Hertz disc only: a 'disc' mesh centred at "
+                                        "(0, radius) on the plane y = 0 with a downward 'loads.body_force'")
+            self.dem = None
+            return
+        self.dem = dem = model.build(scene, comm)
+        self.top = model.Probes(dem, [{"name": "top", "point": _top_point(dem), "component": dem.d - 1}])
+        self.probes = model.Probes(dem, scene.get("probes", []))
+        self.setup_seconds = comm.allreduce(time.perf_counter() - self.wall, op=MPI.MAX)
+
+    def run(self, output: io.OutputDirectory) -> dict:
+        """Solve and write into ``output``; returns the summary."""
+        with output as directory:
+            summary = self._run_dem(directory) if self.dem is not None else self._run_fem(directory)
+            summary["wall_time_s"] = time.perf_counter() - self.wall
+            summary["peak_rss_mb"] = peak_rss_mb(self.comm)
+            io.write_summary(directory / "summary.json", self.comm, summary)
+        return summary
+
+    def _run_dem(self, directory) -> dict:
+        """DEM energy minimisation (statics.minimise_energy)."""
+        scene, comm, dem = self.scene, self.comm, self.dem
         options = scene["statics"]
         result = minimise_energy(dem, options.get("fixed_mean", ()), options.get("fixed_rotation", False),
                                  options.get("rtol", 1e-12))
         u = result.u
-        top = simulation.Probes(dem, [{"name": "top", "point": _top_point(dem), "component": dem.d - 1}])
-        probes = simulation.Probes(dem, scene.get("probes", []))
+        probes = self.probes
         energies = dem.energies(u, 0.0)
-        columns = simulation.SERIES_COLUMNS + simulation.contact_columns(dem) + tuple(probes.names)
+        columns = model.SERIES_COLUMNS + model.contact_columns(dem) + tuple(probes.names)
         with io.SeriesWriter(comm, directory / "series.csv", columns) as series:
             series.write([0.0, 0.0, energies["elastic"], energies["stabilisation"], energies["external"],
-                          energies["potential"], *simulation.contact_values(dem, u), *probes.values(u, 0.0)])
+                          energies["potential"], *model.contact_values(dem, u), *probes.values(u, 0.0)])
         with io.SolutionWriter(comm, directory, dem.mesh) as solution:
             solution.write(0.0, {"displacement": dem.function(u, "displacement"),
                                  "von_mises": dem.scalar_function(dem.von_mises(u, 0.0), "von_mises")})
@@ -86,12 +111,14 @@ def run_static(scene: Mapping, out, comm: MPI.Comm = MPI.COMM_WORLD) -> dict:
             "scene": scene["name"],
             "method": scene["method"],
             "analysis": "static",
+            "status": "completed",
             "n_cells": dem.geometry.num_cells_global,
             "h": scene["mesh"].get("h", float(dem.geometry.facet_diameters.max())),
             "iterations": result.iterations,
             "linear_iterations": result.linear_iterations,
             "gradient_norm_reduction": result.gradient_reduction,
-            "top_vertical_displacement": float(top.values(u, 0.0)[0]),
+            "top_vertical_displacement": float(self.top.values(u, 0.0)[0]),
+            "setup_time_s": self.setup_seconds,
             "processes": comm.size,
         }
         if dem.contact is not None:
@@ -99,11 +126,43 @@ def run_static(scene: Mapping, out, comm: MPI.Comm = MPI.COMM_WORLD) -> dict:
         plotting.plot_cell_field(dem.mesh, u.array_r.reshape(-1, dem.d), dem.von_mises(u, 0.0),
                                  directory / "final.png", "von Mises stress (Pa)",
                                  scene.get("output", {}).get("picture_scale", 1.0))
-        summary["wall_time_s"] = time.perf_counter() - wall
-        summary["setup_time_s"] = t_setup
-        summary["peak_rss_mb"] = simulation.peak_rss_mb(comm)
-        io.write_summary(directory / "summary.json", comm, summary)
-    return summary
+        return summary
+
+    def _run_fem(self, directory) -> dict:
+        """The DOLFINx P2 FEM reference (fem/hertz.py: Nitsche contact, Newton) for the hertz
+        scene: the paper's disc (centre (0, R), plane y = 0, vertical body force) with the
+        scene's radius, mesh size and material."""
+        from dolfinx_dem.fem.hertz import solve_hertz
+
+        scene, comm = self.scene, self.comm
+        mesh, m = scene["mesh"], scene["material"]
+        force = scene.get("loads", {}).get("body_force", [0.0, 0.0])
+        result = solve_hertz(comm, mesh["h"], degree=2, R=mesh["radius"], E=m["E"], nu=m["nu"], body_force=-force[1])
+        result.write_xdmf(directory / "solution.xdmf")
+        _write_pressure(directory / "contact_pressure.csv", comm, result.contact_x[:, None], result.traction_pressure)
+        summary = {
+            "scene": scene["name"],
+            "method": "fem-P2",
+            "analysis": "static",
+            "status": "completed",
+            "h": mesh["h"],
+            "n_dofs": result.num_dofs,
+            "iterations": result.iterations,
+            "residual": result.residual,
+            "contact_half_width": result.contact_half_width_moment,
+            "contact_half_width_fit": result.contact_half_width,
+            "contact_half_width_traction_moment": result.contact_half_width_moment_traction,
+            "contact_half_width_last": result.contact_half_width_last,
+            "top_vertical_displacement": result.top_vertical_displacement,
+            "max_contact_pressure": result.max_contact_pressure,
+            "fitted_max_pressure": result.fit_peak_pressure,
+            "contact_force": result.contact_force,
+            "processes": comm.size,
+        }
+        displacement, von_mises = _fem_cell_fields(result.u, m["E"], m["nu"])
+        plotting.plot_cell_field(result.mesh, displacement, von_mises, directory / "final.png",
+                                 "von Mises stress (Pa)", scene.get("output", {}).get("picture_scale", 1.0))
+        return summary
 
 
 def _contact_summary(dem, u, result, path: pathlib.Path) -> dict:
@@ -137,50 +196,6 @@ def _contact_summary(dem, u, result, path: pathlib.Path) -> dict:
 
     summary = io.call_on_root(comm, figures)
     summary["kink_facets"] = comm.allreduce(int(result.pinned.sum()), op=MPI.SUM)
-    return summary
-
-
-def run_fem_hertz(scene: Mapping, out, comm: MPI.Comm = MPI.COMM_WORLD) -> dict:
-    """The DOLFINx P2 FEM reference (fem/hertz.py: Nitsche contact, Newton) for the hertz scene.
-
-    It solves the paper's disc (centre (0, R), plane y = 0, vertical body force) with the scene's
-    radius, mesh size and material; other scenes are rejected."""
-    from dolfinx_dem.fem.hertz import solve_hertz
-
-    mesh, loads = scene["mesh"], scene.get("loads", {})
-    force = loads.get("body_force", [0.0, 0.0])
-    if mesh["type"] != "disc" or abs(force[0]) > 0 or force[1] >= 0 or mesh["centre"] != [0.0, mesh["radius"]]:
-        raise scenes.SceneError("method 'fem-P2' solves the Hertz disc only: a 'disc' mesh centred at "
-                                "(0, radius) on the plane y = 0 with a downward 'loads.body_force'")
-    wall = time.perf_counter()
-    with io.OutputDirectory(out, comm) as directory:
-        m = scene["material"]
-        result = solve_hertz(comm, mesh["h"], degree=2, R=mesh["radius"], E=m["E"], nu=m["nu"], body_force=-force[1])
-        result.write_xdmf(directory / "solution.xdmf")
-        _write_pressure(directory / "contact_pressure.csv", comm, result.contact_x[:, None], result.traction_pressure)
-        summary = {
-            "scene": scene["name"],
-            "method": "fem-P2",
-            "analysis": "static",
-            "h": mesh["h"],
-            "n_dofs": result.num_dofs,
-            "iterations": result.iterations,
-            "residual": result.residual,
-            "contact_half_width": result.contact_half_width_moment,
-            "contact_half_width_fit": result.contact_half_width,
-            "contact_half_width_traction_moment": result.contact_half_width_moment_traction,
-            "contact_half_width_last": result.contact_half_width_last,
-            "top_vertical_displacement": result.top_vertical_displacement,
-            "max_contact_pressure": result.max_contact_pressure,
-            "fitted_max_pressure": result.fit_peak_pressure,
-            "contact_force": result.contact_force,
-            "processes": comm.size,
-        }
-        displacement, von_mises = _fem_cell_fields(result.u, m["E"], m["nu"])
-        plotting.plot_cell_field(result.mesh, displacement, von_mises, directory / "final.png",
-                                 "von Mises stress (Pa)", scene.get("output", {}).get("picture_scale", 1.0))
-        summary["wall_time_s"] = time.perf_counter() - wall
-        io.write_summary(directory / "summary.json", comm, summary)
     return summary
 
 

@@ -1,5 +1,10 @@
 """Helpers shared by the test modules (tests/ is on sys.path under pytest's default import mode)."""
 
+import os
+import pathlib
+import sys
+import time
+
 import numpy as np
 
 from dolfinx_dem import _compat
@@ -30,3 +35,55 @@ def cell_vector(dem, field):
     u = dem.create_vector()
     u.array[:] = np.asarray(field(owned_centres(dem))).ravel()
     return u
+
+
+# --- running the command line in subprocesses -------------------------------------------------
+
+#: The dolfinx-dem script of this Python's environment.
+CLI = str(pathlib.Path(sys.executable).parent / "dolfinx-dem")
+
+
+def mpi_env(**extra):
+    """The environment for mpirun as root in a container, one thread per process."""
+    return dict(os.environ, OMPI_ALLOW_RUN_AS_ROOT="1", OMPI_ALLOW_RUN_AS_ROOT_CONFIRM="1",
+                OMPI_MCA_btl_vader_single_copy_mechanism="none", OMP_NUM_THREADS="1", **extra)
+
+
+def wait_for(predicate, timeout=240.0, what="the condition"):
+    """Poll ``predicate()`` every 0.1 s until it is true; fail after ``timeout`` seconds."""
+    end = time.monotonic() + timeout
+    while not predicate():
+        if time.monotonic() > end:
+            raise AssertionError(f"timed out after {timeout} s waiting for {what}")
+        time.sleep(0.1)
+
+
+def series_rows(path) -> int:
+    """Rows written to a series.csv so far (0 if it does not exist yet)."""
+    try:
+        with open(path) as f:
+            return max(sum(1 for _ in f) - 1, 0)
+    except FileNotFoundError:
+        return 0
+
+
+def read_solution(path, field="displacement"):
+    """Read every output time of a solution.xdmf back (VTK's XDMF reader, its own HDF5):
+    returns (times, [cell data of ``field`` at each time]); raises if the file cannot be read."""
+    from dolfinx_dem import _compat
+
+    pyvista = _compat.import_pyvista()
+    reader = pyvista.get_reader(str(path))
+    times, data = list(reader.time_values), []
+    for t in times:
+        reader.set_active_time_value(t)
+        data.append(np.asarray(reader.read()[field].cell_data[field]))
+    return times, data
+
+
+def children(pid: int) -> list[int]:
+    """Process ids of the children of ``pid`` (Linux /proc), e.g. the ranks mpirun started."""
+    out = []
+    for task in pathlib.Path(f"/proc/{pid}/task").iterdir():
+        out += [int(c) for c in (task / "children").read_text().split()]
+    return out

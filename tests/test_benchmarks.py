@@ -24,7 +24,14 @@ def test_bench_study_quick(tmp_path):
     assert 0 < data["contact_fraction_billiard"] < 1
     assert [r["processes"] for r in data["mpi"]["runs"]] == [1, 2]
     assert [r["cells"] for r in data["cost_growth"]] == [968, 4050]
-    assert data["bar_impact_dem_step"]["in_contact"]
+    bar = data["bar_impact_dem_step"]
+    assert bar["contact_in_contact"] and not bar["free_flight_in_contact"]
+    assert 0 < bar["clamped_no_contact_step_seconds"] < bar["contact_step_seconds"]
+    # the stable time step: a bound above SLEPc's lambda_max, in a fraction of the set-up
+    assert data["stable_time_step_fraction_of_setup"] > 0
+    assert all(1.0 < r["lambda_bound_over_lambda_max"] < 1.5 for r in data["bound_tightness"].values())
+    for case in data["residual_refresh"].values():
+        assert all(r["pseudo_energy_drift"] < 1e-12 for r in case["refresh_every"].values())
     pairs = data["bar_impact_work_precision"]["methods"]
     assert {"dem-A", "dem-B", "projection", "modified-mass", "newmark-penalty"} <= set(pairs)
     assert all(p["wall_time_s"] > 0 and p["tip_l2"] > 0 for rows in pairs.values() for p in rows)

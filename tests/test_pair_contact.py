@@ -89,16 +89,14 @@ def test_facet_corrections_are_the_reconstruction_the_energy_uses(scheme):
     the force derives from: a = Q u + q changed by Q_F (u_F - u_F^free) gives the energy change."""
     dem, facets = two_discs(h=0.02, scheme=scheme)
     dem.set_contact_boundary(facets)
-    c, ops = dem.pair_contact, dem.operators
+    c = dem.pair_contact
     rng = np.random.default_rng(5)
     u = cell_vector(dem, lambda x: approach(x, 0.013) + 1e-3 * rng.standard_normal(x.shape))
     c.prepare(u)
     up = c.patch_values(u)
     delta = c.facet_corrections(up)
     assert np.abs(delta).max() > 1e-4
-    import scipy.sparse
-    Q = scipy.sparse.vstack([ops.S, ops.J]).tocsr()
-    QF = scipy.sparse.vstack([ops.S_facet, ops.J_facet]).tocsr()
+    Q, QF = dem.rows.Q, dem.rows.QF
     dofs = (c.facets[:, None] * 2 + np.arange(2)).ravel()
     a = Q @ u.array
     change = QF[:, dofs] @ delta.ravel()
@@ -369,10 +367,7 @@ def blocks_on_a_floor(scheme="B"):
 
 def _corrections_of_both_models(dem, u):
     """delta_a of the rigid and of the pair contact on all energy rows (serial)."""
-    import scipy.sparse
-
-    ops = dem.operators
-    QF = scipy.sparse.vstack([ops.S_facet, ops.J_facet]).tocsr()
+    QF = dem.rows.QF
 
     def rows(facets, delta):
         return QF[:, (facets[:, None] * 2 + np.arange(2)).ravel()] @ delta.ravel()
@@ -398,10 +393,7 @@ def test_rigid_and_pair_contact_on_shared_rows_is_the_sum_of_both_energy_changes
     u = cell_vector(dem, lambda x: np.where(x[:, :1] < 0.205, [[0.008, -0.012]], [[-0.008, -0.0135]])
                     + 1e-4 * rng.standard_normal(x.shape))
     dem.pair_contact.prepare(u)
-    import scipy.sparse
-
-    ops = dem.operators
-    a = scipy.sparse.vstack([ops.S, ops.J]).tocsr() @ u.array
+    a = dem.rows.Q @ u.array
     d_rigid, d_pair = _corrections_of_both_models(dem, u)
     shared = (d_rigid != 0) & (d_pair != 0)
     assert shared.any()
@@ -566,3 +558,23 @@ def test_a_step_longer_than_the_skin_is_an_error():
     stepper.initialise(dem.create_vector(), cell_vector(dem, approach))
     with pytest.raises(RuntimeError, match="moves 3.000e-02 m in one step, more than half the Verlet skin"):
         stepper.step()
+
+
+def test_both_contact_models_satisfy_the_contact_model_protocol():
+    """RigidContact and PairContact offer every member of ``ContactModel`` with its parameters,
+    and statics gets a clear refusal from contact between bodies."""
+    import inspect
+
+    from dolfinx_dem.contact import ContactModel
+
+    dem = blocks_on_a_floor()
+    members = [m for m in vars(ContactModel) if not m.startswith("_") and callable(getattr(ContactModel, m))]
+    assert {"own_gaps", "gap_gradient", "reactions", "add_hessian", "checkpoint_state",
+            "restore_state", "prepare", "force_integral", "add"} <= set(members)
+    for model in dem.contacts:
+        assert isinstance(model, ContactModel)
+        for name in members:
+            expected = list(inspect.signature(getattr(ContactModel, name)).parameters)[1:]
+            assert list(inspect.signature(getattr(model, name)).parameters) == expected, (model, name)
+    with pytest.raises(NotImplementedError, match="statics with contact between bodies"):
+        dem.pair_contact.own_gaps(dem.create_vector())

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 from mpi4py import MPI
 
-from dolfinx_dem import io, scenes, simulation
+from dolfinx_dem import cli, io, model, scenes, simulation
 from dolfinx_dem.memm import InstabilityError
 
 CLI = str(pathlib.Path(sys.executable).parent / "dolfinx-dem")
@@ -36,10 +36,12 @@ def test_builtin_scene_output_contract(name, tempdir):
     assert summary["n_steps"] * summary["dt"] == pytest.approx(SHORT[name], rel=1e-12)
     if MPI.COMM_WORLD.rank == 0:
         assert not (out / io.INCOMPLETE).exists()
+        assert {p.name for p in out.iterdir()} <= set(io.RUN_FILES)  # what --overwrite removes
+        assert summary["status"] == "completed" and (out / "checkpoint" / "checkpoint.json").is_file()
         for f in ("summary.json", "series.csv", "solution.xdmf", "solution.h5", "final.png"):
             assert (out / f).stat().st_size > 0, f
         data = _series(out / "series.csv")
-        assert data.dtype.names[:6] == simulation.SERIES_COLUMNS
+        assert data.dtype.names[:6] == model.SERIES_COLUMNS
         assert len(data) == summary["n_steps"] + 1
         assert json.loads((out / "summary.json").read_text())["n_cells"] == summary["n_cells"]
         xdmf = (out / "solution.xdmf").read_text()
@@ -77,7 +79,7 @@ def test_two_processes_give_the_same_series(name, tmp_path):
         # from rest is ~0, the stabilisation energy of a smooth field tiny), probes to their own.
         # Momenta of colliding bodies are ~0 (rounding): compare them to 1 kg m/s, the order
         # of the momentum of each disc of two-disks.
-        scale = energy if column in simulation.SERIES_COLUMNS[1:] else np.abs(a[column]).max()
+        scale = energy if column in model.SERIES_COLUMNS[1:] else np.abs(a[column]).max()
         if column.startswith("momentum_"):
             scale = max(scale, 1.0)
         assert np.abs(a[column] - b[column]).max() <= 1e-12 * scale, column
@@ -123,7 +125,24 @@ def test_both_dt_and_cfl_or_an_unknown_boundary_are_rejected(tmp_path):
     scene = scenes.load("cantilever", {"dirichlet": [{"boundary": "nowhere"}]})
     with pytest.raises(scenes.SceneError, match="unknown boundary 'nowhere'"):
         simulation.run(scene, tmp_path / "b", MPI.COMM_SELF, quiet=True)
-    assert (tmp_path / "b" / io.INCOMPLETE).exists()
+    assert not (tmp_path / "b").exists()  # checked before the output folder is made
+
+
+def test_stable_step_from_the_bound_or_the_eigenvalue(tmp_path):
+    """time.cfl is a fraction of the bound's stable step by default, of SLEPc's with
+    time.stable_step = "eigenvalue" (for stability studies); the key needs time.cfl."""
+    dts = {}
+    for method in ("bound", "eigenvalue"):
+        scene = scenes.load("cantilever", {"time.end": 0.01, "time.stable_step": method})
+        dts[method] = simulation.run(scene, tmp_path / method, MPI.COMM_SELF, quiet=True)["dt"]
+    dem = simulation.build(scenes.load("cantilever"), MPI.COMM_SELF)
+    for method, dt in dts.items():
+        assert 0.45 * dem.stable_time_step(method) < dt <= 0.5 * dem.stable_time_step(method)
+    assert dts["bound"] < dts["eigenvalue"]
+    with pytest.raises(scenes.SceneError, match="'time.stable_step' goes with 'time.cfl'"):
+        scenes.load("bar-impact", {"time.stable_step": "eigenvalue"})
+    with pytest.raises(scenes.SceneError, match="one of bound, eigenvalue"):
+        scenes.load("cantilever", {"time.stable_step": "lanczos"})
 
 
 @pytest.mark.skip_in_parallel
@@ -164,3 +183,132 @@ def test_bad_obstacles_are_rejected_before_the_run(obstacle, message, tmp_path):
         scene = scenes.load("bar-impact", {"obstacles": [obstacle]})
         simulation.run(scene, tmp_path / "bad", MPI.COMM_SELF, quiet=True)
     assert not (tmp_path / "bad" / "series.csv").exists()
+
+
+# -- the output folder, and the command line around a run ----------------------------------------
+
+def _snapshot(folder: pathlib.Path) -> dict:
+    """Every file and folder below ``folder`` with its modification time and content."""
+    return {str(p.relative_to(folder)): (p.stat().st_mtime_ns, None if p.is_dir() else p.read_bytes())
+            for p in folder.rglob("*")}
+
+
+@pytest.mark.skip_in_parallel
+@pytest.mark.parametrize("overwrite", [False, True])
+@pytest.mark.parametrize("args, message", [
+    (["cantilever", "--set", "mesh.type=file", "--set", "mesh.path=nope.msh"], "mesh file nope.msh does not exist"),
+    (["cantilever", "--set", "mesh.type=file", "--set", "mesh.path={quad}", "--set", 'dirichlet=[{boundary="all"}]'],
+     "dolfinx_dem needs a simplex mesh (every cell with 3 vertices)"),
+    (["bar-impact", "--set", 'obstacles=[{point=[6.0], normal=[1.0], boundary="left"}]'],
+     "obstacle 0 intersects the body at t = 0"),
+    (["bar-wave", "--set", "dirichlet=[{boundary=9}]"], "boundary 9 (tag 9) has no facet"),
+    (["block", "--set", 'contact={boundary=["all"]}'],
+     "contact between deformable bodies is implemented in 2D, not 3D"),
+    (["cantilever", "--set", 'probes=[{name="p", point=[5.0, 0.0], component=1}]'],
+     "probe 'p' at [5.0, 0.0] is outside"),
+    (["bar-wave", "--set", 'initial.velocity=["0 * x / 0"]'], "is not finite at t = 0"),
+    (["two-disks", "--set", "mesh.h=0.05", "--set", 'contact.boundary=["y > 100"]'], "selects no facet"),
+])
+def test_input_errors_leave_the_output_folder_untouched(args, message, overwrite, tmp_path, monkeypatch, capsys):
+    """Before: a missing mesh file, a quadrilateral mesh, an overlapping obstacle, an empty tag
+    or contact between 3D bodies were found after the folder was made, and left INCOMPLETE and
+    error.txt (next to the old run's files). Now everything is checked first, even with
+    --overwrite, which only removes the old run once the new one is ready to start; without it
+    a folder of other files gets no INCOMPLETE either."""
+    import dolfinx.io
+    import dolfinx.mesh
+
+    monkeypatch.chdir(tmp_path)
+    quad = dolfinx.mesh.create_unit_square(MPI.COMM_SELF, 2, 2, dolfinx.mesh.CellType.quadrilateral)
+    with dolfinx.io.XDMFFile(MPI.COMM_SELF, str(tmp_path / "quad.xdmf"), "w") as f:
+        f.write_mesh(quad)
+    out = tmp_path / "out"
+    out.mkdir()
+    # with --overwrite, a folder holding another run; without, a folder holding no run
+    for name in ("summary.json", "series.csv", "animation.gif", "notes.txt") if overwrite else ("notes.txt",):
+        (out / name).write_text(f"an earlier {name}")
+    before = _snapshot(out)
+    args = [a.replace("{quad}", str(tmp_path / "quad.xdmf")) for a in args]
+    code = cli.main(["run", *args, "--out", str(out), "--quiet"] + (["--overwrite"] if overwrite else []))
+    assert code == 2
+    assert message in capsys.readouterr().err
+    assert _snapshot(out) == before
+
+
+@pytest.mark.skip_in_parallel
+def test_a_folder_holding_a_run_needs_overwrite_and_keeps_no_stale_file(tmp_path, capsys):
+    out = tmp_path / "out"
+    run = ["run", "bar-wave", "--set", "time.end=0.1", "--out", str(out), "--quiet"]
+    assert cli.main([*run, "--set", "output.animation=true", "--set", "output.every=5"]) == 0
+    assert (out / "animation.gif").stat().st_size > 0
+    assert cli.main(["show", str(out)]) == 0 and (out / "energies.png").exists()
+    capsys.readouterr()
+    before = _snapshot(out)
+    assert cli.main(run) == 2
+    assert (f"dolfinx-dem: error: output folder {out} holds another run (summary.json, series.csv, solution.xdmf, "
+            "solution.h5, final.png, animation.gif, energies.png, probes.png, checkpoint): pass --overwrite to "
+            f"replace it (its files are removed first), or `dolfinx-dem resume {out}` to continue it") \
+        in capsys.readouterr().err
+    assert _snapshot(out) == before
+    (out / "notes.txt").write_text("mine")
+    assert cli.main([*run, "--overwrite"]) == 0
+    assert sorted(p.name for p in out.iterdir()) == ["checkpoint", "final.png", "notes.txt", "series.csv",
+                                                     "solution.h5", "solution.xdmf", "summary.json"]
+
+
+@pytest.mark.skip_in_parallel
+def test_show_survives_a_closed_pipe_and_says_what_a_folder_holds(tmp_path):
+    """``dolfinx-dem show DIR | head -3`` crashed: PETSc caught SIGPIPE and aborted MPI."""
+    out = tmp_path / "out"
+    subprocess.run([CLI, "run", "bar-wave", "--set", "time.end=0.05", "--out", str(out), "--quiet"], check=True)
+    process = subprocess.Popen([CLI, "show", str(out)], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    process.stdout.close()  # the reader has gone before the first line
+    stderr = process.stderr.read()
+    assert process.wait(timeout=120) == 0, stderr
+    assert "PETSC ERROR" not in stderr and "Broken pipe" not in stderr and stderr == ""
+    assert (out / "energies.png").stat().st_size > 0 and (out / "probes.png").stat().st_size > 0
+    (out / "INCOMPLETE").write_text("")
+    (out / "error.txt").write_text("boom")
+    shown = subprocess.run([CLI, "show", str(out)], capture_output=True, text=True, check=True).stdout
+    assert shown.startswith(f"INCOMPLETE: this run did not finish (it failed, see {out / 'error.txt'})")
+
+
+@pytest.mark.skip_in_parallel
+def test_the_first_form_compilation_prints_no_compiler_output(tmp_path):
+    """A fresh JIT cache (HOME) makes DOLFINx compile its forms, which printed pages of
+    ``INFO:root:running build_ext`` and gcc command lines."""
+    env = dict(os.environ, HOME=str(tmp_path / "home"))
+    r = subprocess.run([CLI, "run", "bar-wave", "--set", "time.end=0.05", "--out", str(tmp_path / "out")],
+                       capture_output=True, text=True, env=env, check=True)
+    assert list((tmp_path / "home" / ".cache" / "fenics").iterdir())  # it did compile
+    assert r.stderr == "", r.stderr[:500]
+    assert r.stdout.startswith("bar-wave: 11 steps")  # time.cfl = 0.5 of the bound's stable step
+
+
+@pytest.mark.skip_in_parallel
+def test_a_moving_boundary_is_reported_as_not_conservative(tmp_path):
+    """Before: "pseudo-energy drift 1.00e+00", read as a failure."""
+    r = subprocess.run([CLI, "run", "bar-wave", "--set", "time.end=0.1", "--set",
+                        'dirichlet=[{boundary="left", value=["0.01 * t"], time_dependent=true}]', "--out",
+                        str(tmp_path / "out")], capture_output=True, text=True, check=True)
+    assert "not conservative (moving boundary data): pseudo-energy change" in r.stdout
+    assert json.loads((tmp_path / "out" / "summary.json").read_text())["conservative"] is False
+
+
+@pytest.mark.skip_in_parallel
+def test_an_error_on_one_process_only_aborts_instead_of_hanging(tmp_path):
+    script = tmp_path / "one.py"
+    script.write_text(
+        "import sys\nfrom mpi4py import MPI\nfrom dolfinx_dem import cli, simulation\n\n"
+        "def run(*args, **kwargs):\n"
+        "    if MPI.COMM_WORLD.rank == 1:\n"
+        "        raise ValueError('found on process 1 only')\n"
+        "    MPI.COMM_WORLD.barrier()  # the others wait in a collective\n\n"
+        "simulation.run = run\n"
+        f"sys.exit(cli.main(['run', 'bar-wave', '--out', '{tmp_path / 'out'}', '--quiet']))\n")
+    env = dict(os.environ, OMPI_ALLOW_RUN_AS_ROOT="1", OMPI_ALLOW_RUN_AS_ROOT_CONFIRM="1",
+               OMPI_MCA_btl_vader_single_copy_mechanism="none")
+    r = subprocess.run(["mpirun", "-n", "2", "--oversubscribe", sys.executable, str(script)], capture_output=True,
+                       text=True, env=env, timeout=300)
+    assert r.returncode != 0
+    assert "dolfinx-dem: error on process 1 only: found on process 1 only" in r.stderr

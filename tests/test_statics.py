@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 from mpi4py import MPI
 
-from dolfinx_dem import _compat, meshes, scenes, simulation
+from dolfinx_dem import _compat, io, meshes, scenes, simulation
 from dolfinx_dem.contact import HalfSpace
 from dolfinx_dem.discretisation import DEMDiscretisation
 from dolfinx_dem.material import ElasticMaterial
@@ -42,6 +42,10 @@ def test_bar_resting_on_an_obstacle(scheme):
 def test_hertz_disc_equilibrium_and_symmetry(tempdir):
     scene = scenes.load("hertz", {"mesh.h": 0.02})
     summary = simulation.run(scene, pathlib.Path(tempdir) / "hertz", MPI.COMM_WORLD)
+    assert summary["status"] == "completed"
+    assert {p.name for p in (pathlib.Path(tempdir) / "hertz").iterdir()} == {
+        "summary.json", "series.csv", "solution.xdmf", "solution.h5", "final.png", "contact_pressure.csv"}
+    assert {"summary.json", "contact_pressure.csv"} <= set(io.RUN_FILES)  # what --overwrite removes
     load = 2e6 * np.pi * 0.2**2
     assert summary["gradient_norm_reduction"] < 1e-8
     assert summary["contact_force"] == pytest.approx(load, rel=2e-3)

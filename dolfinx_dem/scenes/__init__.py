@@ -121,6 +121,7 @@ SCHEMA = {
         "end": lambda k, v, d: _number(k, v, positive=True),
         "dt": lambda k, v, d: _number(k, v, positive=True),
         "cfl": lambda k, v, d: _number(k, v, positive=True),
+        "stable_step": lambda k, v, d: _string(k, v, ("bound", "eigenvalue")),
         "quadrature": lambda k, v, d: _string(k, v, QUADRATURES),
     },
     "obstacles": [{
@@ -264,6 +265,8 @@ def _validate_time(scene):
         raise SceneError("scene key 'time.end' is missing")
     if ("dt" in time) == ("cfl" in time):
         raise SceneError("scene needs exactly one of 'time.dt' and 'time.cfl'")
+    if "stable_step" in time and "cfl" not in time:
+        raise SceneError("scene key 'time.stable_step' goes with 'time.cfl'")
     if "dt" in time and abs(time["end"] / time["dt"] - round(time["end"] / time["dt"])) > 1e-9 * time["end"] / time["dt"]:
         raise SceneError(f"scene key 'time.end' ({time['end']}) must be a multiple of 'time.dt' ({time['dt']})")
 
@@ -290,6 +293,12 @@ def load(name_or_path: str, overrides: Mapping[str, object] | None = None) -> di
         p = pathlib.Path(scene["mesh"].get("path", ""))
         if not p.is_absolute():
             scene["mesh"]["path"] = str((path.parent / p).resolve())
+    return override(scene, overrides)
+
+
+def override(scene: Mapping, overrides: Mapping[str, object] | None = None) -> dict:
+    """A validated copy of ``scene`` with the dotted-key ``overrides`` applied."""
+    scene = copy.deepcopy(dict(scene))
     for key, value in (overrides or {}).items():
         set_key(scene, key, value)
     return validate(scene)

@@ -1,0 +1,33 @@
+"""cffi builder of ``dolfinx_dem._kernels`` from ``kernels.c``; run at install (setup.py's
+``cffi_modules``), or by hand: ``python dolfinx_dem/_build_kernels.py`` (builds in place)."""
+
+import pathlib
+
+import cffi
+
+SOURCE = pathlib.Path(__file__).with_name("kernels.c")
+
+ffibuilder = cffi.FFI()
+ffibuilder.cdef(
+    """
+    void dem_gram_apply(int64_t n_rows, int64_t n_elastic, const int32_t *rowptr, const int32_t *cols,
+                        const double *vals, const double *x, const int32_t *shift_index,
+                        const double *shift, double *y, double alpha, double scale, double *z,
+                        double *sums);
+    void dem_lift_sums(int64_t n, const int32_t *rows, const double *q, const double *y, double scale,
+                       int64_t n_elastic, double *sums);
+    void dem_memm_update(int64_t n_blocks, int32_t bs, double dt, double c, double *z_old,
+                         const double *z_new, const double *load, const double *mass,
+                         const double *minv, double *u, const double *v_next, double *v_prev,
+                         const double *f, int32_t advance, const int32_t *body, double *momentum,
+                         double *sums);
+    void dem_gram_abs_rowsums(int64_t n_out, const int32_t *qt_ptr, const int32_t *qt_rows,
+                              const double *qt_vals, const int32_t *rowptr, const int32_t *cols,
+                              const double *vals, const double *x, double *r, double *acc);
+    """
+)
+# -O3, no -march=native: the module must run on any x86-64 the package is installed for.
+ffibuilder.set_source("dolfinx_dem._kernels", SOURCE.read_text(), extra_compile_args=["-O3", "-std=c99"])
+
+if __name__ == "__main__":
+    ffibuilder.compile(tmpdir=str(SOURCE.parent.parent), verbose=True)

@@ -1,0 +1,63 @@
+"""Deleting objects of an HDF5 file, with the HDF5 library that DOLFINx has loaded.
+
+A resumed run rewrites output times that a killed run may already have written after its last
+checkpoint; DOLFINx's XDMFFile cannot overwrite a dataset, so those are deleted first. h5py
+cannot do it here: its wheel brings a second HDF5 library whose symbols clash with DOLFINx's in
+one process ("h5py is running against HDF5 1.10.8 when it was built against ...", then
+``ValueError: Not a datatype``). So the few calls needed go through ctypes to the library
+already in the process (Debian: ``libhdf5_openmpi.so.103``), on one process, while no one
+else has the file open.
+"""
+
+from __future__ import annotations
+
+import ctypes
+import pathlib
+import re
+from collections.abc import Iterable
+
+_H5F_ACC_RDWR = 1
+_H5P_DEFAULT = 0
+_H5E_DEFAULT = 0
+
+
+def _library() -> ctypes.CDLL:
+    """The HDF5 library mapped into this process by DOLFINx."""
+    import dolfinx.io  # noqa: F401  (loads libhdf5)
+
+    with open("/proc/self/maps") as f:
+        paths = sorted({line.split()[-1] for line in f if re.search(r"/libhdf5(_\w+)?\.so[.\d]*$", line.strip())})
+    if not paths:
+        raise RuntimeError("the HDF5 library of DOLFINx is not loaded in this process")
+    lib = ctypes.CDLL(paths[0])
+    lib.H5Fopen.restype = ctypes.c_int64
+    lib.H5Fopen.argtypes = [ctypes.c_char_p, ctypes.c_uint, ctypes.c_int64]
+    lib.H5Fclose.argtypes = [ctypes.c_int64]
+    lib.H5Lexists.argtypes = [ctypes.c_int64, ctypes.c_char_p, ctypes.c_int64]
+    lib.H5Ldelete.argtypes = [ctypes.c_int64, ctypes.c_char_p, ctypes.c_int64]
+    lib.H5Eset_auto2.argtypes = [ctypes.c_int64, ctypes.c_void_p, ctypes.c_void_p]
+    return lib
+
+
+def delete(path: str | pathlib.Path, names: Iterable[str]) -> list[str]:
+    """Delete the objects ``names`` (absolute paths such as ``/Function/u/0_5``) from the HDF5
+    file ``path`` where they exist; returns the names deleted. Serial: call it on one process
+    with the file closed everywhere. The space is not reclaimed (the file does not shrink)."""
+    lib = _library()
+    lib.H5Eset_auto2(_H5E_DEFAULT, None, None)  # missing objects are expected: no error stack print
+    fid = lib.H5Fopen(str(path).encode(), _H5F_ACC_RDWR, _H5P_DEFAULT)
+    if fid < 0:
+        raise OSError(f"HDF5 cannot open {path} for writing")
+    deleted = []
+    try:
+        for name in names:
+            parts = name.strip("/").split("/")
+            # H5Lexists fails on a missing intermediate group: test the path from the root down.
+            if all(lib.H5Lexists(fid, ("/" + "/".join(parts[: k + 1])).encode(), _H5P_DEFAULT) > 0
+                   for k in range(len(parts))):
+                if lib.H5Ldelete(fid, ("/" + "/".join(parts)).encode(), _H5P_DEFAULT) < 0:
+                    raise OSError(f"HDF5 cannot delete {name} from {path}")
+                deleted.append(name)
+    finally:
+        lib.H5Fclose(fid)
+    return deleted

@@ -1,0 +1,175 @@
+/* Compiled kernels of dolfinx_dem (built at install by cffi, see _build_kernels.py).
+ *
+ * They work on process-local arrays only; communication (ghost updates, reductions) is the
+ * caller's. Q is held as a CSR matrix of its local rows with local column numbers (owned dofs
+ * first, then ghosts); "sums" arguments are accumulated into (+=), never overwritten.
+ */
+#include <math.h>
+#include <stdint.h>
+
+/* (Q x)_i for the CSR row [a, b): two accumulators break the dependency chain of the sum. */
+static inline double row_dot(int32_t a, int32_t b, const int32_t *restrict cols,
+                             const double *restrict vals, const double *restrict x)
+{
+  double t0 = 0.0, t1 = 0.0;
+  int32_t k = a;
+  for (; k + 1 < b; k += 2)
+  {
+    t0 += vals[k] * x[cols[k]];
+    t1 += vals[k + 1] * x[cols[k + 1]];
+  }
+  if (k < b)
+    t0 += vals[k] * x[cols[k]];
+  return t0 + t1;
+}
+
+/* The same for x_j - shift[shift_index[j]] (x shifted by a value per group of columns). */
+static inline double row_dot_shifted(int32_t a, int32_t b, const int32_t *restrict cols,
+                                     const double *restrict vals, const double *restrict x,
+                                     const int32_t *restrict shift_index,
+                                     const double *restrict shift)
+{
+  double t0 = 0.0, t1 = 0.0;
+  int32_t k = a;
+  for (; k + 1 < b; k += 2)
+  {
+    const int32_t j0 = cols[k], j1 = cols[k + 1];
+    t0 += vals[k] * (x[j0] - shift[shift_index[j0]]);
+    t1 += vals[k + 1] * (x[j1] - shift[shift_index[j1]]);
+  }
+  if (k < b)
+    t0 += vals[k] * (x[cols[k]] - shift[shift_index[cols[k]]]);
+  return t0 + t1;
+}
+
+/* K = Q^T Q applied in one pass over the rows of Q:
+ *   y_i <- alpha y_i + scale (Q x)_i   for every local row i,
+ *   z   += Q^T y                        (z has the local columns, ghosts included),
+ *   sums[0] += sum of y_i^2 over the rows i < n_elastic, sums[1] over the others.
+ * With shift_index (NULL: none), x_j - shift[shift_index[j]] replaces x_j (a translation per
+ * free body, removed for rounding: Q annihilates it). */
+void dem_gram_apply(int64_t n_rows, int64_t n_elastic, const int32_t *restrict rowptr,
+                    const int32_t *restrict cols, const double *restrict vals,
+                    const double *restrict x, const int32_t *restrict shift_index,
+                    const double *restrict shift, double *restrict y, double alpha, double scale,
+                    double *restrict z, double *restrict sums)
+{
+  double s0 = 0.0, s1 = 0.0;
+  for (int64_t i = 0; i < n_rows; ++i)
+  {
+    const int32_t a = rowptr[i], b = rowptr[i + 1];
+    const double qx = shift_index ? row_dot_shifted(a, b, cols, vals, x, shift_index, shift)
+                                  : row_dot(a, b, cols, vals, x);
+    const double yi = alpha * y[i] + scale * qx;
+    y[i] = yi;
+    for (int32_t k = a; k < b; ++k)
+      z[cols[k]] += vals[k] * yi;
+    if (i < n_elastic)
+      s0 += yi * yi;
+    else
+      s1 += yi * yi;
+  }
+  sums[0] += s0;
+  sums[1] += s1;
+}
+
+/* The sums of dem_gram_apply for the rows scale y + q instead of scale y, given the n entries of
+ * q that are not zero (local rows ``rows``, values ``q``): adds q (2 scale y_r + q) to sums[0]
+ * (rows r < n_elastic) or sums[1]. */
+void dem_lift_sums(int64_t n, const int32_t *restrict rows, const double *restrict q,
+                   const double *restrict y, double scale, int64_t n_elastic,
+                   double *restrict sums)
+{
+  for (int64_t k = 0; k < n; ++k)
+  {
+    const int32_t r = rows[k];
+    sums[r >= n_elastic] += q[k] * (2.0 * scale * y[r] + q[k]);
+  }
+}
+
+/* One MEMM step on n_blocks blocks of bs dofs (a cell's d components share its mass):
+ *   impulse_i = load_i - c (z_old_i + z_new_i)          (load may be NULL: zero)
+ *   v_new_i   = v_prev_i + 2 minv_b impulse_i             (35b)
+ *   u_i      += dt v_next_i                               (35a), if advance
+ *   sums[0]  += 1/2 m_b ((v_next_i + v_new_i) / 2)^2      kinetic energy of vbar
+ *   sums[1]  += 1/2 m_b v_next_i v_new_i                  pseudo-kinetic energy
+ *   sums[2]  += f_i u_i                                   (f may be NULL)
+ *   momentum[body_b bs + j] += m_b v_new_i                (body may be NULL)
+ * then v_prev_i <- v_new_i and z_old_i <- 0 (ready to accumulate the next Q^T y). */
+void dem_memm_update(int64_t n_blocks, int32_t bs, double dt, double c, double *restrict z_old,
+                     const double *restrict z_new, const double *restrict load,
+                     const double *restrict mass, const double *restrict minv,
+                     double *restrict u, const double *restrict v_next,
+                     double *restrict v_prev, const double *restrict f, int32_t advance,
+                     const int32_t *restrict body, double *restrict momentum,
+                     double *restrict sums)
+{
+  double kinetic = 0.0, pseudo = 0.0, external = 0.0;
+  for (int64_t b = 0; b < n_blocks; ++b)
+  {
+    const double two_minv = 2.0 * minv[b];
+    double k2 = 0.0, p2 = 0.0;
+    for (int32_t j = 0; j < bs; ++j)
+    {
+      const int64_t i = b * bs + j;
+      double impulse = -c * (z_old[i] + z_new[i]);
+      if (load)
+        impulse += load[i];
+      const double vn = v_next[i];
+      const double v_new = v_prev[i] + two_minv * impulse;
+      const double vbar = vn + v_new;
+      k2 += vbar * vbar;
+      p2 += vn * v_new;
+      if (advance)
+        u[i] += dt * vn;
+      if (f)
+        external += f[i] * u[i];
+      v_prev[i] = v_new;
+      z_old[i] = 0.0;
+      if (body)
+        momentum[body[b] * bs + j] += mass[b] * v_new;
+    }
+    kinetic += mass[b] * k2;
+    pseudo += mass[b] * p2;
+  }
+  sums[0] += 0.125 * kinetic;
+  sums[1] += 0.5 * pseudo;
+  sums[2] += external;
+}
+
+/* Row sums of |Q^T Q| weighted by x, for the stable time step bound:
+ *   r_i = sum_j |(Q^T Q)_ij| x_j   for each of the n_out rows i,
+ * where row i of Q^T is (qt_ptr, qt_rows, qt_vals) (rows k of Q with Q_ki != 0, as indices into
+ * the CSR (rowptr, cols, vals) of those rows of Q), whose column numbers index x. acc: zeros of
+ * the length of x (workspace, left zero). Row i of Q^T Q is accumulated in acc, then harvested:
+ * the first visit of a column j adds |acc_j| x_j and zeroes acc_j, so later visits add 0 (no
+ * branch, no list). Every sum follows the order of the CSR arrays: equal arrays, equal bits. */
+void dem_gram_abs_rowsums(int64_t n_out, const int32_t *restrict qt_ptr,
+                          const int32_t *restrict qt_rows, const double *restrict qt_vals,
+                          const int32_t *restrict rowptr, const int32_t *restrict cols,
+                          const double *restrict vals, const double *restrict x,
+                          double *restrict r, double *restrict acc)
+{
+  for (int64_t i = 0; i < n_out; ++i)
+  {
+    for (int32_t p = qt_ptr[i]; p < qt_ptr[i + 1]; ++p)
+    {
+      const int32_t k = qt_rows[p];
+      const double a = qt_vals[p];
+      for (int32_t q = rowptr[k]; q < rowptr[k + 1]; ++q)
+        acc[cols[q]] += a * vals[q];
+    }
+    double s = 0.0;
+    for (int32_t p = qt_ptr[i]; p < qt_ptr[i + 1]; ++p)
+    {
+      const int32_t k = qt_rows[p];
+      for (int32_t q = rowptr[k]; q < rowptr[k + 1]; ++q)
+      {
+        const int32_t j = cols[q];
+        s += fabs(acc[j]) * x[j];
+        acc[j] = 0.0;
+      }
+    }
+    r[i] = s;
+  }
+}

@@ -1,0 +1,223 @@
+"""The model of a scene (scene -> model -> runner -> writers): its mesh and boundaries, the DEM
+discretisation with its contact models, the probes, the initial state, and what a time series
+records of them (``SERIES_COLUMNS``, ``contact_columns``, ``contact_values``, ``momentum``).
+
+Everything here is built and checked before a run touches its output folder: a missing mesh file,
+a quadrilateral mesh, an empty boundary, an obstacle that overlaps the body, contact between 3D
+bodies or a probe outside the mesh is an error with the folder left as it was.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+
+import numpy as np
+from mpi4py import MPI
+
+from dolfinx_dem import _compat, meshes, scenes
+from dolfinx_dem.contact import HalfSpace
+from dolfinx_dem.discretisation import DEMDiscretisation, DirichletBC
+from dolfinx_dem.material import ElasticMaterial
+
+SERIES_COLUMNS = ("t", "kinetic", "elastic", "stabilisation", "external", "pseudo_energy")
+
+
+def create_mesh(comm: MPI.Comm, spec: Mapping):
+    """(mesh, facet_tags, names) from the scene's mesh table; ``names`` maps the boundary names
+    the mesh defines to facet tags: the side names of the generated interval, rectangle and box
+    meshes (``scenes.SIDES`` for the mesh's dimension), a gmsh file's physical-group names, none
+    for discs and XDMF files."""
+    kind = spec["type"]
+    required = {"interval": ("x0", "x1", "n"), "rectangle": ("p0", "p1", "n"), "box": ("p0", "p1", "n"),
+                "disc": ("centre", "radius", "h"), "discs": ("discs", "h"), "file": ("path",)}[kind]
+    for key in required:
+        if key not in spec:
+            raise scenes.SceneError(f"scene key 'mesh.{key}' is missing for a mesh of type {kind!r}")
+    names = {}
+    if kind == "interval":
+        mesh, _, tags = meshes.create_interval(comm, spec["n"], spec["x0"], spec["x1"])
+    elif kind == "rectangle":
+        mesh, _, tags = meshes.create_rectangle(comm, spec["p0"], spec["p1"], spec["n"], spec.get("diagonal", "right"))
+    elif kind == "box":
+        mesh, _, tags = meshes.create_box(comm, spec["p0"], spec["p1"], spec["n"])
+    elif kind == "disc":
+        mesh, _, tags = meshes.create_disc(comm, spec["centre"], spec["radius"], spec["h"])
+    elif kind == "discs":
+        if ("frame" in spec) != ("frame_width" in spec):
+            raise scenes.SceneError("scene keys 'mesh.frame' and 'mesh.frame_width' go together")
+        frame = (spec["frame"][:2], spec["frame"][2:], spec["frame_width"]) if "frame" in spec else None
+        try:
+            mesh, _, tags = meshes.create_discs(comm, [(c[:2], c[2]) for c in spec["discs"]], spec["h"], frame)
+        except ValueError as err:
+            raise scenes.SceneError(f"scene table 'mesh': {err}") from None
+    else:
+        mesh, _, tags, names = meshes.read_mesh_named(comm, spec["path"])
+    if kind in ("interval", "rectangle", "box"):
+        names = {name: tag for name, tag in scenes.SIDES.items() if tag <= 2 * mesh.topology.dim}
+    return mesh, tags, names
+
+
+def _boundary_facets(mesh, tags, names, boundary, key="dirichlet.boundary") -> np.ndarray:
+    """Process-local boundary facets of a scene's ``boundary`` entry: "all", a condition on the
+    coordinates, an integer facet tag, or a name of ``names`` (see ``create_mesh``)."""
+    if boundary == "all":
+        return _compat.exterior_facets(mesh)
+    if isinstance(boundary, str) and any(op in boundary for op in "<>="):
+        # A condition on x, y, z that every vertex of the boundary facet satisfies.
+        d = mesh.topology.dim
+        facets = _compat.locate_boundary_facets(
+            mesh, lambda x: np.asarray(scenes.evaluate_condition(boundary, x[:d], key), dtype=bool))
+        if mesh.comm.allreduce(len(facets), op=MPI.SUM) == 0:
+            raise scenes.SceneError(f"scene key '{key}': boundary condition {boundary!r} selects no facet")
+        return facets
+    if isinstance(boundary, int):
+        tag = boundary
+    elif names.get(boundary) is not None:
+        tag = names[boundary]
+    else:
+        what = "ambiguous boundary (it names several facet groups of the mesh file)" if boundary in names \
+            else "unknown boundary"
+        known = f"one of this mesh's names: {', '.join(sorted(names))}" if names else \
+            "no name: this mesh defines none (side names belong to the interval, rectangle and box meshes)"
+        raise scenes.SceneError(
+            f"scene key '{key}': {what} {boundary!r} (use 'all', an integer facet tag, a condition "
+            f"such as 'y <= 0.2', or {known})")
+    if tags is None:
+        raise scenes.SceneError(f"the mesh has no facet tags, so boundary {boundary!r} cannot be found")
+    facets = tags.find(tag)
+    if mesh.comm.allreduce(len(facets), op=MPI.SUM) == 0:
+        raise scenes.SceneError(f"scene key '{key}': boundary {boundary!r} (tag {tag}) has no facet")
+    return facets
+
+
+def build(scene: Mapping, comm: MPI.Comm = MPI.COMM_WORLD) -> DEMDiscretisation:
+    """The DEM discretisation a scene describes."""
+    mesh, tags, names = create_mesh(comm, scene["mesh"])
+    scene = scenes.validate(scene, mesh.topology.dim)
+    m = scene["material"]
+    material = ElasticMaterial(E=m["E"], nu=m["nu"], rho=m["rho"], plane=m.get("plane", "strain"), eta=m.get("eta"))
+    dirichlet = []
+    for i, bc in enumerate(scene.get("dirichlet", [])):
+        value = bc.get("value", [0.0] * mesh.topology.dim)
+        field = (lambda x, t, v=value, key=f"dirichlet[{i}].value": scenes.evaluate_field(v, x, t, key)) \
+            if isinstance(value[0], str) else value
+        facets = _boundary_facets(mesh, tags, names, bc.get("boundary", "all"), f"dirichlet[{i}].boundary")
+        dirichlet.append(DirichletBC(facets, field, bc.get("time_dependent", False)))
+    loads = scene.get("loads", {})
+    body_force = loads.get("body_force")
+    if "gravity" in loads:
+        body_force = [material.rho * g for g in loads["gravity"]]
+    scheme = scene["method"].split("-")[1]
+    dem = DEMDiscretisation(mesh, material, scheme, dirichlet, body_force)
+    obstacles = [HalfSpace(ob["point"], ob["normal"],
+                           _boundary_facets(mesh, tags, names, ob["boundary"], f"obstacles[{k}].boundary"),
+                           ob.get("tolerance", 0.0)) for k, ob in enumerate(scene.get("obstacles", []))]
+    dem.set_obstacles(obstacles)
+    if "contact" in scene:
+        c = scene["contact"]
+        facets = np.unique(np.concatenate([_boundary_facets(mesh, tags, names, b, f"contact.boundary[{k}]")
+                                           for k, b in enumerate(c["boundary"])]))
+        dem.set_contact_boundary(facets, c.get("self_contact", False), c.get("tolerance", 0.0))
+    return dem
+
+
+def contact_columns(dem: DEMDiscretisation) -> tuple[str, ...]:
+    """Series columns of contact: with obstacles the smallest gap and the mean contact pressure
+    (and in 1D the position of the contact end); with contact between bodies the summed normal
+    contact force, the largest interpenetration of the contact reconstructions, and the total
+    linear momentum."""
+    columns = ()
+    if dem.contact is not None:
+        columns += ("contact_gap", "contact_pressure") + (("tip_position",) if dem.d == 1 else ())
+    if dem.pair_contact is not None:
+        columns += ("contact_force", "penetration") + tuple(f"momentum_{'xyz'[i]}" for i in range(dem.d))
+    return columns
+
+
+def contact_values(dem: DEMDiscretisation, u) -> list[float]:
+    """The values of ``contact_columns`` but the momenta, for the displacement ``u``."""
+    values = []
+    if dem.contact is not None:
+        c = dem.contact
+        up = c.patch_values(u)
+        gap, x = c.contact_gap(up)
+        values += [gap, c.contact_pressure(up)]
+        if dem.d == 1:
+            values.append(x)
+    if dem.pair_contact is not None:
+        c = dem.pair_contact
+        up = c.patch_values(u)
+        values += [c.contact_force(up), c.penetration(up)]
+    return values
+
+
+def momentum(dem: DEMDiscretisation, stepper) -> np.ndarray:
+    """Total linear momentum sum_c m_c vbar_c at t_n (vbar the mean of the two half-step
+    velocities of the ``memm.MEMM`` stepper), shape (d,)."""
+    m = dem.mass.array_r.reshape(-1, dem.d)
+    v = 0.5 * (stepper.v_prev.array_r + stepper.v_next.array_r).reshape(-1, dem.d)
+    return dem.comm.allreduce((m * v).sum(axis=0), op=MPI.SUM)
+
+
+class Probes:
+    """Displacement components at points: the P1 reconstruction (eq. (10)) of the cell whose
+    barycentre is nearest to the point (ties broken by position, so any process count agrees)."""
+
+    def __init__(self, dem: DEMDiscretisation, specs):
+        self.dem = dem
+        self.names = [p["name"] for p in specs]
+        if len(set(self.names)) != len(self.names) or set(self.names) & set(SERIES_COLUMNS):
+            raise scenes.SceneError(f"probe names must be unique and differ from {SERIES_COLUMNS}: {self.names}")
+        if any(p["component"] >= dem.d for p in specs):
+            raise scenes.SceneError(f"probe components must be < {dem.d}")
+        points = np.zeros((len(specs), 3))
+        for i, p in enumerate(specs):
+            points[i, : dem.d] = p["point"]
+        inside = _compat.colliding_cells(dem.mesh, points) >= 0 if specs else np.empty(0, bool)
+        inside = dem.comm.allreduce(inside.astype(int), op=MPI.SUM) > 0 if specs else inside
+        if not np.all(inside):
+            bad = int(np.argmin(inside))
+            raise scenes.SceneError(f"probe {self.names[bad]!r} at {specs[bad]['point']} is outside the mesh")
+        # Each process proposes its nearest owned cell (key: distance rounded relative to the
+        # mesh extent, then position); the smallest key over the processes wins.
+        xc = dem.geometry.cell_centres[: dem.n_owned]
+        lo, hi = xc.min(axis=0, initial=np.inf), xc.max(axis=0, initial=-np.inf)
+        dem.comm.Allreduce(MPI.IN_PLACE, lo, op=MPI.MIN)
+        dem.comm.Allreduce(MPI.IN_PLACE, hi, op=MPI.MAX)
+        keys = np.full((len(specs), 1 + dem.d), np.inf)
+        cells = np.zeros(len(specs), dtype=np.int64)
+        for i, x in enumerate(points[:, : dem.d]):
+            if dem.n_owned:
+                dist = np.round(np.linalg.norm(xc - x, axis=1) / (hi - lo).max(), 9)
+                cells[i] = np.lexsort([xc[:, k] for k in reversed(range(dem.d))] + [dist])[0]
+                keys[i] = [dist[cells[i]], *xc[cells[i]]]
+        proposals = np.array(dem.comm.allgather(keys))  # (P, n_probes, 1 + d): a few numbers per probe
+        winner = np.array([np.lexsort(proposals[:, i].T[::-1])[0] for i in range(len(specs))], dtype=int)
+        self.mine = np.flatnonzero(winner == dem.comm.rank)
+        self.blocks = cells[self.mine]
+        self.offsets = points[self.mine, : dem.d] - xc[self.blocks]
+        self.components = np.array([specs[i]["component"] for i in self.mine], dtype=int)
+
+    def values(self, u, t) -> np.ndarray:
+        out = np.zeros(len(self.names))
+        if len(self.names) == 0:
+            return out
+        G = self.dem.gradient(u, t)  # collective
+        if len(self.mine):
+            uc = u.array_r.reshape(-1, self.dem.d)[self.blocks]
+            rec = uc + np.einsum("nij,nj->ni", G[self.blocks], self.offsets)
+            out[self.mine] = rec[np.arange(len(self.mine)), self.components]
+        return self.dem.comm.allreduce(out, op=MPI.SUM)
+
+
+def initial_state(dem: DEMDiscretisation, scene: Mapping):
+    """(u0, v0): the scene's initial displacement and velocity at the owned cell barycentres
+    (zero by default), as PETSc vectors; a field that is not finite is a ``SceneError``."""
+    xc = dem.geometry.cell_centres[: dem.n_owned].T
+    u0, v0 = dem.create_vector(), dem.create_vector()
+    initial = scene.get("initial", {})
+    if "displacement" in initial:
+        u0.array[:] = scenes.evaluate_field(initial["displacement"], xc, 0.0, "initial.displacement").T.ravel()
+    if "velocity" in initial:
+        v0.array[:] = scenes.evaluate_field(initial["velocity"], xc, 0.0, "initial.velocity").T.ravel()
+    return u0, v0

@@ -1,0 +1,101 @@
+"""Running figures of a dynamic run for ``summary.json``, kept in its checkpoints: the energy
+balance (``Statistics``) and, with contact between bodies, first contact, penetration and
+momentum (``PairContactStatistics``)."""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import resource
+from collections.abc import Mapping
+
+import numpy as np
+from mpi4py import MPI
+
+from dolfinx_dem import model
+from dolfinx_dem.discretisation import DEMDiscretisation
+from dolfinx_dem.memm import MEMM
+
+
+@dataclasses.dataclass
+class Statistics:
+    """Running figures of a run for ``summary.json`` (kept in checkpoints)."""
+
+    pseudo_energy_initial: float
+    drift: float = 0.0  # max |E^n - E^0|
+    scale: float = 0.0  # max mechanical energy
+    min_gap: float = math.inf  # smallest obstacle gap
+    stepping_seconds: float = 0.0  # processor time in MEMM steps, without outputs
+    wall_seconds: float = 0.0  # wall time of the earlier parts of a resumed run
+    resumes: int = 0
+
+    @property
+    def relative_drift(self) -> float:
+        return self.drift / self.scale if self.scale > 0 else 0.0
+
+
+class PairContactStatistics:
+    """Running figures of contact between bodies for ``summary.json``: first contact time (when
+    the first gap closed, interpolated within the step), largest interpenetration, momentum
+    change, and the processor time spent in contact work."""
+
+    def __init__(self, dem: DEMDiscretisation, stepper: MEMM):
+        self.first_contact, self.penetration = None, 0.0
+        self.p0 = model.momentum(dem, stepper) if dem.pair_contact is not None else None
+        m = dem.mass.array_r.reshape(-1, dem.d)
+        v = 0.5 * (stepper.v_prev.array_r + stepper.v_next.array_r).reshape(-1, dem.d)
+        self.p_scale = dem.comm.allreduce(float(np.abs(m * v).sum()), op=MPI.SUM)
+        self.momentum_change = 0.0
+        self.free = dem.comm.allreduce(len(dem.reconstruction.dirichlet_facets), op=MPI.SUM) == 0
+        self.dem = dem
+        self.previous = None  # the displacement of the previous step, until the first contact
+
+    def record(self, t: float, stepper: MEMM, values: Mapping[str, float]):
+        """Update with the state at ``t`` and its series ``values`` (``contact_columns``)."""
+        contact = self.dem.pair_contact
+        if self.first_contact is None:
+            if self.previous is not None:
+                tau = contact.touch_time(self.previous, stepper.u, stepper.dt)
+                if tau is not None:
+                    self.first_contact = t - stepper.dt + tau
+            self.previous = stepper.u.copy()
+        self.penetration = max(self.penetration, values["penetration"])
+        if self.free:
+            p = np.array([values[f"momentum_{'xyz'[i]}"] for i in range(self.dem.d)])
+            self.momentum_change = max(self.momentum_change, np.abs(p - self.p0).max())
+
+    def state(self) -> dict:
+        """The running figures for a checkpoint (``previous`` follows from the state u)."""
+        return {"first_contact": self.first_contact, "penetration": self.penetration,
+                "momentum_change": self.momentum_change, "p_scale": self.p_scale,
+                "p0": None if self.p0 is None else [float(x) for x in self.p0]}
+
+    def restore(self, state: Mapping, stepper: MEMM):
+        self.first_contact, self.penetration = state["first_contact"], state["penetration"]
+        self.momentum_change, self.p_scale = state["momentum_change"], state["p_scale"]
+        self.p0 = None if state["p0"] is None else np.array(state["p0"])
+        if self.dem.pair_contact is not None and self.first_contact is None:
+            self.previous = stepper.u.copy()
+
+    def summary(self, stepping_seconds: float) -> dict:
+        c = self.dem.pair_contact
+        comm = self.dem.comm
+        out = {
+            "contact_candidate_facets": c.num_facets,
+            "contact_pairs_listed": c.num_pairs,
+            "contact_list_rebuilds": c.rebuilds,
+            "contact_pairs_scheme_b_rule": c.scheme_b_pairs,
+            "first_contact_time": self.first_contact,
+            "max_penetration": self.penetration,
+            "contact_seconds": comm.allreduce(c.seconds, op=MPI.MAX),
+            "contact_fraction": comm.allreduce(c.seconds / stepping_seconds if stepping_seconds > 0 else 0.0,
+                                               op=MPI.MAX),
+        }
+        if self.free:
+            out["momentum_rel_change"] = self.momentum_change / self.p_scale if self.p_scale > 0 else 0.0
+        return out
+
+
+def peak_rss_mb(comm: MPI.Comm) -> float:
+    """The largest peak resident memory of the processes so far (MB)."""
+    return comm.allreduce(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0, op=MPI.MAX)

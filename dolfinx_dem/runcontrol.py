@@ -1,0 +1,153 @@
+"""Controls of a running time integration: stopping it cleanly on a signal, and its progress line.
+
+Interrupts. SIGINT (Ctrl-C) and SIGTERM (``kill``, a batch system's time limit) only set a flag;
+the run loop calls ``Interrupts.requested()`` after every step, all processes stop after the same
+step, close their outputs and write a checkpoint. The handlers are installed when the run starts,
+after every import (``import gmsh`` resets SIGINT to the default action, which kills the process
+at once), and put back at every check if something replaced them. A second signal while the
+first is being handled stops the process at once (KeyboardInterrupt).
+
+Cost. Looking at the handlers costs ~15 us (``signal.getsignal``, measured), and agreeing under
+MPI one reduction (~100 us measured on 2 oversubscribed processes): 11-25 % of a 0.3-4 ms step
+of bar-impact or cantilever when done at every step. So the check runs every ``k`` steps, ``k``
+adapted so that checks are about ``interval`` (0.05 s) of wall time apart; under MPI, rank 0's
+``k`` and the flags travel in one non-blocking reduction (``MPI_Iallreduce``, completed at the
+next check), so that every process checks at the same steps and stops at the same one, with
+no synchronisation added. A run stops within about 0.1 s of the signal (two check intervals
+under MPI), or after the step in progress if one step takes longer.
+
+Open MPI's ``mpirun`` does not pass SIGINT or SIGTERM on: on either it sends the processes
+SIGCONT, SIGTERM after ``odls_base_sigkill_timeout`` seconds (default 1) and SIGKILL as long after
+that (measured); the run must reach its checkpoint within that time (raise it with
+``OMPI_MCA_odls_base_sigkill_timeout=30`` for large runs), and ``mpirun`` itself then exits with
+1 whatever the processes return. A signal sent to the processes themselves (``kill`` of their
+ids, a batch system such as SLURM) gives every process and ``mpirun`` the exit status 130.
+"""
+
+from __future__ import annotations
+
+import signal
+import sys
+import time
+
+import numpy as np
+from mpi4py import MPI
+
+#: The signals that stop a run cleanly.
+SIGNALS = (signal.SIGINT, signal.SIGTERM)
+
+
+class Interrupts:
+    """Context manager: SIGINT and SIGTERM request a clean stop (see the module docstring).
+    ``interval``: wall time (s) between checks of the flag."""
+
+    def __init__(self, comm: MPI.Comm, interval: float = 0.05):
+        self.comm, self.interval = comm, interval
+        self.signal = 0  # the first signal received, 0 if none
+        self._previous = {}
+        self._send, self._result = np.zeros(2, dtype=np.int64), np.zeros(2, dtype=np.int64)
+        self._request = None
+        self._every, self._count, self._last = 1, 0, time.perf_counter()
+
+    def _handle(self, signum, frame):
+        if self.signal:
+            self._restore()
+            raise KeyboardInterrupt(f"second signal {signal.Signals(signum).name}: stopped at once")
+        self.signal = signum
+
+    def _install(self):
+        for s in SIGNALS:
+            if signal.getsignal(s) != self._handle:
+                signal.signal(s, self._handle)
+
+    def _restore(self):
+        for s, handler in self._previous.items():
+            signal.signal(s, handler)
+        self._previous = {}
+
+    def __enter__(self) -> Interrupts:
+        self._previous = {s: signal.getsignal(s) for s in SIGNALS}
+        self._install()
+        self._last = time.perf_counter()
+        return self
+
+    def __exit__(self, exc_type, exc, tb) -> bool:
+        if self._request is not None:
+            self._request.Wait()
+            self._request = None
+        self._restore()
+        return False
+
+    @property
+    def name(self) -> str:
+        """Name of the signal received (e.g. "SIGINT"), "" if none."""
+        return signal.Signals(self.signal).name if self.signal else ""
+
+    def requested(self) -> bool:
+        """Collective: whether to stop now (call it after every step). Every process gets the
+        same answer at the same call: True at the first check after the signal in serial, at
+        the second under MPI (the reduction started at one check completes at the next)."""
+        self._count += 1
+        if self._count < self._every:
+            return False
+        self._count = 0
+        self._install()
+        now = time.perf_counter()
+        # steps to the next check, for checks `interval` apart (at most doubling each time)
+        every = int(min(2 * self._every, max(1, self._every * self.interval / max(now - self._last, 1e-9))))
+        self._last = now
+        if self.comm.size == 1:
+            self._every = every
+            return bool(self.signal)
+        stop = False
+        if self._request is not None:
+            self._request.Wait()
+            stop, self._every = bool(self._result[0]), int(self._result[1])
+        self._send[:] = self.signal, every if self.comm.rank == 0 else 0
+        self._request = None if stop else self.comm.Iallreduce(self._send, self._result, op=MPI.MAX)
+        return stop
+
+
+class Progress:
+    """Rank 0 reports the step, t, the relative pseudo-energy drift and the time left on stderr.
+
+    On a terminal, in serial, one line rewritten at most every 0.5 s; otherwise (a log file, a
+    pipe, under ``mpirun``) a new line every ``interval`` seconds (10). ``quiet`` silences it.
+    ``first``: the step the run (re)starts from, for the estimate of the time left.
+    """
+
+    def __init__(self, comm: MPI.Comm, n_steps: int, quiet: bool, first: int = 0, interval: float = 10.0,
+                 stream=None):
+        self.stream = sys.stderr if stream is None else stream
+        self.enabled = comm.rank == 0 and not quiet
+        self.terminal = comm.size == 1 and self.stream.isatty()
+        self.interval = 0.5 if self.terminal else interval
+        self.n_steps, self.first = n_steps, first
+        self.start = self.last = time.perf_counter()
+        self._open_line = False  # a terminal line without its newline yet
+
+    def update(self, n: int, t: float, drift: float, conservative: bool = True):
+        """Report step ``n`` at time ``t`` if it is time to; ``drift``: relative pseudo-energy
+        drift (a change, not a drift, when the scene is not ``conservative``)."""
+        if not self.enabled:
+            return
+        now = time.perf_counter()
+        if now - self.last < self.interval and not (self.terminal and n == self.n_steps):
+            return
+        self.last = now
+        left = (now - self.start) / max(n - self.first, 1) * (self.n_steps - n)
+        energy = f"energy drift {drift:.2e}" if conservative else f"energy change {drift:.2e} (not conservative)"
+        line = f"step {n}/{self.n_steps}  t = {t:.5g}  {energy}  {left:.0f} s left"
+        if self.terminal:
+            self._open_line = n != self.n_steps
+            self.stream.write(f"\r{line} " + ("" if self._open_line else "\n"))
+        else:
+            self.stream.write(line + "\n")
+        self.stream.flush()
+
+    def finish(self):
+        """End a rewritten terminal line that did not reach the last step."""
+        if self._open_line:
+            self.stream.write("\n")
+            self.stream.flush()
+            self._open_line = False
