@@ -163,21 +163,97 @@ def petsc_vec(function):
 
 
 def mesh_from_gmsh_model(model, comm, gdim: int):
-    """(mesh, cell_tags, facet_tags) from a gmsh model held on rank 0."""
-    return dolfinx.io.gmshio.model_to_mesh(model, comm, 0, gdim=gdim)
+    """(mesh, cell_tags, facet_tags) from a gmsh model held on rank 0, distributed by
+    ``partitioner()`` (DOLFINx 0.5's model_to_mesh takes no partitioner: its create_mesh is
+    given one for the call)."""
+    import functools
+
+    gmshio = dolfinx.io.gmshio
+    default = gmshio.create_mesh
+    gmshio.create_mesh = functools.partial(default, partitioner=partitioner())
+    try:
+        return gmshio.model_to_mesh(model, comm, 0, gdim=gdim)
+    finally:
+        gmshio.create_mesh = default
+
+
+def read_xdmf_mesh(xdmf, name: str = "mesh"):
+    """The mesh ``name`` of an open ``dolfinx.io.XDMFFile``, distributed by ``partitioner()``,
+    ghost mode ``shared_facet`` (XDMFFile.read_mesh of DOLFINx 0.5 with another partitioner)."""
+    import ufl
+
+    cell_shape, cell_degree = xdmf.read_cell_type(name)
+    cells = xdmf.read_topology_data(name)
+    x = xdmf.read_geometry_data(name)
+    cell = ufl.Cell(cell_shape.name, geometric_dimension=x.shape[1])
+    cmap = dolfinx.cpp.fem.CoordinateElement(cell_shape, cell_degree)
+    mesh = dolfinx.cpp.mesh.create_mesh(xdmf.comm(), dolfinx.cpp.graph.AdjacencyList_int64(cells), cmap, x,
+                                        dolfinx.mesh.GhostMode.shared_facet, partitioner())
+    mesh.name = name
+    return dolfinx.mesh.Mesh(mesh, ufl.Mesh(ufl.VectorElement("Lagrange", cell, cell_degree)))
 
 
 def create_simplex_mesh(comm, x: np.ndarray, cells: np.ndarray):
     """An affine simplex mesh from vertex coordinates ``x`` (n, d) and cells ``cells`` (m, d+1)
-    given on rank 0 (other ranks pass empty arrays), distributed by DOLFINx's default
-    partitioner, with ghost mode ``shared_facet``."""
+    given on rank 0 (other ranks pass empty arrays), distributed by ``partitioner()``, with
+    ghost mode ``shared_facet``."""
     import ufl
 
     d = x.shape[1]
     cell = {1: ufl.interval, 2: ufl.triangle, 3: ufl.tetrahedron}[d]
     domain = ufl.Mesh(ufl.VectorElement("Lagrange", cell, 1))
     return dolfinx.mesh.create_mesh(comm, np.asarray(cells, dtype=np.int64), np.asarray(x, dtype=np.float64),
-                                    domain, ghost_mode=dolfinx.mesh.GhostMode.shared_facet)
+                                    domain, ghost_mode=dolfinx.mesh.GhostMode.shared_facet, partitioner=partitioner())
+
+
+def partitioner():
+    """The cell partitioner of every mesh dolfinx_dem makes or reads: deterministic.
+
+    DOLFINx 0.5's default (SCOTCH, the only graph partitioner of Debian's build) returns a
+    different partition from call to call (measured: 1 in 8 calls on 2 processes for the same
+    80 x 8 rectangle, and every call on one process); the sums of a run then differ in their
+    last bits from run to run, and a run resumed from a checkpoint could not continue bit for
+    bit. Here the cells' dual graph is gathered on rank 0 (a one-off step of mesh creation, as
+    DOLFINx's own built-in meshes are generated on rank 0: 8 bytes per graph edge), numbered by
+    the Gibbs-Poole-Stockmeyer ordering (``reorder_gps``, bandwidth-reducing: consecutive cells
+    are neighbours), and cut into P consecutive blocks of equal size: slabs across the mesh,
+    the same for the same mesh and P. With ghosting (``shared_facet``) a cell is also sent to
+    the owners of its facet neighbours."""
+    return dolfinx.cpp.mesh.create_cell_partitioner(_partition_dual_graph)
+
+
+def _partition_dual_graph(comm, nparts: int, graph, ghosting: bool):
+    """The graph partition function of ``partitioner``: destinations of the local nodes of the
+    distributed dual graph ``graph`` (global node numbers, in rank order)."""
+    parts = comm.gather((np.asarray(graph.array), np.asarray(graph.offsets)), root=0)
+    split = None
+    if comm.rank == 0:
+        sizes = np.array([len(o) - 1 for _, o in parts])
+        starts = np.cumsum([0] + [len(a) for a, _ in parts[:-1]])
+        links = np.concatenate([a for a, _ in parts]).astype(np.int32)
+        offsets = np.concatenate([[0]] + [o[1:] + s for (_, o), s in zip(parts, starts)]).astype(np.int32)
+        n = int(sizes.sum())
+        position = np.asarray(dolfinx.cpp.graph.reorder_gps(dolfinx.cpp.graph.AdjacencyList_int32(links, offsets)))
+        owner = (position.astype(np.int64) * nparts // max(n, 1)).astype(np.int32)
+        if ghosting:
+            # owner first, then the other owners of the facet neighbours, ascending
+            node = np.repeat(np.arange(n), np.diff(offsets))
+            pairs = np.unique(np.stack([node, owner[links]], axis=1), axis=0)
+            pairs = pairs[pairs[:, 1] != owner[pairs[:, 0]]]
+            count = 1 + np.bincount(pairs[:, 0], minlength=n)
+            dest_offsets = np.concatenate([[0], np.cumsum(count)]).astype(np.int32)
+            dest = np.empty(dest_offsets[-1], dtype=np.int32)
+            dest[dest_offsets[:-1]] = owner
+            slot = dest_offsets[pairs[:, 0]] + 1 + (np.arange(len(pairs)) - np.searchsorted(pairs[:, 0], pairs[:, 0]))
+            dest[slot] = pairs[:, 1]
+        else:
+            dest, dest_offsets = owner, np.arange(n + 1, dtype=np.int32)
+        bounds = np.cumsum(np.concatenate([[0], sizes]))
+        split = [(dest[dest_offsets[a]:dest_offsets[b]], dest_offsets[a:b + 1] - dest_offsets[a])
+                 for a, b in zip(bounds[:-1], bounds[1:])]
+    dest, dest_offsets = comm.scatter(split, root=0)
+    return dolfinx.cpp.graph.AdjacencyList_int32(np.ascontiguousarray(dest, dtype=np.int32),
+                                                 np.ascontiguousarray(dest_offsets, dtype=np.int32))
 
 
 def locate_boundary_facets(mesh, marker) -> np.ndarray:

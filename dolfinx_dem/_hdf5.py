@@ -36,7 +36,64 @@ def _library() -> ctypes.CDLL:
     lib.H5Lexists.argtypes = [ctypes.c_int64, ctypes.c_char_p, ctypes.c_int64]
     lib.H5Ldelete.argtypes = [ctypes.c_int64, ctypes.c_char_p, ctypes.c_int64]
     lib.H5Eset_auto2.argtypes = [ctypes.c_int64, ctypes.c_void_p, ctypes.c_void_p]
+    lib.H5Gopen2.restype = ctypes.c_int64
+    lib.H5Gopen2.argtypes = [ctypes.c_int64, ctypes.c_char_p, ctypes.c_int64]
+    lib.H5Gclose.argtypes = [ctypes.c_int64]
+    lib.H5Gget_info.argtypes = [ctypes.c_int64, ctypes.POINTER(_GroupInfo)]
+    lib.H5Lget_name_by_idx.restype = ctypes.c_ssize_t
+    lib.H5Lget_name_by_idx.argtypes = [ctypes.c_int64, ctypes.c_char_p, ctypes.c_int, ctypes.c_int, ctypes.c_uint64,
+                                       ctypes.c_char_p, ctypes.c_size_t, ctypes.c_int64]
     return lib
+
+
+class _GroupInfo(ctypes.Structure):
+    """H5G_info_t."""
+
+    _fields_ = [("storage_type", ctypes.c_int), ("nlinks", ctypes.c_uint64), ("max_corder", ctypes.c_int64),
+                ("mounted", ctypes.c_uint)]
+
+
+def _members(lib, fid: int, group: str) -> list[str]:
+    """Absolute names of the links in ``group`` of the open file ``fid`` (none if it is missing)."""
+    parts = group.strip("/").split("/")
+    if not all(lib.H5Lexists(fid, ("/" + "/".join(parts[: k + 1])).encode(), _H5P_DEFAULT) > 0
+               for k in range(len(parts))):
+        return []
+    gid = lib.H5Gopen2(fid, group.encode(), _H5P_DEFAULT)
+    if gid < 0:
+        return []
+    try:
+        info = _GroupInfo()
+        if lib.H5Gget_info(gid, ctypes.byref(info)) < 0:
+            raise OSError(f"HDF5 cannot read group {group}")
+        names = []
+        for k in range(info.nlinks):
+            buffer = ctypes.create_string_buffer(1024)
+            n = lib.H5Lget_name_by_idx(gid, b".", 0, 0, k, buffer, len(buffer), _H5P_DEFAULT)  # by name, ascending
+            if n < 0 or n >= len(buffer):
+                raise OSError(f"HDF5 cannot read the names in group {group}")
+            names.append(f"/{group.strip('/')}/{buffer.value.decode()}")
+        return names
+    finally:
+        lib.H5Gclose(gid)
+
+
+def delete_unlisted(path: str | pathlib.Path, groups: Iterable[str], keep: Iterable[str]) -> list[str]:
+    """Delete from the HDF5 file ``path`` every object in ``groups`` that is not in ``keep``
+    (absolute names); returns the names deleted. A run killed between writing a dataset and
+    listing it in its XDMF file leaves such an object behind, and DOLFINx could not write it
+    again. Serial, with the file closed everywhere."""
+    lib = _library()
+    lib.H5Eset_auto2(_H5E_DEFAULT, None, None)
+    fid = lib.H5Fopen(str(path).encode(), _H5F_ACC_RDWR, _H5P_DEFAULT)
+    if fid < 0:
+        raise OSError(f"HDF5 cannot open {path} for writing")
+    keep = set(keep)
+    try:
+        unlisted = [name for group in sorted(set(groups)) for name in _members(lib, fid, group) if name not in keep]
+    finally:
+        lib.H5Fclose(fid)
+    return delete(path, unlisted)
 
 
 def delete(path: str | pathlib.Path, names: Iterable[str]) -> list[str]:

@@ -409,15 +409,23 @@ def truncate_xdmf(path: pathlib.Path, writes: int) -> str:
     ElementTree.register_namespace("xi", "http://www.w3.org/2001/XInclude")
     tree = ElementTree.parse(path)
     domain = tree.getroot().find("Domain")
-    stale = []
+    stale, kept = [], []
     for collection in domain.findall("Grid[@GridType='Collection']"):
-        for grid in collection.findall("Grid")[writes:]:
-            stale += [item.text.strip().split(":", 1)[1] for item in grid.iter("DataItem")]
-            collection.remove(grid)
+        for k, grid in enumerate(collection.findall("Grid")):
+            names = [item.text.strip().split(":", 1)[1] for item in grid.iter("DataItem")]
+            if k < writes:
+                kept += names
+            else:
+                stale += names
+                collection.remove(grid)
     meshes = {grid.get("Name") for grid in domain.findall("Grid[@GridType='Uniform']")}
     name = next(f"mesh_{k}" for k in range(1, len(meshes) + 2) if f"mesh_{k}" not in meshes)
     tree.write(path, xml_declaration=True, encoding="utf-8")
     from dolfinx_dem import _hdf5
 
-    _hdf5.delete(path.with_suffix(".h5"), stale + [f"/Mesh/{name}"])
+    h5 = path.with_suffix(".h5")
+    _hdf5.delete(h5, stale + [f"/Mesh/{name}"])
+    # datasets a killed run wrote after its last XDMF entry: in the fields' groups, not listed
+    groups = {n.rsplit("/", 1)[0] for n in kept + stale if n.startswith("/Function/")}
+    _hdf5.delete_unlisted(h5, groups, kept)
     return name

@@ -83,7 +83,7 @@ def create_interval(comm: MPI.Comm, n: int, x0: float, x1: float):
     (n,) = _check_counts(n, 1)
     p0, p1 = _check_corners([x0], [x1], 1)
     mesh = dolfinx.mesh.create_interval(
-        comm, n, [p0[0], p1[0]], ghost_mode=dolfinx.mesh.GhostMode.shared_facet
+        comm, n, [p0[0], p1[0]], ghost_mode=dolfinx.mesh.GhostMode.shared_facet, partitioner=_compat.partitioner()
     )
     return mesh, None, _tag_sides(mesh, p0, p1)
 
@@ -110,6 +110,7 @@ def create_rectangle(
         counts,
         cell_type=dolfinx.mesh.CellType.triangle,
         ghost_mode=dolfinx.mesh.GhostMode.shared_facet,
+        partitioner=_compat.partitioner(),
         diagonal=getattr(dolfinx.mesh.DiagonalType, diagonal),
     )
     return mesh, None, _tag_sides(mesh, a, b)
@@ -125,6 +126,7 @@ def create_box(comm: MPI.Comm, p0: Sequence[float], p1: Sequence[float], n: Sequ
         counts,
         cell_type=dolfinx.mesh.CellType.tetrahedron,
         ghost_mode=dolfinx.mesh.GhostMode.shared_facet,
+        partitioner=_compat.partitioner(),
     )
     return mesh, None, _tag_sides(mesh, a, b)
 
@@ -280,7 +282,7 @@ def read_mesh_named(comm: MPI.Comm, path: str | pathlib.Path):
     if "mesh" not in names:
         raise ValueError(f"{path} holds no mesh named 'mesh' (grids: {sorted(names)})")
     with dolfinx.io.XDMFFile(comm, str(path), "r") as xdmf:
-        mesh = xdmf.read_mesh(name="mesh", ghost_mode=dolfinx.mesh.GhostMode.shared_facet)
+        mesh = _compat.read_xdmf_mesh(xdmf, "mesh")
         tdim = mesh.topology.dim
         mesh.topology.create_connectivity(tdim - 1, tdim)
         cell_tags = xdmf.read_meshtags(mesh, "cell_tags") if "cell_tags" in names else None

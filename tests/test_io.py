@@ -275,3 +275,27 @@ def test_solution_writer_resumes_after_a_later_write_and_flushes_every_write(tmp
             reader.set_active_time_value(t)
             data = reader.read()["displacement"].cell_data["displacement"]
             assert data.shape[0] == 32 and np.all(data[:, :2] == value)
+
+
+@pytest.mark.skip_in_parallel
+def test_a_dataset_written_after_the_last_xdmf_entry_does_not_block_a_resume(tmp_path):
+    """A run killed between writing a time's HDF5 dataset and listing it in the XDMF file leaves
+    the dataset unlisted; the resumed writer deletes it, or DOLFINx could not write that time
+    again ("Failed to create HDF5 global dataset")."""
+    from xml.etree import ElementTree
+
+    comm = MPI.COMM_SELF
+    mesh, _, _ = meshes.create_rectangle(comm, [0, 0], [1, 1], [2, 2])
+    u = dolfinx.fem.Function(_compat.create_vector_space(mesh, "DG", 0))
+    with io.SolutionWriter(comm, tmp_path, mesh) as writer:
+        for t in (0.0, 0.5):
+            writer.write(t, {"displacement": u})
+    path = tmp_path / "solution.xdmf"
+    tree = ElementTree.parse(path)  # as if killed after the dataset of t = 0.5, before its entry
+    collection = tree.getroot().find("Domain").find("Grid[@GridType='Collection']")
+    collection.remove(collection.findall("Grid")[-1])
+    tree.write(path, xml_declaration=True, encoding="utf-8")
+    with io.SolutionWriter(comm, tmp_path, mesh, resume_writes=1) as writer:
+        u.x.array[:] = 2.0
+        writer.write(0.5, {"displacement": u})
+    assert xdmf_times(path) == {"displacement": [0.0, 0.5]}
