@@ -1,0 +1,249 @@
+"""Parallel scaling of the set-up, the memory and the contact work (issue 11).
+
+Each measurement is a child run under ``mpirun -n P`` that prints one JSON line:
+
+* ``scaling``: a 2D unit square of crossed triangles (4 n^2 cells) or a 3D unit cube (6 n^3
+  tetrahedra), clamped on x = 0, under gravity; set up (mesh, then ``DEMDiscretisation``), the
+  stable time step from the bound, then ``--steps`` MEMM steps. Reported: the wall times of
+  the mesh and of the set-up (slowest process), of the stable step, and per step (median), and
+  for every process its peak resident memory (``ru_maxrss``) and its resident memory before
+  the mesh (Python, DOLFINx, PETSc: the baseline).
+* ``pile``: 64 discs of radius 0.1 m in an 8 x 8 grid with 2 mm gaps, every boundary a contact
+  boundary, moving towards the centre (v = -0.5 (x - x_c) 1/s): after ~10 steps every disc
+  touches its neighbours (the first 0.04 s are not measured). The contact work per step is the processor time of
+  ``PairContact`` (detection, events, forces, energies) over the last ``--steps`` steps, the
+  largest over the processes (the one the others wait for).
+
+    .venv/bin/python benchmarks/bench_parallel.py [--quick] [--out docs/bench/parallel.json]
+
+The full run takes about 20 minutes and ~20 GB of memory (the 1e6-cell 3D scene on 2 processes);
+``--quick`` runs small sizes only. Results: docs/bench/parallel.json and docs/parallel.md.
+"""
+
+from __future__ import annotations
+
+import argparse
+import datetime
+import json
+import os
+import pathlib
+import resource
+import subprocess
+import sys
+import time
+
+ROOT = pathlib.Path(__file__).resolve().parents[1]
+MPI_ENV = {"OMPI_ALLOW_RUN_AS_ROOT": "1", "OMPI_ALLOW_RUN_AS_ROOT_CONFIRM": "1",
+           "OMPI_MCA_btl_vader_single_copy_mechanism": "none", "OMP_NUM_THREADS": "1"}
+
+
+def _rss_mb() -> float:
+    with open("/proc/self/status") as f:
+        for line in f:
+            if line.startswith("VmRSS"):
+                return int(line.split()[1]) / 1024.0
+    return 0.0
+
+
+def _available_mb() -> float:
+    with open("/proc/meminfo") as f:
+        for line in f:
+            if line.startswith("MemAvailable"):
+                return int(line.split()[1]) / 1024.0
+    return 0.0
+
+
+def _peak_mb() -> float:
+    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
+
+
+def child_scaling(cells: int, dim: int, steps: int) -> dict:
+    import numpy as np
+    from mpi4py import MPI
+
+    from dolfinx_dem import meshes
+    from dolfinx_dem.discretisation import DEMDiscretisation, DirichletBC
+    from dolfinx_dem.material import ElasticMaterial
+    from dolfinx_dem.memm import MEMM
+
+    comm = MPI.COMM_WORLD
+    baseline = _rss_mb()
+    comm.barrier()
+    wall = time.perf_counter()
+    if dim == 2:
+        n = max(1, round((cells / 4) ** 0.5))
+        mesh, _, tags = meshes.create_rectangle(comm, [0, 0], [1, 1], [n, n], "crossed")
+    else:
+        n = max(1, round((cells / 6) ** (1 / 3)))
+        mesh, _, tags = meshes.create_box(comm, [0, 0, 0], [1, 1, 1], [n, n, n])
+    comm.barrier()
+    t_mesh = time.perf_counter() - wall
+    material = ElasticMaterial(E=1.0e4, nu=0.3, rho=1.0)
+    wall = time.perf_counter()
+    dem = DEMDiscretisation(mesh, material, "A", [DirichletBC(tags.find(meshes.XMIN), [0.0] * dim)],
+                            body_force=[0.0] * (dim - 1) + [-1.0])
+    t_setup = comm.allreduce(time.perf_counter() - wall, op=MPI.MAX)
+    wall = time.perf_counter()
+    dt = 0.5 * dem.stable_time_step()
+    t_stable = comm.allreduce(time.perf_counter() - wall, op=MPI.MAX)
+    memm = MEMM(dem, dt)
+    memm.initialise(dem.create_vector(), dem.create_vector())
+    times = []
+    for _ in range(steps):
+        comm.barrier()
+        wall = time.perf_counter()
+        memm.step()
+        times.append(comm.allreduce(time.perf_counter() - wall, op=MPI.MAX))
+    per_process = comm.gather({"peak_mb": _peak_mb(), "baseline_mb": baseline, "rss_mb": _rss_mb(),
+                               "owned_cells": dem.n_owned, "held_cells": dem.geometry.num_cells}, root=0)
+    return {"kind": "scaling", "dim": dim, "cells": dem.geometry.num_cells_global, "processes": comm.size,
+            "mesh_seconds": t_mesh, "setup_seconds": t_setup, "stable_step_seconds": t_stable,
+            "step_seconds_median": float(np.median(times)) if times else None, "steps": steps,
+            "per_process": per_process}
+
+
+def child_pile(h: float, steps: int) -> dict:
+    import numpy as np
+    from mpi4py import MPI
+
+    from dolfinx_dem import _compat, meshes
+    from dolfinx_dem.discretisation import DEMDiscretisation
+    from dolfinx_dem.material import ElasticMaterial
+    from dolfinx_dem.memm import MEMM
+
+    comm = MPI.COMM_WORLD
+    r, gap = 0.1, 0.002
+    discs = [((i * (2 * r + gap), j * (2 * r + gap)), r) for j in range(8) for i in range(8)]
+    centre = 3.5 * (2 * r + gap)
+    wall = time.perf_counter()
+    mesh, _, _ = meshes.create_discs(comm, discs, h)
+    dem = DEMDiscretisation(mesh, ElasticMaterial(E=100.0, nu=0.2, rho=100.0), "B")
+    dem.set_contact_boundary(_compat.exterior_facets(mesh))
+    t_setup = comm.allreduce(time.perf_counter() - wall, op=MPI.MAX)
+    dt = 0.5 * dem.stable_time_step()
+    x = dem.geometry.cell_centres[: dem.n_owned]
+    v0 = dem.create_vector()
+    v0.array[:] = (-0.5 * (x - centre)).ravel()
+    memm = MEMM(dem, dt)
+    memm.initialise(dem.create_vector(), v0)
+    contact = dem.pair_contact
+    for _ in range(int(0.04 / dt) + 1):  # neighbours close their 2 mm gaps at 0.1 m/s: contact from t = 0.02 s
+        memm.step()
+    seconds0, wall = contact.seconds, time.perf_counter()
+    cpu = time.process_time()
+    for _ in range(steps):
+        memm.step()
+    wall = comm.allreduce(time.perf_counter() - wall, op=MPI.MAX)
+    work = comm.gather((contact.seconds - seconds0, time.process_time() - cpu), root=0)
+    up = contact.patch_values(memm.u)
+    touching = comm.allreduce(int(((contact.pair_states(up)[0] < 0) & (contact.pair_states(up)[1] > 0)).sum()),
+                              op=MPI.SUM)
+    if comm.rank != 0:
+        return {}
+    return {"kind": "pile", "cells": dem.geometry.num_cells_global, "processes": comm.size, "discs": len(discs),
+            "h": h, "dt": dt, "setup_seconds": t_setup, "steps": steps,
+            "touching_pair_entries": touching,  # each touching pair counted by both owners of its facets
+            "contact_seconds_per_step_max": max(w[0] for w in work) / steps,
+            "contact_seconds_per_step_sum": sum(w[0] for w in work) / steps,
+            "step_cpu_seconds_per_step_max": max(w[1] for w in work) / steps,
+            "step_wall_seconds": wall / steps}
+
+
+def _child(args: list[str], processes: int) -> dict:
+    command = ["mpirun", "-n", str(processes), "--oversubscribe", sys.executable, str(pathlib.Path(__file__).resolve()),
+               *args]
+    env = {k: v for k, v in os.environ.items() if not k.startswith(("OMPI_", "PMIX_", "ORTE_"))} | MPI_ENV
+    proc = subprocess.run(command, capture_output=True, text=True, env=env, check=False)
+    if proc.returncode != 0:
+        raise RuntimeError(f"{' '.join(command)} failed:\n{proc.stderr[-4000:]}")
+    return json.loads(proc.stdout.strip().splitlines()[-1])
+
+
+def _memory_summary(run: dict) -> dict:
+    peaks = [p["peak_mb"] for p in run["per_process"]]
+    return {"peak_mb_max": max(peaks), "peak_mb_sum": sum(peaks),
+            "bytes_per_cell_summed": 1e6 * sum(peaks) / run["cells"] * 1.048576,
+            "bytes_per_cell_above_baseline": 1e6 * sum(p["peak_mb"] - p["baseline_mb"] for p in run["per_process"])
+            / run["cells"] * 1.048576,
+            "held_over_owned_max": max(p["held_cells"] / max(p["owned_cells"], 1) for p in run["per_process"])}
+
+
+def main(argv=None) -> dict:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    parser.add_argument("--quick", action="store_true", help="small sizes only")
+    parser.add_argument("--out", type=pathlib.Path, default=ROOT / "docs" / "bench" / "parallel.json")
+    parser.add_argument("--child", choices=("scaling", "pile"), help=argparse.SUPPRESS)
+    parser.add_argument("--cells", type=int, default=0, help=argparse.SUPPRESS)
+    parser.add_argument("--dim", type=int, default=2, help=argparse.SUPPRESS)
+    parser.add_argument("--steps", type=int, default=10, help=argparse.SUPPRESS)
+    parser.add_argument("--h", type=float, default=0.005, help=argparse.SUPPRESS)
+    args = parser.parse_args(argv)
+    if args.child == "scaling":
+        result = child_scaling(args.cells, args.dim, args.steps)
+    elif args.child == "pile":
+        result = child_pile(args.h, args.steps)
+    if args.child is not None:
+        from mpi4py import MPI
+
+        if MPI.COMM_WORLD.rank == 0:
+            print(json.dumps(result))
+        return result
+
+    def log(text):
+        print(text, flush=True)
+
+    big, big3, huge = (20_000, 6_000, 40_000) if args.quick else (1_000_000, 1_000_000, 4_000_000)
+    scaling = []
+    for P in (1, 2, 4):
+        run = _child(["--child", "scaling", "--cells", str(big), "--dim", "2", "--steps", "20"], P)
+        run.update(_memory_summary(run))
+        scaling.append(run)
+        log(f"2D {run['cells']:,} cells, P = {P}: set-up {run['setup_seconds']:.1f} s, peak {run['peak_mb_max']:.0f} MB "
+            f"per process ({run['bytes_per_cell_summed']:.0f} B/cell summed), step {run['step_seconds_median']*1e3:.1f} ms")
+    large = []
+    for cells, dim in ((big3, 3), (huge, 2)):
+        # Predicted from the 2D run (and a 3D cell costing ~3 x a 2D one): a run that would not
+        # fit in the memory available now is recorded as skipped rather than started.
+        predicted = cells * one["bytes_per_cell_summed"] * (3.0 if dim == 3 else 1.0) / 2**20
+        available = _available_mb()
+        if predicted > 0.9 * available:
+            large.append({"dim": dim, "cells": cells, "processes": 2, "skipped": True,
+                          "predicted_mb": predicted, "available_mb": available})
+            log(f"{dim}D {cells:,} cells, P = 2: skipped, predicted {predicted:.0f} MB > 0.9 x available {available:.0f} MB")
+            continue
+        run = _child(["--child", "scaling", "--cells", str(cells), "--dim", str(dim), "--steps", "5"], 2)
+        run.update(_memory_summary(run))
+        large.append(run)
+        log(f"{dim}D {run['cells']:,} cells, P = 2: set-up {run['setup_seconds']:.1f} s, peak {run['peak_mb_max']:.0f} MB "
+            f"per process, step {run['step_seconds_median']*1e3:.1f} ms")
+    pile = []
+    for P in (1, 2):
+        run = _child(["--child", "pile", "--h", "0.02" if args.quick else "0.005", "--steps", "20"], P)
+        pile.append(run)
+        log(f"pile {run['cells']:,} cells, P = {P}: contact {run['contact_seconds_per_step_max']*1e3:.2f} ms per step "
+            f"(max over processes), step {run['step_wall_seconds']*1e3:.1f} ms, {run['touching_pair_entries']} "
+            "touching pair entries")
+    one, two, four = scaling
+    results = {
+        "description": "issue 11 parallel study (benchmarks/bench_parallel.py); wall seconds, slowest process",
+        "date": datetime.datetime.now().strftime("%Y-%m-%d %H:%M"),
+        "commit": subprocess.run(["git", "rev-parse", "--short", "HEAD"], capture_output=True, text=True,
+                                 cwd=ROOT, check=False).stdout.strip(),
+        "load_average_at_start": os.getloadavg()[0],
+        "quick": args.quick,
+        "memory_ratio_to_target": {  # peak per process / (1.3 peak(1) / P + 300 MB): <= 1 meets the target
+            str(r["processes"]): r["peak_mb_max"] / (1.3 * one["peak_mb_max"] / r["processes"] + 300.0)
+            for r in scaling},
+        "setup_2_over_1": two["setup_seconds"] / one["setup_seconds"],
+        "setup_4_over_1": four["setup_seconds"] / one["setup_seconds"],
+        "contact_2_over_1": pile[1]["contact_seconds_per_step_max"] / pile[0]["contact_seconds_per_step_max"],
+        "scaling": scaling, "large": large, "pile": pile,
+    }
+    args.out.parent.mkdir(parents=True, exist_ok=True)
+    args.out.write_text(json.dumps(results, indent=1) + "\n")
+    log(json.dumps({k: v for k, v in results.items() if k not in ("scaling", "large", "pile")}, indent=1))
+    return results
+
+
+if __name__ == "__main__":
+    main()
