@@ -24,6 +24,7 @@ import sys
 import time
 from collections.abc import Mapping
 
+import numpy as np
 from mpi4py import MPI
 
 from dolfinx_dem import _compat, checkpoint, io, model, plotting, runcontrol, scenes
@@ -100,9 +101,11 @@ class DynamicRun:
         vectors = checkpoint.read_state(folder, self.comm, header, keys, centres, tolerance)
         local = checkpoint.read_local(folder, self.comm, header, keys)  # None: another partition
         m = header["memm"]
+        # the evaluation counters differ between processes (contact work is split per process):
+        # this process's own on the same partition, else the largest of the writing run's
+        counters = local["memm_counters"] if local else (m["force_evaluations"], m["max_step_evaluations"])
         self.stepper.restore(*(vectors[name].ravel() for name in checkpoint.VECTORS), m["t0"], m["n"], m["budget"],
-                             m["force_evaluations"], m["max_step_evaluations"],
-                             local and {name: local[name] for name in ("y", "z", "means")})
+                             *counters, local and {name: local[name] for name in ("y", "z", "means")})
         for k, contact in enumerate(dem.contacts):
             prefix = f"contact{k}_"
             contact.restore_state(local and {name[len(prefix):]: a for name, a in local.items()
@@ -189,7 +192,8 @@ class DynamicRun:
             "scene_hash": checkpoint.scene_hash(self.scene),
             "scene": self.scene,
             "step": stepper.n, "t": stepper.t, "dt": self.dt,
-            "memm": {k: state[k] for k in ("t0", "n", "budget", "force_evaluations", "max_step_evaluations")},
+            "memm": {k: state[k] for k in ("t0", "n", "budget")} | {
+                k: self.comm.allreduce(state[k], op=MPI.MAX) for k in ("force_evaluations", "max_step_evaluations")},
             "statistics": dataclasses.asdict(self.stats) | {"wall_seconds": self._wall_seconds()},
             "pair_statistics": self.pair_stats.state(),
             "every": self.every, "series_every": self.series_every, "checkpoint_every": self.checkpoint_every,
@@ -197,6 +201,7 @@ class DynamicRun:
         }
         local = state["recurrence"] | {f"contact{k}_{name}": a for k, c in enumerate(dem.contacts)
                                        for name, a in c.checkpoint_state().items()}
+        local["memm_counters"] = np.array([state["force_evaluations"], state["max_step_evaluations"]], dtype=np.int64)
         vectors = {name: state[name].array_r.reshape(-1, dem.d) for name in checkpoint.VECTORS}
         checkpoint.write(directory, self.comm, header, _compat.owned_original_cells(dem.V),
                          dem.geometry.cell_centres[: dem.n_owned], vectors, local)

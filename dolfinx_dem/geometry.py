@@ -17,7 +17,8 @@ Cells are numbered locally: the owned cells first, in the order of their global 
 global index of their DG0 dof, so that PETSc vectors share the layout of ``Function.vector``),
 then the halo by layer. Facets are numbered locally too; ``facet_global`` holds DOLFINx's global
 facet index. A facet with one cell is a boundary facet (``facet_cells[f, 1] == -1``) unless its
-cell is in the outermost halo layer, whose outer neighbours are not held (``-2``, unknown).
+cell is in the outermost halo layer (``halo.HALO_LAYERS``), whose outer neighbours are not held
+(``-2``, unknown).
 """
 
 from __future__ import annotations
@@ -171,10 +172,13 @@ def geometry_from_arrays(
     num_owned: int | None = None,
     num_cells_global: int | None = None,
     comm: MPI.Comm = MPI.COMM_SELF,
+    halo_layers: int = halo.HALO_LAYERS,
 ) -> MeshGeometry:
     """The geometry of eq. (6)-(13) from the held cells' vertex coordinates (N, d+1, d), global
     vertex numbers (N, d+1) and global facet numbers (N, d+1), facet j opposite vertex j. Without
-    the ownership arguments the cells are a whole mesh owned by one process."""
+    the ownership arguments the cells are a whole mesh owned by one process. ``halo_layers``: the
+    depth the halo was built to; only cells of that layer may have neighbours that are not held
+    (a halo that stopped growing earlier holds every neighbour of its cells)."""
     N, nv, d = vertices.shape
     if cell_global is None:
         cell_global, cell_owner = np.arange(N), np.zeros(N, dtype=np.int64)
@@ -208,8 +212,7 @@ def geometry_from_arrays(
     facet_cells[:, 0], facet_local[:, 0] = np.divmod(order[first], nv)
     two = counts == 2
     facet_cells[two, 1], facet_local[two, 1] = np.divmod(order[first[two] + 1], nv)
-    outer = np.max(cell_layer, initial=0)
-    facet_cells[~two & (cell_layer[facet_cells[:, 0]] == outer) & (outer > 0), 1] = OUTSIDE
+    facet_cells[~two & (cell_layer[facet_cells[:, 0]] == halo_layers), 1] = OUTSIDE
 
     c0, j0 = facet_cells[:, 0], facet_local[:, 0]
     mask = np.ones((num_facets, nv), dtype=bool)

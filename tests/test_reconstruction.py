@@ -12,6 +12,7 @@ from dolfinx_dem import _compat
 from dolfinx_dem.discretisation import DEMDiscretisation, DirichletBC
 from dolfinx_dem.geometry import compute_geometry, geometry_from_arrays
 from dolfinx_dem.material import ElasticMaterial
+from dolfinx_dem.patch import PatchScatter
 from dolfinx_dem.reconstruction import compute_interior_stencils, compute_reconstruction
 
 MATERIAL = ElasticMaterial(E=1.0, nu=0.3, rho=1.0)
@@ -315,17 +316,22 @@ def test_separate_bodies_are_not_coupled(kind):
     mesh = _structured_squares(comm, 1e-3) if kind == "structured" else _gmsh_squares(comm, 1e-3)
     dem = DEMDiscretisation(mesh, MATERIAL, "A")
     geom = dem.geometry
-    body = geom.cell_bodies
-    assert body.max() == 1 and np.array_equal(body, (geom.cell_centres[:, 0] > 0.2).astype(int))
+    body = geom.cell_bodies  # of the held cells (a process may hold cells of one body only)
+    assert comm.allreduce(int(body.max()), op=MPI.MAX) == 1
+    assert np.array_equal(body, (geom.cell_centres[:, 0] > 0.2).astype(int))
     st = dem.reconstruction.stencils
     assert np.all(body[st.cells] == body[geom.facet_cells[st.facets, 0], None])
-    # No stiffness entry couples the bodies (rows: the owned dofs of K).
+    # No stiffness entry couples the bodies (rows: the owned dofs of K; the bodies of the
+    # column dofs come from their owners by a scatter).
     K = dem.K
     start, stop = K.getOwnershipRange()
     ai, aj, av = K.getValuesCSR()
     rows = np.repeat(np.arange(start, stop), np.diff(ai))
-    body_of_dof = np.repeat(body, 2)
-    cross = body_of_dof[rows] != body_of_dof[aj]
+    labels = dem.create_vector()
+    labels.array[:] = np.repeat(body[: dem.n_owned], 2)
+    columns = np.unique(aj)
+    body_of_column = PatchScatter(labels, columns).gather(labels)
+    cross = labels.array[rows - start] != body_of_column[np.searchsorted(columns, aj)]
     assert comm.allreduce(int(np.count_nonzero(av[cross])), op=MPI.SUM) == 0
     # Body 1 turns rigidly (a linearised rotation by 0.05 about its centre; its facets slide
     # along the gap): zero elastic and stabilisation energy. A pure translation would not do:
