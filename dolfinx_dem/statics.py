@@ -270,10 +270,11 @@ def minimise_energy(
             for b, z in zip(gradients, Z):
                 solve(b, z, iteration)
             own = np.flatnonzero(pinned)
+            # patch values are gathered collectively: once per vector on every process
+            zp, sp = [c.patch_values(z) for z in Z], c.patch_values(step)
             S = np.concatenate(comm.allgather(np.array(
-                [[c.gap_gradient_dot(k, c.patch_values(z)) for z in Z] for k in own]).reshape(len(own), len(Z))))
-            step_dot = pinned_values(np.array([c.gap_gradient_dot(k, c.patch_values(step)) if p else 0.0
-                                               for k, p in enumerate(pinned)]))
+                [[c.gap_gradient_dot(k, p) for p in zp] for k in own]).reshape(len(own), len(Z))))
+            step_dot = pinned_values(np.array([c.gap_gradient_dot(k, sp) if p else 0.0 for k, p in enumerate(pinned)]))
             multipliers = np.linalg.solve(S, pinned_values(c.own_gaps(u)) + step_dot)
             for m, z in zip(multipliers, Z):
                 step.axpy(-m, z)
