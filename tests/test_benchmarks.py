@@ -62,3 +62,14 @@ def test_bench_contact_scaling_quick(tmp_path):
     data = json.loads((tmp_path / "scaling.json").read_text())
     # the contact work per step does not grow like the contact facets (5 x more here)
     assert data["contact_facets_ratio"] == 5.0 and data["contact_work_ratio"] < 3.0
+
+
+def test_bench_parallel_quick(tmp_path):
+    _quick("bench_parallel.py", "--out", str(tmp_path / "parallel.json"))
+    data = json.loads((tmp_path / "parallel.json").read_text())
+    runs = data["scaling"]
+    assert [r["processes"] for r in runs] == [1, 2, 4] and len({r["cells"] for r in runs}) == 1
+    # the halo stays a thin layer: no process holds much more than its owned cells
+    assert all(r["held_over_owned_max"] < 1.5 for r in runs)
+    assert all(p["touching_pair_entries"] > 0 for p in data["pile"])
+    assert data["pile"][0]["cells"] == data["pile"][1]["cells"]
