@@ -23,7 +23,10 @@ ffibuilder.cdef(
                          double *sums);
     void dem_gram_abs_rowsums(int64_t n_out, const int32_t *qt_ptr, const int32_t *qt_rows,
                               const double *qt_vals, const int32_t *rowptr, const int32_t *cols,
-                              const double *vals, const double *x, double *r, double *acc);
+                              const double *vals, const int64_t *key, const int32_t *qt2_ptr,
+                              const int32_t *qt2_rows, const double *qt2_vals, const int32_t *rowptr2,
+                              const int32_t *cols2, const double *vals2, const int64_t *key2,
+                              const double *x, double *r, double *acc);
     """
 )
 # -O3, no -march=native: the module must run on any x86-64 the package is installed for.

@@ -36,6 +36,7 @@ from mpi4py import MPI
 from petsc4py import PETSc
 
 from dolfinx_dem.halo import owned_facet_marks
+from dolfinx_dem.operators import gradient_rows
 from dolfinx_dem.patch import PatchScatter, negative_part_integral, piecewise_midpoints
 
 
@@ -225,8 +226,7 @@ class RigidContact:
         Y = (rows.QF[:, dofs] @ e_cols).tocsr()
         touched = np.unique(Y.tocoo().row)
         Y, Q = Y[touched], rows.Q[touched]
-        cell_rows = (self.cells[: self.num_own, None] * d * d + np.arange(d * d)).ravel()
-        grad = dem.operators.grad[cell_rows]
+        grad, grad_dirichlet = gradient_rows(geom, rec, self.cells[: self.num_own])
         # The patch: the held dofs these rows, the gaps and the outputs read.
         patch = np.unique(np.concatenate([Q.indices, R_free.indices, grad.indices]))
         self.scatter = PatchScatter(dem.create_vector(), dem.columns[patch])
@@ -247,7 +247,7 @@ class RigidContact:
         self._RnT_own = _compact(Rn[: self.num_own].T)
         self._R_free = _compact(R_free)
         self._grad_rows = _compact(grad)
-        self._grad_lift = dem.operators.grad_dirichlet[cell_rows] @ g
+        self._grad_lift = grad_dirichlet @ g
         self._grad_weights = geom.facet_area_normals[self.cells, geom.facet_local[self.facets, 0]] / \
             geom.cell_volumes[self.cells, None]
         self.evaluations = 0

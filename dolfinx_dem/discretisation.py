@@ -1,8 +1,9 @@
 """The DEM space discretisation on a DOLFINx mesh: set up once, then forces and energies in PETSc.
 
 ``DEMDiscretisation`` is the object at the API edge (paper §3): it computes the geometry, the
-reconstruction and the energy operators once, distributes their rows over the processes as PETSc
-matrices in the layout of the DG0 ``Function.vector``, and then offers
+reconstruction and the energy rows Q = [S; J] of its owned cells and facets once (the only
+operator of the mesh's size it keeps), with vectors in the layout of the DG0 ``Function.vector``,
+and then offers
 
 - ``force(u, t, out)``: F = -dV/du (eq. (15)-(17)) plus the body force;
 - ``energies(u, t)``: elastic (11), stabilisation (13) and external potential, summed over ranks;
@@ -29,7 +30,7 @@ from dolfinx_dem.factored import FactoredStiffness
 from dolfinx_dem.geometry import MeshGeometry, compute_geometry
 from dolfinx_dem.halo import owned_facet_marks
 from dolfinx_dem.material import ElasticMaterial
-from dolfinx_dem.operators import EnergyOperators, compute_energy_operators
+from dolfinx_dem.operators import EnergyRows, compute_energy_rows
 from dolfinx_dem.reconstruction import Reconstruction, compute_reconstruction
 
 
@@ -47,21 +48,6 @@ class DirichletBC:
     time_dependent: bool = False
 
 
-@dataclasses.dataclass(frozen=True)
-class EnergyRows:
-    """The energy rows a = Q u + Q_dirichlet g a process holds (``DEMDiscretisation.rows``): the
-    elastic rows of its owned cells and the jump rows of every interior facet of its owned cells,
-    ``owned`` marking the rows that are its own (the rows of its part of the PETSc Q). Columns are
-    the held cells' dofs (``DEMDiscretisation.columns`` maps them to global dofs); ``QF`` gives
-    the rows' dependence on the facet values u_F (facet dofs)."""
-
-    Q: scipy.sparse.csr_matrix  # (rows, n_cells d)
-    Q_dirichlet: scipy.sparse.csr_matrix  # (rows, n_D d)
-    QF: scipy.sparse.csr_matrix  # (rows, n_facets d)
-    owned: np.ndarray  # (rows,) bool
-    elastic: np.ndarray  # (rows,) bool: an S row (else a J row)
-
-
 def _petsc_matrix(comm, rows: scipy.sparse.spmatrix, columns: np.ndarray, local_cols: int):
     """A distributed PETSc AIJ matrix from this process's ``rows``, whose local column j is the
     global column ``columns[j]``; ``local_cols`` is the size of the owned column block."""
@@ -77,6 +63,18 @@ def _petsc_matrix(comm, rows: scipy.sparse.spmatrix, columns: np.ndarray, local_
     )
     M.assemble()
     return M
+
+
+def _sort_rows_globally(Q: scipy.sparse.csr_matrix, columns: np.ndarray) -> None:
+    """Orders the entries of each row of Q by global column ``columns[j]`` (in place): every
+    process then sums a row's products in the same order, as one process does."""
+    order = np.argsort(columns, kind="stable").astype(np.int32)  # local column of each global rank
+    rank = np.empty_like(order)
+    rank[order] = np.arange(len(order), dtype=np.int32)
+    Q.indices[:] = rank[Q.indices]
+    Q.has_sorted_indices = False
+    Q.sort_indices()
+    Q.indices[:] = order[Q.indices]
 
 
 class DEMDiscretisation:
@@ -134,13 +132,14 @@ class DEMDiscretisation:
         interior = geom.interior_facets
         c = geom.facet_cells[interior]
         touches = (c < self.n_owned).any(axis=1)
+        g = np.sort(geom.cell_global[c], axis=1)  # the global numbers of the facet's two cells
         first_cell = np.where(geom.cell_global[c[:, 0]] < geom.cell_global[c[:, 1]], c[:, 0], c[:, 1])
         owned_jumps = first_cell < self.n_owned
-        mine, others = interior[owned_jumps], interior[touches & ~owned_jumps]
-        jump_facets = np.concatenate([mine[np.argsort(geom.facet_global[mine])],
-                                      others[np.argsort(geom.facet_global[others])]])
-        self.operators: EnergyOperators = compute_energy_operators(
-            geom, material, self.reconstruction, self.n_owned, jump_facets)
+        # in the order of their cells' global numbers, which does not depend on the partition
+        order = np.lexsort((g[:, 1], g[:, 0]))
+        order = np.concatenate([order[owned_jumps[order]], order[touches[order] & ~owned_jumps[order]]])
+        mine, jump_facets = interior[owned_jumps], interior[order]
+        self._jump_cells_global = g[order[: len(mine)]]  # (own jump rows' facets, 2), row keys
         rec = self.reconstruction
         #: owned cells whose Neumann facets use scheme B under scheme A (reconstruction.py)
         self.multi_neumann_cells = rec.multi_neumann_cells[rec.multi_neumann_cells < self.n_owned]
@@ -148,36 +147,22 @@ class DEMDiscretisation:
         #: extrapolated interior facets (reconstruction.py), counted once: by the owner of their jump row
         self.num_extrapolated_facets = self.comm.allreduce(
             int(np.isin(rec.stencils.extrapolated, mine).sum()), op=MPI.SUM)
-        ops = self.operators
 
         # The energy rows a = Q u + q this process holds: S rows of the owned cells, then J rows of
-        # the interior facets of the owned cells; the first ``len(mine)`` J rows are its own.
-        m = d * (d + 1) // 2
-        S_rows, J_rows = self.n_owned * m, len(jump_facets) * d
-        own = np.zeros(S_rows + J_rows, dtype=bool)
-        own[: S_rows + len(mine) * d] = True
+        # the interior facets of the owned cells; the first ``len(mine)`` J rows are its own. Its
+        # own rows, a prefix of rows.Q, are its part of Q: the force is -Q^T (Q w + q) + f (see
+        # ``force``), applied in one pass over them (``factored``). Q is stored once, with the
+        # held dofs as columns (``columns`` maps them to global dofs); a PETSc copy is made only
+        # on demand (``assemble_Q``).
         self.columns = (geom.cell_global[:, None] * d + np.arange(d)).ravel()  # local dof -> global dof
-        self.rows = EnergyRows(
-            Q=scipy.sparse.vstack([ops.S, ops.J]).tocsr(),
-            Q_dirichlet=scipy.sparse.vstack([ops.S_dirichlet, ops.J_dirichlet]).tocsr(),
-            QF=scipy.sparse.vstack([ops.S_facet, ops.J_facet]).tocsr(),
-            owned=own,
-            elastic=np.arange(S_rows + J_rows) < S_rows,
-        )
-        # S, J and their facet and Dirichlet parts now live in ``rows`` (one copy, not two)
-        self.operators = ops = dataclasses.replace(ops, S=None, S_dirichlet=None, J=None, J_dirichlet=None,
-                                                   S_facet=None, J_facet=None)
-
-        # Q = [S; J] with this process's own rows, as one PETSc matrix with global columns: the
-        # force is -Q^T (Q w + q) + f (see ``force``). Time stepping uses its local rows in
-        # factored form (``factored``); Q^T is never stored.
-        self._n_elastic_rows = S_rows  # local rows of Q that belong to S
-        self._Q_dirichlet = self.rows.Q_dirichlet[own]
-        self.Q = _petsc_matrix(self.comm, self.rows.Q[own], self.columns, self.n_owned * d)
-        self.grad = _petsc_matrix(self.comm, ops.grad, self.columns, self.n_owned * d)
-        self._grad_dirichlet = ops.grad_dirichlet
+        self.rows: EnergyRows = compute_energy_rows(geom, material, rec, self.n_owned, jump_facets, len(mine))
+        _sort_rows_globally(self.rows.Q, self.columns)
+        self._n_elastic_rows = self.n_owned * d * (d + 1) // 2  # local rows of Q that belong to S
+        self._n_own_rows = int(self.rows.owned.sum())
+        self._Q_dirichlet = self.rows.Q_dirichlet[: self._n_own_rows]
+        self.factored = FactoredStiffness(self.comm, self.rows.Q, self._n_own_rows, self._n_elastic_rows,
+                                          self.n_owned * d, self.columns[self.n_owned * d:])
         self._K = None
-        self._factored = None
         self._stable_dt = {}
 
         volumes = geom.cell_volumes[: self.n_owned]
@@ -192,9 +177,9 @@ class DEMDiscretisation:
                 raise ValueError(f"body_force must have {d} components, got {f.shape}")
             self.body_force.array[:] = (volumes[:, None] * f).ravel()
 
-        self._a = self.Q.createVecLeft()  # Q w + q(t): the energy rows [S w + s; J w + j]
-        self._grad_vec = self.grad.createVecLeft()
         self._rhs = self.create_vector()  # f - Q^T q(t)
+        self._held = self.factored.create_vector()  # u at the held dofs (``gradient``)
+        self._work = self.create_vector()
         self._lift_time = None
         self._time_dependent = any(bc.time_dependent for _, bc in self._dirichlet)
         self._update_dirichlet(0.0)
@@ -276,26 +261,41 @@ class DEMDiscretisation:
         """The contact models in use: rigid obstacles and contact between bodies."""
         return tuple(c for c in (self.contact, self.pair_contact) if c is not None)
 
+    def row_keys(self) -> np.ndarray:
+        """A number for each own row of Q, increasing along them, that orders the rows of all
+        processes independently of the partition: the elastic rows by cell, then the jump rows
+        by the global numbers of their facet's two cells (then by component)."""
+        d, m = self.d, self.d * (self.d + 1) // 2
+        n_global = self.geometry.num_cells_global
+        S = (self.geometry.cell_global[: self.n_owned, None] * m + np.arange(m)).ravel()
+        g = self._jump_cells_global.astype(np.int64)
+        J = 2**62 + ((g[:, 0] * n_global + g[:, 1])[:, None] * d + np.arange(d)).ravel()
+        return np.concatenate([S, J]).astype(np.int64)
+
+    def ghost_owners(self) -> np.ndarray:
+        """The rank owning each ghost dof of ``factored`` (the held dofs of other processes)."""
+        return np.repeat(self.geometry.cell_owner[self.n_owned:], self.d)
+
+    def assemble_Q(self) -> PETSc.Mat:
+        """A PETSc copy of Q = [S; J] (rows: this process's own rows; columns: the dofs), for
+        PETSc products and studies; the caller destroys it. Forces and energies do not need it:
+        they apply Q in one pass over ``rows`` (``factored``)."""
+        return _petsc_matrix(self.comm, self.rows.Q[: self._n_own_rows], self.columns, self.n_owned * self.d)
+
     @property
     def K(self) -> PETSc.Mat:
         """The stiffness K = Q^T Q = S^T S + J^T J (PETSc, rows of the owned dofs), built on first
         use by a PETSc product: time stepping applies Q^T Q in factored form and never needs it."""
         if self._K is None:
-            self._K = self.Q.transposeMatMult(self.Q)
+            Q = self.assemble_Q()
+            self._K = Q.transposeMatMult(Q)
+            Q.destroy()
         return self._K
-
-    @property
-    def factored(self) -> FactoredStiffness:
-        """K = Q^T Q applied in one pass over the local rows of Q (factored.py), built on first
-        use: MEMM keeps the energy rows Q w from step to step with it."""
-        if self._factored is None:
-            self._factored = FactoredStiffness(self.Q, self._n_elastic_rows)
-        return self._factored
 
     # -- vectors -----------------------------------------------------------------------------
     def create_vector(self) -> PETSc.Vec:
         """A PETSc vector with the layout of the owned DG0 dofs (cell-major, d per cell)."""
-        v = self.Q.createVecRight()
+        v = PETSc.Vec().createMPI((self.n_owned * self.d, PETSc.DECIDE), comm=self.comm)
         v.set(0.0)
         return v
 
@@ -325,8 +325,7 @@ class DEMDiscretisation:
         g = self.dirichlet_values(t).ravel()
         self._g = g
         self._q = self._Q_dirichlet @ g  # (local rows of Q,)
-        self._a.array[:] = self._q
-        self.Q.multTranspose(self._a, self._rhs)
+        self.factored.residual(None, self._q, self._rhs)
         self._rhs.aypx(-1.0, self.body_force)
         self._lift_time = t
 
@@ -359,15 +358,12 @@ class DEMDiscretisation:
         The force is applied in factored form rather than as -K w: in floating point Q^T Q w and
         K w differ by the rounding of K, of relative size eps (omega_max / omega_1)^2 for smooth
         fields, which showed as pseudo-energy drifts of 8e-12 (1D bar, 800 cells) and 8e-13
-        (cantilever) against 2e-14 and 5e-15 in factored form. Q = [S; J] is one PETSc matrix:
-        this is a MatMult and a MatMultTranspose. (A MEMM step does not call it: it applies the
-        local rows of Q in one pass, ``factored``.)
+        (cantilever) against 2e-14 and 5e-15 in factored form. One pass over the local rows of Q
+        (``factored``); a MEMM step does not call this: it keeps the rows from step to step.
         """
         self._update_dirichlet(t)
-        w = self.relative_displacement(u)
-        self.Q.mult(w, self._a)
-        self.Q.multTranspose(self._a, out)
-        out.aypx(-1.0, self._rhs)
+        self.factored.residual(self.relative_displacement(u), self._q, out)
+        out.aypx(-1.0, self.body_force)
         if contact:
             for c in self.contacts:
                 c.add_force(u, out)
@@ -377,12 +373,8 @@ class DEMDiscretisation:
         """Elastic (eq. (11)), stabilisation (eq. (13)) and external potential -f.u, global sums,
         and ``potential``, their total: the potential whose exact gradient ``force`` computes."""
         self._update_dirichlet(t)
-        w = self.relative_displacement(u)
-        self.Q.mult(w, self._a)
-        a = self._a.array
-        a += self._q
-        nS = self._n_elastic_rows
-        local = np.array([0.5 * (a[:nS] @ a[:nS]), 0.5 * (a[nS:] @ a[nS:]), self.body_force.array_r @ u.array_r])
+        squares = self.factored.residual(self.relative_displacement(u), self._q, self._work)
+        local = np.array([0.5 * squares[0], 0.5 * squares[1], self.body_force.array_r @ u.array_r])
         for c in self.contacts:  # this process's part of the contact energy changes
             local[:2] += c.energy_correction(c.patch_values(u))
         if self.comm.size > 1:
@@ -392,10 +384,17 @@ class DEMDiscretisation:
         return e
 
     def gradient(self, u: PETSc.Vec, t: float) -> np.ndarray:
-        """Cell gradients G_c of eq. (8) for the owned cells, shape (n_owned, d, d)."""
+        """Cell gradients G_c of eq. (8) for the owned cells, shape (n_owned, d, d), formed from
+        the facet reconstructions u_F = R u + D g (outputs: no gradient operator is stored)."""
         self._update_dirichlet(t)
-        self.grad.mult(u, self._grad_vec)
-        G = (self._grad_vec.array + self._grad_dirichlet @ self._g).reshape(self.n_owned, self.d, self.d)
+        d, geom, rec = self.d, self.geometry, self.reconstruction
+        held = self.factored.local_array(self._held)
+        held[: self.n_owned * d] = u.array_r
+        self._held.ghostUpdate(PETSc.InsertMode.INSERT_VALUES, PETSc.ScatterMode.FORWARD)
+        uF = (rec.R @ held + rec.D @ self._g).reshape(-1, d)
+        cells = slice(0, self.n_owned)
+        a = geom.facet_area_normals[cells] / geom.cell_volumes[cells, None, None]  # (n, d+1, d)
+        G = np.einsum("nki,nkj->nij", uF[geom.cell_facets[cells]], a)
         for c in self.contacts:
             cells, change = c.gradient_correction(c.patch_values(u))
             np.add.at(G, cells, change)
@@ -471,9 +470,8 @@ class DEMDiscretisation:
             raise ValueError(f"unknown stable time step method {method!r}; choose 'bound' or 'eigenvalue'")
         if method not in self._stable_dt:
             if method == "bound":
-                QT = self.Q.transpose(PETSc.Mat())  # for the bound's passes only
-                lam = stability.largest_eigenvalue_bound(self.factored, QT, self.inverse_mass)
-                QT.destroy()
+                lam = stability.largest_eigenvalue_bound(self.factored, self.row_keys(), self.ghost_owners(),
+                                                         self.inverse_mass)
             else:
                 lam = self.eigenvalues(1, largest=True, rtol=1e-8)[0]
             self._stable_dt[method] = 2.0 / np.sqrt(lam)

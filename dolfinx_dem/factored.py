@@ -11,7 +11,8 @@ their squares summed in the same pass. Rounding: the same products and sums as a
 the order of the row.
 
 Layout: the process's rows of Q with local column numbers, owned dofs first, then the ghosts
-(the dofs of other processes that local rows read). ``create_vector`` makes PETSc vectors with
+(the held dofs of other processes, ``DEMDiscretisation.columns``). The arrays are those of
+``DEMDiscretisation.rows.Q``, whose own rows are its first rows: Q is stored once. ``create_vector`` makes PETSc vectors with
 those ghosts; their global form has the layout of ``Q.createVecRight()``. Communication is the
 caller's: a forward ghost update of x before ``apply``, a reverse (adding) update of z after.
 """
@@ -19,6 +20,7 @@ caller's: a forward ghost update of x before ``apply``, a reverse (adding) updat
 from __future__ import annotations
 
 import numpy as np
+import scipy.sparse
 from petsc4py import PETSc
 
 from dolfinx_dem.kernels import lib, pointer
@@ -36,27 +38,28 @@ def local_numbering(ids: np.ndarray, start: int, stop: int) -> tuple[np.ndarray,
 
 
 class FactoredStiffness:
-    """K = Q^T Q from the local rows of a distributed PETSc AIJ matrix Q.
+    """K = Q^T Q from the local rows of Q (no copy: the kernel reads the arrays of ``rows``).
 
     Parameters
     ----------
-    Q : the energy rows, (n_rows, n_dofs); its first ``n_elastic`` local rows are elastic rows
-        (S), the others stabilisation rows (J).
-    n_elastic : number of local rows of S.
+    comm : the communicator of the dofs.
+    rows : CSR whose first ``n_rows`` rows are this process's rows of Q, with local column numbers:
+        the ``n_owned`` owned dofs, then the ``ghosts`` (global dof numbers) in that order; the
+        first ``n_elastic`` rows are elastic rows (S), the others stabilisation rows (J).
     """
 
-    def __init__(self, Q: PETSc.Mat, n_elastic: int):
-        self.Q, self.comm = Q, Q.comm
-        indptr, indices, values = Q.getValuesCSR()
-        start, stop = Q.getOwnershipRangeColumn()
-        self.ghosts, cols = local_numbering(indices, start, stop)  # ghosts: global dofs
-        self.n_owned = stop - start
-        self.n_rows = len(indptr) - 1
+    def __init__(self, comm, rows: scipy.sparse.csr_matrix, n_rows: int, n_elastic: int, n_owned: int,
+                 ghosts: np.ndarray):
+        if rows.indptr.dtype != np.int32 or rows.indices.dtype != np.int32 or rows.data.dtype != np.float64:
+            raise ValueError("the rows of Q need int32 indices and float64 values")
+        self.comm = comm
+        self.ghosts = np.asarray(ghosts, dtype=PETSc.IntType)
+        self.n_owned = int(n_owned)
+        self.n_rows = int(n_rows)
         self.n_elastic = int(n_elastic)
-        self.rowptr = np.ascontiguousarray(indptr, dtype=np.int32)
-        self.cols = np.ascontiguousarray(cols, dtype=np.int32)
-        self.vals = np.ascontiguousarray(values, dtype=np.float64)
+        self.rowptr, self.cols, self.vals = rows.indptr[: self.n_rows + 1], rows.indices, rows.data
         self._csr = (pointer(self.rowptr), pointer(self.cols), pointer(self.vals))
+        self._work = None
 
     def create_vector(self) -> PETSc.Vec:
         """A zero vector over the dofs with this operator's ghosts."""
@@ -91,3 +94,25 @@ class FactoredStiffness:
             kernel(n_rows, n_elastic, rowptr, cols, vals, px, pi, pshift, py, alpha, scale, pz, ps)
 
         return apply
+
+    def residual(self, w: PETSc.Vec | None, q: np.ndarray, out: PETSc.Vec) -> np.ndarray:
+        """a = Q w + q and out = Q^T a (owned dofs, summed over processes), for the occasional
+        product outside time stepping (``DEMDiscretisation.force``, ``energies``, ``load``);
+        w (owned dofs; None: zero) and out are vectors of the dof layout. Returns the squares of
+        a summed over this process's elastic and stabilisation rows. Collective."""
+        if self._work is None:
+            self._work = (self.create_vector(), self.create_vector(), np.zeros(self.n_rows), np.zeros(2))
+        x, z, a, sums = self._work
+        x_local = self.local_array(x)
+        if w is None:
+            x_local[:] = 0.0
+        else:
+            x_local[: self.n_owned] = w.array_r
+            x.ghostUpdate(PETSc.InsertMode.INSERT_VALUES, PETSc.ScatterMode.FORWARD)
+        self.local_array(z)[:] = 0.0
+        a[:] = q
+        sums[:] = 0.0
+        self.bind(x, a, z, sums)(1.0, 1.0 if w is not None else 0.0)
+        z.ghostUpdate(PETSc.InsertMode.ADD_VALUES, PETSc.ScatterMode.REVERSE)
+        out.array[:] = z.array_r
+        return sums.copy()

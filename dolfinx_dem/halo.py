@@ -55,7 +55,7 @@ class LocalCells:
     num_cells_global: int
 
 
-def _alltoall(comm: MPI.Comm, destination: np.ndarray, rows: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def alltoall(comm: MPI.Comm, destination: np.ndarray, rows: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Send row i of ``rows`` (n, ...) to rank ``destination[i]``; returns (received rows, their
     source ranks), in rank order. Only the counts go to every process (one integer each)."""
     size = comm.size
@@ -90,7 +90,7 @@ def owned_facet_marks(mesh, facets: np.ndarray, values: np.ndarray, what: str = 
     which, owners = _compat.facet_cell_owners(mesh, facets)  # one entry per (facet, local cell)
     rows = np.stack([_compat.local_facet_global_indices(mesh, facets)[which], values[which]], axis=1)
     mine = owners == comm.rank
-    received, _ = _alltoall(comm, owners[~mine], rows[~mine])
+    received, _ = alltoall(comm, owners[~mine], rows[~mine])
     rows = np.unique(np.concatenate([rows[mine], received]), axis=0)
     twice = rows[1:, 0][rows[1:, 0] == rows[:-1, 0]]
     twice = [f for part in comm.allgather(twice[:1].tolist()) for f in part]
@@ -130,7 +130,7 @@ def build_halo(mesh, dofs: np.ndarray, owned_range: tuple[int, int],
     # 1. Stars of the vertices this process owns: (vertex, cell, cell owner), sorted by vertex.
     pairs = np.stack([ints[:, vertex_columns].ravel(), np.repeat(ints[:, 0], nv),
                       np.full(n * nv, comm.rank)], axis=1)
-    stars, _ = _alltoall(comm, ints[:, owner_columns].ravel(), pairs)
+    stars, _ = alltoall(comm, ints[:, owner_columns].ravel(), pairs)
     stars = stars[np.lexsort((stars[:, 1], stars[:, 0]))]
 
     held_ints, held_floats, held_layer = [ints], [floats], [np.zeros(n, dtype=np.int64)]
@@ -143,18 +143,18 @@ def build_halo(mesh, dofs: np.ndarray, owned_range: tuple[int, int],
         v = np.unique(v, axis=0)
         v = v[~np.isin(v[:, 0], expanded)]
         expanded = np.union1d(expanded, v[:, 0])
-        asked, source = _alltoall(comm, v[:, 1], v[:, :1])
+        asked, source = alltoall(comm, v[:, 1], v[:, :1])
         lo = np.searchsorted(stars[:, 0], asked[:, 0], side="left")
         counts = np.searchsorted(stars[:, 0], asked[:, 0], side="right") - lo
         take = np.arange(counts.sum()) - np.repeat(np.cumsum(counts) - counts - lo, counts)
-        reply, _ = _alltoall(comm, np.repeat(source, counts), stars[take][:, 1:])
+        reply, _ = alltoall(comm, np.repeat(source, counts), stars[take][:, 1:])
         new = np.unique(reply, axis=0)
         new = new[~np.isin(new[:, 0], held)]
         # 2b. Ask the owners of the new cells for their records.
-        asked, source = _alltoall(comm, new[:, 1], new[:, :1])
+        asked, source = alltoall(comm, new[:, 1], new[:, :1])
         rows = asked[:, 0] - start
-        record_ints, _ = _alltoall(comm, source, ints[rows])
-        record_floats, _ = _alltoall(comm, source, floats[rows])
+        record_ints, _ = alltoall(comm, source, ints[rows])
+        record_floats, _ = alltoall(comm, source, floats[rows])
         o = np.argsort(record_ints[:, 0])
         newest = record_ints[o]
         held_ints.append(newest)

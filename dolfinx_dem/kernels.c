@@ -138,36 +138,64 @@ void dem_memm_update(int64_t n_blocks, int32_t bs, double dt, double c, double *
 }
 
 /* Row sums of |Q^T Q| weighted by x, for the stable time step bound:
- *   r_i = sum_j |(Q^T Q)_ij| x_j   for each of the n_out rows i,
- * where row i of Q^T is (qt_ptr, qt_rows, qt_vals) (rows k of Q with Q_ki != 0, as indices into
- * the CSR (rowptr, cols, vals) of those rows of Q), whose column numbers index x. acc: zeros of
- * the length of x (workspace, left zero). Row i of Q^T Q is accumulated in acc, then harvested:
- * the first visit of a column j adds |acc_j| x_j and zeroes acc_j, so later visits add 0 (no
- * branch, no list). Every sum follows the order of the CSR arrays: equal arrays, equal bits. */
+ *   r_i = sum_j |(Q^T Q)_ij| x_j   for each of the n_out owned dofs i
+ * (x NULL: r_i = (Q^T Q)_ii = sum_k Q_ki^2). The rows of Q through dof i come from two sets,
+ * each a CSR (rowptr, cols, vals) with a key per row: this process's rows, listed for dof i by
+ * (qt_ptr, qt_rows, qt_vals) in increasing key, and rows of other processes (set 2, the same
+ * layout); both are visited merged in increasing key, a numbering of the rows that does not
+ * depend on the partition, and each row's columns in the order of the global dof numbering: the
+ * same sums, to the bit, on any number of processes. Column numbers index x and acc (zeros of
+ * the length of x, left zero). Row i of Q^T Q is accumulated in acc, then harvested: the first
+ * visit of a column j adds |acc_j| x_j and zeroes acc_j, so later visits add 0. */
+typedef struct
+{
+  const int32_t *qt_ptr, *qt_rows, *rowptr, *cols;
+  const double *qt_vals, *vals;
+  const int64_t *key;
+} dem_row_set;
+
 void dem_gram_abs_rowsums(int64_t n_out, const int32_t *restrict qt_ptr,
                           const int32_t *restrict qt_rows, const double *restrict qt_vals,
                           const int32_t *restrict rowptr, const int32_t *restrict cols,
-                          const double *restrict vals, const double *restrict x,
+                          const double *restrict vals, const int64_t *restrict key,
+                          const int32_t *restrict qt2_ptr, const int32_t *restrict qt2_rows,
+                          const double *restrict qt2_vals, const int32_t *restrict rowptr2,
+                          const int32_t *restrict cols2, const double *restrict vals2,
+                          const int64_t *restrict key2, const double *restrict x,
                           double *restrict r, double *restrict acc)
 {
+  const dem_row_set sets[2] = {{qt_ptr, qt_rows, rowptr, cols, qt_vals, vals, key},
+                               {qt2_ptr, qt2_rows, rowptr2, cols2, qt2_vals, vals2, key2}};
   for (int64_t i = 0; i < n_out; ++i)
   {
-    for (int32_t p = qt_ptr[i]; p < qt_ptr[i + 1]; ++p)
-    {
-      const int32_t k = qt_rows[p];
-      const double a = qt_vals[p];
-      for (int32_t q = rowptr[k]; q < rowptr[k + 1]; ++q)
-        acc[cols[q]] += a * vals[q];
-    }
     double s = 0.0;
-    for (int32_t p = qt_ptr[i]; p < qt_ptr[i + 1]; ++p)
+    for (int pass = (x ? 0 : 1); pass < 2; ++pass) /* 0: accumulate, 1: harvest (or diagonal) */
     {
-      const int32_t k = qt_rows[p];
-      for (int32_t q = rowptr[k]; q < rowptr[k + 1]; ++q)
+      int32_t p[2] = {qt_ptr[i], qt2_ptr[i]};
+      const int32_t end[2] = {qt_ptr[i + 1], qt2_ptr[i + 1]};
+      while (p[0] < end[0] || p[1] < end[1])
       {
-        const int32_t j = cols[q];
-        s += fabs(acc[j]) * x[j];
-        acc[j] = 0.0;
+        int which = 0;
+        if (p[0] >= end[0])
+          which = 1;
+        else if (p[1] < end[1] && key2[qt2_rows[p[1]]] < key[qt_rows[p[0]]])
+          which = 1;
+        const dem_row_set *set = &sets[which];
+        const int32_t k = set->qt_rows[p[which]];
+        const double a = set->qt_vals[p[which]];
+        ++p[which];
+        if (!x)
+          s += a * a;
+        else if (pass == 0)
+          for (int32_t q = set->rowptr[k]; q < set->rowptr[k + 1]; ++q)
+            acc[set->cols[q]] += a * set->vals[q];
+        else
+          for (int32_t q = set->rowptr[k]; q < set->rowptr[k + 1]; ++q)
+          {
+            const int32_t j = set->cols[q];
+            s += fabs(acc[j]) * x[j];
+            acc[j] = 0.0;
+          }
       }
     }
     r[i] = s;

@@ -10,7 +10,9 @@ With u_F = R u_C + D g (reconstruction.py):
 - stiffness K = S^T S + J^T J and forces F = -(K u + S^T s + J^T j) + f: the exact gradient of
   E_P + E_S, which is eq. (15)-(17) written as matrix products.
 
-Rows: S has m = d(d+1)/2 rows per cell, J has d rows per interior facet, Grad d*d rows per cell.
+Rows: S has m = d(d+1)/2 rows per cell, J has d rows per interior facet. Q = [S; J] is the only
+operator of the size of the mesh that a process keeps; cell gradients (outputs) are formed on
+demand from the reconstruction (``gradient_rows``).
 """
 
 from __future__ import annotations
@@ -46,88 +48,111 @@ def mandel_stiffness(material: ElasticMaterial, d: int) -> np.ndarray:
 
 
 @dataclasses.dataclass(frozen=True)
-class EnergyOperators:
-    """Sparse operators of the cells and facets a process holds. ``DEMDiscretisation`` stacks
-    S, J and their parts into its ``rows`` and keeps only ``grad``, ``grad_dirichlet`` and
-    ``jump_facets`` here (the others are None there)."""
+class EnergyRows:
+    """The energy rows a = Q u + Q_dirichlet g a process holds (``DEMDiscretisation.rows``): the
+    elastic rows of its owned cells, then the jump rows of ``jump_facets`` (every interior facet
+    of its owned cells, its own ones first). Columns of Q: the held cells' dofs; ``QF`` gives the
+    rows' dependence on the values u_F of the boundary facets (the only facets whose
+    reconstruction contact changes; its interior-facet columns are empty)."""
 
-    grad: scipy.sparse.csr_matrix  # (n d d, N d): cell gradients G_c (homogeneous part)
-    grad_dirichlet: scipy.sparse.csr_matrix  # (n d d, n_D d): G_c from the Dirichlet values g
-    S: scipy.sparse.csr_matrix  # (n m, N d), n = num_cells of compute_energy_operators
-    S_dirichlet: scipy.sparse.csr_matrix  # (n m, n_D d)
-    J: scipy.sparse.csr_matrix  # (Fi d, N d), rows ordered as ``jump_facets``
-    J_dirichlet: scipy.sparse.csr_matrix  # (Fi d, n_D d)
+    Q: scipy.sparse.csr_matrix  # (rows, n_cells d)
+    Q_dirichlet: scipy.sparse.csr_matrix  # (rows, n_D d)
+    QF: scipy.sparse.csr_matrix  # (rows, n_facets d), boundary facet columns only
+    owned: np.ndarray  # (rows,) bool: the rows of this process's part of Q
+    elastic: np.ndarray  # (rows,) bool: an S row (else a J row)
     jump_facets: np.ndarray  # (Fi,) interior facets, in the row order of J
-    S_facet: scipy.sparse.csr_matrix  # (n m, F d): S = S_facet (R u + D g)
-    J_facet: scipy.sparse.csr_matrix  # (Fi d, F d): gradient part of J, J = J_facet (R u + D g) + jumps of u_C
 
 
-def facet_gradient(geom: MeshGeometry) -> scipy.sparse.csr_matrix:
-    """Gf of eq. (8): (N d d, F d), row c*d*d + i*d + j, column f*d + i, value |f| n_j / |c|."""
-    d, N = geom.d, geom.num_cells
-    a = geom.facet_area_normals / geom.cell_volumes[:, None, None]  # (N, d+1, d)
-    c, k, i, j = np.meshgrid(np.arange(N), np.arange(d + 1), np.arange(d), np.arange(d), indexing="ij")
-    rows = c * d * d + i * d + j
-    cols = geom.cell_facets[c, k] * d + i
-    vals = a[c, k, j]
-    return scipy.sparse.coo_matrix(
-        (vals.ravel(), (rows.ravel(), cols.ravel())), shape=(N * d * d, geom.num_facets * d)
-    ).tocsr()
+def facet_gradient(geom: MeshGeometry, cells: np.ndarray) -> scipy.sparse.csr_matrix:
+    """Gf of eq. (8) for ``cells``: (n d d, F d), row k*d*d + i*d + j for cells[k], column
+    f*d + i, value |f| n_j / |c|: d+1 entries per row (the cell's facets), built as CSR."""
+    d = geom.d
+    cells = np.asarray(cells)
+    a = geom.facet_area_normals[cells] / geom.cell_volumes[cells, None, None]  # (n, d+1, d): [c, k, j]
+    facets = geom.cell_facets[cells].astype(np.int32)  # (n, d+1)
+    shape = (len(cells), d, d, d + 1)  # entry [c, i, j, k]
+    indices = np.broadcast_to(facets[:, None, None, :] * d + np.arange(d, dtype=np.int32)[None, :, None, None], shape)
+    data = np.broadcast_to(a.transpose(0, 2, 1)[:, None, :, :], shape)
+    indptr = np.arange(0, len(cells) * d * d * (d + 1) + 1, d + 1, dtype=np.int32)
+    return scipy.sparse.csr_matrix((data.ravel(), indices.ravel(), indptr), shape=(len(cells) * d * d, geom.num_facets * d))
 
 
-def compute_energy_operators(
-    geom: MeshGeometry, material: ElasticMaterial, rec: Reconstruction, num_cells: int, jump_facets: np.ndarray
-) -> EnergyOperators:
-    """S and the gradient for the first ``num_cells`` cells, J for ``jump_facets`` (in that row
-    order), as in the module docstring. Columns: the held cells' dofs."""
-    d, N = geom.d, geom.num_cells
-    Gf = facet_gradient(geom)
-    cell_rows = np.arange(num_cells * d * d)
-    grad = (Gf[cell_rows] @ rec.R).tocsr()
-    grad_D = (Gf[cell_rows] @ rec.D).tocsr()
+def gradient_rows(geom: MeshGeometry, rec: Reconstruction, cells: np.ndarray):
+    """The cell gradients of eq. (8) of ``cells`` as operators: G = grad u_C + grad_D g with
+    grad = Gf R (n d d, N d) and grad_D = Gf D (n d d, n_D d), rows as in ``facet_gradient``."""
+    Gf = facet_gradient(geom, cells)
+    return (Gf @ rec.R).tocsr(), (Gf @ rec.D).tocsr()
+
+
+def compute_energy_rows(
+    geom: MeshGeometry, material: ElasticMaterial, rec: Reconstruction, num_cells: int, jump_facets: np.ndarray,
+    num_own_jumps: int,
+) -> EnergyRows:
+    """S for the first ``num_cells`` cells, then J for ``jump_facets`` (in that row order), as in
+    the module docstring; the rows of S and of the first ``num_own_jumps`` jump facets are
+    ``owned``. Q is formed by one sparse product (below), so that no second copy of Q is made."""
+    d, N, F = geom.d, geom.num_cells, geom.num_facets
+    m = d * (d + 1) // 2
+    # Only the cells whose gradients the rows read: the owned ones (S) and both cells of each jump facet.
+    c1, c2 = geom.facet_cells[jump_facets, 0], geom.facet_cells[jump_facets, 1]
+    cells = np.unique(np.concatenate([np.arange(num_cells), c1, c2]))
+    Gf = facet_gradient(geom, cells)  # rows of cell cells[k]: k d d + ...
 
     L = np.linalg.cholesky(mandel_stiffness(material, d))
     block = L.T @ mandel(d)  # (m, d*d)
-    W = scipy.sparse.kron(
-        scipy.sparse.diags(np.sqrt(geom.cell_volumes[:num_cells])), scipy.sparse.csr_matrix(block)
-    ).tocsr()
+    W = scipy.sparse.kron(scipy.sparse.diags(np.sqrt(geom.cell_volumes[:num_cells])),
+                          scipy.sparse.csr_matrix(block)).tocsr()
 
     # Jump of the P1 reconstructions (10) at x_f, eq. (12): direct part + gradient part.
-    c1, c2 = geom.facet_cells[jump_facets, 0], geom.facet_cells[jump_facets, 1]
     n = len(jump_facets)
+    k1, k2 = np.searchsorted(cells, c1), np.searchsorted(cells, c2)
     xf = geom.facet_centres[jump_facets]
     r1, r2 = xf - geom.cell_centres[c1], xf - geom.cell_centres[c2]
+    weight = material.stabilisation * geom.facet_areas[jump_facets] / geom.facet_diameters[jump_facets]
+    sqrt_w = np.repeat(np.sqrt(weight), d)
     f, i, j = np.meshgrid(np.arange(n), np.arange(d), np.arange(d), indexing="ij")
     X = scipy.sparse.coo_matrix(
         (
-            np.concatenate([r1[f, j].ravel(), -r2[f, j].ravel()]),
-            (
-                np.tile((f * d + i).ravel(), 2),
-                np.concatenate([(c1[f] * d * d + i * d + j).ravel(), (c2[f] * d * d + i * d + j).ravel()]),
-            ),
+            np.concatenate([(sqrt_w.reshape(n, d)[f, i] * r1[f, j]).ravel(),
+                            (-sqrt_w.reshape(n, d)[f, i] * r2[f, j]).ravel()]),
+            (np.tile((f * d + i).ravel(), 2),
+             np.concatenate([(k1[f] * d * d + i * d + j).ravel(), (k2[f] * d * d + i * d + j).ravel()])),
         ),
-        shape=(n * d, N * d * d),
+        shape=(n * d, len(cells) * d * d),
     ).tocsr()
+    # the direct part of the jump, sqrt(w) (u_c1 - u_c2), in the columns after the gradients'
     fi, ii = np.meshgrid(np.arange(n), np.arange(d), indexing="ij")
     delta = scipy.sparse.coo_matrix(
-        (
-            np.concatenate([np.ones(n * d), -np.ones(n * d)]),
-            (np.tile((fi * d + ii).ravel(), 2), np.concatenate([(c1[fi] * d + ii).ravel(), (c2[fi] * d + ii).ravel()])),
-        ),
-        shape=(n * d, N * d),
+        (np.concatenate([sqrt_w, -sqrt_w]),
+         (np.tile((fi * d + ii).ravel(), 2),
+          len(cells) * d * d + np.concatenate([(c1[fi] * d + ii).ravel(), (c2[fi] * d + ii).ravel()]))),
+        shape=(n * d, len(cells) * d * d + N * d),
     ).tocsr()
-    weight = material.stabilisation * geom.facet_areas[jump_facets] / geom.facet_diameters[jump_facets]
-    sqrt_w = scipy.sparse.diags(np.repeat(np.sqrt(weight), d))
-    S_facet = (W @ Gf[cell_rows]).tocsr()
-    J_facet = (sqrt_w @ X @ Gf).tocsr()
-    return EnergyOperators(
-        S_facet=S_facet,
-        J_facet=J_facet,
-        grad=grad,
-        grad_dirichlet=grad_D,
-        S=(S_facet @ rec.R).tocsr(),
-        S_dirichlet=(S_facet @ rec.D).tocsr(),
-        J=(sqrt_w @ delta + J_facet @ rec.R).tocsr(),
-        J_dirichlet=(J_facet @ rec.D).tocsr(),
-        jump_facets=np.asarray(jump_facets),
-    )
+    del f, i, j, fi, ii, r1, r2, xf, k1, k2, c1, c2
+    X.resize(n * d, len(cells) * d * d + N * d)
+    W.resize(num_cells * m, len(cells) * d * d + N * d)
+    # a = M [G; u_C], [G; u_C] = blockdiag(Gf, I) [u_F; u_C], [u_F; u_C] = [R; I] u_C (+ [D; 0] g):
+    # QF_ext = M blockdiag(Gf, I), then Q = QF_ext [R; I], each one product; CSR stacks only
+    # (conversions through COO would double the memory of the operands).
+    M = scipy.sparse.vstack([W, X + delta], format="csr")
+    del W, X, delta
+    Gf.resize(Gf.shape[0], F * d + N * d)
+    identity = scipy.sparse.csr_matrix((np.ones(N * d), np.arange(F * d, F * d + N * d, dtype=np.int32),
+                                        np.arange(N * d + 1, dtype=np.int32)), shape=(N * d, F * d + N * d))
+    QF_ext = (M @ scipy.sparse.vstack([Gf, identity], format="csr")).tocsr()
+    del M, Gf, identity
+    R_ext = scipy.sparse.vstack([rec.R, scipy.sparse.identity(N * d)], format="csr")
+    Q = (QF_ext @ R_ext).tocsr()
+    del R_ext
+    Q_dirichlet = (QF_ext @ scipy.sparse.vstack([rec.D, scipy.sparse.csr_matrix((N * d, rec.D.shape[1]))])).tocsr()
+    # QF: the boundary-facet columns only (QF_ext's memory is reused)
+    interior = np.ones(F * d + N * d, dtype=bool)
+    interior[(np.flatnonzero(geom.facet_cells[:, 1] == -1)[:, None] * d + np.arange(d)).ravel()] = False
+    QF_ext.data[interior[QF_ext.indices]] = 0.0
+    QF_ext.eliminate_zeros()
+    QF_ext.resize(QF_ext.shape[0], F * d)
+    S_rows = num_cells * m
+    own = np.zeros(Q.shape[0], dtype=bool)
+    own[: S_rows + num_own_jumps * d] = True
+    return EnergyRows(Q=Q, Q_dirichlet=Q_dirichlet, QF=QF_ext, owned=own,
+                      elastic=np.arange(Q.shape[0]) < S_rows, jump_facets=np.asarray(jump_facets))

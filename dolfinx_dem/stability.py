@@ -14,9 +14,9 @@ Collatz-Wielandt). w = 1 is Gershgorin's bound; w_{k+1} = |Kt| w_k (power iterat
 gives a non-increasing sequence of bounds towards rho(|Kt|). Starting from the diagonal of Kt
 instead of 1 reaches in two passes what w = 1 reaches in three. The rows of |K| = |Q^T Q| are
 computed from the rows of Q (kernels.c, ``dem_gram_abs_rowsums``) without storing K: for each
-owned dof, the rows of Q through it (the local rows of Q^T), fetched from their owners. The sums
-run in the order of the global numbering, so the bound is the same, to the bit, on any number
-of processes.
+owned dof, the rows of Q through it (the local rows of Q^T), those of other processes sent by
+their owners (neighbours only). The sums run in an order of rows and columns that does not
+depend on the partition, so the bound is the same, to the bit, on any number of processes.
 
 Measured against SLEPc (docs/bench/README.md, ``bound_tightness``): rho(|Kt|) is lambda_max
 itself on a 1D bar and 1.1-1.4 lambda_max on the 2D and 3D scenes, so the bound's time step is
@@ -30,63 +30,117 @@ import scipy.sparse
 from mpi4py import MPI
 from petsc4py import PETSc
 
-from dolfinx_dem.factored import FactoredStiffness, local_numbering
-from dolfinx_dem.kernels import lib, pointer
+from dolfinx_dem.factored import FactoredStiffness
+from dolfinx_dem.halo import alltoall
+from dolfinx_dem.kernels import ffi, lib, pointer
 
 #: Relative margin added to the computed bound for its rounding: each entry of |K| is a sum of
 #: a few tens of products, so the computed row sums are within ~1e-14 of the exact ones.
 ROUNDING_MARGIN = 1e-12
 
 
-def largest_eigenvalue_bound(factored: FactoredStiffness, QT: PETSc.Mat, inverse_mass: PETSc.Vec,
-                             iterations: int = 3) -> float:
+def _ranges(starts: np.ndarray, lengths: np.ndarray) -> np.ndarray:
+    """The concatenation of the ranges [starts[k], starts[k] + lengths[k])."""
+    lengths = np.asarray(lengths, dtype=np.int64)
+    offsets = np.concatenate([[0], np.cumsum(lengths)[:-1]]).astype(np.int64)
+    return np.repeat(np.asarray(starts, dtype=np.int64) - offsets, lengths) + np.arange(lengths.sum())
+
+
+def _rows_of_other_processes(factored: FactoredStiffness, row_keys: np.ndarray, ghost_owners: np.ndarray,
+                             start: int):
+    """The rows of Q of other processes that read this process's dofs: each process sends its
+    rows that read ghost dofs to the owners of those dofs (neighbours only). Returns their keys,
+    and their CSR with global column numbers, rows in increasing key."""
+    comm, n_od = factored.comm, factored.n_owned
+    rowptr, cols, vals = factored.rowptr, factored.cols, factored.vals
+    positions = np.flatnonzero(cols[: rowptr[-1]] >= n_od)
+    rows = np.searchsorted(rowptr, positions, side="right") - 1
+    pairs = np.unique(rows.astype(np.int64) * comm.size + ghost_owners[cols[positions] - n_od])
+    rows, destinations = pairs // comm.size, pairs % comm.size
+    lengths = np.diff(rowptr)[rows]
+    entries = _ranges(rowptr[rows], lengths)
+    local = cols[entries]
+    global_cols = np.where(local < n_od, start + local, factored.ghosts[np.maximum(local - n_od, 0)])
+    headers, _ = alltoall(comm, destinations, np.stack([row_keys[rows], lengths], axis=1).astype(np.int64))
+    payload, _ = alltoall(comm, np.repeat(destinations, lengths),
+                           np.stack([global_cols.astype(np.float64), vals[entries]], axis=1))
+    order = np.argsort(headers[:, 0], kind="stable")
+    first = np.concatenate([[0], np.cumsum(headers[:, 1])])
+    take = _ranges(first[order], headers[order, 1])
+    ptr = np.concatenate([[0], np.cumsum(headers[order, 1])]).astype(np.int32)
+    return headers[order, 0].copy(), ptr, payload[take, 0].astype(np.int64), payload[take, 1].copy()
+
+
+def largest_eigenvalue_bound(factored: FactoredStiffness, row_keys: np.ndarray, ghost_owners: np.ndarray,
+                             inverse_mass: PETSc.Vec, iterations: int = 3) -> float:
     """An upper bound on lambda_max(M^-1 Q^T Q) (rad^2/s^2): the smallest of ``iterations``
     weighted row sums max_i (|Kt| w)_i / w_i, w = d, |Kt| d, |Kt|^2 d, ... with d the diagonal
     of Kt (module docstring).
 
-    factored : the local rows of Q (``DEMDiscretisation.factored``); QT : Q^T, with the rows of
-    the owned dofs; inverse_mass : M^-1 with the layout of the dofs. Costs ``iterations`` passes
-    over the rows of Q through each owned dof, plus fetching the rows of other processes once.
+    factored : the local rows of Q (``DEMDiscretisation.factored``); row_keys : a number of each
+    local row, increasing along them, that orders the rows of all processes independently of the
+    partition; ghost_owners : the rank owning each ghost dof of ``factored``; inverse_mass : M^-1
+    with the layout of the dofs. Costs ``iterations`` passes over the rows of Q through each owned
+    dof, a transpose of the local rows (the size of Q, freed on return) and fetching the rows of
+    other processes that reach owned dofs once (from the neighbours only).
     """
     if iterations < 1:
         raise ValueError(f"iterations must be >= 1, got {iterations}")
-    Q = factored.Q
-    comm = Q.comm.tompi4py()
-    qt_ptr, qt_rows, qt_vals = QT.getValuesCSR()  # for each owned dof i: rows k of Q with Q_ki != 0
-    row_start, row_stop = Q.getOwnershipRange()
-    remote, qt_local = local_numbering(qt_rows, row_start, row_stop)
-    needed = np.concatenate([np.arange(row_start, row_stop, dtype=PETSc.IntType), remote])
-    self_comm = PETSc.COMM_SELF
-    dof_start, dof_stop = Q.getOwnershipRangeColumn()
-    if comm.allreduce(len(remote), op=MPI.MAX) == 0:  # e.g. one process: the local rows are all
-        ptr, cols, vals, ghosts = factored.rowptr, factored.cols, factored.vals, factored.ghosts
-    else:
-        all_cols = PETSc.IS().createStride(Q.getSize()[1], 0, 1, comm=self_comm)
-        (rows,) = Q.createSubMatrices(PETSc.IS().createGeneral(needed, comm=self_comm), all_cols)
-        ptr, cols, vals = rows.getValuesCSR()
-        rows.destroy()
-        ghosts, cols = local_numbering(cols, dof_start, dof_stop)  # dofs two rows away from the owned ones
-        ptr, vals = np.ascontiguousarray(ptr, dtype=np.int32), np.ascontiguousarray(vals)
-    reach = np.concatenate([np.arange(dof_start, dof_stop, dtype=PETSc.IntType), ghosts])
-    qt_ptr, qt_vals = np.ascontiguousarray(qt_ptr, dtype=np.int32), np.ascontiguousarray(qt_vals)
+    comm, n = factored.comm, factored.n_owned
+    if len(row_keys) != factored.n_rows or np.any(np.diff(row_keys) <= 0):
+        raise ValueError("row_keys must increase along the local rows of Q")
+    start, stop = inverse_mass.getOwnershipRange()
+    # Q^T on the owned dofs: for each, this process's rows through it (in row order, so in key
+    # order), and the rows of other processes through it.
+    nnz = int(factored.rowptr[-1])
+    own = scipy.sparse.csr_matrix((factored.vals[:nnz], factored.cols[:nnz], factored.rowptr),
+                                  shape=(factored.n_rows, n + len(factored.ghosts)))
+    qt = own.tocsc()
+    del own
+    keys2, ptr2, global2, vals2 = _rows_of_other_processes(factored, row_keys, ghost_owners, start)
+    mine2 = (global2 >= start) & (global2 < stop)
+    rows2 = np.repeat(np.arange(len(keys2), dtype=np.int32), np.diff(ptr2))
+    order = np.argsort(global2[mine2], kind="stable")  # by owned dof, rows in key order
+    dof2 = global2[mine2][order] - start
+    qt2_ptr = np.concatenate([[0], np.cumsum(np.bincount(dof2, minlength=n))]).astype(np.int32)
+    qt2_rows, qt2_vals = np.ascontiguousarray(rows2[mine2][order]), np.ascontiguousarray(vals2[mine2][order])
+    # the dofs the rows read: the held ones (owned, then ghosts), then any others
+    ghosts = factored.ghosts
+    by_value = np.argsort(ghosts)
+    other = global2[~mine2]
+    at = np.searchsorted(ghosts[by_value], other)
+    held = at < len(ghosts)
+    held[held] = ghosts[by_value[at[held]]] == other[held]
+    extras, extra_index = np.unique(other[~held], return_inverse=True)
+    local_other = np.empty(len(other), dtype=np.int64)
+    local_other[held] = n + by_value[at[held]]
+    local_other[~held] = n + len(ghosts) + extra_index
+    cols2 = np.empty(len(global2), dtype=np.int32)
+    cols2[mine2] = global2[mine2] - start
+    cols2[~mine2] = local_other
+    reach = np.concatenate([np.arange(start, stop, dtype=PETSc.IntType), ghosts, extras.astype(PETSc.IntType)])
 
+    self_comm = PETSc.COMM_SELF
     x = inverse_mass.duplicate()
     x_reach = PETSc.Vec().createSeq(len(reach), comm=self_comm)
     scatter = PETSc.Scatter().create(x, PETSc.IS().createGeneral(reach, comm=self_comm), x_reach, None)
+    arrays = (pointer(qt.indptr), pointer(qt.indices), pointer(qt.data), pointer(factored.rowptr),
+              pointer(factored.cols), pointer(factored.vals), pointer(np.ascontiguousarray(row_keys)),
+              pointer(qt2_ptr), pointer(qt2_rows), pointer(qt2_vals), pointer(ptr2), pointer(cols2),
+              pointer(vals2), pointer(keys2))
+    keep = (row_keys, qt2_ptr, qt2_rows, qt2_vals, ptr2, cols2, vals2, keys2)  # noqa: F841 (alive for the pointers)
     s = np.sqrt(inverse_mass.array_r)
-    n = len(s)
     acc = np.zeros(len(reach))  # the kernel's workspace, left zero
     r = np.empty(n)
     # start from the diagonal of Kt (cheaper than w = 1 for the same bound: 2 passes, not 3)
-    squares = scipy.sparse.csr_matrix((qt_vals**2, qt_local, qt_ptr), shape=(n, len(needed)))
-    w = s**2 * np.asarray(squares.sum(axis=1)).ravel()  # each row summed in its own order
+    lib.dem_gram_abs_rowsums(n, *arrays, ffi.NULL, pointer(r), pointer(acc))
+    w = s**2 * r
     w = np.maximum(w / comm.allreduce(w.max() if n else 0.0, op=MPI.MAX), np.finfo(float).tiny)
     bound = np.inf
     for _ in range(iterations):
         x.array[:] = s * w
         scatter.scatter(x, x_reach, PETSc.InsertMode.INSERT_VALUES, PETSc.ScatterMode.FORWARD)
-        lib.dem_gram_abs_rowsums(n, pointer(qt_ptr), pointer(qt_local), pointer(qt_vals), pointer(ptr),
-                                 pointer(cols), pointer(vals), pointer(x_reach.array), pointer(r), pointer(acc))
+        lib.dem_gram_abs_rowsums(n, *arrays, pointer(x_reach.array), pointer(r), pointer(acc))
         b = s * r  # (|Kt| w)_i
         local = (b / w).max() if n else 0.0
         bound = min(bound, comm.allreduce(local, op=MPI.MAX))

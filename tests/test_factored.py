@@ -43,11 +43,12 @@ def test_one_pass_equals_the_two_matmults(alpha):
     K.bind(x, y, z, sums)(alpha, 0.5)
     z.ghostUpdate(**REVERSE)
 
-    a, out = dem.Q.createVecLeft(), dem.create_vector()
-    dem.Q.mult(x, a)
+    Q = dem.assemble_Q()
+    a, out = Q.createVecLeft(), dem.create_vector()
+    Q.mult(x, a)
     expected = alpha * y0 + 0.5 * a.array
     a.array[:] = expected
-    dem.Q.transpose(PETSc.Mat()).mult(a, out)  # the reference: PETSc's Q^T
+    Q.transpose(PETSc.Mat()).mult(a, out)  # the reference: PETSc's Q^T
     scale = comm.allreduce(np.abs(expected).max(), op=MPI.MAX)
     assert comm.allreduce(np.abs(y - expected).max(), op=MPI.MAX) <= 1e-14 * scale
     zscale = comm.allreduce(np.abs(out.array).max(), op=MPI.MAX)
