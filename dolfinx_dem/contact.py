@@ -37,7 +37,7 @@ from petsc4py import PETSc
 
 from dolfinx_dem.halo import owned_facet_marks
 from dolfinx_dem.operators import gradient_rows
-from dolfinx_dem.patch import PatchScatter, negative_part_integral, piecewise_midpoints
+from dolfinx_dem.patch import PatchScatter, negative_part_integral, piecewise_midpoints, scatter_sum
 
 
 #: Patch operators with at most this many entries are stored as dense arrays: a sparse
@@ -390,7 +390,8 @@ class RigidContact:
             pairs = np.unique(np.stack([index[event], col[event]], axis=1), axis=0)
             mid, length = piecewise_midpoints(pairs[:, 0], tau[pairs[:, 1]], len(touching), dt)
             coefficient = (self._YQ @ up + self._Yq)[touching, None] + mid * (self._YQ @ vp)[touching, None]
-            np.add.at(coefficient, index, -val[:, None] * np.minimum(g0[col, None] + mid[index] * s[col, None], 0.0))
+            coefficient += scatter_sum(index, -val[:, None] * np.minimum(g0[col, None] + mid[index] * s[col, None], 0.0),
+                                       len(coefficient))
             active = g0[touching, None] + mid * s[touching, None] < 0
             integral = (length * coefficient * active).sum(axis=1)
             out_p += self._RnT_own[:, touching] @ integral

@@ -67,7 +67,7 @@ from mpi4py import MPI
 from petsc4py import PETSc
 
 from dolfinx_dem.halo import owned_facet_marks
-from dolfinx_dem.patch import PatchScatter, piecewise_midpoints
+from dolfinx_dem.patch import PatchScatter, piecewise_midpoints, scatter_sum
 
 #: Gauss-Legendre 2-point nodes on [0, 1]: exact for the cubic force correction on each piece.
 _GL2 = 0.5 + np.array([-0.5, 0.5]) / np.sqrt(3.0)
@@ -530,9 +530,8 @@ class PairContact:
         dc/du_f = -(that)."""
         L = self.listed
         dc = mu[:, None] * (w[:, None] * L.n[p] - (g * ds)[:, None] * L.t[p])
-        facet_force = np.zeros((len(self.facets_all), self.d))
-        np.add.at(facet_force, L.i[p], dc)
-        np.add.at(facet_force, L.j[p], -dc)
+        n = len(self.facets_all)
+        facet_force = scatter_sum(L.i[p], dc, n) - scatter_sum(L.j[p], dc, n)
         return self._RT @ facet_force.ravel()
 
     def add(self, correction: np.ndarray, out: PETSc.Vec, scale: float = 1.0) -> None:
@@ -575,8 +574,7 @@ class PairContact:
             e = np.repeat(touching, nodes.shape[1])
             s = nodes.ravel()
             g, w, _ = self._state(e, ui0[e] + s[:, None] * vi[e], uj0[e] + s[:, None] * vj[e])
-            c_int = np.zeros(len(L))
-            np.add.at(c_int, e, weights.ravel() * w * np.minimum(g, 0.0))
+            c_int = scatter_sum(e, weights.ravel() * w * np.minimum(g, 0.0), len(L))
             result -= L.QT @ (L.Z @ c_int)
 
             # Pairs' term: each touching pair on the pieces cut by the events of the pairs that
@@ -602,7 +600,7 @@ class PairContact:
                 q = np.repeat(nb, K)
                 sq = s[node]
                 gq, wq, _ = self._state(q, ui0[q] + sq[:, None] * vi[q], uj0[q] + sq[:, None] * vj[q])
-                np.add.at(mu, node, value[entry] * wq * np.minimum(gq, 0.0))
+                mu += scatter_sum(node, value[entry] * wq * np.minimum(gq, 0.0), len(mu))
                 mu = np.where(g < 0, mu, 0.0) * weights.ravel()
                 result += self._facet_force(e, mu, g, w, ds)
                 pieces = max(pieces, int((length > 0).sum(axis=1).max()))
@@ -637,9 +635,9 @@ class PairContact:
         p = np.arange(len(L))
         g, w, _ = self._state(p, *self._pair_displacements(up))
         c = w * np.minimum(g, 0.0)
-        delta = np.zeros((len(self.facets_all), self.d))
-        np.add.at(delta, L.i, (c / self.facets_all.length[L.i])[:, None] * L.e_i)
-        np.add.at(delta, L.j, (c / self.facets_all.length[L.j])[:, None] * L.e_j)
+        n = len(self.facets_all)
+        delta = scatter_sum(L.i, (c / self.facets_all.length[L.i])[:, None] * L.e_i, n) + \
+            scatter_sum(L.j, (c / self.facets_all.length[L.j])[:, None] * L.e_j, n)
         return delta[: len(self.facets)]
 
     def gradient_correction(self, up: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

@@ -16,6 +16,16 @@ import numpy as np
 from petsc4py import PETSc
 
 
+def scatter_sum(index: np.ndarray, values: np.ndarray, n: int) -> np.ndarray:
+    """out[index[k]] += values[k] for values of shape (k,) or (k, m), into zeros of n rows: the
+    sums of ``np.add.at`` in the same order (the same bits), by ``np.bincount`` per column, many
+    times faster on numpy 1.24."""
+    if values.ndim == 1:
+        return np.bincount(index, weights=values, minlength=n)
+    return np.stack([np.bincount(index, weights=values[:, k], minlength=n) for k in range(values.shape[1])],
+                    axis=1).reshape(n, *values.shape[1:])
+
+
 class PatchScatter:
     """Values of distributed vectors (layout of ``template``) at the global dofs ``dofs``, and
     the sum of per-process contributions at those dofs back into a distributed vector.

@@ -323,10 +323,11 @@ def compute_reconstruction(
     eye = np.broadcast_to(np.eye(d), (max(len(neumann), len(dirichlet_facets), 1), d, d))
 
     stencils = compute_interior_stencils(geom, rows)
-    fi = np.repeat(stencils.facets, d + 1)
-    ci = stencils.cells.ravel()
-    blocks = stencils.alpha.ravel()[:, None, None] * np.eye(d)
-    r_int = _block_coo(fi, ci, blocks, d)
+    # interior facets: alpha I blocks, stored by their diagonals only
+    component = np.arange(d)
+    r_int = ((np.repeat(stencils.facets, d + 1)[:, None] * d + component).ravel(),
+             (stencils.cells.ravel()[:, None] * d + component).ravel(),
+             np.repeat(stencils.alpha.ravel(), d))
 
     # Scheme A applies to the Neumann facets of cells with exactly one Neumann facet.
     ncell = geom.facet_cells[neumann, 0]
