@@ -57,8 +57,8 @@ class ContactModel(Protocol):
     is called from outside but its outputs (the series columns and summary figures of a run).
     Methods that take PETSc vectors are collective; ``up`` are this process's patch values
     (``patch_values``: its candidate facets' stencils and rows, gathered by a VecScatter),
-    valid until the next ``prepare``. Each process owns the candidate facets of its owned cells
-    (the first ``num_own`` of ``cells``).
+    valid until the next ``prepare``, which returns those of the state it prepares for. Each
+    process owns the candidate facets of its owned cells (the first ``num_own`` of ``cells``).
 
     Three groups: the dynamics (``prepare`` ... ``force_integral``), the statics of a piecewise
     quadratic potential (``own_gaps`` ... ``gap_gradient_dot``: rigid obstacles; contact between
@@ -68,8 +68,10 @@ class ContactModel(Protocol):
     cells: np.ndarray  # local cells of the candidate facets (own first), (n_facets,)
     num_own: int  # candidate facets of owned cells
 
-    def prepare(self, u: PETSc.Vec, v: PETSc.Vec | None = None, dt: float = 0.0) -> None:
-        """Make the model valid for the states u + tau v, 0 <= tau <= dt (MEMM: every step)."""
+    def prepare(self, u: PETSc.Vec, v: PETSc.Vec | None = None,
+                dt: float = 0.0) -> tuple[np.ndarray, np.ndarray | None]:
+        """Make the model valid for the states u + tau v, 0 <= tau <= dt (MEMM: every step);
+        returns the patch values of u and of v (None without v)."""
 
     def patch_values(self, vec: PETSc.Vec) -> np.ndarray:
         """The values of ``vec`` at this process's patch dofs."""
@@ -91,8 +93,9 @@ class ContactModel(Protocol):
     def gradient_correction(self, up: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(local cells, change of their gradients (n, d, d)) for the touching facets."""
 
-    def force_integral(self, u: PETSc.Vec, v: PETSc.Vec, dt: float, out: PETSc.Vec) -> int:
-        """out += int_0^dt (F - F_free)(u + tau v) dtau, exactly; returns the evaluations."""
+    def force_integral(self, up: np.ndarray, vp: np.ndarray, dt: float, out: PETSc.Vec) -> int:
+        """out += int_0^dt (F - F_free)(u + tau v) dtau, exactly, for the patch values up, vp
+        of u and v that ``prepare`` returned; returns the evaluations."""
 
     def own_gaps(self, u: PETSc.Vec) -> np.ndarray:
         """Gaps g_f of the own candidate facets at u (m), affine in u."""
@@ -253,8 +256,11 @@ class RigidContact:
         self.evaluations = 0
 
     # -- patch data ----------------------------------------------------------------------------
-    def prepare(self, u: PETSc.Vec, v: PETSc.Vec | None = None, dt: float = 0.0) -> None:
-        """Nothing to prepare: every candidate facet is tested at every evaluation."""
+    def prepare(self, u: PETSc.Vec, v: PETSc.Vec | None = None,
+                dt: float = 0.0) -> tuple[np.ndarray, np.ndarray | None]:
+        """Nothing to prepare (every candidate facet is tested at every evaluation): the patch
+        values of u and v (collective)."""
+        return self.patch_values(u), None if v is None else self.patch_values(v)
 
     def patch_values(self, vec: PETSc.Vec) -> np.ndarray:
         """The values of ``vec`` at the patch dofs (collective)."""
@@ -362,9 +368,10 @@ class RigidContact:
         return float(change[self._is_elastic_row].sum()), float(change[~self._is_elastic_row].sum())
 
     # -- events --------------------------------------------------------------------------------
-    def force_integral(self, u: PETSc.Vec, v: PETSc.Vec, dt: float, out: PETSc.Vec) -> int:
-        """out += int_0^dt (F - F_free)(u + tau v) dtau, exactly (collective); returns the largest
-        number of pieces a facet's integral is split into.
+    def force_integral(self, up: np.ndarray, vp: np.ndarray, dt: float, out: PETSc.Vec) -> int:
+        """out += int_0^dt (F - F_free)(u + tau v) dtau, exactly (collective), for the patch
+        values up, vp of u and v (``prepare``); returns the largest number of pieces a facet's
+        integral is split into.
 
         Along the flight every gap is affine, g_f(tau) = g_f + tau s_f. The rows' part,
         Q^T delta, is linear in the g_f^-, whose integrals are exact in closed form. The facet
@@ -372,7 +379,6 @@ class RigidContact:
         contact, is affine in tau between the events (sign changes) of the candidates that share
         rows with f, so it is split there, and only there (paper §4: an impact elsewhere does not
         split it), and integrated by the midpoint rule on each piece: exact."""
-        up, vp = self.patch_values(u), self.patch_values(v)
         g0, s = self.gaps(up), self._Rn @ vp
         g1 = g0 + dt * s
         out_p = self._Z @ negative_part_integral(g0, s, dt)

@@ -200,8 +200,7 @@ class MEMM:
         pair list), whatever the rule.
         """
         contacts = self.problem.contacts
-        for contact in contacts:
-            contact.prepare(self.u, self.v_next, self.dt)
+        patch = [contact.prepare(self.u, self.v_next, self.dt) for contact in contacts]
         split = bool(contacts) and self.quadrature == "midpoint"
         evaluations = len(self.nodes)
         load = self._state.load
@@ -218,11 +217,10 @@ class MEMM:
                 load.copy(out)
         else:
             out = load
-        for contact in contacts:
+        for contact, (up, vp) in zip(contacts, patch):
             if split:
-                evaluations += max(contact.force_integral(self.u, self.v_next, self.dt, out) - 1, 0)
+                evaluations += max(contact.force_integral(up, vp, self.dt, out) - 1, 0)
             else:
-                up, vp = contact.patch_values(self.u), contact.patch_values(self.v_next)
                 for x, w in zip(self.nodes, self.weights):
                     contact.add(contact.force_correction(up + x * self.dt * vp), out, scale=w * self.dt)
         self.force_evaluations += evaluations

@@ -421,26 +421,30 @@ class PairContact:
         because eq. (23)-(24) are not well posed for them (see ``_directions``); collective."""
         return self.comm.allreduce(len(self._scheme_b_rule), op=MPI.SUM)
 
-    def prepare(self, u: PETSc.Vec, v: PETSc.Vec | None = None, dt: float = 0.0) -> None:
+    def prepare(self, u: PETSc.Vec, v: PETSc.Vec | None = None,
+                dt: float = 0.0) -> tuple[np.ndarray, np.ndarray | None]:
         """Make the Verlet list valid for the states u + tau v, 0 <= tau <= dt (u alone without
         v): rebuild it at u on every process if a candidate facet anywhere would move more than
         skin/2 from where it was at the last build. The free facet displacements are affine in
         tau, so checking both ends covers the whole flight. ``MEMM`` calls this before every
         step's force integral, whatever the quadrature, and at ``initialise``; call it before
         evaluating forces or energies at displacements of your own. Collective (one logical
-        reduction). Arrays of patch values gathered before a rebuild are invalid after it."""
+        reduction). Returns the patch values of u and v (None without v), gathered after any
+        rebuild: arrays of patch values gathered before a rebuild are invalid after it."""
         start = time.process_time()
         up = self.patch_values(u)
+        vp = None if v is None else self.patch_values(v)
         uc = self.free_displacements(up)
         stale = self._moved(uc)
         moving = v is not None and dt != 0.0
         if moving:
-            step = dt * (self._R @ self.patch_values(v)).reshape(-1, self.d)
+            step = dt * (self._R @ vp).reshape(-1, self.d)
             stale = stale or self._moved(uc + step)
         if self.comm.allreduce(stale, op=MPI.LOR):
             self._build(u)
+            up = self.patch_values(u)
+            vp = None if v is None else self.patch_values(v)
             if moving:
-                up, vp = self.patch_values(u), self.patch_values(v)
                 uc, step = self.free_displacements(up), dt * (self._R @ vp).reshape(-1, self.d)
                 too_far = self._moved(uc + step)
                 if self.comm.allreduce(too_far, op=MPI.LOR):
@@ -450,6 +454,7 @@ class PairContact:
                         f"in one step, more than half the Verlet skin ({self.skin:.3e} m): no pair list covers the "
                         "step; reduce the time step or pass a larger skin")
         self.seconds += time.process_time() - start
+        return up, vp
 
     def _moved(self, uc: np.ndarray) -> bool:
         """Whether a facet known here (local or ghost) with free displacements ``uc`` has moved
@@ -545,13 +550,13 @@ class PairContact:
         self.scatter.add(self.force_correction(self.patch_values(u)), out)
 
     # -- events --------------------------------------------------------------------------------
-    def force_integral(self, u: PETSc.Vec, v: PETSc.Vec, dt: float, out: PETSc.Vec) -> int:
+    def force_integral(self, up: np.ndarray, vp: np.ndarray, dt: float, out: PETSc.Vec) -> int:
         """out += int_0^dt (F - F_free)(u + tau v) dtau, split at the events and integrated by
-        2-point Gauss-Legendre on each piece (module docstring); returns the largest number of
-        pieces of a pair's integral (collective)."""
+        2-point Gauss-Legendre on each piece (module docstring), for the patch values up, vp of
+        u and v that ``prepare`` returned; returns the largest number of pieces of a pair's
+        integral (collective)."""
         start = time.process_time()
         L = self.listed
-        up, vp = self.patch_values(u), self.patch_values(v)
         ui0, uj0 = self._pair_displacements(up)
         vc = (self._R @ vp).reshape(-1, self.d)
         vi, vj = vc[L.i], vc[L.j]
