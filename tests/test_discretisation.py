@@ -251,3 +251,47 @@ def test_operators_are_the_same_on_any_number_of_processes(kind, scheme):
     assert max(np.abs(par[k][1] - ser[k][1]).max() for k in par) < 1e-12 * s_scale
     for key in ("elastic", "stabilisation", "external"):
         assert e_par[key] == pytest.approx(e_ser[key], rel=1e-12, abs=1e-14)
+
+
+def _held_bytes(obj, seen=None) -> int:
+    """Bytes of the numpy arrays and scipy sparse matrices reachable from ``obj`` through
+    attributes, dataclass fields, lists, tuples and dicts (each array counted once)."""
+    import dataclasses
+
+    import scipy.sparse
+
+    seen = set() if seen is None else seen
+    if id(obj) in seen:
+        return 0
+    seen.add(id(obj))
+    if isinstance(obj, np.ndarray):
+        return obj.nbytes if obj.base is None or id(obj.base) not in seen else 0
+    if scipy.sparse.issparse(obj):
+        return sum(_held_bytes(getattr(obj, n), seen) for n in ("data", "indices", "indptr", "row", "col")
+                   if hasattr(obj, n))
+    if isinstance(obj, (list, tuple)):
+        return sum(_held_bytes(x, seen) for x in obj)
+    if isinstance(obj, dict):
+        return sum(_held_bytes(x, seen) for x in obj.values())
+    if dataclasses.is_dataclass(obj):
+        return sum(_held_bytes(getattr(obj, f.name), seen) for f in dataclasses.fields(obj))
+    if hasattr(obj, "__dict__") and type(obj).__module__.startswith("dolfinx_dem"):
+        return sum(_held_bytes(x, seen) for x in vars(obj).values())
+    return 0
+
+
+def test_set_up_keeps_one_copy_of_the_energy_rows():
+    """The memory a discretisation keeps: Q once (the step reads its rows in place), no PETSc
+    matrix and no gradient operator; per 2D cell, the arrays it holds (geometry, reconstruction,
+    rows) stay below 1.6 kB, where a second copy of Q (0.66 kB) would exceed it."""
+    from petsc4py import PETSc
+
+    mesh = dolfinx.mesh.create_rectangle(MPI.COMM_SELF, [[0.0, 0.0], [1.0, 1.0]], [40, 40],
+                                         diagonal=DiagonalType.crossed)
+    left = _compat.locate_boundary_facets(mesh, lambda x: np.isclose(x[0], 0.0))
+    dem = DEMDiscretisation(mesh, MATERIAL, dirichlet=[DirichletBC(left, [0.0, 0.0])])
+    dem.stable_time_step()
+    assert not [k for k, v in vars(dem).items() if isinstance(v, PETSc.Mat)]
+    assert dem.factored.vals is dem.rows.Q.data and dem.factored.cols is dem.rows.Q.indices
+    per_cell = _held_bytes(dem) / dem.n_owned
+    assert 700 < per_cell < 1600, per_cell
