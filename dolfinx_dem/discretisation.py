@@ -27,7 +27,7 @@ import dolfinx.fem
 
 from dolfinx_dem import _compat, stability
 from dolfinx_dem.factored import FactoredStiffness
-from dolfinx_dem.geometry import MeshGeometry, compute_geometry
+from dolfinx_dem.geometry import compute_geometry
 from dolfinx_dem.halo import owned_facet_marks
 from dolfinx_dem.material import ElasticMaterial
 from dolfinx_dem.operators import EnergyRows, compute_energy_rows

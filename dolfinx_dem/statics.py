@@ -52,7 +52,6 @@ import time
 from collections.abc import Sequence
 
 import numpy as np
-import scipy.sparse
 from mpi4py import MPI
 from petsc4py import PETSc
 

@@ -5,7 +5,6 @@ cfl = 1 (the monitor's trip just above the true limit is in test_memm.py)."""
 import numpy as np
 import pytest
 from mpi4py import MPI
-from petsc4py import PETSc
 
 import dolfinx.mesh
 
