@@ -200,6 +200,10 @@ class PairContact:
         touched = np.unique(QF.tocoo().row)
         self._QF = QF[touched].tocsc()  # (own rows touched, local facet dofs)
         self._Q = rows.Q[own_rows[touched]]  # held-dof columns
+        # the global dofs these rows read, and each entry's index among them (once: a rebuild
+        # then places them in the patch by a gather, not a search over every entry)
+        self._row_dofs, entry_dof = np.unique(dem.columns[self._Q.indices], return_inverse=True)
+        self._Q_entry_dof = entry_dof.astype(np.int32)
         self._q = rows.Q_dirichlet[own_rows[touched]] @ dem.dirichlet_values(0.0).ravel()
         self._is_elastic_row = rows.elastic[own_rows[touched]]
         an = geom.facet_area_normals[self.cells, geom.facet_local[self.facets, 0]]
@@ -214,7 +218,8 @@ class PairContact:
         self.rebuilds = 0
         self._scheme_b_rule = np.empty(0, dtype=np.int64)  # keys of pairs under the B rule (own ones)
         self.seconds = 0.0  # processor time of the contact work in force integrals and energies
-        zero = dem.create_vector()
+        self._template = zero = dem.create_vector()  # the layout of the scatters' source vectors
+        self.scatter = None  # the patch scatter, made by each list build
         self._build(zero)
         up = self.patch_values(zero)
         g, w = self._state(np.arange(len(self.listed)), *self._pair_displacements(up))[:2]
@@ -271,10 +276,11 @@ class PairContact:
         facet whose displaced centres are closer than ``radius`` (collective)."""
         comm, d = self.comm, self.d
         local = self._facets
-        # Free displacements of the local facets at u, through a scatter of their dofs only.
-        scatter = PatchScatter(self.dem.create_vector(), np.unique(local.R_dofs[local.R_dofs >= 0]))
-        up = scatter.gather(u)
-        uc = _free(local, scatter.dofs, up)
+        # Free displacements of the local facets at u: from the previous patch, which holds their
+        # dofs, or (first build) through a scatter of those dofs only.
+        scatter = self.scatter if self.scatter is not None else \
+            PatchScatter(self._template, np.unique(local.R_dofs[local.R_dofs >= 0]))
+        uc = _free(local, scatter.dofs, scatter.gather(u))
         x = local.centre + uc
         own = slice(0, self.num_own)
         empty = np.array([np.inf] * d + [-np.inf] * d)
@@ -287,8 +293,12 @@ class PairContact:
         meets[comm.rank] = False
         floats, ints = local.take(np.arange(self.num_own)).records()
         floats = np.concatenate([floats, uc[own]], axis=1)  # with the sender's displacements
-        targets = np.flatnonzero(meets)
-        send = [(floats, ints) if q in targets else None for q in range(comm.size)]
+        # to each process whose local facets' box, widened by r, meets the own facets: those
+        # own facets inside it (the only ones that can pair with its local facets)
+        send = [None] * comm.size
+        for q in np.flatnonzero(meets):
+            near = np.all((x[own] >= boxes[q, 2 * d : 3 * d] - r) & (x[own] <= boxes[q, 3 * d :] + r), axis=1)
+            send[q] = (floats[near], ints[near])
         received = [m for m in comm.alltoall(send) if m is not None]
         if received:
             rf = np.concatenate([m[0] for m in received])
@@ -337,17 +347,15 @@ class PairContact:
 
         # The patch: the own rows' held dofs and the reconstruction dofs of every known facet
         # (the ghosts' too: their motion decides when the list is stale).
-        row_dofs = self.dem.columns[np.unique(self._Q.indices)]
-        facet_dofs = F.R_dofs[F.R_dofs >= 0]
-        patch = np.unique(np.concatenate([row_dofs, facet_dofs]))
-        self.scatter = PatchScatter(self.dem.create_vector(), patch)
-        Qp = scipy.sparse.csr_matrix((self._Q.data, np.searchsorted(patch, self.dem.columns[self._Q.indices]),
+        patch = np.union1d(self._row_dofs, F.R_dofs[F.R_dofs >= 0])
+        self.scatter = PatchScatter(self._template, patch)
+        Qp = scipy.sparse.csr_matrix((self._Q.data, np.searchsorted(patch, self._row_dofs)[self._Q_entry_dof],
                                       self._Q.indptr), shape=(self._Q.shape[0], len(patch)))
         self.facets_all = F
         self._R = _reconstruction_matrix(F, patch)  # (n_facets d, patch)
         self._RT = self._R.T.tocsr()
         # The facet corrections of the known facets, from their owners (outputs).
-        self._facet_values = PatchScatter(self._facet_vector, (F.index[:, None] * d + np.arange(d)).ravel())
+        self._facet_values = None  # made on first use after a build (outputs): _corrections_everywhere
         self._lift = F.lift
         self.listed = _Pairs(
             i=i, j=j, n=n, t=t, e_i=e_i, e_j=e_j,
@@ -680,6 +688,9 @@ class PairContact:
     def _corrections_everywhere(self, up: np.ndarray) -> np.ndarray:
         """Facet corrections of every known facet (local and ghost), each from its owner (a
         scatter of the candidates' vector; collective)."""
+        if self._facet_values is None:
+            F, d = self.facets_all, self.d
+            self._facet_values = PatchScatter(self._facet_vector, (F.index[:, None] * d + np.arange(d)).ravel())
         self._facet_vector.array[:] = self.facet_corrections(up)[: self.num_own].ravel()
         return self._facet_values.gather(self._facet_vector).reshape(-1, self.d)
 
