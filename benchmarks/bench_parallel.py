@@ -153,10 +153,19 @@ def _child(args: list[str], processes: int) -> dict:
     command = ["mpirun", "-n", str(processes), "--oversubscribe", sys.executable, str(pathlib.Path(__file__).resolve()),
                *args]
     env = {k: v for k, v in os.environ.items() if not k.startswith(("OMPI_", "PMIX_", "ORTE_"))} | MPI_ENV
+    load = os.getloadavg()[0]
+    started = datetime.datetime.now().strftime("%Y-%m-%d %H:%M")
     proc = subprocess.run(command, capture_output=True, text=True, env=env, check=False)
     if proc.returncode != 0:
         raise RuntimeError(f"{' '.join(command)} failed:\n{proc.stderr[-4000:]}")
-    return json.loads(proc.stdout.strip().splitlines()[-1])
+    result = json.loads(proc.stdout.strip().splitlines()[-1])
+    result.update(date=started, load_average_at_start=load, commit=_commit())
+    return result
+
+
+def _commit() -> str:
+    return subprocess.run(["git", "rev-parse", "--short", "HEAD"], capture_output=True, text=True, cwd=ROOT,
+                          check=False).stdout.strip()
 
 
 def _memory_summary(run: dict) -> dict:
@@ -171,6 +180,9 @@ def _memory_summary(run: dict) -> dict:
 def main(argv=None) -> dict:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--quick", action="store_true", help="small sizes only")
+    parser.add_argument("--only", nargs="+", choices=("scaling", "large", "pile"),
+                        help="run these parts only and replace them in an existing --out file (e.g. the timed "
+                             "parts again on an idle machine)")
     parser.add_argument("--out", type=pathlib.Path, default=ROOT / "docs" / "bench" / "parallel.json")
     parser.add_argument("--child", choices=("scaling", "pile"), help=argparse.SUPPRESS)
     parser.add_argument("--cells", type=int, default=0, help=argparse.SUPPRESS)
@@ -192,17 +204,21 @@ def main(argv=None) -> dict:
     def log(text):
         print(text, flush=True)
 
+    load = os.getloadavg()[0]
+
     big, big3, huge = (20_000, 6_000, 40_000) if args.quick else (1_000_000, 1_000_000, 4_000_000)
-    scaling = []
-    for P in (1, 2, 4):
+    parts = set(args.only or ("scaling", "large", "pile"))
+    previous = json.loads(args.out.read_text()) if args.only else {}
+    scaling = [] if "scaling" in parts else previous["scaling"]
+    for P in (1, 2, 4) if "scaling" in parts else ():
         run = _child(["--child", "scaling", "--cells", str(big), "--dim", "2", "--steps", "20"], P)
         run.update(_memory_summary(run))
         scaling.append(run)
         log(f"2D {run['cells']:,} cells, P = {P}: set-up {run['setup_seconds']:.1f} s, peak {run['peak_mb_max']:.0f} MB "
             f"per process ({run['bytes_per_cell_summed']:.0f} B/cell summed), step {run['step_seconds_median']*1e3:.1f} ms")
     one = scaling[0]
-    large = []
-    for cells, dim in ((big3, 3), (huge, 2)):
+    large = [] if "large" in parts else previous["large"]
+    for cells, dim in ((big3, 3), (huge, 2)) if "large" in parts else ():
         # Predicted from the 2-process 2D run (a 3D cell costing ~3 x a 2D one): a run that
         # would not fit in the memory available now is recorded as skipped, and the largest
         # half, quarter, ... of it that fits is run instead.
@@ -219,8 +235,8 @@ def main(argv=None) -> dict:
         large.append(run)
         log(f"{dim}D {run['cells']:,} cells, P = 2: set-up {run['setup_seconds']:.1f} s, peak {run['peak_mb_max']:.0f} MB "
             f"per process, step {run['step_seconds_median']*1e3:.1f} ms")
-    pile = []
-    for P in (1, 2):
+    pile = [] if "pile" in parts else previous["pile"]
+    for P in (1, 2) if "pile" in parts else ():
         run = _child(["--child", "pile", "--h", "0.02" if args.quick else "0.005", "--steps", "20"], P)
         pile.append(run)
         log(f"pile {run['cells']:,} cells, P = {P}: contact {run['contact_seconds_per_step_max']*1e3:.2f} ms per step "
@@ -228,11 +244,12 @@ def main(argv=None) -> dict:
             "touching pair entries")
     two, four = scaling[1], scaling[2]
     results = {
-        "description": "issue 11 parallel study (benchmarks/bench_parallel.py); wall seconds, slowest process",
+        "description": "issue 11 parallel study (benchmarks/bench_parallel.py); wall seconds, slowest process; "
+                       "each run records its date, commit and load average",
         "date": datetime.datetime.now().strftime("%Y-%m-%d %H:%M"),
-        "commit": subprocess.run(["git", "rev-parse", "--short", "HEAD"], capture_output=True, text=True,
-                                 cwd=ROOT, check=False).stdout.strip(),
-        "load_average_at_start": os.getloadavg()[0],
+        "parts_run_at_this_date": sorted(parts),
+        "commit": _commit(),
+        "load_average_at_start": load,
         "quick": args.quick,
         "memory_ratio_to_target": {  # peak per process / (1.3 peak(1) / P + 300 MB): <= 1 meets the target
             str(r["processes"]): r["peak_mb_max"] / (1.3 * one["peak_mb_max"] / r["processes"] + 300.0)
