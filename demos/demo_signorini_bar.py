@@ -97,7 +97,8 @@
 #
 # The outputs compared with the exact solution are the series columns `tip_position` (the
 # reconstructed, contact-aware position of the lower facet), `contact_gap` (the same minus the
-# obstacle position) and `contact_pressure` ($-\sigma_{nn}$ of the boundary cell).
+# obstacle position) and `contact_pressure` (the obstacle's force on the bar per unit contact area,
+# the exact derivative of the energy with respect to the obstacle's position; 0 with the gap open).
 
 # +
 import json
@@ -623,10 +624,10 @@ acceptance = {
     "mean_pressure": criterion([impact[k]["numbers"]["mean_pressure"] for k in "AB"],
                                all(abs(impact[k]["numbers"]["mean_pressure_rel_error"]) <= 0.02 for k in "AB"),
                                "mean contact pressure over [0.5, 7/6] within 2 % of 300 Pa (A, B)"),
-    "scheme_a_zero_pressure_after_liftoff": criterion(
-        impact["A"]["numbers"]["max_abs_pressure_after_release"],
-        impact["A"]["numbers"]["max_abs_pressure_after_release"] == 0.0,
-        "scheme A: contact pressure exactly 0 after the lift-off"),
+    "zero_pressure_after_liftoff": criterion(
+        [impact[k]["numbers"]["max_abs_pressure_after_release"] for k in "AB"],
+        all(impact[k]["numbers"]["max_abs_pressure_after_release"] == 0.0 for k in "AB"),
+        "contact pressure exactly 0 after the lift-off (A, B)"),
     "split_evaluations_per_step": criterion(max(split_evaluations), max(split_evaluations) <= 3,
                                             "force evaluations per step with splitting <= 3 (1 + at most 2)"),
     "impact_tip_order": criterion([convergence[k]["order_tip_l2"] for k in "AB"],
