@@ -211,14 +211,19 @@ class DynamicRun:
         return self.stats.wall_seconds + time.perf_counter() - self.wall
 
     def _pictures(self, directory: pathlib.Path, animation: bool):
-        dem, output = self.dem, self.scene.get("output", {})
+        dem, output, stepper = self.dem, self.scene.get("output", {}), self.stepper
         scale = output.get("picture_scale", 1.0)
-        plotting.plot_cell_field(dem.mesh, self.stepper.u.array_r.reshape(-1, dem.d),
-                                 dem.von_mises(self.stepper.u, self.stepper.t), directory / "final.png",
-                                 "von Mises stress (Pa)", scale)
+        obstacles = [(ob["point"], ob["normal"]) for ob in self.scene.get("obstacles", [])]
+        u = stepper.u.array_r.reshape(-1, dem.d)
+        if dem.d == 1:
+            plotting.plot_bar(dem.mesh, u, dem.stress(stepper.u, stepper.t)[:, 0, 0], directory / "final.png",
+                              stepper.t, obstacles)
+        else:
+            plotting.plot_cell_field(dem.mesh, u, dem.von_mises(stepper.u, stepper.t), directory / "final.png",
+                                     "von Mises stress (Pa)", scale, obstacles)
         if animation and output.get("animation") and not plotting.too_large(dem.mesh):
             io.call_on_root(self.comm, plotting.animate_solution, directory / "solution.xdmf",
-                            directory / "animation.gif", "von_mises", "von Mises stress (Pa)", scale)
+                            directory / "animation.gif", "von_mises", "von Mises stress (Pa)", scale, obstacles)
 
     def _summary(self, status: str, error: InstabilityError | None) -> dict:
         dem, stepper, stats = self.dem, self.stepper, self.stats

@@ -106,3 +106,25 @@ def test_pictures_are_skipped_above_the_size_limit(tmp_path, monkeypatch):
     assert not (tmp_path / "a.png").exists()
     monkeypatch.setattr(plotting, "PICTURE_MAX_CELLS", 32)
     assert plotting.plot_cell_field(mesh, None, np.zeros(n), tmp_path / "a.png", "v") is not None
+
+
+@pytest.mark.mpi
+def test_plot_bar_and_obstacles(tmp_path):
+    """A 1D bar as matplotlib line plots, with its obstacle; 2D and 3D pictures with obstacles."""
+    comm = MPI.COMM_WORLD
+    mesh, _, _ = meshes.create_interval(comm, 20, 5.0, 15.0)
+    values, centroids = dg0_rows(mesh)
+    folder = shared_path(tmp_path)
+    result = plotting.plot_bar(mesh, 0.1 * centroids, values, folder / "bar.png", 1.5, [([0.0], [1.0])])
+    assert result == str(folder / "bar.png")
+    comm.barrier()
+    assert png_size(folder / "bar.png") == (960, 840)
+    mesh2, _, _ = meshes.create_rectangle(comm, [0, 0.1], [1, 0.6], [4, 2])
+    values2, _ = dg0_rows(mesh2)
+    plotting.plot_cell_field(mesh2, None, values2, folder / "plate.png", "x", obstacles=[([0, 0], [0, 1])])
+    comm.barrier()
+    assert png_size(folder / "plate.png") == (1200, 900)
+    with pytest.raises(ValueError, match="obstacle 0: point and normal need 2 finite numbers"):
+        plotting.plot_cell_field(mesh2, None, values2, folder / "x.png", "x", obstacles=[([0], [1])])
+    with pytest.raises(ValueError, match="plot_bar draws 1D meshes"):
+        plotting.plot_bar(mesh2, None, values2, folder / "x.png", 0.0)
