@@ -180,8 +180,12 @@ class Probes:
     def __init__(self, dem: DEMDiscretisation, specs):
         self.dem = dem
         self.names = [p["name"] for p in specs]
-        if len(set(self.names)) != len(self.names) or set(self.names) & set(SERIES_COLUMNS):
-            raise scenes.SceneError(f"probe names must be unique and differ from {SERIES_COLUMNS}: {self.names}")
+        if len(set(self.names)) != len(self.names):
+            raise scenes.SceneError(f"probe names must be unique: {self.names}")
+        columns = SERIES_COLUMNS + contact_columns(dem)
+        clash = [name for name in self.names if name in columns]
+        if clash:
+            raise scenes.SceneError(f"probe names {clash} are series columns of this scene; the columns: {columns}")
         if any(p["component"] >= dem.d for p in specs):
             raise scenes.SceneError(f"probe components must be < {dem.d}")
         points = np.zeros((len(specs), 3))
