@@ -725,9 +725,11 @@ class PairContact:
         return None if first == np.inf else first
 
     def contact_force(self, up: np.ndarray) -> float:
-        """Sum over touching pairs of the normal contact force (N, per unit thickness),
-        (z_p . (a + delta_a)) w_p, the force one facet of the pair exerts on the other,
-        compression counted positive (collective: the own rows' parts are summed)."""
+        """Total normal contact force (N, per unit thickness): the signed sum over touching
+        pairs of -(z_p . (a + delta_a)) w_p, the normal force one facet of the pair exerts on
+        the other, compression positive (z_p . a' < 0 in compression), so that a pair pulling
+        (z_p . a' > 0) lowers it. Between two bodies i, j whose contact facets share one outward
+        normal n_i (on i) it is -n_i . F_ij of ``pair_forces`` (collective: own rows' parts summed)."""
         L = self.listed
         g, w, _ = self._state(np.arange(len(L)), *self._pair_displacements(up))
         c = w * np.minimum(g, 0.0)
@@ -736,7 +738,7 @@ class PairContact:
             a = L.Q @ up + self._q
             mu = L.ZT @ (a + L.Z @ c)
             touching = g < 0  # summed alone: the sum must not depend on the pairs listed around them
-            total = float((mu * w)[touching].sum())
+            total = -float((mu * w)[touching].sum())
         return self.comm.allreduce(total, op=MPI.SUM)
 
     def pair_forces(self, up: np.ndarray) -> np.ndarray:

@@ -182,6 +182,26 @@ def test_pair_force_is_the_sum_of_the_contact_forces_on_a_body(scheme):
     assert np.abs(pair + on_right).max() < 1e-12 * np.abs(pair).max()
 
 
+@pytest.mark.mpi
+@pytest.mark.parametrize("scheme", ["A", "B"])
+@pytest.mark.parametrize("stretch", [0.0, 0.2])
+def test_contact_force_is_the_signed_normal_force_compression_positive(scheme, stretch):
+    """Two blocks pushed rigidly 0.006 into each other, each also stretched along x about its
+    contact side: unstrained cells (stretch 0) are pressed apart, strongly stretched ones pull
+    across the penetrating facets. The facets share the normal n = e_x of the left block, so
+    ``contact_force`` is -F_01 . n: positive in compression, negative when the pairs pull (a
+    sum of absolute values, or the sign of the multipliers, would not match)."""
+    dem, facets = two_blocks(scheme=scheme)
+    dem.set_contact_boundary(facets)
+    u = cell_vector(dem, lambda x: np.stack([np.where(x[:, 0] < 0.205, 0.008, -0.008)
+                                             + stretch * (x[:, 0] - np.where(x[:, 0] < 0.205, 0.2, 0.21)),
+                                             np.zeros(len(x))], axis=1))
+    dem.pair_contact.prepare(u)
+    force, _, pair_x, _ = model.contact_values(dem, u)
+    assert np.sign(force) == (1.0 if stretch == 0.0 else -1.0)  # measured 4.37 (A, B); -0.054 (A), -0.102 (B)
+    assert abs(force + pair_x) < 1e-12 * abs(force)
+
+
 @pytest.mark.parametrize("scheme", ["A", "B"])
 def test_matching_facets_close_the_gap_exactly(scheme):
     """Eq. (31) with one partner of equal size per facet (two blocks pushed rigidly into each
