@@ -4,7 +4,7 @@
 gathering the owned cells of every rank, the colour bar and the time in a column of their own
 beside the body, rigid obstacles (half-spaces) as grey bands bounded by a dark line (2D) or plane
 (3D); ``plot_bar`` draws a 1D bar as matplotlib line plots of its displacement and stress, its
-obstacles as walls; ``plot_series`` draws a ``series.csv``. Matplotlib draws on its Agg canvas (no
+obstacles as walls, and ``animate_bar`` animates it in the same layout; ``plot_series`` draws a ``series.csv``. Matplotlib draws on its Agg canvas (no
 display, no global pyplot state). Pictures gather on rank 0 only meshes of at most
 ``PICTURE_MAX_CELLS`` cells.
 """
@@ -18,7 +18,9 @@ from collections.abc import Sequence
 import numpy as np
 from mpi4py import MPI
 
+import imageio
 import matplotlib.figure
+from matplotlib.backends.backend_agg import FigureCanvasAgg
 
 from dolfinx_dem import _compat
 
@@ -160,37 +162,97 @@ def plot_bar(
     if gathered is None:
         return str(filename)
     points, cells, sigma, u_points = gathered
-    x = points[cells, 0]
-    order = np.argsort(x.min(axis=1))
-    edges = np.append(x.min(axis=1)[order], x.max(axis=1)[order][-1])
+    position = points[:, 0] + u_points[:, 0]
     figure = matplotlib.figure.Figure(figsize=(8.0, 7.0))
-    ax0, ax1, ax2 = figure.subplots(3, 1, gridspec_kw={"height_ratios": [1, 2, 2]})
-    deformed = points[:, 0] + u_points[:, 0]
-    ax0.plot([deformed.min(), deformed.max()], [0.0, 0.0], color="C0", lw=8, solid_capstyle="butt", label="bar")
-    low, high = min(deformed.min(), edges[0]), max(deformed.max(), edges[-1])
-    for p, n in obstacles:
-        low, high = min(low, p[0]), max(high, p[0])
+    _draw_bar(figure, points[cells, 0], position, u_cells[2], sigma, _span(position, points[:, 0], obstacles), t,
+              obstacles)
+    figure.tight_layout()
+    figure.savefig(str(filename), dpi=120)
+    return str(filename)
+
+
+def animate_bar(xdmf: str | pathlib.Path, filename: str | pathlib.Path,
+                obstacles: Sequence[tuple[Sequence[float], Sequence[float]]] = ()) -> int:
+    """An animated GIF of a 1D ``solution.xdmf``, one frame per output time in the layout of
+    ``plot_bar`` (the bar's position with the obstacles, its displacement and its stress
+    ``stress_xx`` along x), with the axes' limits of the whole run, 800 x 640 pixels.
+
+    Serial, read by VTK as in ``animate_solution``. Returns the number of frames.
+    """
+    filename = pathlib.Path(filename)
+    _check_output(filename, 1.0)
+    obstacles = _check_obstacles(obstacles, 1)
+    reader = pyvista.get_reader(str(xdmf))
+    frames = []  # (t, cells' node x (N, 2), cell u (N,), cell sigma (N,), node x + u (P,))
+    for t in reader.time_values:
+        reader.set_active_time_value(t)
+        blocks = reader.read()
+        grid = pyvista.UnstructuredGrid(blocks["stress_xx"])
+        grid.cell_data["u"] = blocks["displacement"].cell_data["displacement"].reshape(grid.n_cells, -1)[:, 0]
+        u_points = grid.cell_data_to_point_data().point_data["u"]  # mean of the cells around each node
+        x = grid.points[:, 0]
+        frames.append((t, x[grid.cell_connectivity.reshape(-1, 2)], grid.cell_data["u"].copy(),
+                       grid.cell_data["stress_xx"].copy(), x + u_points))
+    span = _span(np.concatenate([f[4] for f in frames]), frames[0][1].ravel(), obstacles)
+    limits = [_limits(np.concatenate([f[k] for f in frames])) for k in (2, 3)]
+    figure = matplotlib.figure.Figure(figsize=(8.0, 6.4), dpi=100)
+    figure.subplots_adjust(left=0.12, right=0.97, bottom=0.08, top=0.94, hspace=0.6)  # fixed: no jitter
+    canvas = FigureCanvasAgg(figure)
+    with imageio.get_writer(filename, mode="I", duration=100, loop=0) as gif:
+        for t, x_cells, u, sigma, position in frames:
+            figure.clear()
+            axes = _draw_bar(figure, x_cells, position, u, sigma, span, t, obstacles)
+            for ax, limit in zip(axes[1:], limits):
+                ax.set_ylim(*limit)
+            canvas.draw()
+            gif.append_data(np.asarray(canvas.buffer_rgba())[:, :, :3])
+    return len(frames)
+
+
+def _span(position: np.ndarray, x: np.ndarray, obstacles) -> tuple[float, float]:
+    """The x range of the position axes of ``_draw_bar``: the displaced nodes ``position``, the
+    reference nodes ``x`` and the obstacles' points, with a margin of 5 %."""
+    low = min(position.min(), x.min(), *(p[0] for p, _ in obstacles))
+    high = max(position.max(), x.max(), *(p[0] for p, _ in obstacles))
     margin = 0.05 * (high - low)
+    return low - margin, high + margin
+
+
+def _limits(values: np.ndarray) -> tuple[float, float]:
+    """Axis limits holding ``values`` with a margin of 5 % (a flat range gets one of 1)."""
+    low, high = float(values.min()), float(values.max())
+    margin = 0.05 * (high - low) if high > low else 1.0
+    return low - margin, high + margin
+
+
+def _draw_bar(figure, x_cells: np.ndarray, position: np.ndarray, u: np.ndarray, sigma: np.ndarray,
+              span: tuple[float, float], t: float, obstacles) -> list:
+    """Draw ``plot_bar``'s three axes on ``figure``: the bar from the smallest to the largest of
+    ``position`` (x + u at the nodes) with the ``obstacles`` over the x range ``span``, and the
+    cell displacement ``u`` (N,) and stress ``sigma`` (N,) as steps over the cells ``x_cells``
+    (N, 2) node coordinates, any order. Returns the axes."""
+    order = np.argsort(x_cells.min(axis=1))
+    edges = np.append(x_cells.min(axis=1)[order], x_cells.max(axis=1)[order][-1])
+    ax0, ax1, ax2 = figure.subplots(3, 1, gridspec_kw={"height_ratios": [1, 2, 2]})
+    ax0.plot([position.min(), position.max()], [0.0, 0.0], color="C0", lw=8, solid_capstyle="butt", label="bar")
     for k, (p, n) in enumerate(obstacles):
-        side = (low - margin, p[0]) if n[0] > 0 else (p[0], high + margin)
+        side = (span[0], p[0]) if n[0] > 0 else (p[0], span[1])
         ax0.axvspan(*side, color="0.6", alpha=0.5, hatch="//", label="obstacle" if k == 0 else None)
         ax0.axvline(p[0], color="0.2", lw=2)
-    ax0.set_xlim(low - margin, high + margin)
+    ax0.set_xlim(*span)
     ax0.set_yticks([])
     ax0.set_xlabel("x + u (m)")
     ax0.legend(loc="upper right", fontsize="small")
     ax0.set_title(f"t = {t:.6g} s")
-    ax1.stairs(u_cells[2][order], edges, color="C0", lw=1.5)
+    ax1.stairs(u[order], edges, baseline=None, color="C0", lw=1.5)
     ax1.set_ylabel("displacement u (m)")
-    ax2.stairs(sigma[order], edges, color="C3", lw=1.5)
+    ax2.stairs(sigma[order], edges, baseline=None, color="C3", lw=1.5)
     ax2.set_ylabel("stress $\\sigma_{xx}$ (Pa)")
     for ax in (ax1, ax2):
         ax.set_xlim(edges[0], edges[-1])
         ax.set_xlabel("x (m)")
         ax.grid(True, alpha=0.3)
-    figure.tight_layout()
-    figure.savefig(str(filename), dpi=120)
-    return str(filename)
+    return [ax0, ax1, ax2]
 
 
 def animate_solution(xdmf: str | pathlib.Path, filename: str | pathlib.Path, field: str, title: str,
