@@ -36,7 +36,6 @@ from mpi4py import MPI
 from petsc4py import PETSc
 
 from dolfinx_dem.halo import owned_facet_marks
-from dolfinx_dem.operators import gradient_rows
 from dolfinx_dem.patch import PatchScatter, negative_part_integral, piecewise_midpoints, scatter_sum
 
 
@@ -191,6 +190,7 @@ class RigidContact:
             raise ValueError("contact with time-dependent Dirichlet conditions is not supported")
         order = np.lexsort((f, ~owned))  # own facets first
         self.facets, self.cells, obstacle = f[order], cell[order], marks[cell, j][order]
+        self.num_obstacles, self._obstacle = len(obstacles), obstacle
         self._facet_j = j[order]  # local index of each candidate in its cell
         self.num_own = int(owned.sum())
         self.num_facets = self.comm.allreduce(self.num_own, op=MPI.SUM)
@@ -229,11 +229,10 @@ class RigidContact:
         Y = (rows.QF[:, dofs] @ e_cols).tocsr()
         touched = np.unique(Y.tocoo().row)
         Y, Q = Y[touched], rows.Q[touched]
-        grad, grad_dirichlet = gradient_rows(geom, rec, self.cells[: self.num_own])
-        # The patch: the held dofs these rows, the gaps and the outputs read.
-        patch = np.unique(np.concatenate([Q.indices, R_free.indices, grad.indices]))
+        # The patch: the held dofs these rows and the gaps read.
+        patch = np.unique(np.concatenate([Q.indices, R_free.indices]))
         self.scatter = PatchScatter(dem.create_vector(), dem.columns[patch])
-        Q, R_free, grad = Q[:, patch], R_free[:, patch], grad[:, patch]
+        Q, R_free = Q[:, patch], R_free[:, patch]
         Rn = normal_rows @ R_free
         own_rows = rows.owned[touched]
         self._q = rows.Q_dirichlet[touched] @ g
@@ -249,8 +248,6 @@ class RigidContact:
         self._G_coo = G.tocoo()
         self._RnT_own = _compact(Rn[: self.num_own].T)
         self._R_free = _compact(R_free)
-        self._grad_rows = _compact(grad)
-        self._grad_lift = grad_dirichlet @ g
         self._grad_weights = geom.facet_area_normals[self.cells, geom.facet_local[self.facets, 0]] / \
             geom.cell_volumes[self.cells, None]
         self.evaluations = 0
@@ -324,7 +321,11 @@ class RigidContact:
         equilibrium. The row values a' come from every row the facet touches, owned here or not."""
         up = self.patch_values(u)
         local = None if active is None else self._local_activity(active)
-        active, w, a, delta = self._state(up, local)
+        return self._reactions(up, local)
+
+    def _reactions(self, up: np.ndarray, active: np.ndarray | None = None) -> np.ndarray:
+        """``reactions`` of the own facets for patch values ``up`` (local)."""
+        active, w, a, delta = self._state(up, active)
         own = slice(0, self.num_own)
         return np.where(active[own], self._YQ @ up + self._Yq - self._G @ w, 0.0)
 
@@ -429,17 +430,26 @@ class RigidContact:
         best = (float(gap[k]), float(x[k, 0])) if k >= 0 else (np.inf, np.inf)
         return min(self.comm.allgather(best))
 
-    def contact_pressure(self, up: np.ndarray) -> float:
-        """Area-weighted mean over all candidates of -n . sigma_c n of their cells (Pa,
-        compression > 0), with the contact-aware gradients (collective). Scheme A's free facets
-        carry sigma_c n = 0, so this is exactly 0 out of contact in 1D; scheme B's are not."""
+    def force_sums(self, up: np.ndarray) -> np.ndarray:
+        """This process's part (sum over processes) of [F_0, ..., F_{K-1}, N, A]: F_k (d,) the
+        force obstacle k exerts on the body (N, N/m in 2D), N its normal part summed over the
+        obstacles (the sum of ``reactions``), A the area of the facets in contact (g < 0).
+
+        F_k = dV/dp_k, the derivative of the energy with respect to the obstacle's position: a
+        shift dp changes every gap of obstacle k by -n . dp and dV/dg_f = -y_f . (a + delta_a),
+        so F_k = sum_f (y_f . (a + delta_a)) n over its facets in contact. It is exact (no
+        quadrature), exactly 0 with every gap open, and equals the sum over the cells of the
+        contact forces F - F_free, i.e. the contact's share of the rate of change of the
+        momentum, when no Dirichlet condition enters the candidates' rows and stencils."""
         own = slice(0, self.num_own)
-        G = (self._grad_rows @ up + self._grad_lift).reshape(-1, self.d, self.d) + self.gradient_correction(up)[1]
-        stress = self.dem.material.stress(G)
-        area = self.dem.geometry.facet_areas[self.facets[own]]
-        snn = np.einsum("ni,nij,nj->n", self.normals[own], stress, self.normals[own])
-        total = self.comm.allreduce(np.array([-(area * snn).sum(), area.sum()]), op=MPI.SUM)
-        return float(total[0] / total[1])
+        g = self.gaps(up)[own]
+        forces, normal, area = np.zeros((self.num_obstacles, self.d)), 0.0, 0.0
+        if (g < 0).any():
+            reactions = self._reactions(up)
+            np.add.at(forces, self._obstacle[own], reactions[:, None] * self.normals[own])
+            normal = reactions.sum()
+            area = self.dem.geometry.facet_areas[self.facets[own]][g < 0].sum()
+        return np.append(forces.ravel(), [normal, area])
 
     # -- checkpoint (ContactModel) ----------------------------------------------------------------
     def checkpoint_state(self) -> dict[str, np.ndarray]:

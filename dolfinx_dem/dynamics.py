@@ -211,14 +211,23 @@ class DynamicRun:
         return self.stats.wall_seconds + time.perf_counter() - self.wall
 
     def _pictures(self, directory: pathlib.Path, animation: bool):
-        dem, output = self.dem, self.scene.get("output", {})
+        dem, output, stepper = self.dem, self.scene.get("output", {}), self.stepper
         scale = output.get("picture_scale", 1.0)
-        plotting.plot_cell_field(dem.mesh, self.stepper.u.array_r.reshape(-1, dem.d),
-                                 dem.von_mises(self.stepper.u, self.stepper.t), directory / "final.png",
-                                 "von Mises stress (Pa)", scale)
+        obstacles = [(ob["point"], ob["normal"]) for ob in self.scene.get("obstacles", [])]
+        u = stepper.u.array_r.reshape(-1, dem.d)
+        if dem.d == 1:
+            plotting.plot_bar(dem.mesh, u, dem.stress(stepper.u, stepper.t)[:, 0, 0], directory / "final.png",
+                              stepper.t, obstacles)
+        else:
+            plotting.plot_cell_field(dem.mesh, u, dem.von_mises(stepper.u, stepper.t), directory / "final.png",
+                                     "von Mises stress (Pa)", scale, obstacles)
         if animation and output.get("animation") and not plotting.too_large(dem.mesh):
-            io.call_on_root(self.comm, plotting.animate_solution, directory / "solution.xdmf",
-                            directory / "animation.gif", "von_mises", "von Mises stress (Pa)", scale)
+            if dem.d == 1:
+                io.call_on_root(self.comm, plotting.animate_bar, directory / "solution.xdmf",
+                                directory / "animation.gif", obstacles)
+            else:
+                io.call_on_root(self.comm, plotting.animate_solution, directory / "solution.xdmf",
+                                directory / "animation.gif", "von_mises", "von Mises stress (Pa)", scale, obstacles)
 
     def _summary(self, status: str, error: InstabilityError | None) -> dict:
         dem, stepper, stats = self.dem, self.stepper, self.stats
@@ -310,8 +319,9 @@ def scene_instability(error: InstabilityError, time_spec: Mapping) -> Instabilit
 
 
 def fields(dem: DEMDiscretisation, stepper: MEMM) -> dict:
-    """DG0 displacement, velocity (vbar at t_n) and von Mises stress for XDMF output, and with
-    several bodies the body number of each cell (``body``: 1-based connected component)."""
+    """DG0 displacement, velocity (vbar at t_n) and von Mises stress for XDMF output, in 1D the
+    stress sigma_xx (``stress_xx``, signed, for ``plotting.animate_bar``), and with several
+    bodies the body number of each cell (``body``: 1-based connected component)."""
     v = stepper.v_prev.copy()
     v.axpy(1.0, stepper.v_next)
     v.scale(0.5)
@@ -320,6 +330,8 @@ def fields(dem: DEMDiscretisation, stepper: MEMM) -> dict:
         "velocity": dem.function(v, "velocity"),
         "von_mises": dem.scalar_function(dem.von_mises(stepper.u, stepper.t), "von_mises"),
     }
+    if dem.d == 1:
+        out["stress_xx"] = dem.scalar_function(dem.stress(stepper.u, stepper.t)[:, 0, 0], "stress_xx")
     if dem.geometry.num_bodies > 1:
         out["body"] = dem.scalar_function(dem.body_labels[: dem.n_owned] + 1.0, "body")
     return out

@@ -122,32 +122,46 @@ def build(scene: Mapping, comm: MPI.Comm = MPI.COMM_WORLD) -> DEMDiscretisation:
 
 
 def contact_columns(dem: DEMDiscretisation) -> tuple[str, ...]:
-    """Series columns of contact: with obstacles the smallest gap and the mean contact pressure
-    (and in 1D the position of the contact end); with contact between bodies the summed normal
-    contact force, the largest interpenetration of the contact reconstructions, and the total
-    linear momentum."""
+    """Series columns of contact.
+
+    With obstacles: the smallest gap, ``contact_pressure`` (the obstacles' total normal force
+    over the area of the facets in contact, exactly 0 with every gap open), in 1D the position
+    of the contact end, and the force of each obstacle k on the body,
+    ``contact_force_obstacle<k>_<x|y|z>`` (``RigidContact.force_sums``). With contact between
+    bodies: the summed normal contact force, the largest interpenetration of the contact
+    reconstructions, the force of body j on body i for each pair i < j of bodies with candidate
+    facets, ``contact_force_<i>_<j>_<x|y|z>`` (``PairContact.pair_forces``; the bodies numbered
+    as ``geometry.compute_bodies``, from 0), and the total linear momentum."""
+    xyz = "xyz"[: dem.d]
     columns = ()
     if dem.contact is not None:
         columns += ("contact_gap", "contact_pressure") + (("tip_position",) if dem.d == 1 else ())
+        columns += tuple(f"contact_force_obstacle{k}_{c}" for k in range(dem.contact.num_obstacles) for c in xyz)
     if dem.pair_contact is not None:
-        columns += ("contact_force", "penetration") + tuple(f"momentum_{'xyz'[i]}" for i in range(dem.d))
+        columns += ("contact_force", "penetration")
+        columns += tuple(f"contact_force_{i}_{j}_{c}" for i, j in dem.pair_contact.body_pairs for c in xyz)
+        columns += tuple(f"momentum_{c}" for c in xyz)
     return columns
 
 
 def contact_values(dem: DEMDiscretisation, u) -> list[float]:
-    """The values of ``contact_columns`` but the momenta, for the displacement ``u``."""
+    """The values of ``contact_columns`` but the momenta, for the displacement ``u``
+    (collective: the contact forces of all models are summed by one reduction)."""
+    rigid, pair = dem.contact, dem.pair_contact
+    up_rigid = None if rigid is None else rigid.patch_values(u)
+    up_pair = None if pair is None else pair.patch_values(u)
+    local = [rigid.force_sums(up_rigid)] if rigid is not None else []
+    local += [pair.pair_forces(up_pair).ravel()] if pair is not None else []
+    sums = dem.comm.allreduce(np.concatenate(local), op=MPI.SUM) if local else None
     values = []
-    if dem.contact is not None:
-        c = dem.contact
-        up = c.patch_values(u)
-        gap, x = c.contact_gap(up)
-        values += [gap, c.contact_pressure(up)]
-        if dem.d == 1:
-            values.append(x)
-    if dem.pair_contact is not None:
-        c = dem.pair_contact
-        up = c.patch_values(u)
-        values += [c.contact_force(up), c.penetration(up)]
+    if rigid is not None:
+        n = rigid.num_obstacles * dem.d
+        forces, normal, area = sums[:n], sums[n], sums[n + 1]
+        sums = sums[n + 2:]
+        gap, x = rigid.contact_gap(up_rigid)
+        values += [gap, normal / area if area > 0 else 0.0] + ([x] if dem.d == 1 else []) + list(forces)
+    if pair is not None:
+        values += [pair.contact_force(up_pair), pair.penetration(up_pair), *sums]
     return values
 
 
@@ -166,8 +180,12 @@ class Probes:
     def __init__(self, dem: DEMDiscretisation, specs):
         self.dem = dem
         self.names = [p["name"] for p in specs]
-        if len(set(self.names)) != len(self.names) or set(self.names) & set(SERIES_COLUMNS):
-            raise scenes.SceneError(f"probe names must be unique and differ from {SERIES_COLUMNS}: {self.names}")
+        if len(set(self.names)) != len(self.names):
+            raise scenes.SceneError(f"probe names must be unique: {self.names}")
+        columns = SERIES_COLUMNS + contact_columns(dem)
+        clash = [name for name in self.names if name in columns]
+        if clash:
+            raise scenes.SceneError(f"probe names {clash} are series columns of this scene; the columns: {columns}")
         if any(p["component"] >= dem.d for p in specs):
             raise scenes.SceneError(f"probe components must be < {dem.d}")
         points = np.zeros((len(specs), 3))

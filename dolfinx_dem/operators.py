@@ -77,13 +77,6 @@ def facet_gradient(geom: MeshGeometry, cells: np.ndarray) -> scipy.sparse.csr_ma
     return scipy.sparse.csr_matrix((data.ravel(), indices.ravel(), indptr), shape=(len(cells) * d * d, geom.num_facets * d))
 
 
-def gradient_rows(geom: MeshGeometry, rec: Reconstruction, cells: np.ndarray):
-    """The cell gradients of eq. (8) of ``cells`` as operators: G = grad u_C + grad_D g with
-    grad = Gf R (n d d, N d) and grad_D = Gf D (n d d, n_D d), rows as in ``facet_gradient``."""
-    Gf = facet_gradient(geom, cells)
-    return (Gf @ rec.R).tocsr(), (Gf @ rec.D).tocsr()
-
-
 def compute_energy_rows(
     geom: MeshGeometry, material: ElasticMaterial, rec: Reconstruction, num_cells: int, jump_facets: np.ndarray,
     num_own_jumps: int,

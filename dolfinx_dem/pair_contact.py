@@ -214,6 +214,15 @@ class PairContact:
             raise ValueError(f"the Verlet skin must be > 0, got {skin}")
         self.radius = lengths + self.skin
 
+        # The body pairs (i < j) whose force is an output: both bodies hold candidate facets.
+        held = np.bincount(self._facets.body[: self.num_own], minlength=geom.num_bodies).astype(np.int64)
+        self.comm.Allreduce(MPI.IN_PLACE, held, op=MPI.SUM)
+        bodies = np.flatnonzero(held)
+        self.body_pairs = [(int(a), int(b)) for k, a in enumerate(bodies) for b in bodies[k + 1:]]
+        self._body_pair_index = np.full((geom.num_bodies, geom.num_bodies), -1, dtype=np.int64)
+        for k, (a, b) in enumerate(self.body_pairs):
+            self._body_pair_index[a, b] = self._body_pair_index[b, a] = k
+
         self.evaluations = 0
         self.rebuilds = 0
         self._scheme_b_rule = np.empty(0, dtype=np.int64)  # keys of pairs under the B rule (own ones)
@@ -730,9 +739,11 @@ class PairContact:
         return None if first == np.inf else first
 
     def contact_force(self, up: np.ndarray) -> float:
-        """Sum over touching pairs of the normal contact force (N, per unit thickness),
-        (z_p . (a + delta_a)) w_p, the force one facet of the pair exerts on the other,
-        compression counted positive (collective: the own rows' parts are summed)."""
+        """Total normal contact force (N, per unit thickness): the signed sum over touching
+        pairs of -(z_p . (a + delta_a)) w_p, the normal force one facet of the pair exerts on
+        the other, compression positive (z_p . a' < 0 in compression), so that a pair pulling
+        (z_p . a' > 0) lowers it. Between two bodies i, j whose contact facets share one outward
+        normal n_i (on i) it is -n_i . F_ij of ``pair_forces`` (collective: own rows' parts summed)."""
         L = self.listed
         g, w, _ = self._state(np.arange(len(L)), *self._pair_displacements(up))
         c = w * np.minimum(g, 0.0)
@@ -741,8 +752,36 @@ class PairContact:
             a = L.Q @ up + self._q
             mu = L.ZT @ (a + L.Z @ c)
             touching = g < 0  # summed alone: the sum must not depend on the pairs listed around them
-            total = float((mu * w)[touching].sum())
+            total = -float((mu * w)[touching].sum())
         return self.comm.allreduce(total, op=MPI.SUM)
+
+    def pair_forces(self, up: np.ndarray) -> np.ndarray:
+        """This process's part (sum over processes) of the contact force between each pair of
+        ``body_pairs`` (i, j), i < j: the force body j exerts on body i, (n_body_pairs, d) (N/m);
+        the force on j is its opposite. Self-contact forces are internal to a body: not counted.
+
+        The force on body i is -dV/ds_i, the derivative of the energy with respect to a rigid
+        shift s_i of body i's candidate facets (their free displacements), a fixed: for each
+        touching pair p with facet f of body i, -mu_p dc_p/du_f = mu_p (w_p n - g_p ds_p t), the
+        normal force and the sliding force F^G of eq. (34). A common shift of both bodies changes
+        no gap or overlap, so the forces on i and j are exactly opposite. Without Dirichlet
+        conditions on body i it is the sum over its cells of the contact forces F - F_free, the
+        rate of change of its momentum. mu_p = z_p . (a + delta_a) summed over this process's
+        own rows, as in ``force_correction``."""
+        L, F = self.listed, self.facets_all
+        p = np.arange(len(L))
+        g, w, ds = self._state(p, *self._pair_displacements(up))
+        c = w * np.minimum(g, 0.0)
+        out = np.zeros((len(self.body_pairs), self.d))
+        body_i, body_j = F.body[L.i], F.body[L.j]
+        on = (c < 0) & (body_i != body_j)
+        if on.any():
+            a = L.Q @ up + self._q
+            mu = (L.ZT @ (a + L.Z @ c))[on]
+            force_i = mu[:, None] * (w[on, None] * L.n[on] - (g * ds)[on, None] * L.t[on])
+            sign = np.where(body_i[on] < body_j[on], 1.0, -1.0)  # the force on the lower-numbered body
+            np.add.at(out, self._body_pair_index[body_i[on], body_j[on]], sign[:, None] * force_i)
+        return out
 
     # -- statics (ContactModel): not supported --------------------------------------------------
     @staticmethod

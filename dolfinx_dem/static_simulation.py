@@ -123,9 +123,14 @@ class StaticRun:
         }
         if dem.contact is not None:
             summary.update(_contact_summary(dem, u, result, directory / "contact_pressure.csv"))
-        plotting.plot_cell_field(dem.mesh, u.array_r.reshape(-1, dem.d), dem.von_mises(u, 0.0),
-                                 directory / "final.png", "von Mises stress (Pa)",
-                                 scene.get("output", {}).get("picture_scale", 1.0))
+        obstacles = [(ob["point"], ob["normal"]) for ob in scene.get("obstacles", [])]
+        if dem.d == 1:
+            plotting.plot_bar(dem.mesh, u.array_r.reshape(-1, 1), dem.stress(u, 0.0)[:, 0, 0], directory / "final.png",
+                              0.0, obstacles)
+        else:
+            plotting.plot_cell_field(dem.mesh, u.array_r.reshape(-1, dem.d), dem.von_mises(u, 0.0),
+                                     directory / "final.png", "von Mises stress (Pa)",
+                                     scene.get("output", {}).get("picture_scale", 1.0), obstacles)
         return summary
 
     def _run_fem(self, directory) -> dict:
@@ -161,7 +166,8 @@ class StaticRun:
         }
         displacement, von_mises = _fem_cell_fields(result.u, m["E"], m["nu"])
         plotting.plot_cell_field(result.mesh, displacement, von_mises, directory / "final.png",
-                                 "von Mises stress (Pa)", scene.get("output", {}).get("picture_scale", 1.0))
+                                 "von Mises stress (Pa)", scene.get("output", {}).get("picture_scale", 1.0),
+                                 [(ob["point"], ob["normal"]) for ob in scene.get("obstacles", [])])
         return summary
 
 

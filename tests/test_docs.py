@@ -52,14 +52,20 @@ def test_the_built_in_scenes_and_top_level_keys_are_all_documented():
     assert {k for k in scenes.SCHEMA if f"`{k}`" not in top} == set()
 
 
-def test_every_summary_key_is_documented(tmp_path):
-    documented = set(re.findall(r"`([a-z_]+)`", SCENES_MD))
-    keys = set()
+def test_every_summary_key_and_series_column_is_documented(tmp_path):
+    documented = set(re.findall(r"`([a-z_<>]+)`", SCENES_MD))
+    keys, columns = set(), set()
     for name, overrides in (("bar-wave", {"time.end": 0.05}), ("bar-impact", {"time.end": 0.05}),
                             ("two-disks", {"mesh.h": 0.05, "time.end": 0.05})):
         keys |= set(simulation.run(scenes.load(name, overrides), tmp_path / name, MPI.COMM_SELF, quiet=True))
+        columns |= set((tmp_path / name / "series.csv").read_text().splitlines()[0].split(","))
     assert "conservative" in keys
     assert keys - documented == set()
+    assert {"contact_pressure", "contact_force_obstacle0_x", "contact_force_0_1_y"} <= columns
+    # per obstacle k and body pair i < j: documented as patterns
+    patterns = {re.sub(r"_(\d+)_(\d+)_", "_<i>_<j>_", re.sub(r"obstacle\d+", "obstacle<k>", c)) for c in columns}
+    suffixes = {re.sub(r"_[xyz]$", "_x", c) for c in patterns if "<" in c}  # `..._x`, `_y`, `_z`
+    assert ({c for c in patterns if "<" not in c} | suffixes) - documented == set()
 
 
 def test_every_demo_is_in_the_demos_readme():

@@ -106,3 +106,56 @@ def test_pictures_are_skipped_above_the_size_limit(tmp_path, monkeypatch):
     assert not (tmp_path / "a.png").exists()
     monkeypatch.setattr(plotting, "PICTURE_MAX_CELLS", 32)
     assert plotting.plot_cell_field(mesh, None, np.zeros(n), tmp_path / "a.png", "v") is not None
+
+
+@pytest.mark.mpi
+def test_plot_bar_and_obstacles(tmp_path):
+    """A 1D bar as matplotlib line plots, with its obstacle; 2D and 3D pictures with obstacles."""
+    comm = MPI.COMM_WORLD
+    mesh, _, _ = meshes.create_interval(comm, 20, 5.0, 15.0)
+    values, centroids = dg0_rows(mesh)
+    folder = shared_path(tmp_path)
+    result = plotting.plot_bar(mesh, 0.1 * centroids, values, folder / "bar.png", 1.5, [([0.0], [1.0])])
+    assert result == str(folder / "bar.png")
+    comm.barrier()
+    assert png_size(folder / "bar.png") == (960, 840)
+    mesh2, _, _ = meshes.create_rectangle(comm, [0, 0.1], [1, 0.6], [4, 2])
+    values2, _ = dg0_rows(mesh2)
+    plotting.plot_cell_field(mesh2, None, values2, folder / "plate.png", "x", obstacles=[([0, 0], [0, 1])])
+    comm.barrier()
+    assert png_size(folder / "plate.png") == (1200, 900)
+    with pytest.raises(ValueError, match="obstacle 0: point and normal need 2 finite numbers"):
+        plotting.plot_cell_field(mesh2, None, values2, folder / "x.png", "x", obstacles=[([0], [1])])
+    with pytest.raises(ValueError, match="plot_bar draws 1D meshes"):
+        plotting.plot_bar(mesh2, None, values2, folder / "x.png", 0.0)
+
+
+@pytest.mark.skip_in_parallel
+def test_animate_bar_draws_the_bar_in_the_layout_of_plot_bar(tmp_path):
+    """A 1D animation has plot_bar's layout per frame: a thick bar that moves with its
+    displacement next to its obstacle, and the displacement and stress curves; 800 x 640."""
+    import imageio
+
+    from dolfinx_dem import io
+
+    mesh, _, _ = meshes.create_interval(MPI.COMM_SELF, 20, 5.0, 15.0)
+    x, _ = dg0_rows(mesh)
+    u = dolfinx.fem.Function(_compat.create_vector_space(mesh, "DG", 0))
+    s = dolfinx.fem.Function(_compat.create_scalar_space(mesh, "DG", 0))
+    with io.SolutionWriter(MPI.COMM_SELF, tmp_path, mesh) as writer:
+        for t, shift in ((0.0, -1.0), (1.0, -4.0)):
+            u.x.array[:] = shift - 0.1 * (x - 5.0)
+            s.x.array[:] = -90.0 * t * (15.0 - x) / 10.0
+            writer.write(t, {"displacement": u, "stress_xx": s})
+    assert plotting.animate_bar(tmp_path / "solution.xdmf", tmp_path / "bar.gif", [([0.0], [1.0])]) == 2
+    frames = np.asarray(imageio.mimread(tmp_path / "bar.gif"))[..., :3].astype(int)
+    assert frames.shape[:3] == (2, 640, 800)
+
+    def near(colour):  # pixels of a matplotlib colour (the GIF palette rounds it)
+        return np.abs(frames - np.array(colour)).sum(axis=-1) < 30
+
+    bar, stress = near((31, 119, 180)), near((214, 39, 40))
+    assert bar[:, :120].sum(axis=(1, 2)).min() > 2000  # the bar, ~10 pixels thick, in the top axes
+    assert stress[1].sum() > 500
+    left_end = [np.flatnonzero(bar[k, :120].any(axis=0)).min() for k in range(2)]
+    assert left_end[1] < left_end[0] - 50  # moved 3 m towards the obstacle (about 120 pixels)

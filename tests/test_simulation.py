@@ -119,6 +119,22 @@ def test_bad_scene_values_are_rejected(overrides, message, tmp_path):
         simulation.run(scene, tmp_path / "bad", MPI.COMM_SELF, quiet=True)
 
 
+@pytest.mark.parametrize("names, message", [
+    (["tip", "tip"], "probe names must be unique"),
+    (["kinetic"], "probe names \\['kinetic'\\] are series columns"),
+    (["contact_pressure"], "probe names \\['contact_pressure'\\] are series columns"),
+    (["contact_force_obstacle0_x"], "probe names \\['contact_force_obstacle0_x'\\] are series columns"),
+])
+def test_probe_names_that_clash_with_a_series_column_are_rejected(names, message, tmp_path):
+    """Probe names are series columns: a clash with any other column (energies, contact) is an
+    error before the output folder is made."""
+    probes = [{"name": name, "point": [10.0], "component": 0} for name in names]
+    scene = scenes.load("bar-impact", {"probes": probes})
+    with pytest.raises(scenes.SceneError, match=message):
+        simulation.run(scene, tmp_path / "bad", MPI.COMM_SELF, quiet=True)
+    assert not (tmp_path / "bad").exists()
+
+
 def test_both_dt_and_cfl_or_an_unknown_boundary_are_rejected(tmp_path):
     with pytest.raises(scenes.SceneError, match="exactly one of 'time.dt' and 'time.cfl'"):
         scenes.load("bar-wave", {"time.dt": 0.01})
