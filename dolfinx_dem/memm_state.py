@@ -92,7 +92,8 @@ class StepState:
         self.load = self._lift = None
         if not problem.time_dependent:
             load = problem.load(t0)
-            if load.array_r.any():
+            # collective (the copy is): a load can be zero on some processes (a traction on one side)
+            if problem.comm.allreduce(bool(load.array_r.any()), op=MPI.LOR):
                 self.load = load.copy()
                 self.load.scale(self.dt)
                 self._p[id(self.load)] = pointer(self.load.array)
