@@ -44,7 +44,7 @@ from mpi4py import MPI
 
 from dolfinx_dem.io import call_on_root
 
-FORMAT = 2  # 2: per-process local files (the recurrence, contact states); no shared file
+FORMAT = 3  # 2: per-process local files (the recurrence, contact states); no shared file; 3: MEMM work
 DIRECTORY = "checkpoint"
 HEADER = "checkpoint.json"
 VECTORS = ("u", "v_prev", "v_next")

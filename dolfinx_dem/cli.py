@@ -147,7 +147,8 @@ def summary_line(summary: dict) -> str:
                 f"{summary['top_vertical_displacement']:.5g} m")
     status = "" if summary["status"] == "completed" else f" ({summary['status']})"
     energy = (f"pseudo-energy drift {summary['pseudo_energy_rel_drift']:.2e}" if summary["conservative"] else
-              f"not conservative (moving boundary data): pseudo-energy change {summary['pseudo_energy_rel_drift']:.2e}")
+              f"not conservative (time-dependent data): energy balance error (work counted) "
+              f"{summary['pseudo_energy_rel_drift']:.2e}")
     return (f"{summary['scene']}{status}: {summary['n_steps']} steps of dt = {summary['dt']:.4g} s on "
             f"{summary['n_cells']} cells in {summary['wall_time_s']:.1f} s; {energy}")
 

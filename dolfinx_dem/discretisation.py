@@ -36,16 +36,53 @@ from dolfinx_dem.reconstruction import Reconstruction, compute_reconstruction
 
 @dataclasses.dataclass(frozen=True)
 class DirichletBC:
-    """u_f = value on the given process-local boundary facets.
+    """u_f = value on the given process-local boundary facets, in the components ``components``
+    (default: all d; a roller or a symmetry plane fixes some). The free components of the facets
+    carry no traction (scheme A solves (sigma_c n_f)_i = 0 for them, reconstruction.py).
 
     ``value`` is a constant vector of length d, or a callable ``value(x, t)`` with x of shape
-    (d, n) (facet barycentres) returning shape (d, n). Pass ``time_dependent=True`` when the
-    callable depends on t; otherwise it is evaluated once.
+    (d, n) (facet barycentres) returning shape (d, n); its free components are ignored. Pass
+    ``time_dependent=True`` when the callable depends on t; otherwise it is evaluated once.
+    ``name`` names the condition's reaction (``DEMDiscretisation.reactions``) in outputs.
     """
 
     facets: np.ndarray
     value: Sequence[float] | Callable
     time_dependent: bool = False
+    components: Sequence[int] | None = None
+    name: str | None = None
+
+
+@dataclasses.dataclass(frozen=True)
+class Traction:
+    """A surface traction t (force per unit area, Pa; per unit length in 2D) on the given
+    process-local boundary facets, which must carry no Dirichlet condition. ``value`` as for
+    ``DirichletBC``: a constant vector of length d or a callable ``value(x, t)``."""
+
+    facets: np.ndarray
+    value: Sequence[float] | Callable
+    time_dependent: bool = False
+
+
+def _facet_values(what: str, conditions, facet_order: np.ndarray, centres: np.ndarray, d: int, t: float):
+    """The values at time t of ``conditions`` (pairs (facets, condition with ``value`` and
+    ``time_dependent``)) at their facets, (len(facet_order), d) in the order of ``facet_order``;
+    a condition that is not time dependent is evaluated at t = 0."""
+    values = np.zeros((len(facet_order), d))
+    for facets, bc in conditions:
+        index = np.searchsorted(facet_order, facets)
+        if callable(bc.value):
+            values[index] = np.asarray(bc.value(centres[facets].T, t if bc.time_dependent else 0.0), dtype=float).reshape(d, -1).T
+        else:
+            value = np.asarray(bc.value, dtype=float)
+            if value.shape != (d,):
+                raise ValueError(f"a constant {what} value needs {d} components, got {value.shape}")
+            values[index] = value
+    if not np.isfinite(values).all():
+        k = int(np.argmax(~np.isfinite(values).all(axis=1)))
+        raise ValueError(f"the {what} value at t = {t:.9g} is not finite: {values[k].tolist()} on the facet at "
+                         f"{centres[facet_order[k]].tolist()}")
+    return values
 
 
 def _petsc_matrix(comm, rows: scipy.sparse.spmatrix, columns: np.ndarray, local_cols: int):
@@ -85,8 +122,13 @@ class DEMDiscretisation:
     mesh : DOLFINx mesh; ghost mode ``shared_facet`` or ``none``.
     material : ElasticMaterial.
     scheme : "A" or "B", the Neumann boundary reconstruction (§3.4).
-    dirichlet : DirichletBC conditions; all other boundary facets are traction-free.
+    dirichlet : DirichletBC conditions.
+    tractions : Traction conditions; all other boundary facets are traction-free.
     body_force : force per unit volume (N/m^d), a vector of length d, e.g. rho * g.
+
+    The potential is V(u, t) = E_P + E_S - f.u - sum_f |f| t_f . u_f (eq. (11), (13) and the
+    work of the body force f and of the tractions on the reconstructed facet values u_f), and
+    the force is its exact negative gradient.
     """
 
     def __init__(
@@ -96,34 +138,51 @@ class DEMDiscretisation:
         scheme: str = "A",
         dirichlet: Sequence[DirichletBC] = (),
         body_force: Sequence[float] | None = None,
+        tractions: Sequence[Traction] = (),
     ):
         self.mesh = mesh
         self.comm = mesh.comm
         self.material = material
         self.d = d = mesh.topology.dim
         self.V = _compat.create_vector_space(mesh, "DG", 0)
-        dirichlet = tuple(dirichlet)
-        facets = [np.asarray(bc.facets, dtype=np.int32) for bc in dirichlet]
-        marks = {"dirichlet": owned_facet_marks(
+        dirichlet, tractions = tuple(dirichlet), tuple(tractions)
+        for k, bc in enumerate(dirichlet):
+            components = range(d) if bc.components is None else bc.components
+            if len(components) == 0 or any(not 0 <= int(i) < d for i in components):
+                raise ValueError(f"Dirichlet condition {k}: components must be a nonempty list of integers in "
+                                 f"[0, {d - 1}], got {list(components)}")
+        # Dirichlet conditions are marked 0..n_D-1, tractions n_D.. (one condition per facet)
+        conditions = dirichlet + tractions
+        facets = [np.asarray(bc.facets, dtype=np.int32) for bc in conditions]
+        marks = {"conditions": owned_facet_marks(
             mesh, np.concatenate(facets) if facets else np.empty(0, np.int32),
-            np.repeat(np.arange(len(facets)), [len(f) for f in facets]), "Dirichlet conditions")}
+            np.repeat(np.arange(len(facets)), [len(f) for f in facets]),
+            "boundary conditions (Dirichlet conditions or tractions)")}
         self.geometry, facet_marks = compute_geometry(self.comm, mesh, self.V, marks)
         geom = self.geometry
         self.n_owned = geom.num_owned
 
-        # Dirichlet facets held here, and the condition of each (owned cells' marks decide).
-        mark = facet_marks["dirichlet"]
+        # Facets held here and the condition of each (owned cells' marks decide).
+        mark = facet_marks["conditions"]
         marked = mark >= 0
-        dirichlet_facets, first = np.unique(geom.cell_facets[marked], return_index=True)
+        marked_facets, first = np.unique(geom.cell_facets[marked], return_index=True)
         condition = mark[marked][first]
-        selected = np.bincount(mark[: self.n_owned][marked[: self.n_owned]], minlength=len(dirichlet))
+        selected = np.bincount(mark[: self.n_owned][marked[: self.n_owned]], minlength=len(conditions))
         selected = self.comm.allreduce(selected, op=MPI.SUM)
         if np.any(selected == 0):
-            raise ValueError(f"Dirichlet condition {int(np.argmin(selected))} selects no facet "
-                             "(check its tag or marker)")
-        self._dirichlet = [(dirichlet_facets[condition == k], bc) for k, bc in enumerate(dirichlet)]
+            k = int(np.argmin(selected))
+            what = f"Dirichlet condition {k}" if k < len(dirichlet) else f"traction {k - len(dirichlet)}"
+            raise ValueError(f"{what} selects no facet (check its tag or marker)")
+        self._dirichlet = [(marked_facets[condition == k], bc) for k, bc in enumerate(dirichlet)]
+        self._tractions = [(marked_facets[condition == len(dirichlet) + k], bc) for k, bc in enumerate(tractions)]
+        is_dirichlet = condition < len(dirichlet)
+        dirichlet_facets = marked_facets[is_dirichlet]
+        fixed = np.zeros((len(dirichlet_facets), d), bool)
+        for k, bc in enumerate(dirichlet):
+            fixed[np.ix_(condition[is_dirichlet] == k, range(d) if bc.components is None else list(bc.components))] = True
         self.reconstruction: Reconstruction = compute_reconstruction(
-            geom, material, dirichlet_facets, scheme, geom.facets_of_layers(1), self.comm)
+            geom, material, dirichlet_facets, scheme, geom.facets_of_layers(1), self.comm, fixed,
+            marked_facets[~is_dirichlet])
 
         # The jump row of an interior facet belongs to the owner of its cell with the smaller
         # global number. This process builds the jump rows of every interior facet of its owned
@@ -160,8 +219,11 @@ class DEMDiscretisation:
         self._n_elastic_rows = self.n_owned * d * (d + 1) // 2  # local rows of Q that belong to S
         self._n_own_rows = int(self.rows.owned.sum())
         self._Q_dirichlet = self.rows.Q_dirichlet[: self._n_own_rows]
+        self._Q_traction = (self.rows.QF[: self._n_own_rows] @ rec.N).tocsr()  # the traction lift's rows
+        self._dirichlet_condition = condition[is_dirichlet]  # of each Dirichlet facet
         self.factored = FactoredStiffness(self.comm, self.rows.Q, self._n_own_rows, self._n_elastic_rows,
                                           self.n_owned * d, self.columns[self.n_owned * d:])
+        self._setup_tractions()
         self._K = None
         self._stable_dt = {}
 
@@ -177,15 +239,30 @@ class DEMDiscretisation:
                 raise ValueError(f"body_force must have {d} components, got {f.shape}")
             self.body_force.array[:] = (volumes[:, None] * f).ravel()
 
-        self._rhs = self.create_vector()  # f - Q^T q(t)
-        self._held = self.factored.create_vector()  # u at the held dofs (``gradient``)
+        self.external_force = self.create_vector()  # f(t): the body force and the tractions' (P^T t_w)
+        self._rhs = self.create_vector()  # f(t) - Q^T q(t)
+        self._held = self.factored.create_vector()  # u at the held dofs (``gradient``, ``reactions``)
         self._work = self.create_vector()
         self._lift_time = None
-        self._time_dependent = any(bc.time_dependent for _, bc in self._dirichlet)
-        self._update_dirichlet(0.0)
+        self._time_dependent = any(bc.time_dependent for _, bc in self._dirichlet + self._tractions)
+        self._update_data(0.0)
         self.contact = None  # contact.RigidContact, see set_obstacles
         self.pair_contact = None  # pair_contact.PairContact, see set_contact_boundary
         self._setup_free_bodies()
+
+    def _setup_tractions(self):
+        """The work of the tractions on the facets of the owned cells (each boundary facet counted
+        once, by its cell's owner), W = sum_f |f| t_f . u_f with u_f = R_f u + D_f g + N_f t:
+        W = t_w . (P u) + t_w . (D_T g + N_T t), t_w = |f| t_f, so that the force it adds is P^T t_w
+        (assembled on the held dofs, summed on the owners) and the rest is a constant of u."""
+        rec, geom, d = self.reconstruction, self.geometry, self.d
+        own = rec.traction_facets[geom.facet_cells[rec.traction_facets, 0] < self.n_owned]
+        self._own_tractions = np.searchsorted(rec.traction_facets, own)
+        self._traction_weights = np.repeat(geom.facet_areas[own], d)  # |f| per own traction dof
+        dofs = (own[:, None] * d + np.arange(d)).ravel()
+        self._P_traction = rec.R[dofs].T.tocsr()  # (held dofs, own traction dofs)
+        self._DN_traction = (rec.D[dofs], rec.N[dofs])
+        self._traction_force = self.factored.create_vector() if len(self._tractions) else None
 
     def _setup_free_bodies(self):
         """Bodies (connected components) without Dirichlet facets move freely, and K annihilates
@@ -300,58 +377,87 @@ class DEMDiscretisation:
         return v
 
     def dirichlet_values(self, t: float) -> np.ndarray:
-        """g(t) of shape (n_D, d), in the order of ``reconstruction.dirichlet_facets``."""
-        rec, d = self.reconstruction, self.d
-        g = np.zeros((len(rec.dirichlet_facets), d))
-        for facets, bc in self._dirichlet:
-            index = np.searchsorted(rec.dirichlet_facets, facets)
-            if callable(bc.value):
-                x = self.geometry.facet_centres[facets].T
-                g[index] = np.asarray(bc.value(x, t), dtype=float).reshape(d, -1).T
-            else:
-                value = np.asarray(bc.value, dtype=float)
-                if value.shape != (d,):
-                    raise ValueError(f"a constant Dirichlet value needs {d} components, got {value.shape}")
-                g[index] = value
-        if not np.isfinite(g).all():
-            k = int(np.argmax(~np.isfinite(g).all(axis=1)))
-            raise ValueError(f"the Dirichlet value at t = {t:.9g} is not finite: {g[k].tolist()} on the facet at "
-                             f"{self.geometry.facet_centres[rec.dirichlet_facets[k]].tolist()}")
-        return g
+        """g(t) of shape (n_D, d), in the order of ``reconstruction.dirichlet_facets`` (the free
+        components of a partly fixed facet are read by nothing)."""
+        return _facet_values("Dirichlet", self._dirichlet, self.reconstruction.dirichlet_facets,
+                             self.geometry.facet_centres, self.d, t)
 
-    def _update_dirichlet(self, t: float):
+    def traction_values(self, t: float) -> np.ndarray:
+        """t(t) of shape (n_T, d), in the order of ``reconstruction.traction_facets``."""
+        return _facet_values("traction", self._tractions, self.reconstruction.traction_facets,
+                             self.geometry.facet_centres, self.d, t)
+
+    def _update_data(self, t: float):
+        """The boundary data at t: the lift q(t) = Q_D g(t) + Q_N t(t) of the energy rows, the
+        external force f(t) = f_body + P^T t_w (``_setup_tractions``), the load f(t) - Q^T q(t)
+        and this process's share of the tractions' work at u = 0."""
         if self._lift_time is not None and (not self._time_dependent or self._lift_time == t):
             return
-        g = self.dirichlet_values(t).ravel()
-        self._g = g
-        self._q = self._Q_dirichlet @ g  # (local rows of Q,)
+        g, tr = self.dirichlet_values(t).ravel(), self.traction_values(t).ravel()
+        self._g, self._t = g, tr
+        self._q = self._Q_dirichlet @ g + self._Q_traction @ tr  # (local rows of Q,)
+        self.body_force.copy(self.external_force)
+        self._traction_constant = 0.0
+        if self._traction_force is not None:
+            tw = self._traction_weights * tr.reshape(-1, self.d)[self._own_tractions].ravel()
+            D, N = self._DN_traction
+            self._traction_constant = float(tw @ (D @ g + N @ tr))
+            self.factored.local_array(self._traction_force)[:] = self._P_traction @ tw
+            self._traction_force.ghostUpdate(PETSc.InsertMode.ADD_VALUES, PETSc.ScatterMode.REVERSE)
+            self.external_force.array[:] += self._traction_force.array_r
         self.factored.residual(None, self._q, self._rhs)
-        self._rhs.aypx(-1.0, self.body_force)
+        self._rhs.aypx(-1.0, self.external_force)
         self._lift_time = t
+
+    def external_potential(self, u: PETSc.Vec, t: float) -> float:
+        """This process's share of the external potential -f(t) . u - sum_f |f| t_f . (D g + N t)_f
+        (owned dofs, own traction facets; sum it over ranks)."""
+        self._update_data(t)
+        return -(self.external_force.array_r @ u.array_r + self._traction_constant)
+
+    def data_potential(self, u: PETSc.Vec, t: float) -> float:
+        """This process's share of the part of V(u, t) that the data change, V - 1/2 |Q w|^2 =
+        -u . L(t) + 1/2 |q(t)|^2 - sum_f |f| t_f . (D g + N t)_f, L = ``load(t)``: with it MEMM
+        counts the work that time-dependent data do (memm.py)."""
+        self._update_data(t)
+        return -(self._rhs.array_r @ u.array_r) + 0.5 * (self._q @ self._q) - self._traction_constant
+
+    def external_constant(self, t: float) -> float:
+        """This process's share of the tractions' work at u = 0, sum_f |f| t_f . (D g + N t)_f: the
+        part of the external potential that ``external_force`` does not carry."""
+        self._update_data(t)
+        return self._traction_constant
+
+    @property
+    def dirichlet_conditions(self) -> tuple[DirichletBC, ...]:
+        """The Dirichlet conditions, in the order of ``reactions``."""
+        return tuple(bc for _, bc in self._dirichlet)
 
     @property
     def time_dependent(self) -> bool:
-        """Whether some Dirichlet data depend on time (then the lift q(t) and ``load`` do)."""
+        """Whether some Dirichlet or traction data depend on time (then q(t), f(t) and ``load`` do)."""
         return self._time_dependent
 
     def load(self, t: float) -> PETSc.Vec:
-        """f - Q^T q(t): the force at u = 0 without contact (body force and Dirichlet lift), the
-        owned dofs. The returned vector is the discretisation's own: read it before the next call
+        """f(t) - Q^T q(t): the force at u = 0 without contact (body force, tractions and the lift),
+        the owned dofs. The returned vector is the discretisation's own: read it before the next call
         with another t. A time-dependent lift costs a Q^T product per new t."""
-        self._update_dirichlet(t)
+        self._update_data(t)
         return self._rhs
 
     def lift(self, t: float) -> tuple[np.ndarray, np.ndarray]:
-        """q(t) = [s(t); j(t)], the Dirichlet part of the energy rows Q w + q(t), on the local rows
-        that Dirichlet values reach: (local row indices (int32), values); q is zero elsewhere."""
-        self._update_dirichlet(t)
+        """q(t) = [s(t); j(t)], the boundary data's part of the energy rows Q w + q(t), on the local
+        rows that Dirichlet values or traction lifts reach: (local row indices (int32), values); q
+        is zero elsewhere."""
+        self._update_data(t)
         if not hasattr(self, "_lift_rows"):
-            self._lift_rows = np.flatnonzero(np.diff(self._Q_dirichlet.indptr)).astype(np.int32)
+            self._lift_rows = np.flatnonzero(np.diff(self._Q_dirichlet.indptr) + np.diff(self._Q_traction.indptr)
+                                             ).astype(np.int32)
         return self._lift_rows, self._q[self._lift_rows]
 
     # -- forces and energies -----------------------------------------------------------------
     def force(self, u: PETSc.Vec, t: float, out: PETSc.Vec, contact: bool = True) -> PETSc.Vec:
-        """out = -Q^T (Q w + q(t)) + f = -(S^T (S w + s(t)) + J^T (J w + j(t))) + f, plus the
+        """out = -Q^T (Q w + q(t)) + f(t) = -(S^T (S w + s(t)) + J^T (J w + j(t))) + f(t), plus the
         contact correction unless ``contact=False``: the exact negative gradient of the potential
         of ``energies``.
 
@@ -361,20 +467,21 @@ class DEMDiscretisation:
         (cantilever) against 2e-14 and 5e-15 in factored form. One pass over the local rows of Q
         (``factored``); a MEMM step does not call this: it keeps the rows from step to step.
         """
-        self._update_dirichlet(t)
+        self._update_data(t)
         self.factored.residual(self.relative_displacement(u), self._q, out)
-        out.aypx(-1.0, self.body_force)
+        out.aypx(-1.0, self.external_force)
         if contact:
             for c in self.contacts:
                 c.add_force(u, out)
         return out
 
     def energies(self, u: PETSc.Vec, t: float) -> dict[str, float]:
-        """Elastic (eq. (11)), stabilisation (eq. (13)) and external potential -f.u, global sums,
-        and ``potential``, their total: the potential whose exact gradient ``force`` computes."""
-        self._update_dirichlet(t)
+        """Elastic (eq. (11)), stabilisation (eq. (13)) and external potential -f.u - sum_f |f| t_f.u_f,
+        global sums, and ``potential``, their total: the potential whose exact gradient ``force``
+        computes."""
+        self._update_data(t)
         squares = self.factored.residual(self.relative_displacement(u), self._q, self._work)
-        local = np.array([0.5 * squares[0], 0.5 * squares[1], self.body_force.array_r @ u.array_r])
+        local = np.array([0.5 * squares[0], 0.5 * squares[1], -self.external_potential(u, t)])
         for c in self.contacts:  # this process's part of the contact energy changes
             local[:2] += c.energy_correction(c.patch_values(u))
         if self.comm.size > 1:
@@ -385,13 +492,11 @@ class DEMDiscretisation:
 
     def gradient(self, u: PETSc.Vec, t: float) -> np.ndarray:
         """Cell gradients G_c of eq. (8) for the owned cells, shape (n_owned, d, d), formed from
-        the facet reconstructions u_F = R u + D g (outputs: no gradient operator is stored)."""
-        self._update_dirichlet(t)
+        the facet reconstructions u_F = R u + D g + N t (outputs: no gradient operator is stored)."""
+        self._update_data(t)
         d, geom, rec = self.d, self.geometry, self.reconstruction
-        held = self.factored.local_array(self._held)
-        held[: self.n_owned * d] = u.array_r
-        self._held.ghostUpdate(PETSc.InsertMode.INSERT_VALUES, PETSc.ScatterMode.FORWARD)
-        uF = (rec.R @ held + rec.D @ self._g).reshape(-1, d)
+        held = self._held_values(u)
+        uF = (rec.R @ held + rec.D @ self._g + rec.N @ self._t).reshape(-1, d)
         cells = slice(0, self.n_owned)
         a = geom.facet_area_normals[cells] / geom.cell_volumes[cells, None, None]  # (n, d+1, d)
         G = np.einsum("nki,nkj->nij", uF[geom.cell_facets[cells]], a)
@@ -399,6 +504,37 @@ class DEMDiscretisation:
             cells, change = c.gradient_correction(c.patch_values(u))
             np.add.at(G, cells, change)
         return G
+
+    def _held_values(self, u: PETSc.Vec) -> np.ndarray:
+        """u at the held dofs (owned, then ghosts), a view of ``_held``. Collective."""
+        held = self.factored.local_array(self._held)
+        held[: self.n_owned * self.d] = u.array_r
+        self._held.ghostUpdate(PETSc.InsertMode.INSERT_VALUES, PETSc.ScatterMode.FORWARD)
+        return held
+
+    def reactions(self, u: PETSc.Vec, t: float) -> np.ndarray:
+        """The force each Dirichlet condition exerts on the body, (n_conditions, d), global sums:
+        the exact derivative dV/dg of the potential (class docstring) with respect to the
+        condition's imposed values, summed over its facets,
+
+            dV/dg = Q_D^T (Q w + q(t)) - D_T^T t_w     (t_w = |f| t_f on the own traction facets),
+
+        from the own rows of Q (each row counted once), reduced over processes. A free component
+        of a roller has no column in D: its reaction is 0. Contact corrections of rows near a
+        Dirichlet facet are not included. At equilibrium the reactions balance the loads."""
+        self._update_data(t)
+        if not hasattr(self, "_reaction_rows"):
+            rows = np.flatnonzero(np.diff(self._Q_dirichlet.indptr))
+            self._reaction_rows = rows, self.rows.Q[rows], self._Q_dirichlet[rows].T.tocsr()
+        rows, Q, QD_T = self._reaction_rows
+        dVdg = QD_T @ (Q @ self._held_values(u) + self._q[rows])
+        if self._traction_force is not None:
+            tw = self._traction_weights * self._t.reshape(-1, self.d)[self._own_tractions].ravel()
+            dVdg -= self._DN_traction[0].T @ tw
+        out = np.zeros((len(self._dirichlet), self.d))
+        np.add.at(out, self._dirichlet_condition, dVdg.reshape(-1, self.d))
+        self.comm.Allreduce(MPI.IN_PLACE, out, op=MPI.SUM)
+        return out
 
     def stress(self, u: PETSc.Vec, t: float) -> np.ndarray:
         """Cell stresses sigma_c of eq. (9), shape (n_owned, d, d) (in-plane part in 2D)."""

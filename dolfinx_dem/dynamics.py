@@ -52,16 +52,19 @@ class DynamicRun:
         self.n_steps = max(1, round(time_spec["end"] / self.dt))
         self.stepper = MEMM(dem, self.dt, time_spec.get("quadrature", "midpoint"))
         self.probes = model.Probes(dem, scene.get("probes", []))
-        self.columns = model.SERIES_COLUMNS + model.contact_columns(dem) + tuple(self.probes.names)
+        # with time-dependent data, the work W^n they do (memm.py) and the energy balance E^n - W^n
+        self.work_columns = ("work", "balance") if dem.time_dependent else ()
+        self.columns = (model.SERIES_COLUMNS + self.work_columns + model.reaction_columns(dem)
+                        + model.contact_columns(dem) + tuple(self.probes.names))
         output = scene.get("output", {})
         self.every = output.get("every", max(1, self.n_steps // 50))
         self.series_every = output.get("series_every", 1)
-        # With time-dependent Dirichlet data the boundary does work: no conservation then.
-        self.conservative = not any(bc.get("time_dependent", False) for bc in scene.get("dirichlet", []))
+        # Time-dependent data do work: no conservation then, but an energy balance E^n - W^n.
+        self.conservative = not dem.time_dependent
         self.resumed = None  # the checkpoint header of a resumed run
         diag = self.stepper.initialise(*model.initial_state(dem, scene))
         self.first = diag
-        self.stats = Statistics(diag.pseudo_energy, scale=diag.mechanical)
+        self.stats = Statistics(diag.balance, scale=diag.mechanical)
         self.pair_stats = PairContactStatistics(dem, self.stepper)
         self.setup_seconds = comm.allreduce(time.perf_counter() - self.wall, op=MPI.MAX)
 
@@ -105,7 +108,7 @@ class DynamicRun:
         # this process's own on the same partition, else the largest of the writing run's
         counters = local["memm_counters"] if local else (m["force_evaluations"], m["max_step_evaluations"])
         self.stepper.restore(*(vectors[name].ravel() for name in checkpoint.VECTORS), m["t0"], m["n"], m["budget"],
-                             *counters, local and {name: local[name] for name in ("y", "z", "means")})
+                             m["work"], m["data_potential"], *counters, local and {name: local[name] for name in ("y", "z", "means")})
         for k, contact in enumerate(dem.contacts):
             prefix = f"contact{k}_"
             contact.restore_state(local and {name[len(prefix):]: a for name, a in local.items()
@@ -153,7 +156,7 @@ class DynamicRun:
                     tic = time.process_time()
                     diag = self.stepper.step()
                     self.stats.stepping_seconds += time.process_time() - tic
-                    self.stats.drift = max(self.stats.drift, abs(diag.pseudo_energy - self.stats.pseudo_energy_initial))
+                    self.stats.drift = max(self.stats.drift, abs(diag.balance - self.stats.pseudo_energy_initial))
                     self.stats.scale = max(self.stats.scale, diag.mechanical)
                     self._record(diag, diag.step == self.n_steps)
                     progress.update(diag.step, diag.t, self.stats.relative_drift, self.conservative)
@@ -178,8 +181,10 @@ class DynamicRun:
         if dem.contact is not None:
             self.stats.min_gap = min(self.stats.min_gap, contact[0])
         if diag.step % self.series_every == 0 or force_fields:
+            work = [diag.work, diag.balance] if self.work_columns else []
             self.series.write([diag.t, diag.kinetic, diag.elastic, diag.stabilisation, diag.external,
-                               diag.pseudo_energy, *contact, *self.probes.values(stepper.u, diag.t)])
+                               diag.pseudo_energy, *work, *dem.reactions(stepper.u, diag.t).ravel(), *contact,
+                               *self.probes.values(stepper.u, diag.t)])
         if diag.step % self.every == 0 or force_fields:
             self.solution.write(diag.t, fields(dem, stepper))
 
@@ -192,7 +197,7 @@ class DynamicRun:
             "scene_hash": checkpoint.scene_hash(self.scene),
             "scene": self.scene,
             "step": stepper.n, "t": stepper.t, "dt": self.dt,
-            "memm": {k: state[k] for k in ("t0", "n", "budget")} | {
+            "memm": {k: state[k] for k in ("t0", "n", "budget", "work", "data_potential")} | {
                 k: self.comm.allreduce(state[k], op=MPI.MAX) for k in ("force_evaluations", "max_step_evaluations")},
             "statistics": dataclasses.asdict(self.stats) | {"wall_seconds": self._wall_seconds()},
             "pair_statistics": self.pair_stats.state(),

@@ -38,8 +38,8 @@ import math
 import numpy as np
 from petsc4py import PETSc
 
-from dolfinx_dem.memm_state import (CONTACT_J, CONTACT_S, EXTERNAL, KINETIC, LIFT_J, LIFT_S, PSEUDO, ROWS_J, ROWS_S,
-                                    StepState)
+from dolfinx_dem.memm_state import (CONTACT_J, CONTACT_S, DATA_POTENTIAL, EXTERNAL, KINETIC, LIFT_J, LIFT_S,
+                                    LOAD_POWER, PSEUDO, ROWS_J, ROWS_S, StepState)
 
 #: Default number of steps between true products for the energy rows (see the module docstring
 #: and docs/bench/README.md for the drift with and without).
@@ -86,6 +86,12 @@ class Diagnostics:
     external: float
     pseudo_kinetic: float  # 1/2 (v^{n-1/2})^T M v^{n+1/2}
     pseudo_energy: float  # pseudo_kinetic + the potential the force derives from (energies()["potential"])
+    work: float = 0.0  # the work W^n done by time-dependent data since t0 (MEMM's docstring); 0 without
+
+    @property
+    def balance(self) -> float:
+        """E^n - W^n: constant in exact arithmetic (the pseudo-energy itself with constant data)."""
+        return self.pseudo_energy - self.work
 
     @property
     def mechanical(self) -> float:
@@ -132,6 +138,9 @@ class MEMM:
         self.force_evaluations = 0
         self.max_step_evaluations = 0
         self.budget = 0.0
+        self.work = 0.0  # W^n, see the module docstring
+        self._data_potential = 0.0  # phi(u^n, t_n), global
+        self._load_power = 0.0  # this process's v^{n+1/2} . int L dt of the step
 
         self._state = StepState(problem, self.dt)
 
@@ -170,6 +179,7 @@ class MEMM:
         v0.copy(self.v_next)
         self.v_next.axpy(0.5 * self.dt, f)
         self._state.restart(self.t0)
+        self.work, self._load_power, self._data_potential = 0.0, 0.0, None
         diag = self._diagnostics()
         self.budget = diag.mechanical
         return diag
@@ -209,6 +219,7 @@ class MEMM:
             out.set(0.0)
             for x, w in zip(self.nodes, self.weights):
                 out.axpy(w * self.dt, self.problem.load(self.t + x * self.dt))
+            self._load_power = self.v_next.array_r @ out.array_r
         elif contacts:
             out = self._state.impulse
             if load is None:
@@ -235,13 +246,19 @@ class MEMM:
             de, ds = c.energy_correction(c.patch_values(self.u))
             sums[CONTACT_S] += de
             sums[CONTACT_J] += ds
+        if self.problem.time_dependent:
+            sums[LOAD_POWER] = self._load_power
         s = self._state.reduce(self.t)
+        if self.problem.time_dependent:
+            if self._data_potential is not None:
+                self.work += s[LOAD_POWER] + s[DATA_POTENTIAL] - self._data_potential
+            self._data_potential = s[DATA_POTENTIAL]
         elastic = 0.5 * (self.dt**2 * s[ROWS_S] + s[LIFT_S]) + s[CONTACT_S]
         stabilisation = 0.5 * (self.dt**2 * s[ROWS_J] + s[LIFT_J]) + s[CONTACT_J]
         external = -s[EXTERNAL]
         return Diagnostics(step=self.n, t=self.t, kinetic=s[KINETIC], elastic=elastic, stabilisation=stabilisation,
                            external=external, pseudo_kinetic=s[PSEUDO],
-                           pseudo_energy=s[PSEUDO] + elastic + stabilisation + external)
+                           pseudo_energy=s[PSEUDO] + elastic + stabilisation + external, work=self.work)
 
     def energy_rows(self) -> np.ndarray:
         """The homogeneous energy rows Q u^n (free bodies' mean translations removed) that the
@@ -307,17 +324,20 @@ class MEMM:
     # -- checkpoint -------------------------------------------------------------------------------
     def state(self) -> dict:
         """The complete state of the stepper: the vectors u^n, v^{n-1/2}, v^{n+1/2} (this
-        process's entries), t0, n, dt, the stability budget, the evaluation counters, and
+        process's entries), t0, n, dt, the stability budget, the work of time-dependent data and
+        the data potential it continues from (global), the evaluation counters, and
         ``recurrence``, what the energy-row recurrence carries on this process (memm_state.py)."""
         return {
             "u": self.u, "v_prev": self.v_prev, "v_next": self.v_next,
             "t0": self.t0, "n": self.n, "dt": self.dt, "budget": self.budget,
+            "work": self.work, "data_potential": self._data_potential,
             "force_evaluations": self.force_evaluations, "max_step_evaluations": self.max_step_evaluations,
             "recurrence": self._state.recurrence(),
         }
 
     def restore(self, u: np.ndarray, v_prev: np.ndarray, v_next: np.ndarray, t0: float, n: int,
-                budget: float, force_evaluations: int, max_step_evaluations: int,
+                budget: float, work: float, data_potential: float | None, force_evaluations: int,
+                max_step_evaluations: int,
                 recurrence: dict[str, np.ndarray] | None = None) -> None:
         """Continue from a ``state()``: this process's entries of the vectors (arrays), the
         scalars as stored. With the ``recurrence`` of the same rows (same partition) the next
@@ -326,6 +346,7 @@ class MEMM:
         bits)."""
         self.u.array[:], self.v_prev.array[:], self.v_next.array[:] = u, v_prev, v_next
         self.t0, self.n, self.budget = float(t0), int(n), float(budget)
+        self.work, self._data_potential = float(work), data_potential
         self.force_evaluations, self.max_step_evaluations = int(force_evaluations), int(max_step_evaluations)
         if recurrence is not None:
             self._state.restore_recurrence(self.t, **recurrence)

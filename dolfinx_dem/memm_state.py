@@ -26,9 +26,12 @@ _REVERSE = dict(addv=PETSc.InsertMode.ADD_VALUES, mode=PETSc.ScatterMode.REVERSE
 
 #: slots of ``StepState.sums``: |y|^2 over the elastic and the stabilisation rows, kinetic,
 #: pseudo-kinetic, f . u, the lift's share of the elastic and stabilisation energies, the contact
-#: models' (this process's parts of their energy changes, set by MEMM before ``reduce``); then the
-#: momentum of each free body (d per body, and d for the cells of clamped bodies).
-ROWS_S, ROWS_J, KINETIC, PSEUDO, EXTERNAL, LIFT_S, LIFT_J, CONTACT_S, CONTACT_J, MOMENTA = range(10)
+#: models' (this process's parts of their energy changes, set by MEMM before ``reduce``), with
+#: time-dependent data the step's load power v^{n+1/2} . int L dt (set by MEMM) and the data
+#: potential (``DEMDiscretisation.data_potential``); then the momentum of each free body (d per
+#: body, and d for the cells of clamped bodies).
+(ROWS_S, ROWS_J, KINETIC, PSEUDO, EXTERNAL, LIFT_S, LIFT_J, CONTACT_S, CONTACT_J, LOAD_POWER, DATA_POTENTIAL,
+ MOMENTA) = range(12)
 
 
 class StepState:
@@ -77,8 +80,10 @@ class StepState:
         self._p[id(None)] = ffi.NULL  # no impulse
         self._p_mass, self._p_minv, self._p_sums = pointer(self._mass), pointer(self._minv), pointer(self.sums)
         self._p_body = pointer(self._body)
-        force = problem.body_force.array  # f . u is the external potential's share; skipped when f = 0
-        self._p_body_force = pointer(force) if force.any() else ffi.NULL
+        # f . u, the external potential's share, summed by the kernel for a constant f (not 0); a
+        # time-dependent f(t) is read at t_{n+1} in ``reduce`` instead
+        force = problem.external_force.array
+        self._p_body_force = pointer(force) if force.any() and not problem.time_dependent else ffi.NULL
 
     def restart(self, t0: float):
         """After u, v_prev and v_next are set: the constant loads, and y = Q rel(u) / dt by a true
@@ -87,7 +92,8 @@ class StepState:
         self.load = self._lift = None
         if not problem.time_dependent:
             load = problem.load(t0)
-            if load.array_r.any():
+            # collective (the copy is): a load can be zero on some processes (a traction on one side)
+            if problem.comm.allreduce(bool(load.array_r.any()), op=MPI.LOR):
                 self.load = load.copy()
                 self.load.scale(self.dt)
                 self._p[id(self.load)] = pointer(self.load.array)
@@ -99,10 +105,11 @@ class StepState:
                 local.set(0.0)
         self.sums.fill(0.0)
         self._pass_over_rows(refresh=True, z=self._z[0])
-        M, f = problem.mass.array_r, problem.body_force.array_r
+        M = problem.mass.array_r
         vp, vn = self.v_prev.array_r, self.v_next.array_r
-        self.sums[KINETIC:LIFT_S] = [0.125 * np.dot(M, (vp + vn) ** 2), 0.5 * np.dot(M * vp, vn),
-                                     np.dot(f, self.u.array_r)]
+        self.sums[KINETIC:EXTERNAL] = [0.125 * np.dot(M, (vp + vn) ** 2), 0.5 * np.dot(M * vp, vn)]
+        if self._p_body_force != ffi.NULL:
+            self.sums[EXTERNAL] = np.dot(problem.external_force.array_r, self.u.array_r)
         if self._body is not None:
             np.add.at(self.sums[MOMENTA:], self._slot[: len(vn)], M * vn)
 
@@ -157,9 +164,16 @@ class StepState:
         self._ghosts.reverse()
 
     def reduce(self, t: float) -> np.ndarray:
-        """The sums over all processes, with the lift q(t)'s share of the energies; the free
-        bodies' mean velocities for the next pass. Returns ``sums`` (slots above)."""
+        """The sums over all processes, with the lift q(t)'s share of the energies and the external
+        potential's terms the kernel does not sum (f(t) . u for a time-dependent f, the tractions'
+        work at u = 0); the free bodies' mean velocities for the next pass. Returns ``sums``
+        (slots above)."""
         s = self.sums
+        if self.problem.time_dependent:
+            s[EXTERNAL] -= self.problem.external_potential(self.u, t)
+            s[DATA_POTENTIAL] += self.problem.data_potential(self.u, t)
+        else:
+            s[EXTERNAL] += self.problem.external_constant(t)
         lift = self.problem.lift(t) if self.problem.time_dependent else self._lift
         if lift is not None:
             rows, values = lift

@@ -16,7 +16,7 @@ from mpi4py import MPI
 
 from dolfinx_dem import _compat, meshes, scenes
 from dolfinx_dem.contact import HalfSpace
-from dolfinx_dem.discretisation import DEMDiscretisation, DirichletBC
+from dolfinx_dem.discretisation import DEMDiscretisation, DirichletBC, Traction
 from dolfinx_dem.material import ElasticMaterial
 
 SERIES_COLUMNS = ("t", "kinetic", "elastic", "stabilisation", "external", "pseudo_energy")
@@ -96,19 +96,22 @@ def build(scene: Mapping, comm: MPI.Comm = MPI.COMM_WORLD) -> DEMDiscretisation:
     scene = scenes.validate(scene, mesh.topology.dim)
     m = scene["material"]
     material = ElasticMaterial(E=m["E"], nu=m["nu"], rho=m["rho"], plane=m.get("plane", "strain"), eta=m.get("eta"))
-    dirichlet = []
-    for i, bc in enumerate(scene.get("dirichlet", [])):
+    def data(section, i, bc):
         value = bc.get("value", [0.0] * mesh.topology.dim)
-        field = (lambda x, t, v=value, key=f"dirichlet[{i}].value": scenes.evaluate_field(v, x, t, key)) \
+        field = (lambda x, t, v=value, key=f"{section}[{i}].value": scenes.evaluate_field(v, x, t, key)) \
             if isinstance(value[0], str) else value
-        facets = _boundary_facets(mesh, tags, names, bc.get("boundary", "all"), f"dirichlet[{i}].boundary")
-        dirichlet.append(DirichletBC(facets, field, bc.get("time_dependent", False)))
+        facets = _boundary_facets(mesh, tags, names, bc.get("boundary", "all"), f"{section}[{i}].boundary")
+        return facets, field, bc.get("time_dependent", False)
+
+    dirichlet = [DirichletBC(*data("dirichlet", i, bc), bc.get("components"), bc.get("name"))
+                 for i, bc in enumerate(scene.get("dirichlet", []))]
+    tractions = [Traction(*data("tractions", i, bc)) for i, bc in enumerate(scene.get("tractions", []))]
     loads = scene.get("loads", {})
     body_force = loads.get("body_force")
     if "gravity" in loads:
         body_force = [material.rho * g for g in loads["gravity"]]
     scheme = scene["method"].split("-")[1]
-    dem = DEMDiscretisation(mesh, material, scheme, dirichlet, body_force)
+    dem = DEMDiscretisation(mesh, material, scheme, dirichlet, body_force, tractions)
     obstacles = [HalfSpace(ob["point"], ob["normal"],
                            _boundary_facets(mesh, tags, names, ob["boundary"], f"obstacles[{k}].boundary"),
                            ob.get("tolerance", 0.0)) for k, ob in enumerate(scene.get("obstacles", []))]
@@ -119,6 +122,13 @@ def build(scene: Mapping, comm: MPI.Comm = MPI.COMM_WORLD) -> DEMDiscretisation:
                                            for k, b in enumerate(c["boundary"])]))
         dem.set_contact_boundary(facets, c.get("self_contact", False), c.get("tolerance", 0.0))
     return dem
+
+
+def reaction_columns(dem: DEMDiscretisation) -> tuple[str, ...]:
+    """Series columns ``reaction_<i>_<x|y|z>`` of the Dirichlet conditions' reactions
+    (``DEMDiscretisation.reactions``), i the condition's ``name`` or its index."""
+    return tuple(f"reaction_{i if bc.name is None else bc.name}_{'xyz'[k]}"
+                 for i, bc in enumerate(dem.dirichlet_conditions) for k in range(dem.d))
 
 
 def contact_columns(dem: DEMDiscretisation) -> tuple[str, ...]:

@@ -1,16 +1,20 @@
-"""Facet reconstruction u_F = R u_C + D g (paper §3.1 eq. (6)-(7), §3.4 eq. (19)-(21), scheme B).
+"""Facet reconstruction u_F = R u_C + D g + N t (paper §3.1 eq. (6)-(7), §3.4 eq. (19)-(21), scheme B).
 
 - Interior facets: barycentric interpolation from d+1 cells whose barycentres form a simplex
   containing the facet barycentre (eq. (7)), coefficients in [0, 1].
-- Dirichlet facets: the imposed value, u_f = g_f (the columns of D).
-- Neumann facets, scheme B: u_f = u_c, the facet follows its cell.
-- Neumann facets, scheme A: u_f solves sigma_c n_f = 0 (eq. (19)-(21)) given the cell's other
-  facets. A cell with more than one Neumann facet has no unique local solution (every rectangle
-  corner); dolfinx_dem applies scheme B to the Neumann facets of such cells and reports them in
+- Dirichlet facets: the imposed value, u_f = g_f (the columns of D), in the fixed components of
+  the facet's condition; the other (free) components are reconstructed as on a Neumann facet.
+- Neumann facets, scheme B: u_f = u_c, the facet follows its cell (free components likewise).
+- Neumann facets, scheme A: u_f solves sigma_c n_f = t_f (eq. (19)-(21), t_f = 0 on a traction-free
+  facet) given the cell's other facets; on a partly fixed Dirichlet facet the free components
+  solve (sigma_c n_f)_i = 0 for the free i (zero traction conjugate to the free displacement,
+  e.g. zero tangential traction on a roller). The traction enters as the affine term N t. A cell
+  with more than one such open facet has no unique local solution (every rectangle corner);
+  dolfinx_dem applies scheme B to the open facets of such cells and reports them in
   ``Reconstruction.multi_neumann_cells``.
 
 Matrices act on flattened vectors: cell dof ``c*d + i``, facet dof ``f*d + i``, Dirichlet value
-``k*d + i`` for the k-th Dirichlet facet.
+``k*d + i`` for the k-th Dirichlet facet, traction ``k*d + i`` for the k-th traction facet.
 """
 
 from __future__ import annotations
@@ -47,11 +51,15 @@ class InteriorStencils:
 
 @dataclasses.dataclass(frozen=True)
 class Reconstruction:
-    """u_F = R u_C + D g with R of shape (F d, N d) and D of shape (F d, n_D d)."""
+    """u_F = R u_C + D g + N t with R of shape (F d, N d), D of shape (F d, n_D d) and N of shape
+    (F d, n_T d)."""
 
     R: scipy.sparse.csr_matrix
     D: scipy.sparse.csr_matrix
+    N: scipy.sparse.csr_matrix  # traction lift of scheme A, nonzero on scheme A traction facets only
     dirichlet_facets: np.ndarray  # (n_D,) global facet indices, the order of g
+    fixed: np.ndarray  # (n_D, d) bool: the components each Dirichlet facet fixes
+    traction_facets: np.ndarray  # (n_T,) the order of t
     neumann_facets: np.ndarray  # (n_N,) global facet indices
     scheme_a_facets: np.ndarray  # the Neumann facets reconstructed by scheme A (eq. (20))
     scheme: str
@@ -300,27 +308,35 @@ def compute_reconstruction(
     scheme: str,
     facets: np.ndarray | None = None,
     comm=None,
+    fixed: np.ndarray | None = None,
+    traction_facets: np.ndarray | None = None,
 ) -> Reconstruction:
-    """Assemble R and D (eq. (6)) for the given Dirichlet facets and Neumann scheme "A" or "B".
+    """Assemble R, D and N (eq. (6)) for the given Dirichlet facets and Neumann scheme "A" or "B".
 
-    Only the rows of ``facets`` (default: all held facets; in parallel the facets of the cells in
-    halo layers 0 and 1, see geometry.py) are computed; the others stay empty. ``comm``, if given,
-    makes the input checks collective, so that every process raises the same error.
+    ``fixed`` (n_D, d) bool, in the order of ``dirichlet_facets``: the components each Dirichlet
+    facet fixes (default: all). ``traction_facets``: the Neumann facets that carry a traction
+    (default: none); they must not be Dirichlet facets. Only the rows of ``facets`` (default:
+    all held facets; in parallel the facets of the cells in halo layers 0 and 1, see
+    geometry.py) are computed; the others stay empty. ``comm``, if given, makes the input checks
+    collective, so that every process raises the same error.
     """
     if scheme not in ("A", "B"):
         raise ValueError(f"boundary scheme must be 'A' or 'B', got {scheme!r}")
     d, N, F = geom.d, geom.num_cells, geom.num_facets
     rows = np.arange(F) if facets is None else np.asarray(facets, dtype=np.int64)
-    dirichlet_facets = np.unique(np.asarray(dirichlet_facets, dtype=np.int64))
+    dirichlet_facets, first = np.unique(np.asarray(dirichlet_facets, dtype=np.int64), return_index=True)
+    fixed = np.ones((len(dirichlet_facets), d), bool) if fixed is None else np.asarray(fixed, bool)[first]
+    traction_facets = np.unique(np.asarray([] if traction_facets is None else traction_facets, dtype=np.int64))
     interior = dirichlet_facets[geom.facet_cells[dirichlet_facets, 1] >= 0]
     bad = geom.facet_global[interior[:1]].tolist()
     if comm is not None:
         bad = [f for b in comm.allgather(bad) for f in b]
     if bad:
         raise ValueError(f"Dirichlet facets must lie on the boundary; facet {bad[0]} is interior")
+    if np.isin(traction_facets, dirichlet_facets).any() or (geom.facet_cells[traction_facets, 1] >= 0).any():
+        raise ValueError("traction facets must be boundary facets without a Dirichlet condition")
     boundary = np.intersect1d(geom.boundary_facets, rows)
     neumann = np.setdiff1d(boundary, dirichlet_facets)
-    eye = np.broadcast_to(np.eye(d), (max(len(neumann), len(dirichlet_facets), 1), d, d))
 
     stencils = compute_interior_stencils(geom, rows)
     # interior facets: alpha I blocks, stored by their diagonals only
@@ -329,32 +345,50 @@ def compute_reconstruction(
              (stencils.cells.ravel()[:, None] * d + component).ravel(),
              np.repeat(stencils.alpha.ravel(), d))
 
-    # Scheme A applies to the Neumann facets of cells with exactly one Neumann facet.
-    ncell = geom.facet_cells[neumann, 0]
-    per_cell = np.bincount(ncell, minlength=N)
+    # Open facets: Neumann facets and partly fixed Dirichlet facets, with their free components.
+    # Scheme A applies to the open facets of cells with exactly one open facet.
+    partial = np.flatnonzero(~fixed.all(axis=1) & np.isin(dirichlet_facets, boundary))
+    open_facets = np.concatenate([neumann, dirichlet_facets[partial]])
+    free = np.concatenate([np.ones((len(neumann), d), bool), ~fixed[partial]])
+    ocell = geom.facet_cells[open_facets, 0]
+    per_cell = np.bincount(ocell, minlength=N)
     multi = np.flatnonzero(per_cell > 1)
-    is_a = np.full(neumann.shape, scheme == "A") & (per_cell[ncell] == 1)
-    b_facets = neumann[~is_a]
-    r_b = _block_coo(b_facets, geom.facet_cells[b_facets, 0], eye[: len(b_facets)], d)
+    is_a = np.full(open_facets.shape, scheme == "A") & (per_cell[ocell] == 1)
+    # scheme B: the free components follow the cell
+    b_free = free[~is_a]
+    b_facets = np.repeat(open_facets[~is_a], b_free.sum(axis=1))
+    b_comp = np.nonzero(b_free)[1]
+    r_b = (b_facets * d + b_comp, geom.facet_cells[b_facets, 0] * d + b_comp, np.ones(len(b_facets)))
 
-    nD = len(dirichlet_facets)
-    d_rows = _block_coo(dirichlet_facets, np.arange(nD), eye[:nD], d)
+    nD, nT = len(dirichlet_facets), len(traction_facets)
+    k_fix, i_fix = np.nonzero(fixed)
     R0 = scipy.sparse.coo_matrix(
         (np.concatenate([r_int[2], r_b[2]]), (np.concatenate([r_int[0], r_b[0]]),
          np.concatenate([r_int[1], r_b[1]]))), shape=(F * d, N * d)).tocsr()
-    D0 = scipy.sparse.coo_matrix((d_rows[2], (d_rows[0], d_rows[1])), shape=(F * d, nD * d)).tocsr()
+    D0 = scipy.sparse.coo_matrix((np.ones(len(k_fix)), (dirichlet_facets[k_fix] * d + i_fix, k_fix * d + i_fix)),
+                                 shape=(F * d, nD * d)).tocsr()
 
-    a_facets = neumann[is_a]
+    a_facets = open_facets[is_a]
+    lift = scipy.sparse.csr_matrix((F * d, nT * d))
     if len(a_facets):
-        T = _scheme_a_operator(geom, material, a_facets)
+        T, solve = _scheme_a_operator(geom, material, a_facets, free[is_a])
         R = R0 + T @ R0
         D = D0 + T @ D0
+        # traction lift: u_f += A^-1 t_f on the scheme A traction facets
+        on = np.isin(a_facets, traction_facets)
+        if on.any():
+            r, c, v = _block_coo(a_facets[on], np.searchsorted(traction_facets, a_facets[on]), solve[on], d)
+            lift = scipy.sparse.coo_matrix((v, (r, c)), shape=(F * d, nT * d)).tocsr()
+            lift.eliminate_zeros()
     else:
         R, D = R0, D0
     return Reconstruction(
         R=R.tocsr(),
         D=D.tocsr(),
+        N=lift,
         dirichlet_facets=dirichlet_facets,
+        fixed=fixed,
+        traction_facets=traction_facets,
         neumann_facets=neumann,
         scheme_a_facets=a_facets,
         scheme=scheme,
@@ -363,11 +397,16 @@ def compute_reconstruction(
     )
 
 
-def _scheme_a_operator(geom: MeshGeometry, material: ElasticMaterial, facets: np.ndarray):
-    """Facet-to-facet map of eq. (20)-(21): u_f = sum_{f' in dc, f' != f} T_{f f'} u_{f'}.
+def _scheme_a_operator(geom: MeshGeometry, material: ElasticMaterial, facets: np.ndarray, free: np.ndarray):
+    """Facet-to-facet map of eq. (20)-(21) for the free components ``free`` (n, d) of ``facets``:
+    u_f = sum_{f' in dc} T_{f f'} u_{f'} + A_hat^-1 E t_f in the free components of u_f.
 
-    sigma_c n_f = sum_{f'} (1/|c|) C : (u_{f'} (x) a_{f'}) n_f with a_{f'} = |f'| n_{f',c}; the
-    term of f itself is A u_f with A = (1/|c|) C[n_f, a_f] invertible, so T_{f f'} = -A^{-1} B_{f'}.
+    sigma_c n_f = sum_{f'} B_{f'} u_{f'} with B_{f'} = (1/|c|) C[n_f, a_{f'}], a_{f'} = |f'| n_{f',c};
+    A = B_f is the facet's own (symmetric positive definite) block. With E the projection on the
+    free components, E (sigma_c n_f - t_f) = 0 and the fixed components (I - E) u_f given, the free
+    ones solve A_hat x = E (t_f - sum_{f' != f} B_{f'} u_{f'} - A (I - E) u_f), A_hat = E A E + I - E:
+    T_{f f'} = -A_hat^-1 E B_{f'}, T_{f f} = -A_hat^-1 E A (I - E) (zero on a Neumann facet).
+    Returns (T (F d, F d), A_hat^-1 E (n, d, d)).
     """
     d = geom.d
     C = material.elasticity_tensor(d)
@@ -378,13 +417,21 @@ def _scheme_a_operator(geom: MeshGeometry, material: ElasticMaterial, facets: np
     # B[k]_{ik} = sum_{jl} C_ijkl n_j a_l / |c|, for every local facet of the cell
     B = np.einsum("ijkl,nj,nml->nmik", C, n_f, a) / geom.cell_volumes[c, None, None, None]
     A = B[np.arange(len(c)), j]
-    Ainv_B = np.linalg.solve(A[:, None], B)  # (n, d+1, d, d)
+    E = np.einsum("ni,ij->nij", free.astype(float), np.eye(d))
+    A_hat = E @ A @ E + (np.eye(d) - E)
+    solve = np.linalg.solve(A_hat, E)  # (n, d, d); its rows of fixed components are 0
     rows, cols, blocks = [], [], []
     for k in range(d + 1):
         other = k != j
         rows.append(facets[other])
         cols.append(geom.cell_facets[c[other], k])
-        blocks.append(-Ainv_B[other, k])
+        blocks.append(-solve[other] @ B[other, k])
+    partial = ~free.all(axis=1)
+    rows.append(facets[partial])
+    cols.append(facets[partial])
+    blocks.append(-solve[partial] @ A[partial] @ (np.eye(d) - E[partial]))
     r, cc, v = _block_coo(np.concatenate(rows), np.concatenate(cols), np.concatenate(blocks), d)
     F = geom.num_facets
-    return scipy.sparse.coo_matrix((v, (r, cc)), shape=(F * d, F * d)).tocsr()
+    T = scipy.sparse.coo_matrix((v, (r, cc)), shape=(F * d, F * d)).tocsr()
+    T.eliminate_zeros()
+    return T, solve

@@ -136,7 +136,7 @@ class Progress:
             return
         self.last = now
         left = (now - self.start) / max(n - self.first, 1) * (self.n_steps - n)
-        energy = f"energy drift {drift:.2e}" if conservative else f"energy change {drift:.2e} (not conservative)"
+        energy = f"energy drift {drift:.2e}" if conservative else f"energy balance {drift:.2e} (work counted)"
         line = f"step {n}/{self.n_steps}  t = {t:.5g}  {energy}  {left:.0f} s left"
         if self.terminal:
             self._open_line = n != self.n_steps

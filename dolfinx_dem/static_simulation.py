@@ -100,10 +100,12 @@ class StaticRun:
         u = result.u
         probes = self.probes
         energies = dem.energies(u, 0.0)
-        columns = model.SERIES_COLUMNS + model.contact_columns(dem) + tuple(probes.names)
+        reactions = dem.reactions(u, 0.0)
+        columns = model.SERIES_COLUMNS + model.reaction_columns(dem) + model.contact_columns(dem) + tuple(probes.names)
         with io.SeriesWriter(comm, directory / "series.csv", columns) as series:
             series.write([0.0, 0.0, energies["elastic"], energies["stabilisation"], energies["external"],
-                          energies["potential"], *model.contact_values(dem, u), *probes.values(u, 0.0)])
+                          energies["potential"], *reactions.ravel(), *model.contact_values(dem, u),
+                          *probes.values(u, 0.0)])
         with io.SolutionWriter(comm, directory, dem.mesh) as solution:
             solution.write(0.0, {"displacement": dem.function(u, "displacement"),
                                  "von_mises": dem.scalar_function(dem.von_mises(u, 0.0), "von_mises")})
@@ -121,6 +123,8 @@ class StaticRun:
             "setup_time_s": self.setup_seconds,
             "processes": comm.size,
         }
+        if reactions.size:  # the force each Dirichlet condition exerts on the body
+            summary["reactions"] = dict(zip(model.reaction_columns(dem), reactions.ravel().tolist()))
         if dem.contact is not None:
             summary.update(_contact_summary(dem, u, result, directory / "contact_pressure.csv"))
         obstacles = [(ob["point"], ob["normal"]) for ob in scene.get("obstacles", [])]

@@ -93,11 +93,16 @@ def test_a_stopped_run_resumes_bit_identical(name, tempdir, monkeypatch):
 
 def _close(a: np.ndarray, b: np.ndarray):
     """Columns of two series agree to 1e-12 of the scale: energies to the largest mechanical
-    energy, momenta to max(their largest value, 1 kg m/s), others to their largest value."""
+    energy, momenta to max(their largest value, 1 kg m/s), reactions to the largest reaction
+    component, others to their largest value."""
     assert a.shape == b.shape
     energy = max(np.abs(a[c]).max() for c in ("kinetic", "elastic", "stabilisation"))
+    reactions = [c for c in a.dtype.names if c.startswith("reaction_")]
+    reaction = max((np.abs(a[c]).max() for c in reactions), default=0.0)
     for column in a.dtype.names:
         scale = energy if column in model.SERIES_COLUMNS[1:] else np.abs(a[column]).max()
+        if column in reactions:
+            scale = reaction
         if column.startswith("momentum_"):
             scale = max(scale, 1.0)
         assert np.abs(a[column] - b[column]).max() <= 1e-12 * scale, column

@@ -8,26 +8,44 @@ import dolfinx.mesh
 from dolfinx.mesh import CellType, DiagonalType
 
 from dolfinx_dem import _compat
-from dolfinx_dem.discretisation import DEMDiscretisation, DirichletBC
+from dolfinx_dem.discretisation import DEMDiscretisation, DirichletBC, Traction
 from dolfinx_dem.material import ElasticMaterial
 
 MATERIAL = ElasticMaterial(E=2.0, nu=0.25, rho=1.5, eta=0.7)
 
 
-def _problem(d, scheme, comm, time_dependent=False):
-    """A mesh with Dirichlet values on x = 0 (callable), a body force and free other sides."""
+def _problem(d, scheme, comm, time_dependent=False, loaded=False, shift=None):
+    """A mesh with Dirichlet values on x = 0 (callable), a body force and free other sides;
+    ``loaded``: also a roller (u_y = 0) on the bottom and a traction (callable, time dependent
+    with the Dirichlet values) on the right. ``shift`` (two vectors): the Dirichlet values of the
+    two conditions move by t times them (time dependent), for derivatives in g."""
     if d == 2:
         mesh = dolfinx.mesh.create_rectangle(comm, [[0.0, 0.0], [1.5, 1.0]], [4, 3], diagonal=DiagonalType.right)
     else:
         mesh = dolfinx.mesh.create_box(comm, [[0.0, 0.0, 0.0], [1.0, 1.0, 1.5]], [2, 2, 2])
     left = _compat.locate_boundary_facets(mesh, lambda x: np.isclose(x[0], 0.0))
+    a, b = (np.zeros(d), np.zeros(d)) if shift is None else shift
 
     def g(x, t):
-        return np.stack([0.1 * np.sin(x[1] + t)] + [0.2 * x[0] + 0.3 * x[1] * (1 + t)] * (d - 1))
+        value = np.stack([0.1 * np.sin(x[1] + t)] + [0.2 * x[0] + 0.3 * x[1] * (1 + t)] * (d - 1))
+        return value if shift is None else np.stack([0.1 * np.sin(x[1])] + [0.2 * x[0] + 0.3 * x[1]] * (d - 1)) \
+            + t * a[:, None]
 
-    bc = DirichletBC(left, g, time_dependent=time_dependent)
+    bc = DirichletBC(left, g, time_dependent=time_dependent or shift is not None)
     body = [0.5, -1.0, 0.25][:d]
-    return DEMDiscretisation(mesh, MATERIAL, scheme=scheme, dirichlet=[bc], body_force=body)
+    if not loaded:
+        return DEMDiscretisation(mesh, MATERIAL, scheme=scheme, dirichlet=[bc], body_force=body)
+    bottom = _compat.locate_boundary_facets(mesh, lambda x: np.isclose(x[1], 0.0) & (x[0] > 1e-12))
+    right = _compat.locate_boundary_facets(mesh, lambda x: np.isclose(x[0], 1.5 if d == 2 else 1.0))
+    roller = DirichletBC(bottom, lambda x, t: np.stack([0.0 * x[0] + 0.05] * d) + t * b[:, None],
+                         time_dependent=shift is not None, components=[1])
+
+    def traction(x, t):
+        return np.stack([0.7 + 0.2 * x[1] * (1 + t), 0.0 * x[0] - 0.3 + 0.1 * t] + [0.4 * x[1]] * (d - 2))
+
+    tractions = [Traction(right, traction, time_dependent=time_dependent)]
+    return DEMDiscretisation(mesh, MATERIAL, scheme=scheme, dirichlet=[bc, roller], body_force=body,
+                             tractions=tractions)
 
 
 def _potential(dem, u, t):
@@ -42,12 +60,13 @@ def _random_field(dem, seed):
     return u
 
 
+@pytest.mark.parametrize("loaded", [False, True])
 @pytest.mark.parametrize("scheme", ["A", "B"])
 @pytest.mark.parametrize("d", [2, 3])
-def test_force_is_minus_gradient_full(d, scheme):
-    """Every component of F against central differences of E_P + E_S - f.u (exact for a
-    quadratic potential up to round-off)."""
-    dem = _problem(d, scheme, MPI.COMM_SELF)
+def test_force_is_minus_gradient_full(d, scheme, loaded):
+    """Every component of F against central differences of E_P + E_S - f.u (- the tractions'
+    work with ``loaded``, and a roller) (exact for a quadratic potential up to round-off)."""
+    dem = _problem(d, scheme, MPI.COMM_SELF, loaded=loaded)
     if d == 2 and scheme == "A":
         assert dem.reconstruction.multi_neumann_cells.size > 0  # the fallback is covered too
     u = _random_field(dem, 0)
@@ -67,13 +86,14 @@ def test_force_is_minus_gradient_full(d, scheme):
 
 
 @pytest.mark.mpi
+@pytest.mark.parametrize("loaded", [False, True])
 @pytest.mark.parametrize("scheme", ["A", "B"])
 @pytest.mark.parametrize("d", [2, 3])
-def test_force_is_minus_gradient_directional(d, scheme):
+def test_force_is_minus_gradient_directional(d, scheme, loaded):
     """Directional derivatives along random directions, also in parallel, with time-dependent
-    Dirichlet values evaluated at t = 0.7."""
+    Dirichlet values (and tractions, with ``loaded``) evaluated at t = 0.7."""
     comm = MPI.COMM_WORLD
-    dem = _problem(d, scheme, comm, time_dependent=True)
+    dem = _problem(d, scheme, comm, time_dependent=True, loaded=loaded)
     t = 0.7
     u = _random_field(dem, comm.rank)
     F = dem.create_vector()
@@ -96,6 +116,24 @@ def test_force_is_minus_gradient_directional(d, scheme):
     dem.force(u, 0.0, F0)
     F0.axpy(-1.0, F)
     assert F0.norm() > 1e-3 * F.norm()
+
+
+@pytest.mark.mpi
+@pytest.mark.parametrize("scheme", ["A", "B"])
+@pytest.mark.parametrize("d", [2, 3])
+def test_reactions_are_the_derivative_in_the_imposed_values(d, scheme):
+    """reactions() against the central difference of V(u, g + s a) in s, for a clamp and a roller
+    moved along a and b (as t): dV/ds = R_clamp . a + R_roller . b; the free x component of the
+    roller has no reaction."""
+    comm = MPI.COMM_WORLD
+    a, b = np.array([0.3, -0.7, 0.2][:d]), np.array([0.4, 0.9, -0.5][:d])
+    dem = _problem(d, scheme, comm, loaded=True, shift=(a, b))
+    u = _random_field(dem, comm.rank)
+    R = dem.reactions(u, 0.0)
+    assert R.shape == (2, d) and R[1, 0] == 0.0 and np.abs(R).max() > 1e-2
+    h = 1e-3
+    slope = (_potential(dem, u, h) - _potential(dem, u, -h)) / (2 * h)
+    assert abs(slope - (R[0] @ a + R[1] @ b)) < 1e-9 * np.abs(R).max()
 
 
 @pytest.mark.mpi

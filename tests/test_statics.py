@@ -9,7 +9,7 @@ from mpi4py import MPI
 
 from dolfinx_dem import _compat, io, meshes, scenes, simulation
 from dolfinx_dem.contact import HalfSpace
-from dolfinx_dem.discretisation import DEMDiscretisation
+from dolfinx_dem.discretisation import DEMDiscretisation, DirichletBC, Traction
 from dolfinx_dem.material import ElasticMaterial
 from dolfinx_dem.statics import StaticsError, minimise_energy
 from helpers import owned_centres
@@ -108,3 +108,45 @@ def test_scheme_b_minimum_on_a_kink(tempdir):
     assert summary["gradient_norm_reduction"] < 1e-8
     assert summary["contact_force"] == pytest.approx(load, rel=1e-9)
     assert summary["top_vertical_displacement"] == pytest.approx(-0.01389, rel=0.02)
+
+
+@pytest.mark.mpi
+@pytest.mark.parametrize("scheme", ["A", "B"])
+def test_bar_under_an_end_traction(scheme):
+    """1D bar [0, L] clamped at 0, traction sigma at L: the reaction balances the load to 1e-12
+    (both schemes: V is invariant under a common translation of u and g but for the loads); with
+    scheme A the solution is exact, u_tip = sigma L / E to 1e-12."""
+    L, E, sigma = 2.0, 50.0, 3.0
+    mesh, _, tags = meshes.create_interval(MPI.COMM_WORLD, 16, 0.0, L)
+    dem = DEMDiscretisation(mesh, ElasticMaterial(E=E, nu=0.0, rho=1.0), scheme,
+                            [DirichletBC(tags.find(meshes.XMIN), [0.0])],
+                            tractions=[Traction(tags.find(meshes.XMAX), [sigma])])
+    result = minimise_energy(dem, rtol=1e-14)
+    assert dem.reactions(result.u, 0.0)[0, 0] == pytest.approx(-sigma, rel=1e-12)
+    if scheme == "A":
+        x = owned_centres(dem)[:, 0]
+        G = dem.gradient(result.u, 0.0)[:, 0, 0]
+        assert np.allclose(G, sigma / E, rtol=1e-12, atol=0)
+        tip = result.u.array + G * (L - x)  # the P1 reconstruction (eq. (10)) at x = L
+        assert np.allclose(tip, sigma * L / E, rtol=1e-12, atol=0)
+
+
+@pytest.mark.mpi
+def test_patch_test_with_rollers():
+    """2D block [0, 2] x [0, 1] (crossed: no cell with two boundary facets) on rollers, u_x = 0
+    on the left and u_y = 0 on the bottom, traction (sigma, 0) on the right: with scheme A the
+    stress is uniform and exact, sigma_xx = sigma, sigma_yy = sigma_xy = 0, in every cell; the
+    rollers balance the load: reactions (-sigma H, 0) on the left, 0 on the bottom."""
+    sigma, H = 0.7, 1.0
+    mesh, _, tags = meshes.create_rectangle(MPI.COMM_WORLD, [0.0, 0.0], [2.0, H], [6, 3], "crossed")
+    dem = DEMDiscretisation(mesh, ElasticMaterial(E=10.0, nu=0.3, rho=1.0), "A",
+                            [DirichletBC(tags.find(meshes.XMIN), [0.0, 0.0], components=[0]),
+                             DirichletBC(tags.find(meshes.YMIN), [0.0, 0.0], components=[1])],
+                            tractions=[Traction(tags.find(meshes.XMAX), [sigma, 0.0])])
+    assert dem.num_multi_neumann_cells == 0
+    result = minimise_energy(dem, rtol=1e-14)
+    stress = dem.stress(result.u, 0.0)
+    exact = np.array([[sigma, 0.0], [0.0, 0.0]])
+    error = MPI.COMM_WORLD.allreduce(np.abs(stress - exact).max(initial=0.0), op=MPI.MAX)
+    assert error < 1e-11 * sigma
+    assert np.allclose(dem.reactions(result.u, 0.0), [[-sigma * H, 0.0], [0.0, 0.0]], rtol=0, atol=1e-12 * sigma)

@@ -108,6 +108,13 @@ SCHEMA = {
         "boundary": lambda k, v, d: v if isinstance(v, int) and not isinstance(v, bool) else _string(k, v),
         "value": lambda k, v, d: _field(k, v, d),
         "time_dependent": lambda k, v, d: _bool(k, v),
+        "components": lambda k, v, d: _components(k, v, d),
+        "name": lambda k, v, d: _name(k, v),
+    }],
+    "tractions": [{
+        "boundary": lambda k, v, d: v if isinstance(v, int) and not isinstance(v, bool) else _string(k, v),
+        "value": lambda k, v, d: _field(k, v, d),
+        "time_dependent": lambda k, v, d: _bool(k, v),
     }],
     "loads": {
         "gravity": lambda k, v, d: _vector(k, v, d),
@@ -157,7 +164,8 @@ SCHEMA = {
 #: Required keys of the sections; "mesh" and "material" are required sections, the others optional.
 REQUIRED = {"mesh": ("type",), "material": ("E", "nu", "rho"), "contact": ("boundary",)}
 #: Required keys of the entries of array-of-tables sections.
-REQUIRED_ITEMS = {"dirichlet": ("boundary",), "probes": ("name", "point", "component"),
+REQUIRED_ITEMS = {"dirichlet": ("boundary",), "tractions": ("boundary", "value"),
+                  "probes": ("name", "point", "component"),
                   "obstacles": ("point", "normal", "boundary")}
 #: Facet tags of the generated interval/rectangle/box meshes, by boundary name.
 SIDES = {"xmin": 1, "xmax": 2, "ymin": 3, "ymax": 4, "zmin": 5, "zmax": 6,
@@ -167,6 +175,22 @@ SIDES = {"xmin": 1, "xmax": 2, "ymin": 3, "ymax": 4, "zmin": 5, "zmax": 6,
 def _list(key, v):
     if not isinstance(v, list):
         raise SceneError(f"scene key '{key}' must be a list, got {v!r}")
+    return v
+
+
+def _components(key, v, d):
+    """A nonempty list of distinct displacement components, each in [0, d - 1]."""
+    items = [_integer(f"{key}[{i}]", x, minimum=0) for i, x in enumerate(_list(key, v))]
+    if not items or len(set(items)) != len(items) or (d is not None and max(items) >= d):
+        raise SceneError(f"scene key '{key}' must be a nonempty list of distinct components in [0, {(d or 3) - 1}] "
+                         f"(0 = x, 1 = y, 2 = z), got {v!r}")
+    return items
+
+
+def _name(key, v):
+    """A name for series columns: letters, digits and underscores."""
+    if not (isinstance(v, str) and v and v.replace("_", "a").isalnum() and v.isascii()):
+        raise SceneError(f"scene key '{key}' must be a name of letters, digits and underscores, got {v!r}")
     return v
 
 
@@ -227,12 +251,16 @@ def validate(scene: Mapping, mesh_dimension: int | None = None) -> dict:
             for key in keys:
                 if key not in item:
                     raise SceneError(f"scene key '{section}[{i}].{key}' is missing")
-    for i, bc in enumerate(scene.get("dirichlet", [])):
-        for k, e in enumerate(bc.get("value", [])):
-            if isinstance(e, str) and "t" in compile(e, "<value>", "eval").co_names and not bc.get("time_dependent"):
-                raise SceneError(f"scene key 'dirichlet[{i}].value[{k}]' ({e!r}) uses t, but "
-                                 f"'dirichlet[{i}].time_dependent' is not true: the value would be frozen at "
-                                 "t = 0 (set time_dependent = true)")
+    for section in ("dirichlet", "tractions"):
+        for i, bc in enumerate(scene.get(section, [])):
+            for k, e in enumerate(bc.get("value", [])):
+                if isinstance(e, str) and "t" in compile(e, "<value>", "eval").co_names and not bc.get("time_dependent"):
+                    raise SceneError(f"scene key '{section}[{i}].value[{k}]' ({e!r}) uses t, but "
+                                     f"'{section}[{i}].time_dependent' is not true: the value would be frozen at "
+                                     "t = 0 (set time_dependent = true)")
+    names = [bc["name"] for bc in scene.get("dirichlet", []) if "name" in bc]
+    if len(set(names)) != len(names):
+        raise SceneError(f"scene key 'dirichlet[].name': names must be unique, got {names}")
     if "statics" in scene:
         for section in ("time", "initial"):
             if section in scene:
