@@ -186,8 +186,10 @@ class RigidContact:
         dirichlet = self.comm.allreduce(bool(np.isin(f[owned], rec.dirichlet_facets).any()), op=MPI.LOR)
         if dirichlet:
             raise ValueError("obstacle contact candidate facets must not carry a Dirichlet condition")
+        if self.comm.allreduce(bool(np.isin(f[owned], rec.traction_facets).any()), op=MPI.LOR):
+            raise ValueError("obstacle contact candidate facets must not carry a traction")
         if dem._time_dependent:
-            raise ValueError("contact with time-dependent Dirichlet conditions is not supported")
+            raise ValueError("contact with time-dependent Dirichlet conditions or tractions is not supported")
         order = np.lexsort((f, ~owned))  # own facets first
         self.facets, self.cells, obstacle = f[order], cell[order], marks[cell, j][order]
         self.num_obstacles, self._obstacle = len(obstacles), obstacle
@@ -212,15 +214,14 @@ class RigidContact:
             e[is_a] = Ainv_n / np.einsum("ni,ni->n", n, Ainv_n)[:, None]
         self.directions = e
 
-        # Gaps g = Rn u + g0 (g0 from the geometry and the Dirichlet lift).
+        # Gaps g = Rn u + g0 (g0 from the geometry and the data's lift).
         dofs = (self.facets[:, None] * d + np.arange(d)).ravel()
         normal_rows = scipy.sparse.csr_matrix(
             (self.normals.ravel(), (np.repeat(np.arange(nc), d), np.arange(nc * d))), shape=(nc, nc * d))
-        g = dem.dirichlet_values(0.0).ravel()
         R_free = rec.R[dofs]
+        self._D_free = dem.facet_lift(self.facets).ravel()
         self._g0 = np.einsum("ni,ni->n", self.normals, geom.facet_centres[self.facets] - self.points)
-        self._g0 += normal_rows @ (rec.D[dofs] @ g)
-        self._D_free = rec.D[dofs] @ g
+        self._g0 += normal_rows @ self._D_free
 
         # The energy rows the candidates touch (y_f = Q_F e_f), among this process's rows.
         rows = dem.rows
@@ -235,7 +236,7 @@ class RigidContact:
         Q, R_free = Q[:, patch], R_free[:, patch]
         Rn = normal_rows @ R_free
         own_rows = rows.owned[touched]
-        self._q = rows.Q_dirichlet[touched] @ g
+        self._q = dem.row_lift(touched)
         self._is_elastic_row = rows.elastic[touched]
         self._own_rows = own_rows
         self._Q, self._Y, self._Rn = _compact(Q), _compact(Y), _compact(Rn)

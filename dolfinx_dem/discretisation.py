@@ -376,6 +376,19 @@ class DEMDiscretisation:
         v.set(0.0)
         return v
 
+    def row_lift(self, rows: np.ndarray) -> np.ndarray:
+        """The data's part q of the energy rows ``rows`` (indices into ``rows.Q``: any row this
+        process holds), Q_D g + Q_N t at the data's current time (contact models: constant data)."""
+        rows = np.asarray(rows)
+        return self.rows.Q_dirichlet[rows] @ self._g + (self.rows.QF[rows] @ self.reconstruction.N) @ self._t
+
+    def facet_lift(self, facets: np.ndarray) -> np.ndarray:
+        """The data's part D g + N t of the reconstructions of the local ``facets``, (n, d), at
+        the data's current time (contact models: constant data)."""
+        rec, d = self.reconstruction, self.d
+        dofs = (np.asarray(facets)[:, None] * d + np.arange(d)).ravel()
+        return (rec.D[dofs] @ self._g + rec.N[dofs] @ self._t).reshape(-1, d)
+
     def dirichlet_values(self, t: float) -> np.ndarray:
         """g(t) of shape (n_D, d), in the order of ``reconstruction.dirichlet_facets`` (the free
         components of a partly fixed facet are read by nothing)."""

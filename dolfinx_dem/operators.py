@@ -12,7 +12,7 @@ With u_F = R u_C + D g (reconstruction.py):
 
 Rows: S has m = d(d+1)/2 rows per cell, J has d rows per interior facet. Q = [S; J] is the only
 operator of the size of the mesh that a process keeps; cell gradients (outputs) are formed on
-demand from the reconstruction (``gradient_rows``).
+demand from the reconstruction (``DEMDiscretisation.gradient``).
 """
 
 from __future__ import annotations

@@ -167,8 +167,10 @@ class PairContact:
             raise ValueError(f"contact facets must be boundary facets; the facet at {bad[0]} is interior")
         if self.comm.allreduce(bool(np.isin(f[owned], rec.dirichlet_facets).any()), op=MPI.LOR):
             raise ValueError("contact facets must not carry a Dirichlet condition")
+        if self.comm.allreduce(bool(np.isin(f[owned], rec.traction_facets).any()), op=MPI.LOR):
+            raise ValueError("contact facets must not carry a traction")
         if dem._time_dependent:
-            raise ValueError("contact with time-dependent Dirichlet conditions is not supported")
+            raise ValueError("contact with time-dependent Dirichlet conditions or tractions is not supported")
         _check_bodies_share_no_vertex(dem)
         _check_bodies_do_not_overlap(dem)
         self.self_contact = bool(self_contact)
@@ -204,7 +206,7 @@ class PairContact:
         # then places them in the patch by a gather, not a search over every entry)
         self._row_dofs, entry_dof = np.unique(dem.columns[self._Q.indices], return_inverse=True)
         self._Q_entry_dof = entry_dof.astype(np.int32)
-        self._q = rows.Q_dirichlet[own_rows[touched]] @ dem.dirichlet_values(0.0).ravel()
+        self._q = dem.row_lift(own_rows[touched])
         self._is_elastic_row = rows.elastic[own_rows[touched]]
         an = geom.facet_area_normals[self.cells, geom.facet_local[self.facets, 0]]
         self._grad_weights = an / geom.cell_volumes[self.cells, None]
@@ -275,7 +277,7 @@ class PairContact:
             vertex_ids=geom.cell_vertex_ids[cell][mask].reshape(n, d), scheme_a=scheme_a,
             Ca=np.where(scheme_a[:, None, None, None], Ca, 0.0),
             R_dofs=R_dofs.reshape(n, d, width), R_values=R_values.reshape(n, d, width),
-            lift=(rec.D[(f[:, None] * d + np.arange(d)).ravel()] @ dem.dirichlet_values(0.0).ravel()).reshape(n, d),
+            lift=dem.facet_lift(f),
         )
 
     # -- broad phase ---------------------------------------------------------------------------

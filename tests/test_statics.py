@@ -150,3 +150,22 @@ def test_patch_test_with_rollers():
     error = MPI.COMM_WORLD.allreduce(np.abs(stress - exact).max(initial=0.0), op=MPI.MAX)
     assert error < 1e-11 * sigma
     assert np.allclose(dem.reactions(result.u, 0.0), [[-sigma * H, 0.0], [0.0, 0.0]], rtol=0, atol=1e-12 * sigma)
+
+
+@pytest.mark.parametrize("n", [2, 3, 8])
+def test_bar_pressed_on_a_wall_by_a_traction(n):
+    """1D bar [0, L] against a rigid wall at x = 0, pushed by a traction -p at x = L (scheme A):
+    the exact solution, uniform stress -p, the wall's force p. With two cells the jump row of the
+    middle facet reads both cells' reconstructions, so the contact rows carry the traction's
+    lift (a contact model that built its rows' lift from the Dirichlet data alone gave a wrong
+    stress there). A traction on a contact candidate facet is refused."""
+    L, E, p = 1.0, 20.0, 0.5
+    mesh, _, tags = meshes.create_interval(MPI.COMM_SELF, n, 0.0, L)
+    dem = DEMDiscretisation(mesh, ElasticMaterial(E=E, nu=0.0, rho=1.0), "A",
+                            tractions=[Traction(tags.find(meshes.XMAX), [-p])])
+    dem.set_obstacles([HalfSpace([0.0], [1.0], tags.find(meshes.XMIN))])
+    result = minimise_energy(dem, rtol=1e-14)
+    assert np.allclose(dem.stress(result.u, 0.0)[:, 0, 0], -p, rtol=1e-12, atol=0)
+    assert float(dem.contact.reactions(result.u).sum()) == pytest.approx(p, rel=1e-12)
+    with pytest.raises(ValueError, match="must not carry a traction"):
+        dem.set_obstacles([HalfSpace([L], [-1.0], tags.find(meshes.XMAX))])
