@@ -61,9 +61,10 @@ def test_every_summary_key_and_series_column_is_documented(tmp_path):
         columns |= set((tmp_path / name / "series.csv").read_text().splitlines()[0].split(","))
     assert "conservative" in keys
     assert keys - documented == set()
-    assert {"contact_pressure", "contact_force_obstacle0_x", "contact_force_0_1_y"} <= columns
-    # per obstacle k and body pair i < j: documented as patterns
-    patterns = {re.sub(r"_(\d+)_(\d+)_", "_<i>_<j>_", re.sub(r"obstacle\d+", "obstacle<k>", c)) for c in columns}
+    assert {"contact_pressure", "contact_force_obstacle0_x", "contact_force_0_1_y", "reaction_0_x"} <= columns
+    # per obstacle k, body pair i < j and Dirichlet condition i: documented as patterns
+    patterns = {re.sub(r"^reaction_\d+_", "reaction_<i>_",
+                       re.sub(r"_(\d+)_(\d+)_", "_<i>_<j>_", re.sub(r"obstacle\d+", "obstacle<k>", c))) for c in columns}
     suffixes = {re.sub(r"_[xyz]$", "_x", c) for c in patterns if "<" in c}  # `..._x`, `_y`, `_z`
     assert ({c for c in patterns if "<" not in c} | suffixes) - documented == set()
 
