@@ -128,7 +128,8 @@ class Progress:
 
     def update(self, n: int, t: float, drift: float, conservative: bool = True):
         """Report step ``n`` at time ``t`` if it is time to; ``drift``: relative pseudo-energy
-        drift (a change, not a drift, when the scene is not ``conservative``)."""
+        drift (when the scene is not ``conservative``: the error of the balance E - W with the
+        work W of the time-dependent data counted)."""
         if not self.enabled:
             return
         now = time.perf_counter()

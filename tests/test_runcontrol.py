@@ -173,7 +173,7 @@ def test_progress_lines_without_a_terminal():
     lines = stream.getvalue().splitlines()
     assert len(lines) == 2 and "\r" not in stream.getvalue()
     assert lines[0].startswith("step 10/100  t = 0.25  energy drift 1.00e-15  ") and lines[0].endswith(" s left")
-    assert "energy change 2.00e-15 (not conservative)" in lines[1]
+    assert "energy balance 2.00e-15 (work counted)" in lines[1]
     quiet = _Stream(tty=False)
     runcontrol.Progress(MPI.COMM_SELF, 100, quiet=True, interval=0.0, stream=quiet).update(10, 0.25, 0.0)
     assert quiet.getvalue() == ""
@@ -187,6 +187,7 @@ def test_progress_lines_without_a_terminal():
 def test_the_summary_line_says_when_a_scene_is_not_conservative():
     summary = {"scene": "s", "status": "completed", "n_steps": 10, "dt": 0.1, "n_cells": 4, "wall_time_s": 1.0,
                "pseudo_energy_rel_drift": 1.0, "conservative": False}
-    assert cli.summary_line(summary).endswith("not conservative (moving boundary data): pseudo-energy change 1.00e+00")
+    assert cli.summary_line(summary).endswith(
+        "not conservative (time-dependent data): energy balance error (work counted) 1.00e+00")
     line = cli.summary_line(summary | {"conservative": True, "status": "interrupted", "pseudo_energy_rel_drift": 1e-15})
     assert line.startswith("s (interrupted): 10 steps") and line.endswith("pseudo-energy drift 1.00e-15")
