@@ -27,7 +27,7 @@ import numpy as np
 import scipy.sparse
 
 from dolfinx_dem.geometry import MeshGeometry
-from dolfinx_dem.material import ElasticMaterial
+from dolfinx_dem.material import CellMaterials
 
 #: Number of candidate cells (the nearest of the facet's mesh neighbourhood), by dimension.
 _NEIGHBOURS = {1: 2, 2: 10, 3: 14}
@@ -303,7 +303,7 @@ def _block_coo(rows: np.ndarray, cols: np.ndarray, blocks: np.ndarray, d: int):
 
 def compute_reconstruction(
     geom: MeshGeometry,
-    material: ElasticMaterial,
+    materials: CellMaterials,
     dirichlet_facets: np.ndarray,
     scheme: str,
     facets: np.ndarray | None = None,
@@ -371,7 +371,7 @@ def compute_reconstruction(
     a_facets = open_facets[is_a]
     lift = scipy.sparse.csr_matrix((F * d, nT * d))
     if len(a_facets):
-        T, solve = _scheme_a_operator(geom, material, a_facets, free[is_a])
+        T, solve = _scheme_a_operator(geom, materials, a_facets, free[is_a])
         R = R0 + T @ R0
         D = D0 + T @ D0
         # traction lift: u_f += A^-1 t_f on the scheme A traction facets
@@ -397,11 +397,12 @@ def compute_reconstruction(
     )
 
 
-def _scheme_a_operator(geom: MeshGeometry, material: ElasticMaterial, facets: np.ndarray, free: np.ndarray):
+def _scheme_a_operator(geom: MeshGeometry, materials: CellMaterials, facets: np.ndarray, free: np.ndarray):
     """Facet-to-facet map of eq. (20)-(21) for the free components ``free`` (n, d) of ``facets``:
     u_f = sum_{f' in dc} T_{f f'} u_{f'} + A_hat^-1 E t_f in the free components of u_f.
 
-    sigma_c n_f = sum_{f'} B_{f'} u_{f'} with B_{f'} = (1/|c|) C[n_f, a_{f'}], a_{f'} = |f'| n_{f',c};
+    sigma_c n_f = sum_{f'} B_{f'} u_{f'} with B_{f'} = (1/|c|) C_c[n_f, a_{f'}], a_{f'} = |f'| n_{f',c},
+    C_c the elasticity tensor of the cell's material;
     A = B_f is the facet's own (symmetric positive definite) block. With E the projection on the
     free components, E (sigma_c n_f - t_f) = 0 and the fixed components (I - E) u_f given, the free
     ones solve A_hat x = E (t_f - sum_{f' != f} B_{f'} u_{f'} - A (I - E) u_f), A_hat = E A E + I - E:
@@ -409,13 +410,13 @@ def _scheme_a_operator(geom: MeshGeometry, material: ElasticMaterial, facets: np
     Returns (T (F d, F d), A_hat^-1 E (n, d, d)).
     """
     d = geom.d
-    C = material.elasticity_tensor(d)
     c = geom.facet_cells[facets, 0]
+    C = materials.elasticity_tensor(d, c)
     j = geom.facet_local[facets, 0]
     a = geom.facet_area_normals[c]  # (n, d+1, d)
     n_f = a[np.arange(len(c)), j] / geom.facet_areas[facets, None]
     # B[k]_{ik} = sum_{jl} C_ijkl n_j a_l / |c|, for every local facet of the cell
-    B = np.einsum("ijkl,nj,nml->nmik", C, n_f, a) / geom.cell_volumes[c, None, None, None]
+    B = np.einsum("nijkl,nj,nml->nmik", C, n_f, a) / geom.cell_volumes[c, None, None, None]
     A = B[np.arange(len(c)), j]
     E = np.einsum("ni,ij->nij", free.astype(float), np.eye(d))
     A_hat = E @ A @ E + (np.eye(d) - E)
