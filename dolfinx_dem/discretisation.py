@@ -25,7 +25,7 @@ from petsc4py import PETSc
 
 import dolfinx.fem
 
-from dolfinx_dem import _compat, stability
+from dolfinx_dem import _compat, halo, stability
 from dolfinx_dem.factored import FactoredStiffness
 from dolfinx_dem.geometry import compute_geometry
 from dolfinx_dem.halo import owned_facet_marks
@@ -160,7 +160,10 @@ class DEMDiscretisation:
             mesh, np.concatenate(facets) if facets else np.empty(0, np.int32),
             np.repeat(np.arange(len(facets)), [len(f) for f in facets]),
             "boundary conditions (Dirichlet conditions or tractions)")}
-        self.geometry, facet_marks = compute_geometry(self.comm, mesh, self.V, marks)
+        # several materials: one more halo layer, as an interface facet of a layer-1 cell reads the
+        # reconstructions of the facets of its layer-2 cell (reconstruction.py)
+        layers = halo.HALO_LAYERS + (not isinstance(material, ElasticMaterial))
+        self.geometry, facet_marks = compute_geometry(self.comm, mesh, self.V, marks, layers)
         geom = self.geometry
         self.n_owned = geom.num_owned
         #: the material of each held cell
