@@ -204,12 +204,12 @@ class RigidContact:
         e = self.normals.copy()
         is_a = np.isin(self.facets, rec.scheme_a_facets)
         if is_a.any():
-            C = dem.material.elasticity_tensor(d)
             jj = geom.facet_local[self.facets[is_a], 0]
             c = self.cells[is_a]
+            C = dem.materials.elasticity_tensor(d, c)
             a = geom.facet_area_normals[c, jj]
             n = self.normals[is_a]
-            A = np.einsum("ijkl,nj,nl->nik", C, n, a) / geom.cell_volumes[c, None, None]
+            A = np.einsum("nijkl,nj,nl->nik", C, n, a) / geom.cell_volumes[c, None, None]
             Ainv_n = np.linalg.solve(A, n[..., None])[..., 0]
             e[is_a] = Ainv_n / np.einsum("ni,ni->n", n, Ainv_n)[:, None]
         self.directions = e

@@ -16,7 +16,7 @@ and then offers
 from __future__ import annotations
 
 import dataclasses
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 
 import numpy as np
 import scipy.sparse
@@ -25,11 +25,11 @@ from petsc4py import PETSc
 
 import dolfinx.fem
 
-from dolfinx_dem import _compat, stability
+from dolfinx_dem import _compat, halo, stability
 from dolfinx_dem.factored import FactoredStiffness
 from dolfinx_dem.geometry import compute_geometry
 from dolfinx_dem.halo import owned_facet_marks
-from dolfinx_dem.material import ElasticMaterial
+from dolfinx_dem.material import CellMaterials, ElasticMaterial
 from dolfinx_dem.operators import EnergyRows, compute_energy_rows
 from dolfinx_dem.reconstruction import Reconstruction, compute_reconstruction
 
@@ -120,11 +120,13 @@ class DEMDiscretisation:
     Parameters
     ----------
     mesh : DOLFINx mesh; ghost mode ``shared_facet`` or ``none``.
-    material : ElasticMaterial.
+    material : ElasticMaterial, or several materials ``{cell tag: ElasticMaterial}``, which then
+        need ``cell_tags``: every cell must carry exactly one of the tags (``materials``).
     scheme : "A" or "B", the Neumann boundary reconstruction (§3.4).
     dirichlet : DirichletBC conditions.
     tractions : Traction conditions; all other boundary facets are traction-free.
     body_force : force per unit volume (N/m^d), a vector of length d, e.g. rho * g.
+    cell_tags : DOLFINx MeshTags of the cells, with ``material`` given per tag.
 
     The potential is V(u, t) = E_P + E_S - f.u - sum_f |f| t_f . u_f (eq. (11), (13) and the
     work of the body force f and of the tractions on the reconstructed facet values u_f), and
@@ -134,15 +136,15 @@ class DEMDiscretisation:
     def __init__(
         self,
         mesh,
-        material: ElasticMaterial,
+        material: ElasticMaterial | Mapping[int, ElasticMaterial],
         scheme: str = "A",
         dirichlet: Sequence[DirichletBC] = (),
         body_force: Sequence[float] | None = None,
         tractions: Sequence[Traction] = (),
+        cell_tags=None,
     ):
         self.mesh = mesh
         self.comm = mesh.comm
-        self.material = material
         self.d = d = mesh.topology.dim
         self.V = _compat.create_vector_space(mesh, "DG", 0)
         dirichlet, tractions = tuple(dirichlet), tuple(tractions)
@@ -158,9 +160,15 @@ class DEMDiscretisation:
             mesh, np.concatenate(facets) if facets else np.empty(0, np.int32),
             np.repeat(np.arange(len(facets)), [len(f) for f in facets]),
             "boundary conditions (Dirichlet conditions or tractions)")}
-        self.geometry, facet_marks = compute_geometry(self.comm, mesh, self.V, marks)
+        # several materials: one more halo layer, as an interface facet of a layer-1 cell reads the
+        # reconstructions of the facets of its layer-2 cell (reconstruction.py)
+        layers = halo.HALO_LAYERS + (not isinstance(material, ElasticMaterial))
+        self.geometry, facet_marks = compute_geometry(self.comm, mesh, self.V, marks, layers)
         geom = self.geometry
         self.n_owned = geom.num_owned
+        #: the material of each held cell
+        self.materials = self._cell_materials(material, cell_tags)
+        materials = self.materials
 
         # Facets held here and the condition of each (owned cells' marks decide).
         mark = facet_marks["conditions"]
@@ -181,7 +189,7 @@ class DEMDiscretisation:
         for k, bc in enumerate(dirichlet):
             fixed[np.ix_(condition[is_dirichlet] == k, range(d) if bc.components is None else list(bc.components))] = True
         self.reconstruction: Reconstruction = compute_reconstruction(
-            geom, material, dirichlet_facets, scheme, geom.facets_of_layers(1), self.comm, fixed,
+            geom, materials, dirichlet_facets, scheme, geom.facets_of_layers(1), self.comm, fixed,
             marked_facets[~is_dirichlet])
 
         # The jump row of an interior facet belongs to the owner of its cell with the smaller
@@ -214,7 +222,7 @@ class DEMDiscretisation:
         # held dofs as columns (``columns`` maps them to global dofs); a PETSc copy is made only
         # on demand (``assemble_Q``).
         self.columns = (geom.cell_global[:, None] * d + np.arange(d)).ravel()  # local dof -> global dof
-        self.rows: EnergyRows = compute_energy_rows(geom, material, rec, self.n_owned, jump_facets, len(mine))
+        self.rows: EnergyRows = compute_energy_rows(geom, materials, rec, self.n_owned, jump_facets, len(mine))
         _sort_rows_globally(self.rows.Q, self.columns)
         self._n_elastic_rows = self.n_owned * d * (d + 1) // 2  # local rows of Q that belong to S
         self._n_own_rows = int(self.rows.owned.sum())
@@ -229,7 +237,7 @@ class DEMDiscretisation:
 
         volumes = geom.cell_volumes[: self.n_owned]
         self.mass = self.create_vector()
-        self.mass.array[:] = np.repeat(material.rho * volumes, d)
+        self.mass.array[:] = np.repeat(materials.rho(slice(0, self.n_owned)) * volumes, d)
         self.inverse_mass = self.create_vector()
         self.inverse_mass.array[:] = 1.0 / self.mass.array
         self.body_force = self.create_vector()
@@ -249,6 +257,40 @@ class DEMDiscretisation:
         self.contact = None  # contact.RigidContact, see set_obstacles
         self.pair_contact = None  # pair_contact.PairContact, see set_contact_boundary
         self._setup_free_bodies()
+
+    def _cell_materials(self, material, cell_tags) -> CellMaterials:
+        """The ``CellMaterials`` of the held cells: one material, or one per cell tag (the owned
+        cells' tags, extended to the halo by ``halo_exchange``). Every cell needs exactly one tag
+        of ``material`` and every tag a cell; errors are raised on every process."""
+        if isinstance(material, ElasticMaterial):
+            if cell_tags is not None:
+                raise ValueError("cell_tags are only used with several materials ({cell tag: ElasticMaterial})")
+            return CellMaterials.uniform(material, self.geometry.num_cells)
+        if cell_tags is None:
+            raise ValueError("several materials ({cell tag: ElasticMaterial}) need cell_tags")
+        tags = [int(t) for t in material]
+        n = self.n_owned
+        count = np.zeros(n, dtype=np.int64)  # tags of each owned cell (dolfinx_dem's cell order)
+        index = np.full(n, -1, dtype=np.int64)
+        selected = np.zeros(len(tags), dtype=np.int64)
+        block = _compat.cell_dofs(self.V)[: self.mesh.topology.index_map(self.d).size_local]
+        for k, tag in enumerate(tags):
+            cells = cell_tags.indices[cell_tags.values == tag]
+            cells = block[cells[cells < len(block)]]
+            count[cells] += 1
+            index[cells] = k
+            selected[k] = len(cells)
+        selected = self.comm.allreduce(selected, op=MPI.SUM)
+        counts = np.array([(count > 1).sum(), (count == 0).sum()])
+        counts = self.comm.allreduce(counts, op=MPI.SUM)
+        if np.any(selected == 0):
+            raise ValueError(f"the material of cell tag {tags[int(np.argmin(selected))]} selects no cell")
+        if counts[0]:
+            raise ValueError(f"{counts[0]} cells carry several material tags (materials overlap); tags {tags}")
+        if counts[1]:
+            raise ValueError(f"{counts[1]} cells carry none of the material tags {tags}: give every cell a material")
+        held = self.halo_exchange(index[:, None])[:, 0]
+        return CellMaterials(tuple(material[t] for t in material), held.astype(np.int32))
 
     def _setup_tractions(self):
         """The work of the tractions on the facets of the owned cells (each boundary facet counted
@@ -281,7 +323,7 @@ class DEMDiscretisation:
         self.body_labels = labels
         owned = labels[: self.n_owned]
         self._free = free = ~clamped
-        body_mass = np.bincount(owned, weights=self.material.rho * geom.cell_volumes[: self.n_owned], minlength=n_bodies)
+        body_mass = np.bincount(owned, weights=self.mass.array_r[::d], minlength=n_bodies)
         self.comm.Allreduce(MPI.IN_PLACE, body_mass, op=MPI.SUM)
         # Mean translations of the free bodies, (n_free, d) = mean_operator @ u.reshape(-1, d)
         # summed over ranks; row n_free of ``_means`` stays 0 for the cells of clamped bodies.
@@ -290,7 +332,7 @@ class DEMDiscretisation:
         self._body_of_cell = index[owned].astype(np.int32)
         self._free_body_mass = body_mass[free]
         cells = np.flatnonzero(free[owned])
-        weights = self.material.rho * geom.cell_volumes[cells] / body_mass[owned[cells]]
+        weights = self.mass.array_r[::d][cells] / body_mass[owned[cells]]
         mean_operator = scipy.sparse.csr_matrix((weights, (index[owned[cells]], cells)), shape=(n_free, self.n_owned))
         # one free body (a bar, a disc): a dense row, as a sparse product costs ~8 us of overhead
         self._mean_operator = mean_operator.toarray() if n_free == 1 else mean_operator
@@ -551,19 +593,19 @@ class DEMDiscretisation:
 
     def stress(self, u: PETSc.Vec, t: float) -> np.ndarray:
         """Cell stresses sigma_c of eq. (9), shape (n_owned, d, d) (in-plane part in 2D)."""
-        return self.material.stress(self.gradient(u, t))
+        return self.materials.stress(self.gradient(u, t))
 
     def von_mises(self, u: PETSc.Vec, t: float) -> np.ndarray:
         """Von Mises stress of the owned cells (Pa); the out-of-plane stress of plane strain counts."""
         G = self.gradient(u, t)
-        sigma = self.material.stress(G)
+        sigma = self.materials.stress(G)
         d = self.d
         if d == 1:
             return np.abs(sigma[:, 0, 0])
         s = np.zeros((self.n_owned, 3, 3))
         s[:, :d, :d] = sigma
-        if d == 2 and self.material.plane == "strain":
-            lmbda, _ = self.material.lame(2)
+        if d == 2 and self.materials.plane == "strain":
+            lmbda = np.array([m.lame(2)[0] for m in self.materials.materials])[self.materials.index[: self.n_owned]]
             s[:, 2, 2] = lmbda * (G[:, 0, 0] + G[:, 1, 1])
         dev = s - np.trace(s, axis1=1, axis2=2)[:, None, None] * np.eye(3) / 3
         return np.sqrt(1.5 * np.einsum("nij,nij->n", dev, dev))

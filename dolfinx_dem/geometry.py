@@ -96,19 +96,20 @@ class MeshGeometry:
         return np.unique(self.cell_facets[self.cell_layer <= layers])
 
 
-def compute_geometry(comm: MPI.Comm, mesh, V, marks=None) -> tuple[MeshGeometry, dict]:
-    """The geometry of this process's cells and halo, and the halo cells' facet markers.
+def compute_geometry(comm: MPI.Comm, mesh, V, marks=None, layers: int = halo.HALO_LAYERS) -> tuple[MeshGeometry, dict]:
+    """The geometry of this process's cells and a halo of ``layers`` layers, and the halo cells'
+    facet markers.
 
     ``V`` is the DG0 vector space whose dof numbering becomes the global cell numbering;
     ``marks`` maps names to (n_owned, d+1) facet markers of the owned cells
     (``halo.owned_facet_marks``), returned for all held cells as (n, d+1) arrays.
     """
     dofs, start, stop = _compat.dg0_cell_dofs(V)
-    cells = halo.build_halo(mesh, dofs, (start, stop), marks or {})
+    cells = halo.build_halo(mesh, dofs, (start, stop), marks or {}, layers)
     geom = geometry_from_arrays(
         cells.vertices, cells.vertex_ids, cells.facet_ids, cell_global=cells.global_index,
         cell_owner=cells.owner, cell_layer=cells.layer, num_owned=cells.num_owned,
-        num_cells_global=cells.num_cells_global, comm=comm)
+        num_cells_global=cells.num_cells_global, comm=comm, halo_layers=layers)
     return geom, dict(cells.marks)
 
 

@@ -79,3 +79,65 @@ class ElasticMaterial:
         """sigma = C : sym(grad), grad of shape (..., d, d)."""
         d = grad.shape[-1]
         return np.einsum("ijkl,...kl->...ij", self.elasticity_tensor(d), grad)
+
+
+@dataclasses.dataclass(frozen=True)
+class CellMaterials:
+    """The material of each cell a process holds: cell c is made of ``materials[index[c]]``.
+
+    ``index`` (n_cells,) covers the owned and the halo cells (geometry.py), so that every operator
+    of a process reads its cells' C (eq. (9)), rho and eta from local data. All materials share
+    ``plane``: plane strain and plane stress are two hypotheses on the third direction of the
+    whole body (an infinite prism or a thin plate), and a body cannot be both at an interface.
+    """
+
+    materials: tuple[ElasticMaterial, ...]
+    index: np.ndarray  # (n_cells,) int
+
+    def __post_init__(self):
+        planes = {m.plane for m in self.materials}
+        if len(planes) > 1:
+            raise ValueError(f"all materials must share 'plane' (the body's 2D hypothesis), got {sorted(planes)}")
+
+    @classmethod
+    def uniform(cls, material: ElasticMaterial, num_cells: int) -> CellMaterials:
+        """One material for all ``num_cells`` cells."""
+        return cls((material,), np.zeros(num_cells, dtype=np.int32))
+
+    @property
+    def plane(self) -> str:
+        """The 2D hypothesis all materials share."""
+        return self.materials[0].plane
+
+    def _per_cell(self, values, cells) -> np.ndarray:
+        index = self.index if cells is None else self.index[cells]
+        return np.asarray(values, dtype=float)[index]
+
+    def rho(self, cells=None) -> np.ndarray:
+        """Density of ``cells`` (default: all held cells), (n,)."""
+        return self._per_cell([m.rho for m in self.materials], cells)
+
+    def stabilisation(self, cells=None) -> np.ndarray:
+        """eta of eq. (13) of ``cells``, (n,) (Pa)."""
+        return self._per_cell([m.stabilisation for m in self.materials], cells)
+
+    def elasticity_tensor(self, d: int, cells=None) -> np.ndarray:
+        """C of eq. (9) of ``cells``, (n, d, d, d, d)."""
+        return self._per_cell([m.elasticity_tensor(d) for m in self.materials], cells)
+
+    def facet_stabilisation(self, c1: np.ndarray, c2: np.ndarray) -> np.ndarray:
+        """eta_f of the facets between cells c1 and c2 (n,), the weight of eq. (13): the harmonic
+        mean 2 eta_1 eta_2 / (eta_1 + eta_2) of the two cells' eta, eta itself in one material.
+        The term eta_f |f| / h_f |[u]|^2 is a spring across the facet; the two half cells, each of
+        width h_f / 2 and modulus eta_i, act in series, which is the harmonic mean (the soft side
+        governs, as the elastic energy does across an interface)."""
+        e1, e2 = self.stabilisation(c1), self.stabilisation(c2)
+        return 2 * e1 * e2 / (e1 + e2)
+
+    def stress(self, grad: np.ndarray) -> np.ndarray:
+        """sigma = C : sym(grad) of eq. (9) for the first len(grad) cells, grad of shape (n, d, d)."""
+        index = self.index[: len(grad)]
+        sigma = np.empty_like(grad)
+        for k, m in enumerate(self.materials):
+            sigma[index == k] = m.stress(grad[index == k])
+        return sigma

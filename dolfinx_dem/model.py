@@ -23,7 +23,8 @@ SERIES_COLUMNS = ("t", "kinetic", "elastic", "stabilisation", "external", "pseud
 
 
 def create_mesh(comm: MPI.Comm, spec: Mapping):
-    """(mesh, facet_tags, names) from the scene's mesh table; ``names`` maps the boundary names
+    """(mesh, cell_tags, facet_tags, names) from the scene's mesh table (``cell_tags``: None for
+    the generated interval, rectangle and box meshes, the disc numbers for discs); ``names`` maps the boundary names
     the mesh defines to facet tags: the side names of the generated interval, rectangle and box
     meshes (``scenes.SIDES`` for the mesh's dimension), a gmsh file's physical-group names, none
     for discs and XDMF files."""
@@ -35,26 +36,26 @@ def create_mesh(comm: MPI.Comm, spec: Mapping):
             raise scenes.SceneError(f"scene key 'mesh.{key}' is missing for a mesh of type {kind!r}")
     names = {}
     if kind == "interval":
-        mesh, _, tags = meshes.create_interval(comm, spec["n"], spec["x0"], spec["x1"])
+        mesh, cell_tags, tags = meshes.create_interval(comm, spec["n"], spec["x0"], spec["x1"])
     elif kind == "rectangle":
-        mesh, _, tags = meshes.create_rectangle(comm, spec["p0"], spec["p1"], spec["n"], spec.get("diagonal", "right"))
+        mesh, cell_tags, tags = meshes.create_rectangle(comm, spec["p0"], spec["p1"], spec["n"], spec.get("diagonal", "right"))
     elif kind == "box":
-        mesh, _, tags = meshes.create_box(comm, spec["p0"], spec["p1"], spec["n"])
+        mesh, cell_tags, tags = meshes.create_box(comm, spec["p0"], spec["p1"], spec["n"])
     elif kind == "disc":
-        mesh, _, tags = meshes.create_disc(comm, spec["centre"], spec["radius"], spec["h"])
+        mesh, cell_tags, tags = meshes.create_disc(comm, spec["centre"], spec["radius"], spec["h"])
     elif kind == "discs":
         if ("frame" in spec) != ("frame_width" in spec):
             raise scenes.SceneError("scene keys 'mesh.frame' and 'mesh.frame_width' go together")
         frame = (spec["frame"][:2], spec["frame"][2:], spec["frame_width"]) if "frame" in spec else None
         try:
-            mesh, _, tags = meshes.create_discs(comm, [(c[:2], c[2]) for c in spec["discs"]], spec["h"], frame)
+            mesh, cell_tags, tags = meshes.create_discs(comm, [(c[:2], c[2]) for c in spec["discs"]], spec["h"], frame)
         except ValueError as err:
             raise scenes.SceneError(f"scene table 'mesh': {err}") from None
     else:
-        mesh, _, tags, names = meshes.read_mesh_named(comm, spec["path"])
+        mesh, cell_tags, tags, names = meshes.read_mesh_named(comm, spec["path"])
     if kind in ("interval", "rectangle", "box"):
         names = {name: tag for name, tag in scenes.SIDES.items() if tag <= 2 * mesh.topology.dim}
-    return mesh, tags, names
+    return mesh, cell_tags, tags, names
 
 
 def _boundary_facets(mesh, tags, names, boundary, key="dirichlet.boundary") -> np.ndarray:
@@ -92,10 +93,14 @@ def _boundary_facets(mesh, tags, names, boundary, key="dirichlet.boundary") -> n
 
 def build(scene: Mapping, comm: MPI.Comm = MPI.COMM_WORLD) -> DEMDiscretisation:
     """The DEM discretisation a scene describes."""
-    mesh, tags, names = create_mesh(comm, scene["mesh"])
+    mesh, cell_tags, tags, names = create_mesh(comm, scene["mesh"])
     scene = scenes.validate(scene, mesh.topology.dim)
-    m = scene["material"]
-    material = ElasticMaterial(E=m["E"], nu=m["nu"], rho=m["rho"], plane=m.get("plane", "strain"), eta=m.get("eta"))
+    material = scenes.materials(scene)
+    if isinstance(material, ElasticMaterial):
+        cell_tags = None
+    elif cell_tags is None:
+        raise scenes.SceneError("scene key 'materials' selects cells by tag, and this mesh has no cell tags (use "
+                                "a mesh of type 'discs' or a mesh file with cell tags)")
     def data(section, i, bc):
         value = bc.get("value", [0.0] * mesh.topology.dim)
         field = (lambda x, t, v=value, key=f"{section}[{i}].value": scenes.evaluate_field(v, x, t, key)) \
@@ -109,9 +114,9 @@ def build(scene: Mapping, comm: MPI.Comm = MPI.COMM_WORLD) -> DEMDiscretisation:
     loads = scene.get("loads", {})
     body_force = loads.get("body_force")
     if "gravity" in loads:
-        body_force = [material.rho * g for g in loads["gravity"]]
+        body_force = [material.rho * g for g in loads["gravity"]]  # one material (scenes.materials)
     scheme = scene["method"].split("-")[1]
-    dem = DEMDiscretisation(mesh, material, scheme, dirichlet, body_force, tractions)
+    dem = DEMDiscretisation(mesh, material, scheme, dirichlet, body_force, tractions, cell_tags)
     obstacles = [HalfSpace(ob["point"], ob["normal"],
                            _boundary_facets(mesh, tags, names, ob["boundary"], f"obstacles[{k}].boundary"),
                            ob.get("tolerance", 0.0)) for k, ob in enumerate(scene.get("obstacles", []))]

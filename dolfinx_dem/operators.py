@@ -4,9 +4,11 @@ With u_F = R u_C + D g (reconstruction.py):
 
 - gradient, eq. (8):   G_c = sum_{f in dc} |f|/|c| u_f (x) n_{f,c}, i.e. grad = Gf (R u + D g);
 - elastic energy, eq. (9), (11): E_P = 1/2 sum_c |c| eps_c : C : eps_c = 1/2 |S u + s|^2 with
-  S = diag(sqrt|c| L^T P) Gf R, C_M = L L^T the Mandel elasticity matrix, P grad -> Mandel strain;
+  S = diag(sqrt|c| L_c^T P) Gf R, C_M = L_c L_c^T the Mandel elasticity matrix of cell c's material,
+  P grad -> Mandel strain;
 - jump, eq. (10), (12): [R u]_f = u_c1 - u_c2 + G_c1 (x_f - x_c1) - G_c2 (x_f - x_c2);
-- stabilisation, eq. (13): E_S = 1/2 |J u + j|^2, J = diag(sqrt(eta |f|/h_f)) (jump operator);
+- stabilisation, eq. (13): E_S = 1/2 |J u + j|^2, J = diag(sqrt(eta_f |f|/h_f)) (jump operator),
+  eta_f the harmonic mean of the two cells' eta (``CellMaterials.facet_stabilisation``);
 - stiffness K = S^T S + J^T J and forces F = -(K u + S^T s + J^T j) + f: the exact gradient of
   E_P + E_S, which is eq. (15)-(17) written as matrix products.
 
@@ -23,7 +25,7 @@ import numpy as np
 import scipy.sparse
 
 from dolfinx_dem.geometry import MeshGeometry
-from dolfinx_dem.material import ElasticMaterial
+from dolfinx_dem.material import CellMaterials, ElasticMaterial
 from dolfinx_dem.reconstruction import Reconstruction
 
 
@@ -78,7 +80,7 @@ def facet_gradient(geom: MeshGeometry, cells: np.ndarray) -> scipy.sparse.csr_ma
 
 
 def compute_energy_rows(
-    geom: MeshGeometry, material: ElasticMaterial, rec: Reconstruction, num_cells: int, jump_facets: np.ndarray,
+    geom: MeshGeometry, materials: CellMaterials, rec: Reconstruction, num_cells: int, jump_facets: np.ndarray,
     num_own_jumps: int,
 ) -> EnergyRows:
     """S for the first ``num_cells`` cells, then J for ``jump_facets`` (in that row order), as in
@@ -91,17 +93,22 @@ def compute_energy_rows(
     cells = np.unique(np.concatenate([np.arange(num_cells), c1, c2]))
     Gf = facet_gradient(geom, cells)  # rows of cell cells[k]: k d d + ...
 
-    L = np.linalg.cholesky(mandel_stiffness(material, d))
-    block = L.T @ mandel(d)  # (m, d*d)
-    W = scipy.sparse.kron(scipy.sparse.diags(np.sqrt(geom.cell_volumes[:num_cells])),
-                          scipy.sparse.csr_matrix(block)).tocsr()
+    # sqrt|c| L_c^T P of each owned cell, (num_cells, m, d*d): one Cholesky factor per material
+    blocks = np.stack([np.linalg.cholesky(mandel_stiffness(mat, d)).T @ mandel(d) for mat in materials.materials])
+    # the owned cells are the first ones of ``cells``: row i of cell k reads columns k d d + (0..d d - 1)
+    W = scipy.sparse.csr_matrix(
+        ((np.sqrt(geom.cell_volumes[:num_cells])[:, None, None] * blocks[materials.index[:num_cells]]).ravel(),
+         np.repeat(np.arange(num_cells * d * d, dtype=np.int32).reshape(num_cells, 1, d * d), m, axis=1).ravel(),
+         np.arange(0, num_cells * m * d * d + 1, d * d, dtype=np.int32)),
+        shape=(num_cells * m, num_cells * d * d))
+    W.eliminate_zeros()
 
     # Jump of the P1 reconstructions (10) at x_f, eq. (12): direct part + gradient part.
     n = len(jump_facets)
     k1, k2 = np.searchsorted(cells, c1), np.searchsorted(cells, c2)
     xf = geom.facet_centres[jump_facets]
     r1, r2 = xf - geom.cell_centres[c1], xf - geom.cell_centres[c2]
-    weight = material.stabilisation * geom.facet_areas[jump_facets] / geom.facet_diameters[jump_facets]
+    weight = materials.facet_stabilisation(c1, c2) * geom.facet_areas[jump_facets] / geom.facet_diameters[jump_facets]
     sqrt_w = np.repeat(np.sqrt(weight), d)
     f, i, j = np.meshgrid(np.arange(n), np.arange(d), np.arange(d), indexing="ij")
     X = scipy.sparse.coo_matrix(

@@ -267,9 +267,9 @@ class PairContact:
         R_dofs[rows, rank] = dem.columns[R.indices]
         R_values[rows, rank] = R.data
         scheme_a = np.isin(f, rec.scheme_a_facets)
-        C = dem.material.elasticity_tensor(d)
-        # A_f x = (C : (x (x) a_f)) n / |c| for the pair's normal n: einsum with C and a_f.
-        Ca = np.einsum("ijkl,nl->nijk", C, an) / geom.cell_volumes[cell, None, None, None]
+        C = dem.materials.elasticity_tensor(d, cell)
+        # A_f x = (C_c : (x (x) a_f)) n / |c| for the pair's normal n: einsum with the cell's C and a_f.
+        Ca = np.einsum("nijkl,nl->nijk", C, an) / geom.cell_volumes[cell, None, None, None]
         return _Facets(
             key=geom.facet_global[f], index=numbers, owner=geom.cell_owner[cell], body=geom.cell_bodies[cell],
             centre=geom.facet_centres[f], normal=an / length[:, None], length=length,

@@ -4,6 +4,10 @@
   containing the facet barycentre (eq. (7)), coefficients in [0, 1].
 - Dirichlet facets: the imposed value, u_f = g_f (the columns of D), in the fixed components of
   the facet's condition; the other (free) components are reconstructed as on a Neumann facet.
+- Interior facets between two materials (``CellMaterials``): u_f makes the tractions of the two
+  cells equal, sigma_c1 n_f = sigma_c2 n_f, given the cells' other facets (eq. (19)-(21) written
+  for the pair of cells), so that a piecewise affine field whose tractions are continuous is
+  reconstructed exactly (springs in series); eq. (7)'s interpolation does not see the materials.
 - Neumann facets, scheme B: u_f = u_c, the facet follows its cell (free components likewise).
 - Neumann facets, scheme A: u_f solves sigma_c n_f = t_f (eq. (19)-(21), t_f = 0 on a traction-free
   facet) given the cell's other facets; on a partly fixed Dirichlet facet the free components
@@ -27,7 +31,7 @@ import numpy as np
 import scipy.sparse
 
 from dolfinx_dem.geometry import MeshGeometry
-from dolfinx_dem.material import ElasticMaterial
+from dolfinx_dem.material import CellMaterials
 
 #: Number of candidate cells (the nearest of the facet's mesh neighbourhood), by dimension.
 _NEIGHBOURS = {1: 2, 2: 10, 3: 14}
@@ -303,7 +307,7 @@ def _block_coo(rows: np.ndarray, cols: np.ndarray, blocks: np.ndarray, d: int):
 
 def compute_reconstruction(
     geom: MeshGeometry,
-    material: ElasticMaterial,
+    materials: CellMaterials,
     dirichlet_facets: np.ndarray,
     scheme: str,
     facets: np.ndarray | None = None,
@@ -324,6 +328,9 @@ def compute_reconstruction(
         raise ValueError(f"boundary scheme must be 'A' or 'B', got {scheme!r}")
     d, N, F = geom.d, geom.num_cells, geom.num_facets
     rows = np.arange(F) if facets is None else np.asarray(facets, dtype=np.int64)
+    # an interface facet reads the reconstructions of its two cells' other facets
+    requested, interface = rows, _interface_facets(geom, materials, rows)
+    rows = np.union1d(rows, geom.cell_facets[geom.facet_cells[interface]].ravel())
     dirichlet_facets, first = np.unique(np.asarray(dirichlet_facets, dtype=np.int64), return_index=True)
     fixed = np.ones((len(dirichlet_facets), d), bool) if fixed is None else np.asarray(fixed, bool)[first]
     traction_facets = np.unique(np.asarray([] if traction_facets is None else traction_facets, dtype=np.int64))
@@ -371,7 +378,7 @@ def compute_reconstruction(
     a_facets = open_facets[is_a]
     lift = scipy.sparse.csr_matrix((F * d, nT * d))
     if len(a_facets):
-        T, solve = _scheme_a_operator(geom, material, a_facets, free[is_a])
+        T, solve = _scheme_a_operator(geom, materials, a_facets, free[is_a])
         R = R0 + T @ R0
         D = D0 + T @ D0
         # traction lift: u_f += A^-1 t_f on the scheme A traction facets
@@ -382,6 +389,14 @@ def compute_reconstruction(
             lift.eliminate_zeros()
     else:
         R, D = R0, D0
+    if len(interface):
+        # interface rows from the other facets' final rows; only the requested rows are kept
+        keep = np.zeros(F * d)
+        keep[(requested[:, None] * d + np.arange(d)).ravel()] = 1.0
+        keep[(interface[:, None] * d + np.arange(d)).ravel()] = 0.0
+        T = scipy.sparse.diags(keep) + _interface_operator(geom, materials, interface)
+        R, D, lift = T @ R, T @ D, T @ lift
+        neumann, a_facets = np.intersect1d(neumann, requested), np.intersect1d(a_facets, requested)
     return Reconstruction(
         R=R.tocsr(),
         D=D.tocsr(),
@@ -397,11 +412,46 @@ def compute_reconstruction(
     )
 
 
-def _scheme_a_operator(geom: MeshGeometry, material: ElasticMaterial, facets: np.ndarray, free: np.ndarray):
+def _interface_facets(geom: MeshGeometry, materials: CellMaterials, facets: np.ndarray) -> np.ndarray:
+    """The interior facets among ``facets`` whose two cells are of different materials."""
+    facets = np.intersect1d(geom.interior_facets, facets)
+    c = geom.facet_cells[facets]
+    return facets[materials.index[c[:, 0]] != materials.index[c[:, 1]]]
+
+
+def _interface_operator(geom: MeshGeometry, materials: CellMaterials, facets: np.ndarray) -> scipy.sparse.csr_matrix:
+    """Facet-to-facet map of the interface ``facets`` (module docstring), (F d, F d):
+    with n = n_{f,c1} and B^c_{f'} = (1/|c|) C_c[s_c n, a_{f'}] (s_c1 = 1, s_c2 = -1, as in
+    ``_scheme_a_operator``), sigma_c1 n - sigma_c2 n = sum_c sum_{f' in dc} B^c_{f'} u_{f'} = 0
+    gives u_f = -(A_1 + A_2)^-1 sum_c sum_{f' != f} B^c_{f'} u_{f'}, A_c = B^c_f symmetric
+    positive definite."""
+    d = geom.d
+    n = geom.facet_area_normals[geom.facet_cells[facets, 0], geom.facet_local[facets, 0]] / geom.facet_areas[facets, None]
+    sides = []
+    for side, sign in ((0, 1.0), (1, -1.0)):
+        c, j = geom.facet_cells[facets, side], geom.facet_local[facets, side]
+        B = np.einsum("nijkl,nj,nml->nmik", materials.elasticity_tensor(d, c), sign * n,
+                      geom.facet_area_normals[c]) / geom.cell_volumes[c, None, None, None]
+        sides.append((c, j, B))
+    inverse = np.linalg.inv(sum(B[np.arange(len(facets)), j] for _, j, B in sides))
+    rows, cols, blocks = [], [], []
+    for c, j, B in sides:
+        for k in range(d + 1):
+            other = k != j
+            rows.append(facets[other])
+            cols.append(geom.cell_facets[c[other], k])
+            blocks.append(-inverse[other] @ B[other, k])
+    r, cc, v = _block_coo(np.concatenate(rows), np.concatenate(cols), np.concatenate(blocks), d)
+    F = geom.num_facets
+    return scipy.sparse.coo_matrix((v, (r, cc)), shape=(F * d, F * d)).tocsr()
+
+
+def _scheme_a_operator(geom: MeshGeometry, materials: CellMaterials, facets: np.ndarray, free: np.ndarray):
     """Facet-to-facet map of eq. (20)-(21) for the free components ``free`` (n, d) of ``facets``:
     u_f = sum_{f' in dc} T_{f f'} u_{f'} + A_hat^-1 E t_f in the free components of u_f.
 
-    sigma_c n_f = sum_{f'} B_{f'} u_{f'} with B_{f'} = (1/|c|) C[n_f, a_{f'}], a_{f'} = |f'| n_{f',c};
+    sigma_c n_f = sum_{f'} B_{f'} u_{f'} with B_{f'} = (1/|c|) C_c[n_f, a_{f'}], a_{f'} = |f'| n_{f',c},
+    C_c the elasticity tensor of the cell's material;
     A = B_f is the facet's own (symmetric positive definite) block. With E the projection on the
     free components, E (sigma_c n_f - t_f) = 0 and the fixed components (I - E) u_f given, the free
     ones solve A_hat x = E (t_f - sum_{f' != f} B_{f'} u_{f'} - A (I - E) u_f), A_hat = E A E + I - E:
@@ -409,13 +459,13 @@ def _scheme_a_operator(geom: MeshGeometry, material: ElasticMaterial, facets: np
     Returns (T (F d, F d), A_hat^-1 E (n, d, d)).
     """
     d = geom.d
-    C = material.elasticity_tensor(d)
     c = geom.facet_cells[facets, 0]
+    C = materials.elasticity_tensor(d, c)
     j = geom.facet_local[facets, 0]
     a = geom.facet_area_normals[c]  # (n, d+1, d)
     n_f = a[np.arange(len(c)), j] / geom.facet_areas[facets, None]
     # B[k]_{ik} = sum_{jl} C_ijkl n_j a_l / |c|, for every local facet of the cell
-    B = np.einsum("ijkl,nj,nml->nmik", C, n_f, a) / geom.cell_volumes[c, None, None, None]
+    B = np.einsum("nijkl,nj,nml->nmik", C, n_f, a) / geom.cell_volumes[c, None, None, None]
     A = B[np.arange(len(c)), j]
     E = np.einsum("ni,ij->nij", free.astype(float), np.eye(d))
     A_hat = E @ A @ E + (np.eye(d) - E)

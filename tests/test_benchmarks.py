@@ -73,3 +73,18 @@ def test_bench_parallel_quick(tmp_path):
     assert all(r["held_over_owned_max"] < 1.5 for r in runs)
     assert all(p["touching_pair_entries"] > 0 for p in data["pile"])
     assert data["pile"][0]["cells"] == data["pile"][1]["cells"]
+
+
+def test_bench_two_materials_small(tmp_path):
+    """The two-material study on two coarse meshes: T converges, the energy is conserved, the
+    reaction balances the load."""
+    proc = subprocess.run([sys.executable, str(ROOT / "benchmarks" / "bench_two_materials.py"), "--meshes", "140",
+                           "280", "--out", str(tmp_path / "two.json")], capture_output=True, text=True, timeout=300,
+                          cwd=ROOT)
+    assert proc.returncode == 0, proc.stderr
+    data = json.loads((tmp_path / "two.json").read_text())
+    for study in data["weights"].values():
+        rows = study["dynamic_A"]["rows"]
+        assert rows[1]["T_error"] < 0.5 * rows[0]["T_error"]
+        assert all(r["pseudo_energy_drift_rel"] < 1e-14 for r in rows)
+        assert all(s["reaction_error_rel"] < 1e-10 for s in study["static"])

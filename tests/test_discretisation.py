@@ -3,6 +3,7 @@
 import numpy as np
 import pytest
 from mpi4py import MPI
+from petsc4py import PETSc
 
 import dolfinx.mesh
 from dolfinx.mesh import CellType, DiagonalType
@@ -12,10 +13,21 @@ from dolfinx_dem.discretisation import DEMDiscretisation, DirichletBC, Traction
 from dolfinx_dem.material import ElasticMaterial
 
 MATERIAL = ElasticMaterial(E=2.0, nu=0.25, rho=1.5, eta=0.7)
+#: two materials, tagged 3 (x < 0.6) and 8: different E, nu, rho and eta (the second's eta is E)
+MATERIALS = {3: MATERIAL, 8: ElasticMaterial(E=9.0, nu=0.35, rho=0.4)}
 
 
-def _problem(d, scheme, comm, time_dependent=False, loaded=False, shift=None):
-    """A mesh with Dirichlet values on x = 0 (callable), a body force and free other sides;
+def _material_tags(mesh):
+    """Cell tags 3 (barycentre x < 0.6) and 8 (the others) of all process-local cells."""
+    d = mesh.topology.dim
+    cells = np.arange(mesh.topology.index_map(d).size_local + mesh.topology.index_map(d).num_ghosts, dtype=np.int32)
+    x = dolfinx.mesh.compute_midpoints(mesh, d, cells)[:, 0]
+    return dolfinx.mesh.meshtags(mesh, d, cells, np.where(x < 0.6, 3, 8).astype(np.int32))
+
+
+def _problem(d, scheme, comm, time_dependent=False, loaded=False, shift=None, two=False):
+    """A mesh with Dirichlet values on x = 0 (callable), a body force and free other sides
+    (``two``: of the two ``MATERIALS``);
     ``loaded``: also a roller (u_y = 0) on the bottom and a traction (callable, time dependent
     with the Dirichlet values) on the right. ``shift`` (two vectors): the Dirichlet values of the
     two conditions move by t times them (time dependent), for derivatives in g."""
@@ -33,8 +45,9 @@ def _problem(d, scheme, comm, time_dependent=False, loaded=False, shift=None):
 
     bc = DirichletBC(left, g, time_dependent=time_dependent or shift is not None)
     body = [0.5, -1.0, 0.25][:d]
+    material = dict(material=MATERIALS, cell_tags=_material_tags(mesh)) if two else dict(material=MATERIAL)
     if not loaded:
-        return DEMDiscretisation(mesh, MATERIAL, scheme=scheme, dirichlet=[bc], body_force=body)
+        return DEMDiscretisation(mesh, scheme=scheme, dirichlet=[bc], body_force=body, **material)
     bottom = _compat.locate_boundary_facets(mesh, lambda x: np.isclose(x[1], 0.0) & (x[0] > 1e-12))
     right = _compat.locate_boundary_facets(mesh, lambda x: np.isclose(x[0], 1.5 if d == 2 else 1.0))
     roller = DirichletBC(bottom, lambda x, t: np.stack([0.0 * x[0] + 0.05] * d) + t * b[:, None],
@@ -44,8 +57,8 @@ def _problem(d, scheme, comm, time_dependent=False, loaded=False, shift=None):
         return np.stack([0.7 + 0.2 * x[1] * (1 + t), 0.0 * x[0] - 0.3 + 0.1 * t] + [0.4 * x[1]] * (d - 2))
 
     tractions = [Traction(right, traction, time_dependent=time_dependent)]
-    return DEMDiscretisation(mesh, MATERIAL, scheme=scheme, dirichlet=[bc, roller], body_force=body,
-                             tractions=tractions)
+    return DEMDiscretisation(mesh, scheme=scheme, dirichlet=[bc, roller], body_force=body, tractions=tractions,
+                             **material)
 
 
 def _potential(dem, u, t):
@@ -60,13 +73,16 @@ def _random_field(dem, seed):
     return u
 
 
-@pytest.mark.parametrize("loaded", [False, True])
+@pytest.mark.parametrize("loaded, two", [(False, False), (True, False), (True, True)])
 @pytest.mark.parametrize("scheme", ["A", "B"])
 @pytest.mark.parametrize("d", [2, 3])
-def test_force_is_minus_gradient_full(d, scheme, loaded):
+def test_force_is_minus_gradient_full(d, scheme, loaded, two):
     """Every component of F against central differences of E_P + E_S - f.u (- the tractions'
-    work with ``loaded``, and a roller) (exact for a quadratic potential up to round-off)."""
-    dem = _problem(d, scheme, MPI.COMM_SELF, loaded=loaded)
+    work with ``loaded``, and a roller; ``two`` materials) (exact for a quadratic potential up to
+    round-off)."""
+    dem = _problem(d, scheme, MPI.COMM_SELF, loaded=loaded, two=two)
+    if two:
+        assert set(dem.materials.index) == {0, 1}
     if d == 2 and scheme == "A":
         assert dem.reconstruction.multi_neumann_cells.size > 0  # the fallback is covered too
     u = _random_field(dem, 0)
@@ -86,14 +102,14 @@ def test_force_is_minus_gradient_full(d, scheme, loaded):
 
 
 @pytest.mark.mpi
-@pytest.mark.parametrize("loaded", [False, True])
+@pytest.mark.parametrize("loaded, two", [(False, False), (True, False), (True, True)])
 @pytest.mark.parametrize("scheme", ["A", "B"])
 @pytest.mark.parametrize("d", [2, 3])
-def test_force_is_minus_gradient_directional(d, scheme, loaded):
+def test_force_is_minus_gradient_directional(d, scheme, loaded, two):
     """Directional derivatives along random directions, also in parallel, with time-dependent
-    Dirichlet values (and tractions, with ``loaded``) evaluated at t = 0.7."""
+    Dirichlet values (and tractions, with ``loaded``; ``two`` materials) evaluated at t = 0.7."""
     comm = MPI.COMM_WORLD
-    dem = _problem(d, scheme, comm, time_dependent=True, loaded=loaded)
+    dem = _problem(d, scheme, comm, time_dependent=True, loaded=loaded, two=two)
     t = 0.7
     u = _random_field(dem, comm.rank)
     F = dem.create_vector()
@@ -254,23 +270,26 @@ def _cell_keys(dem):
 
 @pytest.mark.mpi
 @pytest.mark.parametrize("scheme", ["A", "B"])
-@pytest.mark.parametrize("kind", ["square", "cube", "discs"])
+@pytest.mark.parametrize("kind", ["square", "cube", "discs", "square-two", "cube-two"])
 def test_operators_are_the_same_on_any_number_of_processes(kind, scheme):
     """The force -Q^T (Q u + q) + f, the energies and the cell stresses of a generic field, cell
     by cell (matched by barycentre), agree between this run's processes and one process to
-    rounding: the distributed set-up (owned cells plus halo) builds the serial operators."""
+    rounding: the distributed set-up (owned cells plus halo) builds the serial operators; with
+    two materials (``-two``) too, so that the halo cells carry their materials."""
     from dolfinx_dem import meshes
 
     def make(comm):
-        if kind == "square":
+        if kind.startswith("square"):
             mesh = dolfinx.mesh.create_unit_square(comm, 9, 7, diagonal=dolfinx.mesh.DiagonalType.crossed)
-        elif kind == "cube":
+        elif kind.startswith("cube"):
             mesh = dolfinx.mesh.create_unit_cube(comm, 3, 4, 3)
         else:
             mesh = meshes.create_discs(comm, [((0.0, 0.0), 1.0), ((2.5, 0.0), 1.0)], 0.25)[0]
         left = _compat.locate_boundary_facets(mesh, lambda x: x[0] < -0.9 if kind == "discs" else np.isclose(x[0], 0.0))
-        return DEMDiscretisation(mesh, MATERIAL, scheme, [DirichletBC(left, lambda x, t: 0.01 * x[::-1] ** 2)],
-                                 body_force=[0.3] * mesh.topology.dim)
+        material = dict(material=MATERIALS, cell_tags=_material_tags(mesh)) if kind.endswith("two") else \
+            dict(material=MATERIAL)
+        return DEMDiscretisation(mesh, scheme=scheme, dirichlet=[DirichletBC(left, lambda x, t: 0.01 * x[::-1] ** 2)],
+                                 body_force=[0.3] * mesh.topology.dim, **material)
 
     results = []
     for comm in (MPI.COMM_WORLD, MPI.COMM_SELF):
@@ -333,3 +352,83 @@ def test_set_up_keeps_one_copy_of_the_energy_rows():
     assert dem.factored.vals is dem.rows.Q.data and dem.factored.cols is dem.rows.Q.indices
     per_cell = _held_bytes(dem) / dem.n_owned
     assert 700 < per_cell < 1600, per_cell
+
+
+@pytest.mark.parametrize("d", [2, 3])
+def test_scheme_a_uses_each_cells_material(d):
+    """Scheme A's local solve (eq. (20)-(21)) with two materials: on every traction-free scheme A
+    facet, sigma_c n_f = 0 with the stress of the facet's cell's own material (cells without a
+    facet on the interface, whose value is set after scheme A's, reconstruction.py)."""
+    dem = _problem(d, "A", MPI.COMM_SELF, two=True)
+    rec, geom = dem.reconstruction, dem.geometry
+    u = _random_field(dem, 1)
+    sigma = dem.stress(u, 0.0)
+    index = dem.materials.index
+    cells = geom.facet_cells[rec.scheme_a_facets, 0]
+    c = geom.facet_cells[geom.cell_facets[cells]]  # (n, d+1, 2): the cells of each cell's facets
+    at_interface = ((c[..., 1] >= 0) & (index[c[..., 0]] != index[np.maximum(c[..., 1], 0)])).any(axis=1)
+    assert 0 < at_interface.sum() < len(cells)
+    cells = cells[~at_interface]
+    normals = geom.facet_area_normals[cells, geom.facet_local[rec.scheme_a_facets[~at_interface], 0]]
+    assert set(dem.materials.index[cells]) == {0, 1}
+    assert np.abs(np.einsum("nij,nj->ni", sigma[cells], normals)).max() < 1e-12 * np.abs(sigma).max()
+
+
+def test_several_materials_mass():
+    """The lumped mass is rho_c |c| with each cell's density."""
+    mesh = dolfinx.mesh.create_unit_square(MPI.COMM_WORLD, 4, 3)
+    dem = DEMDiscretisation(mesh, MATERIALS, cell_tags=_material_tags(mesh))
+    x = dem.geometry.cell_centres[: dem.n_owned, 0]
+    rho = np.where(x < 0.6, MATERIALS[3].rho, MATERIALS[8].rho)
+    assert np.allclose(dem.mass.array_r, np.repeat(rho * dem.geometry.cell_volumes[: dem.n_owned], 2), rtol=1e-14)
+
+
+@pytest.mark.parametrize("values, word", [
+    ({3: MATERIAL, 8: MATERIALS[8], 5: MATERIAL}, "cell tag 5 selects no cell"),
+    ({3: MATERIAL}, "carry none of the material tags"),
+    ({3: MATERIAL, 8: ElasticMaterial(E=1.0, nu=0.3, rho=1.0, plane="stress")}, "share 'plane'"),
+])
+def test_several_materials_bad_input(values, word):
+    mesh = dolfinx.mesh.create_unit_square(MPI.COMM_WORLD, 4, 3)
+    with pytest.raises(ValueError, match=word):
+        DEMDiscretisation(mesh, values, cell_tags=_material_tags(mesh))
+
+
+def test_several_materials_overlap_and_missing_tags():
+    mesh = dolfinx.mesh.create_unit_square(MPI.COMM_WORLD, 4, 3)
+    tags = _material_tags(mesh)
+    cells = np.concatenate([tags.indices, tags.indices[:3]])
+    values = np.concatenate([tags.values, np.full(3, 5, dtype=np.int32)])
+    order = np.argsort(cells, kind="stable")
+    overlapping = dolfinx.mesh.meshtags(mesh, 2, cells[order], values[order])
+    with pytest.raises(ValueError, match="several material tags"):
+        DEMDiscretisation(mesh, {3: MATERIAL, 8: MATERIALS[8], 5: MATERIAL}, cell_tags=overlapping)
+    with pytest.raises(ValueError, match="need cell_tags"):
+        DEMDiscretisation(mesh, MATERIALS)
+    with pytest.raises(ValueError, match="only used with several materials"):
+        DEMDiscretisation(mesh, MATERIAL, cell_tags=tags)
+
+
+@pytest.mark.mpi
+def test_springs_in_series_are_exact():
+    """A bar of two materials (E = 1 on [0, 0.4], 4 on [0.4, 1]), clamped at x = 0, traction
+    sigma at x = 1, scheme A: the exact displacement, piecewise linear, is in equilibrium (force
+    0) and every cell stress is sigma, as the interface facet is reconstructed by traction
+    continuity (reconstruction.py; with eq. (7)'s interpolation the stress error was 0.32 sigma)."""
+    comm, n, sigma = MPI.COMM_WORLD, 20, 0.5
+    mesh = dolfinx.mesh.create_interval(comm, n, [0.0, 1.0], ghost_mode=dolfinx.mesh.GhostMode.shared_facet)
+    cells = np.arange(mesh.topology.index_map(1).size_local + mesh.topology.index_map(1).num_ghosts, dtype=np.int32)
+    x = dolfinx.mesh.compute_midpoints(mesh, 1, cells)[:, 0]
+    tags = dolfinx.mesh.meshtags(mesh, 1, cells, np.where(x < 0.4, 1, 2).astype(np.int32))
+    materials = {1: ElasticMaterial(E=1.0, nu=0.0, rho=1.0), 2: ElasticMaterial(E=4.0, nu=0.0, rho=3.0, eta=2.0)}
+    left = _compat.locate_boundary_facets(mesh, lambda x: np.isclose(x[0], 0.0))
+    right = _compat.locate_boundary_facets(mesh, lambda x: np.isclose(x[0], 1.0))
+    dem = DEMDiscretisation(mesh, materials, "A", [DirichletBC(left, [0.0])], tractions=[Traction(right, [sigma])],
+                            cell_tags=tags)
+    xc = dem.geometry.cell_centres[: dem.n_owned, 0]
+    u = dem.create_vector()
+    u.array[:] = np.where(xc < 0.4, sigma * xc, sigma * (0.4 + (xc - 0.4) / 4))
+    F = dem.force(u, 0.0, dem.create_vector())
+    assert F.norm(PETSc.NormType.NORM_INFINITY) < 1e-13 * sigma
+    error = np.abs(dem.stress(u, 0.0)[:, 0, 0] - sigma).max(initial=0.0)
+    assert comm.allreduce(error, op=MPI.MAX) < 1e-13 * sigma

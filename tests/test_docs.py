@@ -27,9 +27,23 @@ def _error_table():
     return rows
 
 
+def _materials_example() -> str:
+    """The TOML example of the ``[[materials]]`` section (``materials.toml`` of the error table)."""
+    section = SCENES_MD[SCENES_MD.index("### `[[materials]]`"):]
+    return re.search(r"```toml\n(.*?)```", section, re.S).group(1)
+
+
+def test_the_materials_example_runs(tmp_path):
+    """The ``[[materials]]`` example runs, two materials and contact, with its energy conserved."""
+    (tmp_path / "materials.toml").write_text(_materials_example())
+    summary = simulation.run(scenes.load(str(tmp_path / "materials.toml")), tmp_path / "out", MPI.COMM_SELF, quiet=True)
+    assert summary["pseudo_energy_rel_drift"] < 1e-13
+
+
 @pytest.mark.parametrize("command, stage, message", _error_table(), ids=[r[0][:40] for r in _error_table()])
 def test_the_error_table_shows_what_the_command_prints(command, stage, message, tmp_path, monkeypatch):
     monkeypatch.chdir(tmp_path)
+    (tmp_path / "materials.toml").write_text(_materials_example())
     stderr = io.StringIO()
     with contextlib.redirect_stderr(stderr):
         code = cli.main(["run", *shlex.split(command), "--quiet"])

@@ -11,7 +11,7 @@ from dolfinx.mesh import DiagonalType
 from dolfinx_dem import _compat
 from dolfinx_dem.discretisation import DEMDiscretisation, DirichletBC
 from dolfinx_dem.geometry import compute_geometry, geometry_from_arrays
-from dolfinx_dem.material import ElasticMaterial
+from dolfinx_dem.material import CellMaterials, ElasticMaterial
 from dolfinx_dem.patch import PatchScatter
 from dolfinx_dem.reconstruction import compute_interior_stencils, compute_reconstruction
 
@@ -113,7 +113,7 @@ def test_extrapolated_facets_unit_cube():
     assert stencils.alpha[~inside].min() < -1e-10  # really extrapolated
     assert stencils.alpha[~inside].min() >= -1.0  # the documented bound
     # Affine field through R (all boundary facets Dirichlet so that only eq. (7) acts).
-    rec = compute_reconstruction(geom, MATERIAL, geom.boundary_facets, "A")
+    rec = compute_reconstruction(geom, CellMaterials.uniform(MATERIAL, geom.num_cells), geom.boundary_facets, "A")
     A = np.array([[0.3, -1.2, 0.5], [2.0, 0.1, -0.7], [0.4, 0.9, 1.1]])
     b = np.array([0.2, -0.3, 0.5])
     uc = geom.cell_centres @ A.T + b
@@ -158,7 +158,7 @@ def test_multi_neumann_cells_crossed_and_scheme_b():
 def test_scheme_b_neumann_facets_follow_their_cell():
     mesh = _square(DiagonalType.crossed)
     geom = _geometry(mesh)
-    rec = compute_reconstruction(geom, MATERIAL, np.empty(0, np.int64), "B")
+    rec = compute_reconstruction(geom, CellMaterials.uniform(MATERIAL, geom.num_cells), np.empty(0, np.int64), "B")
     d = 2
     u = np.random.default_rng(0).normal(size=(geom.num_cells, d))
     uf = (rec.R @ u.ravel()).reshape(-1, d)
@@ -172,7 +172,7 @@ def test_scheme_a_neumann_facets_are_traction_free():
     cell with one Neumann facet, for any cell values."""
     mesh = _square(DiagonalType.crossed)
     geom = _geometry(mesh)
-    rec = compute_reconstruction(geom, MATERIAL, np.empty(0, np.int64), "A")
+    rec = compute_reconstruction(geom, CellMaterials.uniform(MATERIAL, geom.num_cells), np.empty(0, np.int64), "A")
     d = 2
     u = np.random.default_rng(1).normal(size=(geom.num_cells, d))
     uf = (rec.R @ u.ravel()).reshape(-1, d)
@@ -254,7 +254,7 @@ def test_stencils_equal_serial_and_parallel(kind):
     key = lambda g, f: {tuple(np.round(x, 10)) for x in g.facet_centres[f]}  # noqa: E731
     assert key(gp, sp.extrapolated) == key(gs, ss.extrapolated) & set(kp)
     # R reconstructs an affine field (x) exactly on those facets.
-    rec = compute_reconstruction(gp, MATERIAL, gp.boundary_facets, "A", rows)
+    rec = compute_reconstruction(gp, CellMaterials.uniform(MATERIAL, gp.num_cells), gp.boundary_facets, "A", rows)
     uf = (rec.R @ gp.cell_centres.ravel() + rec.D @ gp.facet_centres[rec.dirichlet_facets].ravel())
     assert np.allclose(uf.reshape(-1, gp.d)[rows], gp.facet_centres[rows], atol=1e-12)
 

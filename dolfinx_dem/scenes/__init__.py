@@ -104,6 +104,14 @@ SCHEMA = {
         "plane": lambda k, v, d: _string(k, v, ("strain", "stress")),
         "eta": lambda k, v, d: _number(k, v),
     },
+    "materials": [{
+        "tag": lambda k, v, d: _integer(k, v, minimum=0),
+        "E": lambda k, v, d: _number(k, v),
+        "nu": lambda k, v, d: _number(k, v),
+        "rho": lambda k, v, d: _number(k, v),
+        "plane": lambda k, v, d: _string(k, v, ("strain", "stress")),
+        "eta": lambda k, v, d: _number(k, v),
+    }],
     "dirichlet": [{
         "boundary": lambda k, v, d: v if isinstance(v, int) and not isinstance(v, bool) else _string(k, v),
         "value": lambda k, v, d: _field(k, v, d),
@@ -164,7 +172,7 @@ SCHEMA = {
 #: Required keys of the sections; "mesh" and "material" are required sections, the others optional.
 REQUIRED = {"mesh": ("type",), "material": ("E", "nu", "rho"), "contact": ("boundary",)}
 #: Required keys of the entries of array-of-tables sections.
-REQUIRED_ITEMS = {"dirichlet": ("boundary",), "tractions": ("boundary", "value"),
+REQUIRED_ITEMS = {"materials": ("tag", "E", "nu", "rho"), "dirichlet": ("boundary",), "tractions": ("boundary", "value"),
                   "probes": ("name", "point", "component"),
                   "obstacles": ("point", "normal", "boundary")}
 #: Facet tags of the generated interval/rectangle/box meshes, by boundary name.
@@ -240,8 +248,10 @@ def validate(scene: Mapping, mesh_dimension: int | None = None) -> dict:
         raise SceneError("scene key 'mesh' is missing")
     d = mesh_dimension or dimension(scene)
     scene = _validate_table("", scene, SCHEMA, d)
+    if ("material" in scene) == ("materials" in scene):
+        raise SceneError("a scene needs exactly one of 'material' (one material) and 'materials' (one per cell tag)")
     for section, keys in REQUIRED.items():
-        if section not in scene and section not in ("mesh", "material"):
+        if section not in scene and section not in ("mesh", "material") or section == "material" and "materials" in scene:
             continue
         for key in keys:
             if key not in scene.get(section, {}):
@@ -269,11 +279,7 @@ def validate(scene: Mapping, mesh_dimension: int | None = None) -> dict:
         _validate_time(scene)
         if scene.get("method") == "fem-P2":
             raise SceneError("method 'fem-P2' is available for static scenes (the Hertz reference) only")
-    m = scene["material"]
-    try:
-        ElasticMaterial(E=m["E"], nu=m["nu"], rho=m["rho"], plane=m.get("plane", "strain"), eta=m.get("eta"))
-    except ValueError as err:
-        raise SceneError(f"scene table 'material': {err}") from None
+    materials(scene)
     loads = scene.get("loads", {})
     if "gravity" in loads and "body_force" in loads:
         raise SceneError("scene key 'loads': give 'gravity' or 'body_force', not both")
@@ -285,6 +291,36 @@ def validate(scene: Mapping, mesh_dimension: int | None = None) -> dict:
         if "statics" in scene:
             raise SceneError("contact between bodies ('contact' table) is implemented for dynamics only")
     return scene
+
+
+def materials(scene: Mapping) -> ElasticMaterial | dict[int, ElasticMaterial]:
+    """The scene's material: an ElasticMaterial (``material``), or {cell tag: ElasticMaterial}
+    (``materials``), whose tags must differ and whose entries share ``plane``."""
+    if "material" in scene:
+        return _material("scene table 'material'", scene["material"])
+    out = {}
+    for i, m in enumerate(scene["materials"]):
+        if m["tag"] in out:
+            raise SceneError(f"scene key 'materials[{i}].tag': cell tag {m['tag']} already has a material "
+                             "(materials overlap)")
+        out[m["tag"]] = _material(f"scene table 'materials[{i}]'", m)
+    planes = [m.plane for m in out.values()]
+    if len(set(planes)) > 1:
+        raise SceneError(f"scene key 'materials': all materials must share 'plane' (the body's 2D hypothesis), got "
+                         f"{planes}")
+    if "gravity" in scene.get("loads", {}):
+        raise SceneError("scene key 'loads.gravity' needs one material (rho g is one body force): with 'materials', "
+                         "give 'loads.body_force'")
+    if scene.get("method") == "fem-P2":
+        raise SceneError("method 'fem-P2' (the Hertz reference) takes one material, not 'materials'")
+    return out
+
+
+def _material(what, m) -> ElasticMaterial:
+    try:
+        return ElasticMaterial(E=m["E"], nu=m["nu"], rho=m["rho"], plane=m.get("plane", "strain"), eta=m.get("eta"))
+    except ValueError as err:
+        raise SceneError(f"{what}: {err}") from None
 
 
 def _validate_time(scene):
