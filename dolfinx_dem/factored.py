@@ -12,9 +12,10 @@ the order of the row.
 
 Layout: the process's rows of Q with local column numbers, owned dofs first, then the ghosts
 (the held dofs of other processes, ``DEMDiscretisation.columns``). The arrays are those of
-``DEMDiscretisation.rows.Q``, whose own rows are its first rows: Q is stored once. ``create_vector`` makes PETSc vectors with
-those ghosts; their global form has the layout of ``Q.createVecRight()``. Communication is the
-caller's: a forward ghost update of x before ``apply``, a reverse (adding) update of z after.
+``DEMDiscretisation.rows.Q``, whose own rows are its first rows: Q is stored once.
+``create_vector`` makes PETSc vectors with those ghosts, in the layout of the DG0 dofs.
+Communication is the caller's: a forward ghost update of x before ``apply``, a reverse (adding)
+update of z after.
 """
 
 from __future__ import annotations
