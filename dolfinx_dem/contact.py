@@ -398,8 +398,8 @@ class RigidContact:
             pairs = np.unique(np.stack([index[event], col[event]], axis=1), axis=0)
             mid, length = piecewise_midpoints(pairs[:, 0], tau[pairs[:, 1]], len(touching), dt)
             coefficient = (self._YQ @ up + self._Yq)[touching, None] + mid * (self._YQ @ vp)[touching, None]
-            coefficient += scatter_sum(index, -val[:, None] * np.minimum(g0[col, None] + mid[index] * s[col, None], 0.0),
-                                       len(coefficient))
+            negative = np.minimum(g0[col, None] + mid[index] * s[col, None], 0.0)
+            coefficient += scatter_sum(index, -val[:, None] * negative, len(coefficient))
             active = g0[touching, None] + mid * s[touching, None] < 0
             integral = (length * coefficient * active).sum(axis=1)
             out_p += self._RnT_own[:, touching] @ integral

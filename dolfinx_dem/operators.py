@@ -76,7 +76,8 @@ def facet_gradient(geom: MeshGeometry, cells: np.ndarray) -> scipy.sparse.csr_ma
     indices = np.broadcast_to(facets[:, None, None, :] * d + np.arange(d, dtype=np.int32)[None, :, None, None], shape)
     data = np.broadcast_to(a.transpose(0, 2, 1)[:, None, :, :], shape)
     indptr = np.arange(0, len(cells) * d * d * (d + 1) + 1, d + 1, dtype=np.int32)
-    return scipy.sparse.csr_matrix((data.ravel(), indices.ravel(), indptr), shape=(len(cells) * d * d, geom.num_facets * d))
+    return scipy.sparse.csr_matrix((data.ravel(), indices.ravel(), indptr),
+                                   shape=(len(cells) * d * d, geom.num_facets * d))
 
 
 def compute_energy_rows(
