@@ -652,3 +652,16 @@ def test_both_contact_models_satisfy_the_contact_model_protocol():
             assert list(inspect.signature(getattr(model, name)).parameters) == expected, (model, name)
     with pytest.raises(NotImplementedError, match="statics with contact between bodies"):
         dem.pair_contact.own_gaps(dem.create_vector())
+
+
+@pytest.mark.mpi
+def test_a_traction_on_a_contact_facet_is_rejected():
+    """A contact candidate facet carrying a traction has no defined reconstruction in the
+    contact rule: refused on every process, before anything runs."""
+    from dolfinx_dem.discretisation import Traction
+
+    mesh, _, _ = meshes.create_discs(MPI.COMM_WORLD, [((0.14, 2.27), 0.1), ((0.36, 2.27), 0.1)], 0.05)
+    facets = _compat.locate_boundary_facets(mesh, lambda x: (x[0] >= 0.14) & (x[0] <= 0.36))
+    dem = DEMDiscretisation(mesh, SOFT, "A", tractions=[Traction(facets, [0.0, -1.0])])
+    with pytest.raises(ValueError, match="contact facets must not carry a traction"):
+        dem.set_contact_boundary(_compat.exterior_facets(mesh))
