@@ -352,8 +352,9 @@ def interpolate_expression(function, expr) -> None:
     function.interpolate(dolfinx.fem.Expression(expr, points))
 
 
-def newton_solver(comm, F, u, J):
-    """(NewtonSolver, NonlinearProblem) for the residual form F(u; v) = 0 with Jacobian form J.
+def newton_solver(comm, F, u, J, bcs=()):
+    """(NewtonSolver, NonlinearProblem) for the residual form F(u; v) = 0 with Jacobian form J
+    and the Dirichlet conditions ``bcs`` (applied to u by the first update).
 
     The solver's Jacobian matrix is ``solver.A``, its linear solver ``solver.krylov_solver``;
     ``solver.solve(u)`` returns (iterations, converged) and scatters u forward.
@@ -361,7 +362,7 @@ def newton_solver(comm, F, u, J):
     import dolfinx.fem.petsc
     import dolfinx.nls.petsc
 
-    problem = dolfinx.fem.petsc.NonlinearProblem(F, u, bcs=[], J=J)
+    problem = dolfinx.fem.petsc.NonlinearProblem(F, u, bcs=list(bcs), J=J)
     return dolfinx.nls.petsc.NewtonSolver(comm, problem), problem
 
 
@@ -388,3 +389,20 @@ def facet_cell_and_vertices(mesh, facets: np.ndarray) -> tuple[np.ndarray, np.nd
     facet_x = np.array([x[v2x[f2v.links(f)]] for f in facets]).reshape(-1, tdim, 3)
     cell_x = np.array([x[v2x[c2v.links(c)]] for c in cells]).reshape(-1, tdim + 1, 3)
     return cells, facet_x, cell_x
+
+
+def zero_dirichletbc(V, facets: np.ndarray, component=None):
+    """u = 0 (``component=None``) or u_component = 0 on the process-local ``facets`` of the vector
+    space V (a clamp, or a symmetry plane / roller)."""
+    import dolfinx.fem
+    from petsc4py import PETSc
+
+    mesh = V.mesh
+    fdim = mesh.topology.dim - 1
+    mesh.topology.create_connectivity(fdim, mesh.topology.dim)
+    if component is None:
+        dofs = dolfinx.fem.locate_dofs_topological(V, fdim, facets)
+        return dolfinx.fem.dirichletbc(np.zeros(mesh.geometry.dim, dtype=PETSc.ScalarType), dofs, V)
+    sub = V.sub(int(component))
+    dofs = dolfinx.fem.locate_dofs_topological(sub, fdim, facets)
+    return dolfinx.fem.dirichletbc(PETSc.ScalarType(0.0), dofs, sub)
