@@ -11,7 +11,7 @@ wall times; per delta, the differences between successive meshes (relative to th
 the ratio of successive differences; and the half-space estimates a_H = sqrt(4 P R / (pi E*)),
 p0_H = 2 P / (pi a_H) (indicative only: the block is finite). Serial. Usage::
 
-    python benchmarks/bench_indentation_fem.py --out docs/validation/indentation_fem.json  # ~2 min
+    python benchmarks/bench_indentation_fem.py --out docs/validation/indentation_fem.json  # ~3.5 min
     python benchmarks/bench_indentation_fem.py --meshes 0.01 0.005 --out /tmp/ind.json   # seconds
 """
 
