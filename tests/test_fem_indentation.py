@@ -54,3 +54,10 @@ def test_bad_input():
         indentation_reference(-0.01, H)
     with pytest.raises(ValueError, match="mesh size"):
         indentation_reference(0.01, 0.2)
+
+
+def test_reference_dict_is_the_solver_result(coarse):
+    ref = indentation_reference(DELTAS[0], H, MPI.COMM_WORLD)
+    assert {"P", "a", "p_max"} <= set(ref)
+    for key in ("P", "a", "p_max"):
+        assert ref[key] == pytest.approx(getattr(coarse[0], key), rel=1e-9)

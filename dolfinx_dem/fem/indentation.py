@@ -57,7 +57,7 @@ Measured quantities (the DEM measures the same from its facet pressures):
 
 The half-space (Hertz) estimate for the same load, ``a_H = sqrt(4 P R / (pi E*))``,
 ``p0_H = 2 P / (pi a_H)``, ``E* = E / (1 - nu^2)``, is only indicative: the block is finite
-(a / D up to ~0.2) and a / R is not small.
+(a / D up to 0.1) and a / R is not small (up to 0.26).
 
 Mesh (gmsh, :func:`create_indentation_mesh`): triangles of size h in the box
 [0, 0.08] x [-0.06, 0] m around the contact zone (a = 0.053 m at delta = 0.02 m; a solve whose
@@ -65,7 +65,8 @@ contact zone reaches x > 0.08 - 2 h is refused), growing linearly over 0.15 m to
 so that halving h halves the mesh size everywhere. Newton (MUMPS LU, consistent Jacobian by UFL)
 starts from u = 0 for the first indentation (the initial active set is the geometric overlap)
 and from the previous solution scaled by the ratio of the indentations for the next ones (P and
-the displacements grow about linearly with delta: fewer active-set changes).
+the displacements grow about linearly with delta). It takes 9-15 iterations on h = 4e-3 to 1e-3
+m, most of them spent settling the active set at the quadrature points.
 
 Units are SI throughout. The solvers are collective on ``comm``.
 """
@@ -81,10 +82,7 @@ import ufl
 from mpi4py import MPI
 from petsc4py import PETSc
 
-import dolfinx
 import dolfinx.fem
-import dolfinx.fem.petsc
-import dolfinx.mesh
 
 from dolfinx_dem import _compat
 from dolfinx_dem.fem.hertz import _check_int, _check_material, _check_positive, _gather_sorted, _lame, _owned
