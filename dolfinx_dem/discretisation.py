@@ -438,6 +438,18 @@ class DEMDiscretisation:
         """The owned dofs of the prescribed bodies (empty without)."""
         return self._prescribed_dofs
 
+    @property
+    def prescribed_cells(self) -> np.ndarray | None:
+        """Whether each owned cell belongs to a prescribed body, (n_owned,) booleans; None without."""
+        if not self.prescribed:
+            return None
+        return np.isin(self.body_labels[: self.n_owned], self.prescribed_body_numbers)
+
+    @property
+    def prescribed_body_numbers(self) -> np.ndarray:
+        """The numbers of the prescribed bodies (``body_labels``; empty without)."""
+        return np.flatnonzero(self._prescribed_bodies) if self.prescribed else np.empty(0, dtype=np.int64)
+
     def _setup_free_bodies(self):
         """Bodies (connected components) without Dirichlet facets move freely, and K annihilates
         their translations only up to rounding of order eps |K| |u|, which would spoil the energy

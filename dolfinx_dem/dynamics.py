@@ -228,14 +228,15 @@ class DynamicRun:
                               stepper.t, obstacles)
         else:
             plotting.plot_cell_field(dem.mesh, u, dem.von_mises(stepper.u, stepper.t), directory / "final.png",
-                                     "von Mises stress (Pa)", scale, obstacles)
+                                     "von Mises stress (Pa)", scale, obstacles, dem.prescribed_cells)
         if animation and output.get("animation") and not plotting.too_large(dem.mesh):
             if dem.d == 1:
                 io.call_on_root(self.comm, plotting.animate_bar, directory / "solution.xdmf",
                                 directory / "animation.gif", obstacles)
             else:
                 io.call_on_root(self.comm, plotting.animate_solution, directory / "solution.xdmf",
-                                directory / "animation.gif", "von_mises", "von Mises stress (Pa)", scale, obstacles)
+                                directory / "animation.gif", "von_mises", "von Mises stress (Pa)", scale, obstacles,
+                                dem.prescribed_body_numbers + 1)  # the ``body`` field is 1-based
 
     def _summary(self, status: str, error: InstabilityError | None) -> dict:
         dem, stepper, stats = self.dem, self.stepper, self.stats
