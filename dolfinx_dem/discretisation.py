@@ -70,7 +70,7 @@ class PrescribedBody:
     which must form whole bodies (``DEMDiscretisation``). Exactly one of ``velocity``, a constant
     vector of length d (U(t) = velocity t), and ``displacement``, a callable ``displacement(t)``
     returning d numbers (U(t) itself). ``name`` names its reaction and displacement columns in
-    outputs (default: its index). It acts as an indenter, a punch or a moving wall in contact
+    outputs (default: its number after the Dirichlet conditions, model.prescribed_columns). It acts as an indenter, a punch or a moving wall in contact
     between bodies (pair_contact.py); MEMM counts the work it does (memm.py)."""
 
     tag: int

@@ -145,10 +145,12 @@ def reaction_columns(dem: DEMDiscretisation) -> tuple[str, ...]:
 
 def prescribed_columns(dem: DEMDiscretisation) -> tuple[str, ...]:
     """Series columns of the prescribed bodies (``DEMDiscretisation.prescribed_values``): for
-    each, named by its ``name`` or index, its reaction ``reaction_<name>_<x|y>`` (the force it
-    exerts on the other bodies) and its translation ``prescribed_<name>_displacement_<x|y>``:
-    together a force-indentation curve."""
-    names = [i if body.name is None else body.name for i, body in enumerate(dem.prescribed)]
+    each, named by its ``name`` or else its number after the Dirichlet conditions (whose
+    reactions come first), its reaction ``reaction_<name>_<x|y>`` (the force it exerts on the
+    other bodies) and its translation ``prescribed_<name>_displacement_<x|y>``: together a
+    force-indentation curve."""
+    first = len(dem.dirichlet_conditions)
+    names = [first + i if body.name is None else body.name for i, body in enumerate(dem.prescribed)]
     xyz = "xyz"[: dem.d]
     return tuple(f"reaction_{n}_{c}" for n in names for c in xyz) + tuple(
         f"prescribed_{n}_displacement_{c}" for n in names for c in xyz)

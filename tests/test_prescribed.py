@@ -90,6 +90,16 @@ def test_the_reaction_is_the_derivative_of_the_energy_with_respect_to_the_transl
     assert np.allclose(values[-1, :2], reaction, rtol=0, atol=0)
 
 
+def test_unnamed_reactions_are_numbered_after_the_dirichlet_conditions():
+    scene = indentation()
+    scene["dirichlet"][0].pop("name")
+    scene["prescribed"][0].pop("name")
+    dem = model.build(scenes.validate(scene))
+    assert model.reaction_columns(dem) + model.prescribed_columns(dem) == (
+        "reaction_0_x", "reaction_0_y", "reaction_1_x", "reaction_1_y",
+        "prescribed_1_displacement_x", "prescribed_1_displacement_y")
+
+
 @pytest.mark.mpi
 def test_processes_agree_on_the_prescribed_columns():
     """The balances and the prescribed body's columns of a run on all processes against the

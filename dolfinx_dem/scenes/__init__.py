@@ -297,11 +297,10 @@ def validate(scene: Mapping, mesh_dimension: int | None = None) -> dict:
     for i, body in enumerate(scene.get("prescribed", [])):
         if ("velocity" in body) == ("displacement" in body):
             raise SceneError(f"scene table 'prescribed[{i}]' needs exactly one of 'velocity' and 'displacement'")
-    reactions = [str(bc.get("name", i)) for section in ("dirichlet", "prescribed")
-                 for i, bc in enumerate(scene.get(section, []))]
+    reactions = [str(bc.get("name", i)) for i, bc in enumerate(scene.get("dirichlet", []) + scene.get("prescribed", []))]
     if len(set(reactions)) != len(reactions):
-        raise SceneError(f"scene keys 'dirichlet[].name' and 'prescribed[].name' (default: the index) name the "
-                         f"reaction columns and must be unique together, got {reactions}: name them")
+        raise SceneError(f"scene keys 'dirichlet[].name' and 'prescribed[].name' name the reaction columns and must "
+                         f"be unique together, got {reactions} (unnamed: the number in the list of both)")
     if "statics" in scene:
         if "prescribed" in scene:
             raise SceneError("prescribed bodies ('prescribed' tables) are implemented for dynamics only")
