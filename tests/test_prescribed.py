@@ -90,6 +90,15 @@ def test_the_reaction_is_the_derivative_of_the_energy_with_respect_to_the_transl
     assert np.allclose(values[-1, :2], reaction, rtol=0, atol=0)
 
 
+def test_a_free_block_pushed_by_a_prescribed_disc_balances_its_energy():
+    """No Dirichlet condition: the block is a free body (its mean translation removed from its
+    rows), the disc is not; the balance is exact, and the pushed block gains momentum, so the
+    summary reports no momentum_rel_change."""
+    r, balances, _ = run(indentation() | {"dirichlet": [], "time": {"end": 0.004, "cfl": 0.5}})
+    assert np.abs(balances - balances[0]).max() < 1e-12
+    assert model.momentum(r.dem, r.stepper)[1] < 0.0 and not r.pair_stats.free
+
+
 def test_unnamed_reactions_are_numbered_after_the_dirichlet_conditions():
     scene = indentation()
     scene["dirichlet"][0].pop("name")
