@@ -70,8 +70,9 @@ class PrescribedBody:
     which must form whole bodies (``DEMDiscretisation``). Exactly one of ``velocity``, a constant
     vector of length d (U(t) = velocity t), and ``displacement``, a callable ``displacement(t)``
     returning d numbers (U(t) itself). ``name`` names its reaction and displacement columns in
-    outputs (default: its number after the Dirichlet conditions, model.prescribed_columns). It acts as an indenter, a punch or a moving wall in contact
-    between bodies (pair_contact.py); MEMM counts the work it does (memm.py)."""
+    outputs (default: its number after the Dirichlet conditions, model.prescribed_columns). It
+    acts as an indenter, a punch or a moving wall in contact between bodies (pair_contact.py);
+    MEMM counts the work it does (memm.py)."""
 
     tag: int
     velocity: Sequence[float] | None = None
@@ -347,10 +348,11 @@ class DEMDiscretisation:
         their dofs, so that MEMM's update leaves their velocity as set (memm.py) and the kinetic
         energy and momenta leave them out. A rigid translation gives their own energy rows zero
         energy; their dofs also drop out of the stable step bound (M^-1 = 0: they do not
-        vibrate). Errors, raised on every process: no cell tags, a tag that selects no cell or not whole bodies (a cell of the same body without
-        the tag, or a vertex shared with another body), a Dirichlet condition or a traction on
-        the body, not exactly one of velocity and displacement, a velocity of the wrong length
-        (and 3D, checked first, in ``__init__``)."""
+        vibrate). Errors, raised on every process: no cell tags, a tag that selects no cell or
+        not whole bodies (a cell of the same body without the tag, or a vertex shared with
+        another body), a body selected twice, a Dirichlet condition or a traction on the body,
+        not exactly one of velocity and displacement, a velocity of the wrong length (and 3D,
+        checked first, in ``__init__``)."""
         self.prescribed = prescribed
         self._prescribed_cells = []
         self._prescribed_dofs = np.empty(0, dtype=np.int64)

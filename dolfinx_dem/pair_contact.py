@@ -927,8 +927,9 @@ def _check_bodies_do_not_overlap(dem):
 
 def _check_bodies_share_no_vertex(dem, bodies=None):
     """Separate bodies (connected through facets) must not share a vertex: contact between them
-    would be undefined at the shared point (``bodies``: only the vertices of these bodies). The boundary vertices of the owned cells meet at the
-    process their coordinates hash to. Collective."""
+    would be undefined at the shared point (``bodies``: only the vertices of these bodies). The
+    boundary vertices of the owned cells meet at the process their coordinates hash to.
+    Collective."""
     geom, d, comm = dem.geometry, dem.d, dem.comm
     bf = np.intersect1d(geom.boundary_facets, geom.facets_of_layers(0))
     cells, local = geom.facet_cells[bf, 0], geom.facet_local[bf, 0]

@@ -164,6 +164,8 @@ def test_bad_prescribed_bodies_are_rejected_by_the_discretisation():
                           (PrescribedBody(1, velocity=[1.0]), "velocity must have 2 components")]:
         with pytest.raises(ValueError, match=message):
             DEMDiscretisation(mesh, MATERIAL, "B", cell_tags=tags, prescribed=[body])
+    with pytest.raises(ValueError, match="prescribed body 1 .cell tag 1. overlaps another prescribed body"):
+        DEMDiscretisation(mesh, MATERIAL, "B", cell_tags=tags, prescribed=[PrescribedBody(1, velocity=[0.0, 1.0])] * 2)
     with pytest.raises(ValueError, match="cell_tags are needed"):
         DEMDiscretisation(mesh, MATERIAL, "B", prescribed=[PrescribedBody(1, velocity=[0.0, 1.0])])
     top = facet_tags.find(meshes.YMAX)

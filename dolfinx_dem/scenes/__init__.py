@@ -297,7 +297,8 @@ def validate(scene: Mapping, mesh_dimension: int | None = None) -> dict:
     for i, body in enumerate(scene.get("prescribed", [])):
         if ("velocity" in body) == ("displacement" in body):
             raise SceneError(f"scene table 'prescribed[{i}]' needs exactly one of 'velocity' and 'displacement'")
-    reactions = [str(bc.get("name", i)) for i, bc in enumerate(scene.get("dirichlet", []) + scene.get("prescribed", []))]
+    reactions = [str(bc.get("name", i))
+                 for i, bc in enumerate(scene.get("dirichlet", []) + scene.get("prescribed", []))]
     if len(set(reactions)) != len(reactions):
         raise SceneError(f"scene keys 'dirichlet[].name' and 'prescribed[].name' name the reaction columns and must "
                          f"be unique together, got {reactions} (unnamed: the number in the list of both)")
