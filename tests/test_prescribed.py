@@ -99,6 +99,23 @@ def test_a_free_block_pushed_by_a_prescribed_disc_balances_its_energy():
     assert model.momentum(r.dem, r.stepper)[1] < 0.0 and not r.pair_stats.free
 
 
+def test_the_indentation_scene_writes_a_force_indentation_curve(tmp_path):
+    """The built-in scene, coarse and short: its series has the work, balance and prescribed
+    columns, the disc's displacement is U(t) and the summary says it is not conservative."""
+    from dolfinx_dem import simulation
+
+    scene = scenes.load("indentation", {"mesh.h": 0.06, "mesh.discs": [[0.0, 0.2005, 0.2]], "time.end": 0.006,
+                                        "output.every": 1000})
+    summary = simulation.run(scene, tmp_path / "out", MPI.COMM_SELF, quiet=True)
+    assert not summary["conservative"] and summary["pseudo_energy_rel_drift"] < 1e-12
+    assert "momentum_rel_change" not in summary
+    series = np.genfromtxt(tmp_path / "out" / "series.csv", delimiter=",", names=True)
+    assert np.allclose(series["prescribed_disc_displacement_y"], -0.5 * series["t"], rtol=0, atol=1e-15)
+    assert series["reaction_disc_y"][-1] < 0 and series["reaction_disc_y"][0] == 0
+    assert {"work", "balance", "reaction_base_y", "reaction_disc_x"} <= set(series.dtype.names)
+    assert (tmp_path / "out" / "final.png").stat().st_size > 1000
+
+
 def test_unnamed_reactions_are_numbered_after_the_dirichlet_conditions():
     scene = indentation()
     scene["dirichlet"][0].pop("name")
