@@ -113,7 +113,8 @@ class Diagnostics:
 
 class MEMM:
     """The MEMM stepper for a ``DEMDiscretisation`` (``force``, ``energies``, ``factored``,
-    ``load``, ``lift``, ``mass``, ``contacts``).
+    ``load``, ``lift``, ``mass``, ``contacts``, and for prescribed bodies ``prescribed``,
+    ``prescribed_dofs``, ``moving_prescribed``, ``impose``).
 
     Parameters
     ----------
@@ -183,7 +184,8 @@ class MEMM:
 
     def initialise(self, u0: PETSc.Vec, v0: PETSc.Vec, t0: float = 0.0) -> Diagnostics:
         """Start from u^0, v^0: v^{-1/2} = v^0 - dt/2 M^-1 F(u^0), v^{1/2} = v^0 + dt/2 M^-1 F(u^0),
-        and the energy rows y^0 = Q u^0 by a true product."""
+        and the energy rows y^0 = Q u^0 by a true product. On prescribed bodies u^0 = U(t0) and
+        v^0 is their velocity (``impose``), whatever u0 and v0 hold there."""
         self.t0, self.n = float(t0), 0
         f = self.problem.create_vector()
         for contact in self.problem.contacts:
