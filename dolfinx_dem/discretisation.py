@@ -64,6 +64,32 @@ class Traction:
     time_dependent: bool = False
 
 
+@dataclasses.dataclass(frozen=True)
+class PrescribedBody:
+    """A body whose motion is imposed, a rigid translation U(t) (m): the cells of cell tag ``tag``,
+    which must form whole bodies (``DEMDiscretisation``). Exactly one of ``velocity``, a constant
+    vector of length d (U(t) = velocity t), and ``displacement``, a callable ``displacement(t)``
+    returning d numbers (U(t) itself). ``name`` names its reaction and displacement columns in
+    outputs (default: its number after the Dirichlet conditions, model.prescribed_columns). It
+    acts as an indenter, a punch or a moving wall in contact between bodies (pair_contact.py);
+    MEMM counts the work it does (memm.py)."""
+
+    tag: int
+    velocity: Sequence[float] | None = None
+    displacement: Callable[[float], Sequence[float]] | None = None
+    name: str | None = None
+
+    def translation(self, t: float, d: int) -> np.ndarray:
+        """U(t), shape (d,)."""
+        if self.displacement is None:
+            return t * np.asarray(self.velocity, dtype=float)
+        U = np.asarray(self.displacement(t), dtype=float).reshape(-1)
+        if U.shape != (d,) or not np.isfinite(U).all():
+            raise ValueError(f"prescribed body {self.tag}: displacement({t:.9g}) must be {d} finite numbers, "
+                             f"got {U.tolist()}")
+        return U
+
+
 def _facet_values(what: str, conditions, facet_order: np.ndarray, centres: np.ndarray, d: int, t: float):
     """The values at time t of ``conditions`` (pairs (facets, condition with ``value`` and
     ``time_dependent``)) at their facets, (len(facet_order), d) in the order of ``facet_order``;
@@ -126,7 +152,9 @@ class DEMDiscretisation:
     dirichlet : DirichletBC conditions.
     tractions : Traction conditions; all other boundary facets are traction-free.
     body_force : force per unit volume (N/m^d), a vector of length d, e.g. rho * g.
-    cell_tags : DOLFINx MeshTags of the cells, with ``material`` given per tag.
+    cell_tags : DOLFINx MeshTags of the cells, with ``material`` given per tag or ``prescribed``.
+    prescribed : PrescribedBody bodies (2D), whose translation is imposed: their dofs have mass 0
+        (no kinetic energy, inverse mass 0 in MEMM's update), see ``_setup_prescribed``.
 
     The potential is V(u, t) = E_P + E_S - f.u - sum_f |f| t_f . u_f (eq. (11), (13) and the
     work of the body force f and of the tractions on the reconstructed facet values u_f), and
@@ -142,10 +170,13 @@ class DEMDiscretisation:
         body_force: Sequence[float] | None = None,
         tractions: Sequence[Traction] = (),
         cell_tags=None,
+        prescribed: Sequence[PrescribedBody] = (),
     ):
         self.mesh = mesh
         self.comm = mesh.comm
         self.d = d = mesh.topology.dim
+        if prescribed and d != 2:
+            raise ValueError(f"prescribed bodies take part in contact between bodies, implemented in 2D, not {d}D")
         self.V = _compat.create_vector_space(mesh, "DG", 0)
         dirichlet, tractions = tuple(dirichlet), tuple(tractions)
         for k, bc in enumerate(dirichlet):
@@ -167,7 +198,7 @@ class DEMDiscretisation:
         geom = self.geometry
         self.n_owned = geom.num_owned
         #: the material of each held cell
-        self.materials = self._cell_materials(material, cell_tags)
+        self.materials = self._cell_materials(material, cell_tags, bool(prescribed))
         materials = self.materials
 
         # Facets held here and the condition of each (owned cells' marks decide).
@@ -256,15 +287,17 @@ class DEMDiscretisation:
         self._update_data(0.0)
         self.contact = None  # contact.RigidContact, see set_obstacles
         self.pair_contact = None  # pair_contact.PairContact, see set_contact_boundary
+        self._setup_prescribed(tuple(prescribed), cell_tags)
         self._setup_free_bodies()
 
-    def _cell_materials(self, material, cell_tags) -> CellMaterials:
+    def _cell_materials(self, material, cell_tags, prescribed: bool) -> CellMaterials:
         """The ``CellMaterials`` of the held cells: one material, or one per cell tag (the owned
         cells' tags, extended to the halo by ``halo_exchange``). Every cell needs exactly one tag
         of ``material`` and every tag a cell; errors are raised on every process."""
         if isinstance(material, ElasticMaterial):
-            if cell_tags is not None:
-                raise ValueError("cell_tags are only used with several materials ({cell tag: ElasticMaterial})")
+            if cell_tags is not None and not prescribed:
+                raise ValueError("cell_tags are only used with several materials ({cell tag: ElasticMaterial}) "
+                                 "or prescribed bodies")
             return CellMaterials.uniform(material, self.geometry.num_cells)
         if cell_tags is None:
             raise ValueError("several materials ({cell tag: ElasticMaterial}) need cell_tags")
@@ -273,10 +306,8 @@ class DEMDiscretisation:
         count = np.zeros(n, dtype=np.int64)  # tags of each owned cell (dolfinx_dem's cell order)
         index = np.full(n, -1, dtype=np.int64)
         selected = np.zeros(len(tags), dtype=np.int64)
-        block = _compat.cell_dofs(self.V)[: self.mesh.topology.index_map(self.d).size_local]
         for k, tag in enumerate(tags):
-            cells = cell_tags.indices[cell_tags.values == tag]
-            cells = block[cells[cells < len(block)]]
+            cells = self._tagged_cells(cell_tags, tag)
             count[cells] += 1
             index[cells] = k
             selected[k] = len(cells)
@@ -306,6 +337,121 @@ class DEMDiscretisation:
         self._DN_traction = (rec.D[dofs], rec.N[dofs])
         self._traction_force = self.factored.create_vector() if len(self._tractions) else None
 
+    def _tagged_cells(self, cell_tags, tag: int) -> np.ndarray:
+        """The owned cells (dolfinx_dem's numbering) that carry cell tag ``tag``."""
+        block = _compat.cell_dofs(self.V)[: self.mesh.topology.index_map(self.d).size_local]
+        cells = cell_tags.indices[cell_tags.values == tag]
+        return np.sort(block[cells[cells < len(block)]])
+
+    def _setup_prescribed(self, prescribed: tuple[PrescribedBody, ...], cell_tags):
+        """The bodies of imposed translation: their owned cells, and mass and inverse mass 0 on
+        their dofs, so that MEMM's update leaves their velocity as set (memm.py) and the kinetic
+        energy and momenta leave them out. A rigid translation gives their own energy rows zero
+        energy; their dofs also drop out of the stable step bound (M^-1 = 0: they do not
+        vibrate). Errors, raised on every process: no cell tags, a tag that selects no cell or
+        not whole bodies (a cell of the same body without the tag, or a vertex shared with
+        another body), a body selected twice, a Dirichlet condition or a traction on the body,
+        not exactly one of velocity and displacement, a velocity of the wrong length (and 3D,
+        checked first, in ``__init__``)."""
+        self.prescribed = prescribed
+        self._prescribed_cells = []
+        self._prescribed_dofs = np.empty(0, dtype=np.int64)
+        if not prescribed:
+            return
+        d, geom = self.d, self.geometry
+        if cell_tags is None:
+            raise ValueError("prescribed bodies are selected by cell tag: cell_tags are needed")
+        owned_bodies = geom.cell_bodies[: self.n_owned]
+        mine = np.zeros(geom.num_bodies, dtype=np.int64)  # bodies of prescribed cells (any body)
+        for k, body in enumerate(prescribed):
+            what = f"prescribed body {k if body.name is None else body.name!r} (cell tag {body.tag})"
+            if (body.velocity is None) == (body.displacement is None):
+                raise ValueError(f"{what} needs exactly one of velocity and displacement")
+            if body.velocity is not None and np.shape(body.velocity) != (d,):
+                raise ValueError(f"{what}: velocity must have {d} components, got {list(np.ravel(body.velocity))}")
+            cells = self._tagged_cells(cell_tags, body.tag)
+            if self.comm.allreduce(len(cells), op=MPI.SUM) == 0:
+                raise ValueError(f"{what} selects no cell")
+            bodies = np.zeros(geom.num_bodies, dtype=np.int64)
+            bodies[owned_bodies[cells]] = 1
+            self.comm.Allreduce(MPI.IN_PLACE, bodies, op=MPI.MAX)
+            untagged = np.isin(owned_bodies, np.flatnonzero(bodies))
+            untagged[cells] = False
+            if self.comm.allreduce(int(untagged.sum()), op=MPI.SUM):
+                raise ValueError(f"{what} is not a whole body: it shares facets with cells without the tag "
+                                 "(a prescribed body must be meshed separately)")
+            if mine[bodies > 0].any():
+                raise ValueError(f"{what} overlaps another prescribed body")
+            mine += bodies
+            self._prescribed_cells.append(cells)
+        rec = self.reconstruction
+        for what, facets in (("a Dirichlet condition", rec.dirichlet_facets), ("a traction", rec.traction_facets)):
+            cells = geom.facet_cells[facets, 0]
+            if self.comm.allreduce(bool(mine[geom.cell_bodies[cells[cells < self.n_owned]]].any()), op=MPI.LOR):
+                raise ValueError(f"a prescribed body carries {what}: its motion is imposed already")
+        from dolfinx_dem.pair_contact import _check_bodies_share_no_vertex
+        try:
+            _check_bodies_share_no_vertex(self, np.flatnonzero(mine))
+        except ValueError as err:
+            raise ValueError(f"a prescribed body is not a whole body: {err}") from None
+        self._prescribed_bodies = mine > 0
+        dofs = (np.concatenate(self._prescribed_cells)[:, None] * d + np.arange(d)).ravel()
+        self.mass.array[dofs] = 0.0
+        self.inverse_mass.array[dofs] = 0.0
+        self._prescribed_dofs = dofs
+
+    def impose(self, u: PETSc.Vec, v: PETSc.Vec, t: float, dt: float, position: bool = True) -> None:
+        """On the prescribed bodies' dofs: u = U(t) if ``position``, and v = the constant velocity,
+        or (U(t + dt) - u)/dt for a displacement: the velocity v^{n+1/2} of MEMM's step from
+        u^n = u at t_n to U(t + dt) (the flight is affine within the step, and u follows U(t)
+        without accumulating rounding)."""
+        d = self.d
+        for body, cells in zip(self.prescribed, self._prescribed_cells):
+            ua = u.array.reshape(-1, d)
+            if position:
+                ua[cells] = body.translation(t, d)
+            v.array.reshape(-1, d)[cells] = body.velocity if body.velocity is not None else \
+                (body.translation(t + dt, d) - ua[cells]) / dt
+
+    @property
+    def moving_prescribed(self) -> bool:
+        """Whether some prescribed body follows a displacement U(t) (MEMM sets its velocity each step)."""
+        return any(body.displacement is not None for body in self.prescribed)
+
+    def prescribed_values(self, u: PETSc.Vec, t: float) -> np.ndarray:
+        """For each prescribed body, its reaction, the force it exerts on the other bodies,
+        -(sum of the force on its dofs) = dV/dU, the exact derivative of the potential with
+        respect to its translation U, and its translation (its cells' mean u): (n, 2, d), global.
+        Collective (a force evaluation)."""
+        d = self.d
+        f = self.force(u, t, self._work)
+        out = np.zeros((len(self.prescribed), 2, d))
+        counts = np.zeros(len(self.prescribed))
+        for k, cells in enumerate(self._prescribed_cells):
+            out[k, 0] = -f.array_r.reshape(-1, d)[cells].sum(axis=0)
+            out[k, 1] = u.array_r.reshape(-1, d)[cells].sum(axis=0)
+            counts[k] = len(cells)
+        self.comm.Allreduce(MPI.IN_PLACE, out, op=MPI.SUM)
+        out[:, 1] /= self.comm.allreduce(counts, op=MPI.SUM)[:, None]
+        return out
+
+    @property
+    def prescribed_dofs(self) -> np.ndarray:
+        """The owned dofs of the prescribed bodies (empty without)."""
+        return self._prescribed_dofs
+
+    @property
+    def prescribed_cells(self) -> np.ndarray | None:
+        """Whether each owned cell belongs to a prescribed body, (n_owned,) booleans; None without."""
+        if not self.prescribed:
+            return None
+        return np.isin(self.body_labels[: self.n_owned], self.prescribed_body_numbers)
+
+    @property
+    def prescribed_body_numbers(self) -> np.ndarray:
+        """The numbers of the prescribed bodies (``body_labels``; empty without)."""
+        return np.flatnonzero(self._prescribed_bodies) if self.prescribed else np.empty(0, dtype=np.int64)
+
     def _setup_free_bodies(self):
         """Bodies (connected components) without Dirichlet facets move freely, and K annihilates
         their translations only up to rounding of order eps |K| |u|, which would spoil the energy
@@ -319,6 +465,8 @@ class DEMDiscretisation:
         clamped = np.zeros(n_bodies, dtype=np.int64)
         clamped[labels[geom.facet_cells[rec.dirichlet_facets, 0]]] = 1
         self.comm.Allreduce(MPI.IN_PLACE, clamped, op=MPI.MAX)
+        if self.prescribed:  # a prescribed body translates exactly: no mean to remove
+            clamped[self._prescribed_bodies] = 1
         clamped = clamped > 0
         self.body_labels = labels
         owned = labels[: self.n_owned]

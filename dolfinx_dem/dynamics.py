@@ -52,15 +52,17 @@ class DynamicRun:
         self.n_steps = max(1, round(time_spec["end"] / self.dt))
         self.stepper = MEMM(dem, self.dt, time_spec.get("quadrature", "midpoint"))
         self.probes = model.Probes(dem, scene.get("probes", []))
-        # with time-dependent data, the work W^n they do (memm.py) and the energy balance E^n - W^n
-        self.work_columns = ("work", "balance") if dem.time_dependent else ()
+        # with time-dependent data or prescribed bodies, the work W^n they do (memm.py) and the
+        # energy balance E^n - W^n
+        self.work_columns = ("work", "balance") if self.stepper.does_work else ()
         self.columns = (model.SERIES_COLUMNS + self.work_columns + model.reaction_columns(dem)
-                        + model.contact_columns(dem) + tuple(self.probes.names))
+                        + model.prescribed_columns(dem) + model.contact_columns(dem) + tuple(self.probes.names))
         output = scene.get("output", {})
         self.every = output.get("every", max(1, self.n_steps // 50))
         self.series_every = output.get("series_every", 1)
-        # Time-dependent data do work: no conservation then, but an energy balance E^n - W^n.
-        self.conservative = not dem.time_dependent
+        # Time-dependent data and prescribed bodies do work: no conservation then, but an energy
+        # balance E^n - W^n.
+        self.conservative = not self.stepper.does_work
         self.resumed = None  # the checkpoint header of a resumed run
         diag = self.stepper.initialise(*model.initial_state(dem, scene))
         self.first = diag
@@ -183,7 +185,8 @@ class DynamicRun:
         if diag.step % self.series_every == 0 or force_fields:
             work = [diag.work, diag.balance] if self.work_columns else []
             self.series.write([diag.t, diag.kinetic, diag.elastic, diag.stabilisation, diag.external,
-                               diag.pseudo_energy, *work, *dem.reactions(stepper.u, diag.t).ravel(), *contact,
+                               diag.pseudo_energy, *work, *dem.reactions(stepper.u, diag.t).ravel(),
+                               *model.prescribed_values(dem, stepper.u, diag.t), *contact,
                                *self.probes.values(stepper.u, diag.t)])
         if diag.step % self.every == 0 or force_fields:
             self.solution.write(diag.t, fields(dem, stepper))
@@ -225,14 +228,15 @@ class DynamicRun:
                               stepper.t, obstacles)
         else:
             plotting.plot_cell_field(dem.mesh, u, dem.von_mises(stepper.u, stepper.t), directory / "final.png",
-                                     "von Mises stress (Pa)", scale, obstacles)
+                                     "von Mises stress (Pa)", scale, obstacles, dem.prescribed_cells)
         if animation and output.get("animation") and not plotting.too_large(dem.mesh):
             if dem.d == 1:
                 io.call_on_root(self.comm, plotting.animate_bar, directory / "solution.xdmf",
                                 directory / "animation.gif", obstacles)
             else:
                 io.call_on_root(self.comm, plotting.animate_solution, directory / "solution.xdmf",
-                                directory / "animation.gif", "von_mises", "von Mises stress (Pa)", scale, obstacles)
+                                directory / "animation.gif", "von_mises", "von Mises stress (Pa)", scale, obstacles,
+                                dem.prescribed_body_numbers + 1)  # the ``body`` field is 1-based
 
     def _summary(self, status: str, error: InstabilityError | None) -> dict:
         dem, stepper, stats = self.dem, self.stepper, self.stats

@@ -28,6 +28,18 @@ Allreduce reduces them with the energies: a step synchronises three times (the g
 v^{n+1/2} and of Q^T y, and the reduction); contact adds the gathers of its patch values. The
 kernel also sums the momentum of each free body: the pass over Q subtracts its mean velocity
 from v^{n+1/2} at the next step (for rounding, as ``relative_displacement`` does for u).
+
+Work. Time-dependent data and prescribed bodies change E^n; ``work`` counts W^n, the work done
+since t0, so that E^n - W^n (``Diagnostics.balance``) is constant in exact arithmetic. A
+prescribed body (discretisation.PrescribedBody) has M^-1 = 0 and M = 0 on its dofs p: (35b)
+leaves its velocity (a constant one moves on exactly), or the step sets v_p^{n+1/2} =
+(U(t_{n+1}) - u_p^n)/dt. With I^n = int_0^dt F(u^n + tau v^{n+1/2}) dtau (exact, events included)
+and F = -grad V, V(u^{n+1}) - V(u^n) = -v^{n+1/2} . I^n, while (35b) on the other dofs gives the
+pseudo-kinetic change v^{n+1/2} . I^n - v_p^{n+1/2} . I_p^n: so
+
+    W^{n+1} - W^n = -I_p^n . (u_p^{n+1} - u_p^n) / dt,
+
+the work of the force -I_p^n/dt that the body exerts on the rest, exact to rounding.
 """
 
 from __future__ import annotations
@@ -86,7 +98,7 @@ class Diagnostics:
     external: float
     pseudo_kinetic: float  # 1/2 (v^{n-1/2})^T M v^{n+1/2}
     pseudo_energy: float  # pseudo_kinetic + the potential the force derives from (energies()["potential"])
-    work: float = 0.0  # the work W^n done by time-dependent data since t0 (MEMM's docstring); 0 without
+    work: float = 0.0  # the work W^n done by time-dependent data and prescribed bodies since t0 (MEMM's docstring)
 
     @property
     def balance(self) -> float:
@@ -101,7 +113,8 @@ class Diagnostics:
 
 class MEMM:
     """The MEMM stepper for a ``DEMDiscretisation`` (``force``, ``energies``, ``factored``,
-    ``load``, ``lift``, ``mass``, ``contacts``).
+    ``load``, ``lift``, ``mass``, ``contacts``, and for prescribed bodies ``prescribed``,
+    ``prescribed_dofs``, ``moving_prescribed``, ``impose``).
 
     Parameters
     ----------
@@ -160,16 +173,25 @@ class MEMM:
         return self._state.v_next
 
     @property
+    def does_work(self) -> bool:
+        """Whether time-dependent data or prescribed bodies do work on the system: then E^n is not
+        conserved, and ``work`` counts W^n (module docstring)."""
+        return self.problem.time_dependent or bool(self.problem.prescribed)
+
+    @property
     def t(self) -> float:
         return self.t0 + self.n * self.dt
 
     def initialise(self, u0: PETSc.Vec, v0: PETSc.Vec, t0: float = 0.0) -> Diagnostics:
         """Start from u^0, v^0: v^{-1/2} = v^0 - dt/2 M^-1 F(u^0), v^{1/2} = v^0 + dt/2 M^-1 F(u^0),
-        and the energy rows y^0 = Q u^0 by a true product."""
+        and the energy rows y^0 = Q u^0 by a true product. On prescribed bodies u^0 = U(t0) and
+        v^0 is their velocity (``impose``), whatever u0 and v0 hold there."""
         self.t0, self.n = float(t0), 0
         f = self.problem.create_vector()
         for contact in self.problem.contacts:
             contact.prepare(u0)
+        u0, v0 = u0.copy(), v0.copy()
+        self.problem.impose(u0, v0, self.t0, self.dt)  # u = U(t0) and its velocity on prescribed bodies
         self.problem.force(u0, self.t0, f)
         self.force_evaluations += 1
         f.pointwiseMult(f, self.problem.inverse_mass)
@@ -178,6 +200,8 @@ class MEMM:
         self.v_prev.axpy(-0.5 * self.dt, f)
         v0.copy(self.v_next)
         self.v_next.axpy(0.5 * self.dt, f)
+        u0.destroy()
+        v0.destroy()
         self._state.restart(self.t0)
         self.work, self._load_power, self._data_potential = 0.0, 0.0, None
         diag = self._diagnostics()
@@ -187,6 +211,8 @@ class MEMM:
     def step(self) -> Diagnostics:
         """Advance one step (eq. (35a)-(35b)) and return the diagnostics at the new time."""
         refresh = self.refresh_every > 0 and (self.n + 1) % self.refresh_every == 0
+        if self.problem.moving_prescribed:  # v^{n+1/2} = (U(t_{n+1}) - u^n)/dt on their dofs
+            self.problem.impose(self.u, self.v_next, self.t, self.dt, position=False)
         impulse = self.impulse()  # from u^n and v^{n+1/2}
         if refresh:
             self.u.axpy(self.dt, self.v_next)  # (35a) here: y^{n+1} from u^{n+1} by a true product
@@ -247,9 +273,9 @@ class MEMM:
             sums[CONTACT_S] += de
             sums[CONTACT_J] += ds
         if self.problem.time_dependent:
-            sums[LOAD_POWER] = self._load_power
+            sums[LOAD_POWER] += self._load_power
         s = self._state.reduce(self.t)
-        if self.problem.time_dependent:
+        if self.does_work:
             if self._data_potential is not None:
                 self.work += s[LOAD_POWER] + s[DATA_POTENTIAL] - self._data_potential
             self._data_potential = s[DATA_POTENTIAL]
@@ -324,7 +350,7 @@ class MEMM:
     # -- checkpoint -------------------------------------------------------------------------------
     def state(self) -> dict:
         """The complete state of the stepper: the vectors u^n, v^{n-1/2}, v^{n+1/2} (this
-        process's entries), t0, n, dt, the stability budget, the work of time-dependent data and
+        process's entries), t0, n, dt, the stability budget, the work W^n and
         the data potential it continues from (global), the evaluation counters, and
         ``recurrence``, what the energy-row recurrence carries on this process (memm_state.py)."""
         return {

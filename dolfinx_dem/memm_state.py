@@ -9,7 +9,8 @@ is, in the terms of memm.py's docstring:
   y = Q rel(u^{n+1}) / dt by a true product; z^{n+1} = Q^T y, the squares of y summed (one pass
   over Q, factored.py), between a forward ghost update of v and a reverse one of z;
 - ``update``: (35a)-(35b) with the affine force integral -dt^2/2 (z^n + z^{n+1}) plus the step's
-  impulse, summing the kinetic, pseudo-kinetic and external terms and the free bodies' momenta;
+  impulse, summing the kinetic, pseudo-kinetic and external terms and the free bodies' momenta
+  (and the prescribed bodies' work, from the same force integral on their dofs);
 - ``reduce``: the lift q(t)'s share of the energies, then one Allreduce of all the sums.
 """
 
@@ -26,9 +27,10 @@ _REVERSE = dict(addv=PETSc.InsertMode.ADD_VALUES, mode=PETSc.ScatterMode.REVERSE
 
 #: slots of ``StepState.sums``: |y|^2 over the elastic and the stabilisation rows, kinetic,
 #: pseudo-kinetic, f . u, the lift's share of the elastic and stabilisation energies, the contact
-#: models' (this process's parts of their energy changes, set by MEMM before ``reduce``), with
-#: time-dependent data the step's load power v^{n+1/2} . int L dt (set by MEMM) and the data
-#: potential (``DEMDiscretisation.data_potential``); then the momentum of each free body (d per
+#: models' (this process's parts of their energy changes, set by MEMM before ``reduce``), the
+#: step's work of time-dependent data, v^{n+1/2} . int L dt (added by MEMM), and of prescribed
+#: bodies, -v_p^{n+1/2} . I_p (added by ``update``), and the data potential
+#: (``DEMDiscretisation.data_potential``); then the momentum of each free body (d per
 #: body, and d for the cells of clamped bodies).
 (ROWS_S, ROWS_J, KINETIC, PSEUDO, EXTERNAL, LIFT_S, LIFT_J, CONTACT_S, CONTACT_J, LOAD_POWER, DATA_POTENTIAL,
  MOMENTA) = range(12)
@@ -56,6 +58,7 @@ class StepState:
         if not np.all(mass.reshape(-1, d) == mass[::d, None]):
             raise ValueError("MEMM needs the d dofs of a cell to share their mass")
         self._mass = np.ascontiguousarray(mass[::d])  # the kernel reads one mass per cell
+        self._prescribed = problem.prescribed_dofs  # mass 0: the kernel leaves their velocity
         self._minv = np.ascontiguousarray(problem.inverse_mass.array_r[::d])
         body, body_mass = problem.free_bodies
         self.sums = np.zeros(MOMENTA + (len(body_mass) + 1) * d if len(body_mass) else MOMENTA)
@@ -152,6 +155,12 @@ class StepState:
         ``advance``; then v_prev, v_next and z^n, z^{n+1} swap roles."""
         z_old, z_new = self._z
         p = self._p
+        if len(self._prescribed):  # their work over the step, -I_p . v_p^{n+1/2} (memm.py)
+            q = self._prescribed
+            force_integral = -0.5 * self.dt**2 * (z_old.array_r[q] + z_new.array_r[q])
+            if impulse is not None:
+                force_integral += impulse.array_r[q]
+            self.sums[LOAD_POWER] -= self.v_next.array_r[q] @ force_integral
         lib.dem_memm_update(len(self._mass), self.problem.d, self.dt, 0.5 * self.dt**2, p[id(z_old)], p[id(z_new)],
                             p[id(impulse)], self._p_mass, self._p_minv, p[id(self.u)], p[id(self.v_next)],
                             p[id(self.v_prev)], self._p_body_force, 1 if advance else 0, self._p_body,

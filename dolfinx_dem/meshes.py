@@ -7,7 +7,8 @@ Every function returns ``(mesh, cell_tags, facet_tags)`` (``read_mesh_named`` ad
   z=min, z=max (constants ``XMIN`` ... ``ZMAX``).
 * ``create_disc``, ``create_discs``: cell tag and boundary facet tag = 1-based disc number (the
   body tag). The discs are separate connected bodies that share no vertex; ``create_discs`` can
-  add a frame around them (the billiard table), see its docstring.
+  add rectangles (tags after the discs') and a frame around them (the billiard table), see its
+  docstring.
 * ``read_mesh``, ``read_mesh_named``: whatever tags the file holds (see the docstrings), and
   the names of the facet tags (a gmsh file's physical-group names).
 
@@ -151,17 +152,22 @@ def _mesh_from_gmsh(comm: MPI.Comm, build: Callable[[], int]):
 
 
 def create_discs(comm: MPI.Comm, discs: Sequence[tuple[Sequence[float], float]], h: float,
-                 frame: tuple[Sequence[float], Sequence[float], float] | None = None):
-    """Separate discs, optionally inside a rectangular frame, meshed with triangles of size ~h (m).
+                 frame: tuple[Sequence[float], Sequence[float], float] | None = None,
+                 rectangles: Sequence[Sequence[float]] = ()):
+    """Separate discs and rectangles, optionally inside a rectangular frame, meshed with triangles
+    of size ~h (m).
 
     ``discs`` is a sequence of ``(centre (2,), radius)``; discs may touch but not overlap. Disc
-    ``i`` (1-based) has cell tag ``i`` and boundary facet tag ``i``. ``frame = (p0, p1, width)``
-    adds the frame [p0 - width, p1 + width] minus the open rectangle (p0, p1) (the billiard table
-    of paper §5.4): cell tag ``n + 1``, inner boundary tag ``n + 1``, outer boundary tag ``n + 2``
-    for n discs. The discs must lie inside (p0, p1). No two bodies share a vertex.
+    ``i`` (1-based) has cell tag ``i`` and boundary facet tag ``i``. ``rectangles`` is a sequence
+    of ``[x0, y0, x1, y1]`` (x0 < x1, y0 < y1), which must not overlap the discs or each other:
+    rectangle ``j`` (1-based) has cell and boundary facet tag ``n + j`` for n discs (e.g. a block
+    under an indenter). ``frame = (p0, p1, width)`` adds the frame [p0 - width, p1 + width] minus
+    the open rectangle (p0, p1) (the billiard table of paper §5.4): cell tag ``m + 1``, inner
+    boundary tag ``m + 1``, outer boundary tag ``m + 2`` for m discs and rectangles. The discs
+    must lie inside (p0, p1). No two bodies share a vertex.
     """
-    if len(discs) == 0:
-        raise ValueError("discs must hold at least one (centre, radius) pair")
+    if len(discs) == 0 and len(rectangles) == 0:
+        raise ValueError("discs must hold at least one (centre, radius) pair (or give rectangles)")
     centres, radii = [], []
     for i, disc in enumerate(discs, start=1):
         if len(disc) != 2:
@@ -181,6 +187,18 @@ def create_discs(comm: MPI.Comm, discs: Sequence[tuple[Sequence[float], float]],
             gap = np.linalg.norm(centres[i] - centres[j]) - radii[i] - radii[j]
             if gap < -1e-12 * (radii[i] + radii[j]):
                 raise ValueError(f"discs {j + 1} and {i + 1} overlap (gap {gap:g} m)")
+    boxes = []
+    for j, rect in enumerate(rectangles, start=1):
+        r = np.asarray(rect, dtype=np.float64).reshape(-1)
+        if r.shape != (4,) or not np.all(np.isfinite(r)) or r[2] <= r[0] or r[3] <= r[1]:
+            raise ValueError(f"rectangle {j} must be [x0, y0, x1, y1] with x0 < x1 and y0 < y1, got {rect!r}")
+        for i, (c, radius) in enumerate(zip(centres, radii), start=1):
+            if np.linalg.norm(c - np.clip(c, r[:2], r[2:])) < radius * (1 - 1e-12):
+                raise ValueError(f"rectangle {j} overlaps disc {i}")
+        for k, b in enumerate(boxes, start=1):
+            if np.all(np.minimum(r[2:], b[2:]) > np.maximum(r[:2], b[:2])):
+                raise ValueError(f"rectangles {k} and {j} overlap")
+        boxes.append(r)
     if frame is not None:
         if len(frame) != 3:
             raise ValueError(f"frame must be (p0, p1, width), got {frame!r}")
@@ -195,9 +213,8 @@ def create_discs(comm: MPI.Comm, discs: Sequence[tuple[Sequence[float], float]],
 
     def build() -> int:
         gmsh.model.add("discs")
-        surfaces = [
-            gmsh.model.occ.addDisk(c[0], c[1], 0.0, r, r) for c, r in zip(centres, radii)
-        ]
+        surfaces = [gmsh.model.occ.addDisk(c[0], c[1], 0.0, r, r) for c, r in zip(centres, radii)]
+        surfaces += [gmsh.model.occ.addRectangle(b[0], b[1], 0.0, b[2] - b[0], b[3] - b[1]) for b in boxes]
         if frame is not None:
             outer = gmsh.model.occ.addRectangle(p0[0] - width, p0[1] - width, 0.0,
                                                 p1[0] - p0[0] + 2 * width, p1[1] - p0[1] + 2 * width)

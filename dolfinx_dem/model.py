@@ -16,7 +16,7 @@ from mpi4py import MPI
 
 from dolfinx_dem import _compat, meshes, scenes
 from dolfinx_dem.contact import HalfSpace
-from dolfinx_dem.discretisation import DEMDiscretisation, DirichletBC, Traction
+from dolfinx_dem.discretisation import DEMDiscretisation, DirichletBC, PrescribedBody, Traction
 from dolfinx_dem.material import ElasticMaterial
 
 SERIES_COLUMNS = ("t", "kinetic", "elastic", "stabilisation", "external", "pseudo_energy")
@@ -30,7 +30,7 @@ def create_mesh(comm: MPI.Comm, spec: Mapping):
     for discs and XDMF files."""
     kind = spec["type"]
     required = {"interval": ("x0", "x1", "n"), "rectangle": ("p0", "p1", "n"), "box": ("p0", "p1", "n"),
-                "disc": ("centre", "radius", "h"), "discs": ("discs", "h"), "file": ("path",)}[kind]
+                "disc": ("centre", "radius", "h"), "discs": ("h",), "file": ("path",)}[kind]
     for key in required:
         if key not in spec:
             raise scenes.SceneError(f"scene key 'mesh.{key}' is missing for a mesh of type {kind!r}")
@@ -48,7 +48,8 @@ def create_mesh(comm: MPI.Comm, spec: Mapping):
             raise scenes.SceneError("scene keys 'mesh.frame' and 'mesh.frame_width' go together")
         frame = (spec["frame"][:2], spec["frame"][2:], spec["frame_width"]) if "frame" in spec else None
         try:
-            mesh, cell_tags, tags = meshes.create_discs(comm, [(c[:2], c[2]) for c in spec["discs"]], spec["h"], frame)
+            mesh, cell_tags, tags = meshes.create_discs(comm, [(c[:2], c[2]) for c in spec.get("discs", [])], spec["h"],
+                                                        frame, spec.get("rectangles", []))
         except ValueError as err:
             raise scenes.SceneError(f"scene table 'mesh': {err}") from None
     else:
@@ -96,11 +97,17 @@ def build(scene: Mapping, comm: MPI.Comm = MPI.COMM_WORLD) -> DEMDiscretisation:
     mesh, cell_tags, tags, names = create_mesh(comm, scene["mesh"])
     scene = scenes.validate(scene, mesh.topology.dim)
     material = scenes.materials(scene)
-    if isinstance(material, ElasticMaterial):
+    d = mesh.topology.dim
+    prescribed = [PrescribedBody(b["tag"], b.get("velocity"), None if "velocity" in b else (
+        lambda t, e=b["displacement"], key=f"prescribed[{i}].displacement":
+        scenes.evaluate_field(e, np.zeros((d, 1)), t, key)[:, 0]), b.get("name"))
+        for i, b in enumerate(scene.get("prescribed", []))]
+    for key in ("materials", "prescribed"):
+        if key in scene and cell_tags is None:
+            raise scenes.SceneError(f"scene key '{key}' selects cells by tag, and this mesh has no cell tags (use "
+                                    "a mesh of type 'discs' or a mesh file with cell tags)")
+    if isinstance(material, ElasticMaterial) and not prescribed:
         cell_tags = None
-    elif cell_tags is None:
-        raise scenes.SceneError("scene key 'materials' selects cells by tag, and this mesh has no cell tags (use "
-                                "a mesh of type 'discs' or a mesh file with cell tags)")
     def data(section, i, bc):
         value = bc.get("value", [0.0] * mesh.topology.dim)
         field = (lambda x, t, v=value, key=f"{section}[{i}].value": scenes.evaluate_field(v, x, t, key)) \
@@ -116,7 +123,7 @@ def build(scene: Mapping, comm: MPI.Comm = MPI.COMM_WORLD) -> DEMDiscretisation:
     if "gravity" in loads:
         body_force = [material.rho * g for g in loads["gravity"]]  # one material (scenes.materials)
     scheme = scene["method"].split("-")[1]
-    dem = DEMDiscretisation(mesh, material, scheme, dirichlet, body_force, tractions, cell_tags)
+    dem = DEMDiscretisation(mesh, material, scheme, dirichlet, body_force, tractions, cell_tags, prescribed)
     obstacles = [HalfSpace(ob["point"], ob["normal"],
                            _boundary_facets(mesh, tags, names, ob["boundary"], f"obstacles[{k}].boundary"),
                            ob.get("tolerance", 0.0)) for k, ob in enumerate(scene.get("obstacles", []))]
@@ -134,6 +141,27 @@ def reaction_columns(dem: DEMDiscretisation) -> tuple[str, ...]:
     (``DEMDiscretisation.reactions``), i the condition's ``name`` or its index."""
     return tuple(f"reaction_{i if bc.name is None else bc.name}_{'xyz'[k]}"
                  for i, bc in enumerate(dem.dirichlet_conditions) for k in range(dem.d))
+
+
+def prescribed_columns(dem: DEMDiscretisation) -> tuple[str, ...]:
+    """Series columns of the prescribed bodies (``DEMDiscretisation.prescribed_values``): for
+    each, named by its ``name`` or else its number after the Dirichlet conditions (whose
+    reactions come first), its reaction ``reaction_<name>_<x|y>`` (the force it exerts on the
+    other bodies) and its translation ``prescribed_<name>_displacement_<x|y>``: together a
+    force-indentation curve."""
+    first = len(dem.dirichlet_conditions)
+    names = [first + i if body.name is None else body.name for i, body in enumerate(dem.prescribed)]
+    xyz = "xyz"[: dem.d]
+    return tuple(f"reaction_{n}_{c}" for n in names for c in xyz) + tuple(
+        f"prescribed_{n}_displacement_{c}" for n in names for c in xyz)
+
+
+def prescribed_values(dem: DEMDiscretisation, u, t: float) -> np.ndarray:
+    """The values of ``prescribed_columns`` (collective)."""
+    if not dem.prescribed:
+        return np.empty(0)
+    values = dem.prescribed_values(u, t)
+    return np.concatenate([values[:, 0].ravel(), values[:, 1].ravel()])
 
 
 def contact_columns(dem: DEMDiscretisation) -> tuple[str, ...]:
@@ -197,7 +225,7 @@ class Probes:
         self.names = [p["name"] for p in specs]
         if len(set(self.names)) != len(self.names):
             raise scenes.SceneError(f"probe names must be unique: {self.names}")
-        columns = SERIES_COLUMNS + contact_columns(dem)
+        columns = SERIES_COLUMNS + reaction_columns(dem) + prescribed_columns(dem) + contact_columns(dem)
         clash = [name for name in self.names if name in columns]
         if clash:
             raise scenes.SceneError(f"probe names {clash} are series columns of this scene; the columns: {columns}")

@@ -925,10 +925,11 @@ def _check_bodies_do_not_overlap(dem):
                          f"lies inside body {b}")
 
 
-def _check_bodies_share_no_vertex(dem):
+def _check_bodies_share_no_vertex(dem, bodies=None):
     """Separate bodies (connected through facets) must not share a vertex: contact between them
-    would be undefined at the shared point. The boundary vertices of the owned cells meet at the
-    process their coordinates hash to. Collective."""
+    would be undefined at the shared point (``bodies``: only the vertices of these bodies). The
+    boundary vertices of the owned cells meet at the process their coordinates hash to.
+    Collective."""
     geom, d, comm = dem.geometry, dem.d, dem.comm
     bf = np.intersect1d(geom.boundary_facets, geom.facets_of_layers(0))
     cells, local = geom.facet_cells[bf, 0], geom.facet_local[bf, 0]
@@ -945,6 +946,8 @@ def _check_bodies_share_no_vertex(dem):
     received = comm.alltoall([rows[home == q] for q in range(comm.size)])
     rows = np.unique(np.concatenate(received), axis=0)
     same = np.all(rows[1:, :d] == rows[:-1, :d], axis=1)
+    if bodies is not None:
+        same &= np.isin(rows[1:, d], bodies) | np.isin(rows[:-1, d], bodies)
     point = rows[1:][same][0, :d].tolist() if same.any() else None
     shared = [p for p in comm.allgather(point) if p is not None]
     if shared:

@@ -92,6 +92,7 @@ def plot_cell_field(
     title: str,
     scale: float = 1.0,
     obstacles: Sequence[tuple[Sequence[float], Sequence[float]]] = (),
+    rigid: np.ndarray | None = None,
 ) -> str:
     """Picture of the mesh, deformed by ``scale * displacement``, coloured by a cell field.
 
@@ -109,6 +110,8 @@ def plot_cell_field(
     scale : displacement magnification (dimensionless).
     obstacles : rigid half-spaces {x : (x - point) . normal < 0} as (point, normal) pairs of
         ``gdim`` numbers, drawn across the view.
+    rigid : (n_owned_cells,) booleans: cells of rigid (prescribed) bodies, drawn light grey
+        without the field's colour (their stress means nothing), or None.
 
     Rows follow the owned DG0 dofs, i.e. dolfinx_dem's cell numbering: for DG0 Functions ``u``
     (vector) and ``s`` (scalar) pass ``u.x.array[:n * gdim].reshape(n, gdim)`` and
@@ -122,6 +125,8 @@ def plot_cell_field(
     obstacles = _check_obstacles(obstacles, mesh.geometry.dim)
     if too_large(mesh):
         return None
+    if rigid is not None:
+        values = np.where(rigid, np.nan, values)  # drawn in _show's nan_color
     grid = _grid(mesh, displacement, values, title, scale)
     if grid is None:
         return str(filename)
@@ -257,10 +262,12 @@ def _draw_bar(figure, x_cells: np.ndarray, position: np.ndarray, u: np.ndarray, 
 
 def animate_solution(xdmf: str | pathlib.Path, filename: str | pathlib.Path, field: str, title: str,
                      scale: float = 1.0,
-                     obstacles: Sequence[tuple[Sequence[float], Sequence[float]]] = ()) -> int:
+                     obstacles: Sequence[tuple[Sequence[float], Sequence[float]]] = (),
+                     rigid_bodies: Sequence[int] = ()) -> int:
     """An animated GIF of the cell field ``field`` of a ``solution.xdmf`` (``io.SolutionWriter``)
     on the mesh deformed by ``scale`` times its ``displacement``, one frame per output time, with
-    the ``obstacles`` of ``plot_cell_field``.
+    the ``obstacles`` of ``plot_cell_field``; the cells whose ``body`` field is in
+    ``rigid_bodies`` light grey, as ``plot_cell_field``'s ``rigid`` cells.
 
     Serial: VTK reads the file (so a resumed run, whose output times refer to several meshes,
     animates as one). The points move by the mean displacement of the cells around them, as in
@@ -280,6 +287,8 @@ def animate_solution(xdmf: str | pathlib.Path, filename: str | pathlib.Path, fie
         u = grid.cell_data_to_point_data().point_data["u"].reshape(grid.n_points, -1)  # 1D: one component
         grid.points[:, : u.shape[1]] += scale * u
         grid.cell_data[title] = grid.cell_data[field]
+        if len(rigid_bodies):
+            grid.cell_data[title][np.isin(blocks["body"].cell_data["body"], rigid_bodies)] = np.nan
         flat = 2 if np.ptp(grid.points[:, 2]) == 0 else 3
         if k == 0:
             obstacles = _check_obstacles(obstacles, np.flatnonzero(np.ptp(grid.points, axis=0) > 0).max(initial=0) + 1
@@ -368,7 +377,7 @@ def _show(plotter, grid, title: str, gdim: int, obstacles=(), name: str | None =
     the obstacles, and draw the obstacles."""
     plotter.subplot(0, 0)
     plotter.set_background("white")
-    style = {"scalars": title, "cmap": "viridis", "name": name, "show_scalar_bar": False}
+    style = {"scalars": title, "cmap": "viridis", "name": name, "show_scalar_bar": False, "nan_color": "lightgrey"}
     num_cells = grid.n_cells
     if grid.get_cell(0).type == pyvista.CellType.LINE:
         actor = plotter.add_mesh(grid, line_width=10, **style)

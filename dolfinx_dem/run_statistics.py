@@ -46,7 +46,8 @@ class PairContactStatistics:
         v = 0.5 * (stepper.v_prev.array_r + stepper.v_next.array_r).reshape(-1, dem.d)
         self.p_scale = dem.comm.allreduce(float(np.abs(m * v).sum()), op=MPI.SUM)
         self.momentum_change = 0.0
-        self.free = dem.comm.allreduce(len(dem.reconstruction.dirichlet_facets), op=MPI.SUM) == 0
+        # momentum is conserved without Dirichlet conditions and prescribed bodies (their impulse)
+        self.free = dem.comm.allreduce(len(dem.reconstruction.dirichlet_facets), op=MPI.SUM) == 0 and not dem.prescribed
         self.dem = dem
         self.previous = None  # the displacement of the previous step, until the first contact
 

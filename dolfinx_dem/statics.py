@@ -191,6 +191,9 @@ def minimise_energy(
         raise ValueError(f"fixed_mean components must be in [0, {d}), got {list(fixed_mean)}")
     if not 0 < rtol < 1:
         raise ValueError(f"rtol must lie in (0, 1), got {rtol}")
+    if dem.prescribed:
+        raise NotImplementedError("minimise_energy does not handle prescribed bodies (a translation imposed "
+                                  "in time): use a dynamic run (MEMM)")
     if dem.pair_contact is not None:
         # Its energy is not piecewise quadratic (the overlaps make it quartic in u), so the
         # active-set Newton iteration below does not apply; ignoring it would be a wrong answer.

@@ -112,6 +112,29 @@ def test_two_touching_discs_are_separate_bodies():
     assert counts[1] == pytest.approx(2 * math.pi / 0.2, rel=0.1)
 
 
+def test_a_disc_over_a_rectangle_are_separate_bodies_tagged_in_order():
+    """``rectangles`` after the discs: tags 1 (disc) and 2 (the block), no shared vertex
+    although the disc touches the block, the block's area and its 4 sides' facets."""
+    mesh, cell_tags, facet_tags = meshes.create_discs(MPI.COMM_WORLD, [((0.0, 0.2), 0.2)], 0.05,
+                                                      rectangles=[[-0.5, -0.5, 0.5, 0.0]])
+    area, nodes, tags = disc_area_and_vertex_tags(mesh, cell_tags)
+    assert area == pytest.approx(math.pi * 0.04 + 0.5, rel=0.01)
+    assert set(tags.tolist()) == {1, 2}
+    unique, inverse = np.unique(nodes, return_inverse=True)
+    lowest, highest = np.full(unique.shape, 3), np.zeros(unique.shape, dtype=int)
+    np.minimum.at(lowest, inverse, tags)
+    np.maximum.at(highest, inverse, tags)
+    assert np.all(lowest == highest)  # no node has cells of both bodies
+    counts = owned_tag_counts(mesh, facet_tags)
+    assert set(counts) == {1, 2} and counts[2] == pytest.approx(3.0 / 0.05, rel=0.1)
+    with pytest.raises(ValueError, match="rectangle 1 overlaps disc 1"):
+        meshes.create_discs(MPI.COMM_WORLD, [((0.0, 0.1), 0.2)], 0.05, rectangles=[[-0.5, -0.5, 0.5, 0.0]])
+    with pytest.raises(ValueError, match="rectangles 1 and 2 overlap"):
+        meshes.create_discs(MPI.COMM_WORLD, [], 0.05, rectangles=[[0, 0, 1, 1], [0.5, 0.5, 2, 2]])
+    with pytest.raises(ValueError, match="x0 < x1"):
+        meshes.create_discs(MPI.COMM_WORLD, [], 0.05, rectangles=[[1, 0, 0, 1]])
+
+
 def test_disc_errors():
     comm = MPI.COMM_WORLD
     with pytest.raises(ValueError, match="radius must be > 0"):

@@ -94,6 +94,7 @@ SCHEMA = {
         "h": lambda k, v, d: _number(k, v, positive=True),
         "path": lambda k, v, d: _string(k, v),
         "discs": lambda k, v, d: [_vector(f"{k}[{i}]", x, 3) for i, x in enumerate(_list(k, v))],
+        "rectangles": lambda k, v, d: [_vector(f"{k}[{i}]", x, 4) for i, x in enumerate(_list(k, v))],
         "frame": lambda k, v, d: _vector(k, v, 4),
         "frame_width": lambda k, v, d: _number(k, v, positive=True),
     },
@@ -151,6 +152,12 @@ SCHEMA = {
         "self_contact": lambda k, v, d: _bool(k, v),
         "tolerance": lambda k, v, d: _number(k, v, nonnegative=True),
     },
+    "prescribed": [{
+        "tag": lambda k, v, d: _integer(k, v, minimum=0),
+        "velocity": lambda k, v, d: _vector(k, v, d),
+        "displacement": lambda k, v, d: _translation(k, v, d),
+        "name": lambda k, v, d: _name(k, v),
+    }],
     "probes": [{
         "name": lambda k, v, d: _string(k, v),
         "point": lambda k, v, d: _vector(k, v, d),
@@ -173,7 +180,7 @@ SCHEMA = {
 REQUIRED = {"mesh": ("type",), "material": ("E", "nu", "rho"), "contact": ("boundary",)}
 #: Required keys of the entries of array-of-tables sections.
 REQUIRED_ITEMS = {"materials": ("tag", "E", "nu", "rho"), "dirichlet": ("boundary",), "tractions": ("boundary", "value"),
-                  "probes": ("name", "point", "component"),
+                  "probes": ("name", "point", "component"), "prescribed": ("tag",),
                   "obstacles": ("point", "normal", "boundary")}
 #: Facet tags of the generated interval/rectangle/box meshes, by boundary name.
 SIDES = {"xmin": 1, "xmax": 2, "ymin": 3, "ymax": 4, "zmin": 5, "zmax": 6,
@@ -193,6 +200,22 @@ def _components(key, v, d):
         raise SceneError(f"scene key '{key}' must be a nonempty list of distinct components in [0, {(d or 3) - 1}] "
                          f"(0 = x, 1 = y, 2 = z), got {v!r}")
     return items
+
+
+def _translation(key, v, d):
+    """d expression strings in t (a rigid translation U(t))."""
+    if not (isinstance(v, list) and v and all(isinstance(e, str) for e in v) and len(v) == (d or len(v))):
+        raise SceneError(f"scene key '{key}' must be a list of {d or 'd'} expressions in t (strings), got {v!r}")
+    for i, e in enumerate(v):
+        try:
+            names = compile(e, f"<{key}[{i}]>", "eval").co_names
+        except SyntaxError as err:
+            raise SceneError(f"scene key '{key}[{i}]' is not a valid expression: {err.msg}") from None
+        unknown = set(names) - set(_NAMESPACE) - {"t"}
+        if unknown:
+            raise SceneError(f"scene key '{key}[{i}]' uses unknown names {sorted(unknown)} "
+                             f"(allowed: {', '.join(sorted(set(_NAMESPACE) | {'t'}))})")
+    return v
 
 
 def _name(key, v):
@@ -271,7 +294,17 @@ def validate(scene: Mapping, mesh_dimension: int | None = None) -> dict:
     names = [bc["name"] for bc in scene.get("dirichlet", []) if "name" in bc]
     if len(set(names)) != len(names):
         raise SceneError(f"scene key 'dirichlet[].name': names must be unique, got {names}")
+    for i, body in enumerate(scene.get("prescribed", [])):
+        if ("velocity" in body) == ("displacement" in body):
+            raise SceneError(f"scene table 'prescribed[{i}]' needs exactly one of 'velocity' and 'displacement'")
+    reactions = [str(bc.get("name", i))
+                 for i, bc in enumerate(scene.get("dirichlet", []) + scene.get("prescribed", []))]
+    if len(set(reactions)) != len(reactions):
+        raise SceneError(f"scene keys 'dirichlet[].name' and 'prescribed[].name' name the reaction columns and must "
+                         f"be unique together, got {reactions} (unnamed: the number in the list of both)")
     if "statics" in scene:
+        if "prescribed" in scene:
+            raise SceneError("prescribed bodies ('prescribed' tables) are implemented for dynamics only")
         for section in ("time", "initial"):
             if section in scene:
                 raise SceneError(f"a static scene ('statics' table) takes no '{section}' table")
