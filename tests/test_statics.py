@@ -228,6 +228,35 @@ def test_statics_refuses_obstacles_with_contact_between_bodies():
         minimise_energy(dem, fixed_mean=(0,))
 
 
+STACKED = {
+    "name": "stacked", "method": "dem-B",
+    "mesh": {"type": "discs", "discs": [[0.0, 0.100001, 0.1], [0.0, -0.1, 0.1]], "h": 0.05},
+    "material": {"E": 1e4, "nu": 0.25, "rho": 1.0},
+    "loads": {"body_force": [0.0, -100.0]},
+    "dirichlet": [{"boundary": "y <= -0.17", "value": [0.0, 0.0]}],
+    "contact": {"boundary": ["abs(y) <= 0.05"]},
+    "statics": {"fixed_mean": [0], "fixed_rotation": True},
+}
+
+
+def test_static_scene_with_contact_between_bodies(tempdir):
+    """A static scene with a [contact] table: a disc resting on another one clamped at its
+    bottom. The run completes; the summary's contact force (pairs in contact plus the pinned
+    pairs' multipliers) balances the upper disc's load; obstacles with contact are refused."""
+    summary = simulation.run(scenes.validate(STACKED), pathlib.Path(tempdir) / "stacked", MPI.COMM_WORLD)
+    assert summary["status"] == "completed" and summary["gradient_norm_reduction"] < 1e-10
+    dem = simulation.build(scenes.validate(STACKED))
+    geom = dem.geometry
+    upper = geom.cell_bodies[: dem.n_owned][geom.cell_centres[: dem.n_owned, 1] > 0]
+    upper = MPI.COMM_WORLD.allreduce(int(upper.max(initial=0)), op=MPI.MAX)
+    area = MPI.COMM_WORLD.allreduce(geom.cell_volumes[: dem.n_owned][geom.cell_bodies[: dem.n_owned] == upper].sum(),
+                                    op=MPI.SUM)
+    force = summary["contact_forces"]["0_1"][1]
+    assert abs(force) == pytest.approx(100.0 * area, rel=1e-8)
+    with pytest.raises(scenes.SceneError, match="obstacles or contact between bodies"):
+        scenes.validate(STACKED | {"obstacles": [{"point": [0.0, -0.3], "normal": [0.0, 1.0], "boundary": "y < 0"}]})
+
+
 def test_static_scene_rejects_time_and_fem_needs_statics():
     with pytest.raises(scenes.SceneError, match="takes no 'time' table"):
         scenes.load("hertz", {"time": {"end": 1.0, "dt": 0.1}})
