@@ -41,8 +41,29 @@ there. The active-set iteration above, with the kink treatment, is kept for both
 
 Rigid translations that neither a Dirichlet condition nor contact fixes (the horizontal motion of
 a disc on a frictionless plane) are removed by holding the mass-weighted mean displacement in
-those components at zero (and, for a disc that could roll, the mean rotation): the Krylov solver
-(CG, GAMG) works in the subspace of these linear constraints, where H_A is positive definite.
+those components at zero (and, for a disc that could roll, the mean rotation), for each body
+without a Dirichlet condition: the Krylov solver (CG, GAMG) works in the subspace of these
+linear constraints, where H_A is positive definite.
+
+Contact between bodies (``pair_contact.PairContact``, paper §3.4.3, eq. (30)-(34)). The
+potential is that of the dynamics, V = 1/2 |a + delta_a|^2 + external, delta_a = sum_p c_p z_p,
+c_p = w_p g_p^-. On a piece A (the pairs in contact and the overlap configuration fixed) g_p and
+w_p are affine, c_p = w_p g_p is quadratic and V quartic, so the iteration is a damped Newton
+method on the pieces rather than one solve per piece:
+
+    H d = F_A(u)   with H = J^T J + sum_p mu_p (grad w_p grad g_p^T + grad g_p grad w_p^T),
+                   J = Q + sum_p z_p grad c_p^T, mu_p = z_p . (a + delta_a)   (exact Hessian),
+    or H = J^T J (Gauss-Newton part, positive semi-definite) when CG breaks down on the exact
+    one or its step is not a descent direction; u += alpha d, alpha by backtracking on V;
+    A = {g_p(u) < 0, w_p > 0}, until the gradient has fallen by ``gradient_rtol``.
+
+Active sets are sorted arrays of pair keys (the pairs' global facet numbers): the Verlet list is
+rebuilt at any trial point where facets moved more than skin/2, and no step may move a facet by
+more than skin/2 (bodies must not pass through each other, where V is unbounded below). The
+kinks at g_p = 0 get the treatment above, pairs in place of facets: pairs that keep switching
+(the set of pairs in contact returns to an earlier one), or against whose switch the line search
+stalls, are pinned on g_p = 0 by multipliers, with the same kink conditions (-mu_p between 0 and
+the force r_p = -w_p z_p . (a + delta_a) the pair would carry in contact).
 """
 
 from __future__ import annotations
