@@ -154,9 +154,13 @@ def _hessian(dem, active):
 
 
 def _project(x: PETSc.Vec, normals) -> None:
-    """x <- P x, P the orthogonal projector onto {w . x = 0 for the orthonormal normals w}."""
-    for w in normals:
-        x.axpy(-x.dot(w), w)
+    """x <- P x, P the orthogonal projector onto {w . x = 0 for the orthonormal normals w}: one
+    reduction for all the normals (CG applies P twice per iteration; in parallel the latency of
+    the reductions dominated)."""
+    if normals:
+        dots = np.array([w.array_r @ x.array_r for w in normals])
+        x.getComm().tompi4py().Allreduce(MPI.IN_PLACE, dots, op=MPI.SUM)
+        x.maxpy(-dots, normals)
 
 
 class _ConstrainedOperator:
@@ -580,5 +584,6 @@ def _newton_step(dem, directions, linear, pc, up, active, pinned, exact, rhs, st
 
 
 def _projected(vec: PETSc.Vec, normals) -> PETSc.Vec:
+    """``vec`` after ``_project``."""
     _project(vec, normals)
     return vec
