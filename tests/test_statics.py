@@ -218,6 +218,16 @@ def test_pair_contact_hessian_is_the_derivative_of_the_force():
         assert plus.norm() < 1e-6 * 2 * Hv.norm()
 
 
+def test_pair_statics_ends_with_an_error_when_it_does_not_converge():
+    """Not converged in the iterations allowed: a StaticsError naming the gradient reduction
+    reached, never a result."""
+    dem = disc_on_block(MPI.COMM_WORLD, 0.04)
+    with pytest.raises(StaticsError, match=r"no convergence in 2 iterations \(gradient reduction"):
+        minimise_energy(dem, fixed_mean=(0,), fixed_rotation=True, max_iterations=2)
+    with pytest.raises(ValueError, match="gradient_rtol"):
+        minimise_energy(dem, gradient_rtol=0.0)
+
+
 def test_statics_refuses_obstacles_with_contact_between_bodies():
     mesh, _, _ = meshes.create_discs(MPI.COMM_WORLD, [((0.0, 0.1), 0.1), ((0.25, 0.1), 0.1)], 0.05)
     dem = DEMDiscretisation(mesh, ElasticMaterial(E=100.0, nu=0.2, rho=1.0), "B", body_force=[0.0, -1.0])
