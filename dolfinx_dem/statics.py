@@ -315,9 +315,6 @@ def minimise_energy(
     def potential(vec):
         return dem.energies(vec, 0.0)["potential"]
 
-    def solve(b, x, iteration):
-        linear.solve(b, x, iteration)
-
     def pinned_values(values: np.ndarray) -> np.ndarray:
         """Per-facet values of the own facets -> the pinned facets' values, in ``facets`` order."""
         return np.concatenate(comm.allgather(values[pinned])) if facets else np.zeros(0)
@@ -332,7 +329,7 @@ def minimise_energy(
             c.add_force(u, rhs, active)
         _project(rhs, directions)
         linear.set_operator(H, directions)
-        solve(rhs, step, iteration)
+        linear.solve(rhs, step, iteration)
         if c is None:
             step.copy(u)
             break
@@ -341,7 +338,7 @@ def minimise_energy(
             gradients = [_gap_gradient(dem, f, directions) for f in facets]
             Z = [dem.create_vector() for _ in facets]
             for b, z in zip(gradients, Z):
-                solve(b, z, iteration)
+                linear.solve(b, z, iteration)
             own = np.flatnonzero(pinned)
             # patch values are gathered collectively: once per vector on every process
             zp, sp = [c.patch_values(z) for z in Z], c.patch_values(step)
