@@ -269,8 +269,9 @@ def minimise_energy(
     max_iterations : active-set (Newton) iterations allowed.
     gradient_rtol : contact between bodies only: the iteration stops when the gradient norm of V
         has fallen by this factor (its pieces are quartic: Newton takes several steps).
-    curvature : contact between bodies only: Newton with the exact Hessian of the piece rather
-        than its Gauss-Newton part (see the module docstring).
+    curvature : contact between bodies only: try the exact Hessian of the piece first, falling
+        back to its Gauss-Newton part for an iteration where CG breaks down or the step is not a
+        descent direction (default); False: the Gauss-Newton part always (module docstring).
     """
     d = dem.d
     if any(not (0 <= i < d) for i in fixed_mean):
