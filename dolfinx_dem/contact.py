@@ -59,10 +59,12 @@ class ContactModel(Protocol):
     valid until the next ``prepare``, which returns those of the state it prepares for. Each
     process owns the candidate facets of its owned cells (the first ``num_own`` of ``cells``).
 
-    Three groups: the dynamics (``prepare`` ... ``force_integral``), the statics of a piecewise
-    quadratic potential (``own_gaps`` ... ``gap_gradient_dot``: rigid obstacles; contact between
-    bodies raises ``NotImplementedError`` there, its energy is quartic), and the checkpoint
-    (``checkpoint_state``, ``restore_state``)."""
+    Two groups: the dynamics (``prepare`` ... ``force_integral``) and the checkpoint
+    (``checkpoint_state``, ``restore_state``). Statics (statics.py) also uses each model's own
+    active-set interface, which differs with the shape of its potential: ``RigidContact``'s
+    (``own_gaps`` ... ``gap_gradient_dot``, active sets of own facets; piecewise quadratic) and
+    ``PairContact``'s (``touching_pairs``, ``add_hessian``, active sets of pair keys; quartic on
+    each piece). ``active`` in ``force_correction`` and ``add_force`` is in the model's own form."""
 
     cells: np.ndarray  # local cells of the candidate facets (own first), (n_facets,)
     num_own: int  # candidate facets of owned cells
@@ -78,13 +80,13 @@ class ContactModel(Protocol):
     def force_correction(self, up: np.ndarray, active: np.ndarray | None = None) -> np.ndarray:
         """This process's part of F - F_free at the patch dofs (the exact negative gradient of
         ``energy_correction``, summed over processes by ``add``); ``active`` imposes the
-        candidates in contact (statics), default: those with g < 0."""
+        piece of the potential (statics: the candidates in contact), default: those with g < 0."""
 
     def add(self, correction: np.ndarray, out: PETSc.Vec, scale: float = 1.0) -> None:
         """out += scale * correction (patch values; a reverse scatter)."""
 
     def add_force(self, u: PETSc.Vec, out: PETSc.Vec, active: np.ndarray | None = None) -> None:
-        """out += F - F_free at u; ``active`` (over the own facets) as in ``force_correction``."""
+        """out += F - F_free at u; ``active`` as in ``force_correction``."""
 
     def energy_correction(self, up: np.ndarray) -> tuple[float, float]:
         """This process's part of the (elastic, stabilisation) energy changes (sum over processes)."""
@@ -95,23 +97,6 @@ class ContactModel(Protocol):
     def force_integral(self, up: np.ndarray, vp: np.ndarray, dt: float, out: PETSc.Vec) -> int:
         """out += int_0^dt (F - F_free)(u + tau v) dtau, exactly, for the patch values up, vp
         of u and v that ``prepare`` returned; returns the evaluations."""
-
-    def own_gaps(self, u: PETSc.Vec) -> np.ndarray:
-        """Gaps g_f of the own candidate facets at u (m), affine in u."""
-
-    def reactions(self, u: PETSc.Vec, active: np.ndarray | None = None) -> np.ndarray:
-        """Normal contact force on each own facet with the set ``active`` (all candidate
-        facets of the process) in contact, default g < 0; 0 on the others."""
-
-    def add_hessian(self, H: PETSc.Mat, active: np.ndarray) -> None:
-        """H += d^2 V/du^2 - K on this process's rows for the set ``active`` in contact; H is
-        left unassembled."""
-
-    def gap_gradient(self, rank: int, k: int) -> PETSc.Vec:
-        """dg/du of own facet ``k`` of process ``rank`` as a distributed vector."""
-
-    def gap_gradient_dot(self, k: int, up: np.ndarray) -> float:
-        """dg_k/du . v for own facet ``k`` and the patch values ``up`` of v."""
 
     def checkpoint_state(self) -> dict[str, np.ndarray]:
         """The model's state that is not a function of u (e.g. the pair list) and its counters,

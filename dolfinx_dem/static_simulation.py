@@ -96,15 +96,16 @@ class StaticRun:
         scene, comm, dem = self.scene, self.comm, self.dem
         options = scene["statics"]
         result = minimise_energy(dem, options.get("fixed_mean", ()), options.get("fixed_rotation", False),
-                                 options.get("rtol", 1e-12))
+                                 options.get("rtol", 1e-12), gradient_rtol=options.get("gradient_rtol", 1e-10))
         u = result.u
         probes = self.probes
         energies = dem.energies(u, 0.0)
         reactions = dem.reactions(u, 0.0)
         columns = model.SERIES_COLUMNS + model.reaction_columns(dem) + model.contact_columns(dem) + tuple(probes.names)
+        momenta = [0.0] * dem.d if dem.pair_contact is not None else []  # at rest
         with io.SeriesWriter(comm, directory / "series.csv", columns) as series:
             series.write([0.0, 0.0, energies["elastic"], energies["stabilisation"], energies["external"],
-                          energies["potential"], *reactions.ravel(), *model.contact_values(dem, u),
+                          energies["potential"], *reactions.ravel(), *model.contact_values(dem, u), *momenta,
                           *probes.values(u, 0.0)])
         with io.SolutionWriter(comm, directory, dem.mesh) as solution:
             solution.write(0.0, {"displacement": dem.function(u, "displacement"),
@@ -127,6 +128,8 @@ class StaticRun:
             summary["reactions"] = dict(zip(model.reaction_columns(dem), reactions.ravel().tolist()))
         if dem.contact is not None:
             summary.update(_contact_summary(dem, u, result, directory / "contact_pressure.csv"))
+        if dem.pair_contact is not None:
+            summary.update(_pair_summary(dem, u, result))
         obstacles = [(ob["point"], ob["normal"]) for ob in scene.get("obstacles", [])]
         if dem.d == 1:
             plotting.plot_bar(dem.mesh, u.array_r.reshape(-1, 1), dem.stress(u, 0.0)[:, 0, 0], directory / "final.png",
@@ -207,6 +210,20 @@ def _contact_summary(dem, u, result, path: pathlib.Path) -> dict:
     summary = io.call_on_root(comm, figures)
     summary["kink_facets"] = comm.allreduce(int(result.pinned.sum()), op=MPI.SUM)
     return summary
+
+
+def _pair_summary(dem, u, result) -> dict:
+    """The contact figures of a static solution with contact between bodies: the force body j
+    exerts on body i for each pair of bodies i < j with candidate facets (the pairs in contact
+    and the multipliers of the pairs held on a contact switch, ``kink_pairs``), and the number of
+    pairs in contact. The series' ``contact_force_<i>_<j>_*`` columns are the dynamics' outputs,
+    which count a pinned pair by the sign its gap rounds to: the summary's are the ones to use."""
+    pc, comm = dem.pair_contact, dem.comm
+    forces = pc.pair_forces(pc.patch_values(u), result.contact_pairs) + pc.kink_forces(result.pinned, result.kink_forces)
+    forces = comm.allreduce(forces, op=MPI.SUM)
+    return {"contact_forces": {f"{i}_{j}": forces[k].tolist() for k, (i, j) in enumerate(pc.body_pairs)},
+            "contact_pairs": result.contact_facets, "kink_pairs": len(result.pinned),
+            "gauss_newton_steps": result.gauss_newton_steps}
 
 
 def _fem_cell_fields(u, E: float, nu: float):

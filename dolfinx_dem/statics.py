@@ -41,8 +41,29 @@ there. The active-set iteration above, with the kink treatment, is kept for both
 
 Rigid translations that neither a Dirichlet condition nor contact fixes (the horizontal motion of
 a disc on a frictionless plane) are removed by holding the mass-weighted mean displacement in
-those components at zero (and, for a disc that could roll, the mean rotation): the Krylov solver
-(CG, GAMG) works in the subspace of these linear constraints, where H_A is positive definite.
+those components at zero (and, for a disc that could roll, the mean rotation), for each body
+without a Dirichlet condition: the Krylov solver (CG, GAMG) works in the subspace of these
+linear constraints, where H_A is positive definite.
+
+Contact between bodies (``pair_contact.PairContact``, paper §3.4.3, eq. (30)-(34)). The
+potential is that of the dynamics, V = 1/2 |a + delta_a|^2 + external, delta_a = sum_p c_p z_p,
+c_p = w_p g_p^-. On a piece A (the pairs in contact and the overlap configuration fixed) g_p and
+w_p are affine, c_p = w_p g_p is quadratic and V quartic, so the iteration is a damped Newton
+method on the pieces rather than one solve per piece:
+
+    H d = F_A(u)   with H = J^T J + sum_p mu_p (grad w_p grad g_p^T + grad g_p grad w_p^T),
+                   J = Q + sum_p z_p grad c_p^T, mu_p = z_p . (a + delta_a)   (exact Hessian),
+    or H = J^T J (Gauss-Newton part, positive semi-definite) when CG breaks down on the exact
+    one or its step is not a descent direction; u += alpha d, alpha by backtracking on V;
+    A = {g_p(u) < 0, w_p > 0}, until the gradient has fallen by ``gradient_rtol``.
+
+Active sets are sorted arrays of pair keys (the pairs' global facet numbers): the Verlet list is
+rebuilt at any trial point where facets moved more than skin/2, and no step may move a facet by
+more than skin/2 (bodies must not pass through each other, where V is unbounded below). The
+kinks at g_p = 0 get the treatment above, pairs in place of facets: pairs that keep switching
+(the set of pairs in contact returns to an earlier one), or against whose switch the line search
+stalls, are pinned on g_p = 0 by multipliers, with the same kink conditions (-mu_p between 0 and
+the force r_p = -w_p z_p . (a + delta_a) the pair would carry in contact).
 """
 
 from __future__ import annotations
@@ -68,10 +89,16 @@ class StaticResult:
     gradient_norm_initial: float
     gradient_norm: float
     energy: float
-    contact_facets: int
+    contact_facets: int  # facets in contact (obstacles), or pairs in contact (between bodies), pinned ones included
     wall_time_s: float
-    pinned: np.ndarray  # own candidate facets held at g_f = 0 on a kink of V (bool, per own candidate)
-    kink_forces: np.ndarray  # contact force (N/m) of each own pinned facet, -mu_f; 0 elsewhere
+    # Obstacles: own candidate facets held at g_f = 0 on a kink of V (bool, per own candidate) and
+    # the contact force (N/m) of each, -mu_f (0 elsewhere). Contact between bodies: the sorted
+    # keys (PairContact.pair_keys) of the pairs held at g_p = 0, the same on every process, and
+    # the normal contact force of each, -mu_p.
+    pinned: np.ndarray
+    kink_forces: np.ndarray
+    gauss_newton_steps: int = 0  # contact between bodies: Newton steps taken with the Gauss-Newton H
+    contact_pairs: np.ndarray | None = None  # contact between bodies: keys of the pairs in contact (not pinned)
 
     @property
     def gradient_reduction(self) -> float:
@@ -79,25 +106,34 @@ class StaticResult:
 
 
 def _constraints(dem, components, rotation):
-    """Orthonormal normals w of the linear constraints w . u = 0: the mass-weighted mean
-    displacement in ``components`` and, if ``rotation``, the mass-weighted mean rotation
-    sum_c m_c (x_c - x_G) x u_c (2D)."""
-    d = dem.d
+    """Orthonormal normals w of the linear constraints w . u = 0, for each body (connected
+    component) without a Dirichlet condition: its mass-weighted mean displacement in
+    ``components`` and, if ``rotation``, its mass-weighted mean rotation sum_c m_c (x_c - x_G) x
+    u_c (2D). Bodies held by a Dirichlet condition get none: a constraint there would add a
+    spurious force (a body pressed on a clamped one must not share its constraints)."""
+    d, geom = dem.d, dem.geometry
+    if rotation and d != 2:
+        raise ValueError("fixed_rotation is implemented for 2D bodies")
     m = dem.mass.array_r.reshape(-1, d)
+    body = geom.cell_bodies[: dem.n_owned]
+    held = np.zeros(geom.num_bodies, dtype=np.int64)
+    held[geom.cell_bodies[geom.facet_cells[dem.reconstruction.dirichlet_facets, 0]]] = 1
+    comm = dem.comm
+    comm.Allreduce(MPI.IN_PLACE, held, op=MPI.MAX)
     normals = []
-    for i in components:
-        w = dem.create_vector()
-        w.array.reshape(-1, d)[:, i] = m[:, i]
-        normals.append(w)
-    if rotation:
-        if d != 2:
-            raise ValueError("fixed_rotation is implemented for 2D bodies")
-        xc = dem.geometry.cell_centres[: dem.n_owned]
-        mass = dem.comm.allreduce(m[:, 0].sum(), op=MPI.SUM)
-        xg = dem.comm.allreduce(m[:, 0] @ xc, op=MPI.SUM) / mass
-        w = dem.create_vector()
-        w.array.reshape(-1, d)[:] = m * np.stack([-(xc[:, 1] - xg[1]), xc[:, 0] - xg[0]], axis=1)
-        normals.append(w)
+    for b in np.flatnonzero(held == 0):
+        mine = body == b
+        for i in components:
+            w = dem.create_vector()
+            w.array.reshape(-1, d)[mine, i] = m[mine, i]
+            normals.append(w)
+        if rotation:
+            xc = geom.cell_centres[: dem.n_owned]
+            mb = np.where(mine, m[:, 0], 0.0)
+            xg = comm.allreduce(mb @ xc, op=MPI.SUM) / comm.allreduce(mb.sum(), op=MPI.SUM)
+            w = dem.create_vector()
+            w.array.reshape(-1, d)[:] = mb[:, None] * np.stack([-(xc[:, 1] - xg[1]), xc[:, 0] - xg[0]], axis=1)
+            normals.append(w)
     for k, w in enumerate(normals):  # Gram-Schmidt
         for v in normals[:k]:
             w.axpy(-w.dot(v), v)
@@ -118,9 +154,13 @@ def _hessian(dem, active):
 
 
 def _project(x: PETSc.Vec, normals) -> None:
-    """x <- P x, P the orthogonal projector onto {w . x = 0 for the orthonormal normals w}."""
-    for w in normals:
-        x.axpy(-x.dot(w), w)
+    """x <- P x, P the orthogonal projector onto {w . x = 0 for the orthonormal normals w}: one
+    reduction for all the normals (CG applies P twice per iteration; in parallel the latency of
+    the reductions dominated)."""
+    if normals:
+        dots = np.array([w.array_r @ x.array_r for w in normals])
+        x.getComm().tompi4py().Allreduce(MPI.IN_PLACE, dots, op=MPI.SUM)
+        x.maxpy(-dots, normals)
 
 
 class _ConstrainedOperator:
@@ -154,6 +194,46 @@ def _constrained(H, normals):
     return shell, P
 
 
+class _Linear:
+    """The linear solves of the minimisation: CG + GAMG on the constrained operator of H
+    (options prefix ``dolfinx_dem_statics_``); counts the iterations, and a failed solve is a
+    StaticsError."""
+
+    def __init__(self, dem, rtol: float):
+        self.ksp = ksp = PETSc.KSP().create(dem.comm)
+        ksp.setType(PETSc.KSP.Type.CG)
+        ksp.getPC().setType(PETSc.PC.Type.GAMG)
+        ksp.setTolerances(rtol=rtol, atol=0.0, max_it=10000)
+        ksp.setOptionsPrefix("dolfinx_dem_statics_")
+        ksp.setFromOptions()
+        self.iterations = 0
+
+    def set_operator(self, H, normals) -> None:
+        self.ksp.setOperators(*_constrained(H, normals))
+
+    def solve(self, b, x, iteration: int, check: bool = False) -> None:
+        """x = A^-1 b; ``check``: also fail when the true residual exceeds 1e3 rtol |b| (CG
+        preconditioned by an indefinite matrix can report convergence in its preconditioned norm
+        and be far off)."""
+        x.set(0.0)
+        self.ksp.solve(b, x)
+        self.iterations += self.ksp.getIterationNumber()
+        reason = self.ksp.getConvergedReason()
+        if check and reason >= 0:
+            r = b.duplicate()
+            self.ksp.getOperators()[0].mult(x, r)
+            r.axpy(-1.0, b)
+            if r.norm() > 1e3 * self.ksp.getTolerances()[0] * b.norm():
+                reason = -100
+        if reason < 0:
+            raise StaticsError(f"the linear solve of iteration {iteration} failed (KSP reason {reason}): a rigid "
+                               "mode may be unconstrained (missing Dirichlet condition, contact or fixed_mean "
+                               "component), or the Hessian is indefinite")
+
+    def destroy(self) -> None:
+        self.ksp.destroy()
+
+
 def _gap_gradient(dem, facet: tuple[int, int], directions) -> PETSc.Vec:
     """P grad g_f for the candidate ``facet`` = (owner rank, own index): the gradient of its gap
     projected onto the subspace of the linear constraints (collective)."""
@@ -173,18 +253,25 @@ def minimise_energy(
     fixed_rotation: bool = False,
     rtol: float = 1e-12,
     max_iterations: int = 50,
+    gradient_rtol: float = 1e-10,
+    curvature: bool = True,
 ) -> StaticResult:
     """Minimise the DEM potential energy at t = 0 (see the module docstring).
 
     Parameters
     ----------
-    dem : DEMDiscretisation, with obstacles if any; contact between bodies is rejected.
+    dem : DEMDiscretisation, with obstacles or contact between bodies (not both) if any.
     fixed_mean : displacement components whose mass-weighted mean is held at zero (e.g. (0,) for
         the horizontal translation of a body on a frictionless horizontal plane).
     fixed_rotation : hold the mass-weighted mean rotation at zero (2D): a disc on a frictionless
         plane can roll at almost no energy cost (exactly none for a true circle).
     rtol : relative residual of each linear solve (CG).
-    max_iterations : active-set iterations allowed.
+    max_iterations : active-set (Newton) iterations allowed.
+    gradient_rtol : contact between bodies only: the iteration stops when the gradient norm of V
+        has fallen by this factor (its pieces are quartic: Newton takes several steps).
+    curvature : contact between bodies only: try the exact Hessian of the piece first, falling
+        back to its Gauss-Newton part for an iteration where CG breaks down or the step is not a
+        descent direction (default); False: the Gauss-Newton part always (module docstring).
     """
     d = dem.d
     if any(not (0 <= i < d) for i in fixed_mean):
@@ -194,13 +281,12 @@ def minimise_energy(
     if dem.prescribed:
         raise NotImplementedError("minimise_energy does not handle prescribed bodies (a translation imposed "
                                   "in time): use a dynamic run (MEMM)")
-    if dem.pair_contact is not None:
-        # Its energy is not piecewise quadratic (the overlaps make it quartic in u), so the
-        # active-set Newton iteration below does not apply; ignoring it would be a wrong answer.
-        raise ValueError("minimise_energy handles rigid obstacles only, not contact between bodies "
-                         "(set_contact_boundary): use a dynamic run (MEMM) for contact between bodies")
+    if dem.pair_contact is not None and dem.contact is not None:
+        raise ValueError("minimise_energy takes rigid obstacles or contact between bodies, not both")
+    if not 0 < gradient_rtol < 1:
+        raise ValueError(f"gradient_rtol must lie in (0, 1), got {gradient_rtol}")
     comm = dem.comm
-    if comm.allreduce(len(dem.reconstruction.dirichlet_facets), op=MPI.SUM) == 0 and dem.contact is None:
+    if comm.allreduce(len(dem.reconstruction.dirichlet_facets), op=MPI.SUM) == 0 and not dem.contacts:
         raise StaticsError("the body is free: with neither a Dirichlet condition nor an obstacle its "
                            "rigid motions are unconstrained (unconstrained rigid mode)")
     start = time.perf_counter()
@@ -213,6 +299,9 @@ def minimise_energy(
     dem.force(zero, 0.0, force)
     _project(force, directions)
     norm0 = force.norm()
+    if dem.pair_contact is not None:
+        return _minimise_pairs(dem, directions, norm0, _Linear(dem, rtol), gradient_rtol, curvature,
+                               max_iterations, start)
 
     pinned = np.zeros(0, dtype=bool)
     if c is not None:
@@ -223,28 +312,12 @@ def minimise_energy(
         active = g <= comm.allreduce(g.min(initial=np.inf), op=MPI.MIN) + 1e-9 * h
         pinned = np.zeros_like(active)
         history = [active.copy()]
-    ksp = PETSc.KSP().create(dem.comm)
-    ksp.setType(PETSc.KSP.Type.CG)
-    ksp.getPC().setType(PETSc.PC.Type.GAMG)
-    ksp.setTolerances(rtol=rtol, atol=0.0, max_it=10000)
-    ksp.setOptionsPrefix("dolfinx_dem_statics_")
-    ksp.setFromOptions()
-    linear_iterations = 0
+    linear = _Linear(dem, rtol)
     step, trial = dem.create_vector(), dem.create_vector()
     multipliers, facets = np.zeros(0), []
 
     def potential(vec):
         return dem.energies(vec, 0.0)["potential"]
-
-    def solve(b, x, iteration):
-        nonlocal linear_iterations
-        x.set(0.0)
-        ksp.solve(b, x)
-        linear_iterations += ksp.getIterationNumber()
-        if ksp.getConvergedReason() < 0:
-            raise StaticsError(f"the linear solve of active-set iteration {iteration} failed "
-                               f"(KSP reason {ksp.getConvergedReason()}): a rigid mode may be unconstrained "
-                               "(missing Dirichlet condition, obstacle contact or fixed_mean component)")
 
     def pinned_values(values: np.ndarray) -> np.ndarray:
         """Per-facet values of the own facets -> the pinned facets' values, in ``facets`` order."""
@@ -258,10 +331,9 @@ def minimise_energy(
         dem.force(u, 0.0, rhs, contact=False)
         if c is not None:
             c.add_force(u, rhs, active)
-        operator, preconditioner = _constrained(H, directions)
         _project(rhs, directions)
-        ksp.setOperators(operator, preconditioner)
-        solve(rhs, step, iteration)
+        linear.set_operator(H, directions)
+        linear.solve(rhs, step, iteration)
         if c is None:
             step.copy(u)
             break
@@ -270,7 +342,7 @@ def minimise_energy(
             gradients = [_gap_gradient(dem, f, directions) for f in facets]
             Z = [dem.create_vector() for _ in facets]
             for b, z in zip(gradients, Z):
-                solve(b, z, iteration)
+                linear.solve(b, z, iteration)
             own = np.flatnonzero(pinned)
             # patch values are gathered collectively: once per vector on every process
             zp, sp = [c.patch_values(z) for z in Z], c.patch_values(step)
@@ -328,7 +400,7 @@ def minimise_energy(
     else:
         raise StaticsError(f"the active set did not settle in {max_iterations} iterations (cycling between "
                            "contact states: the load may be too large or the contact tag wrong)")
-    ksp.destroy()
+    linear.destroy()
 
     # Gradient of the Lagrangian at the end: grad V of the active piece minus the pinned facets'
     # multiplier forces (= grad V itself when no facet is pinned).
@@ -345,7 +417,7 @@ def minimise_energy(
     return StaticResult(
         u=u,
         iterations=iteration,
-        linear_iterations=linear_iterations,
+        linear_iterations=linear.iterations,
         gradient_norm_initial=norm0,
         gradient_norm=force.norm(),
         energy=dem.energies(u, 0.0)["potential"],
@@ -354,3 +426,165 @@ def minimise_energy(
         pinned=pinned.copy() if c is not None else np.zeros(0, dtype=bool),
         kink_forces=kink_forces,
     )
+
+
+def _minimise_pairs(dem, directions, norm0: float, linear: _Linear, gradient_rtol: float, curvature: bool,
+                    max_iterations: int, start: float) -> StaticResult:
+    """Damped Newton on the pieces of the potential with contact between bodies, pairs keyed by
+    ``PairContact.pair_keys``, kinks held by multipliers (module docstring, "Contact between
+    bodies")."""
+    comm, pc = dem.comm, dem.pair_contact
+    u, rhs, step, trial = (dem.create_vector() for _ in range(4))
+    up = pc.prepare(u)[0]
+    # Start from the overlapping pairs of smallest gap (as for obstacles): the piece that holds
+    # a body which only contact holds.
+    active = pc.touching_pairs(up, pc.smallest_gap(up) + 1e-9 * pc.skin)
+    if len(active) == 0:
+        raise StaticsError("no pair of contact candidate facets faces another: contact between bodies cannot "
+                           "hold them (check the contact boundary)")
+    pinned, multipliers = np.zeros(0, dtype=np.int64), np.zeros(0)
+    history = [active]
+
+    def potential(vec) -> float:
+        pc.prepare(vec)  # a trial point may move facets by more than skin/2: rebuild the list
+        return dem.energies(vec, 0.0)["potential"]
+
+    def lagrangian_force(vec, out) -> None:
+        """out = -grad V_A(vec) - sum_C mu_p grad g_p, projected (-grad V without pinned pairs)."""
+        dem.force(vec, 0.0, out, contact=False)
+        pc.add_force(vec, out, active)
+        _project(out, directions)
+        for key, m in zip(pinned, multipliers):
+            out.axpy(-m, _projected(pc.gap_gradient(pc.patch_values(vec), key), directions))
+
+    norm, gauss_newton_steps = norm0, 0
+    for iteration in range(1, max_iterations + 1):
+        # Newton step on the piece A: H d = F_A(u) (H its Gauss-Newton or exact Hessian), with
+        # the pinned pairs C held on their switch, g_C(u + d) = 0 (g is affine), as for obstacles:
+        # d = z_0 - Z mu, H z_0 = F_A, H Z = P grad g_C, (grad g_C . Z) mu = g_C(u) + grad g_C . z_0.
+        up = pc.patch_values(u)
+        for exact in (True, False) if curvature else (False,):
+            multipliers = np.zeros(0)
+            lagrangian_force(u, rhs)
+            try:
+                multipliers, gaps = _newton_step(dem, directions, linear, pc, up, active, pinned, exact, rhs, step,
+                                                 iteration)
+            except StaticsError:
+                if exact:
+                    continue  # CG broke down on the indefinite exact Hessian: Gauss-Newton
+                raise
+            if not exact or rhs.dot(step) > 0:
+                break  # a descent direction (always, with the positive semi-definite Gauss-Newton H)
+        gauss_newton_steps += not exact
+        # Backtracking (Armijo) on the potential of the dynamics. A decrease predicted below the
+        # rounding of V (the last Newton steps) cannot be measured: the full step is taken, and
+        # so is the first step onto newly pinned pairs (it moves them onto their switch).
+        slope, v0, alpha = -rhs.dot(step), potential(u), 1.0
+        # No facet may move more than skin/2 in one step: the pairs it would meet are then all in
+        # the list built at u, and a long step (a piece that holds a body weakly, e.g. by a pair
+        # of small overlap) cannot carry one body through another, where V is not bounded below.
+        motion = pc.largest_motion(pc.patch_values(step))
+        if motion > 0.5 * pc.skin:
+            step.scale(0.5 * pc.skin / motion)
+            slope *= 0.5 * pc.skin / motion
+        entering = len(pinned) and np.abs(gaps).max() > 1e-12 * pc.skin
+        while -slope > 1e-13 * abs(v0) and not entering:
+            u.copy(trial)
+            trial.axpy(alpha, step)
+            if potential(trial) <= v0 + 1e-4 * alpha * slope:
+                break
+            alpha *= 0.5
+            if alpha < 1e-10:
+                raise StaticsError(f"iteration {iteration}: the line search found no decrease of the potential")
+        # The pairs whose switch the full step crosses before alpha: a step cut this short sits
+        # against one (a kink of V), to be pinned if the iteration stalls there.
+        up = pc.prepare(u)[0]  # the line search may have rebuilt the list elsewhere
+        crossed = pc.switches_crossed(up, pc.patch_values(step), alpha, np.union1d(active, pinned))
+        u.axpy(alpha, step)
+        up = pc.prepare(u)[0]
+        new = np.setdiff1d(pc.touching_pairs(up), pinned)
+        lagrangian_force(u, rhs)
+        norm = rhs.norm()
+
+        if len(new) + len(pinned) == 0:
+            raise StaticsError("no pair is in contact: contact between bodies does not hold them (check the "
+                               "contact boundary and the load direction)")
+        if norm <= gradient_rtol * norm0 and np.array_equal(new, active):
+            if len(pinned) == 0:
+                break
+            # Kink conditions of the pinned pairs (g_p = 0): the directional derivatives of V
+            # towards lifting off (-mu_p) and towards pressing in (mu_p + r_p) must be >= 0.
+            reaction = pc.pinned_values(up, active, pinned)[1]
+            lift, press = multipliers > 0, multipliers + reaction < 0
+            if not (lift.any() or press.any()):
+                break
+            new = np.union1d(new, pinned[press])
+            pinned = pinned[~(lift | press)]
+        elif not np.array_equal(new, active):
+            if any(np.array_equal(new, old) for old in history):
+                # The pieces cycle: V has its minimum on (or across) a contact switch. Hold the
+                # pairs that keep switching on it (g_p = 0).
+                first = next(k for k, old in enumerate(history) if np.array_equal(new, old))
+                switching = np.setxor1d(new, history[first])
+                for old in history[first:]:
+                    switching = np.union1d(switching, np.setxor1d(old, new))
+                pinned = np.union1d(pinned, switching)
+                new = np.setdiff1d(new, pinned)
+                history = []
+            history.append(new)
+        elif alpha < 2**-6 and len(crossed):
+            # Stalled against a switch (the set does not change, the step is cut ever shorter).
+            pinned = np.union1d(pinned, crossed)
+            new = np.setdiff1d(new, pinned)
+        active = new
+    else:
+        raise StaticsError(f"no convergence in {max_iterations} iterations (gradient reduction {norm / norm0:.2e}, "
+                           f"target {gradient_rtol:g}, {len(pinned)} pairs held on a contact switch)")
+    linear.destroy()
+    return StaticResult(
+        u=u,
+        iterations=iteration,
+        linear_iterations=linear.iterations,
+        gradient_norm_initial=norm0,
+        gradient_norm=norm,
+        energy=dem.energies(u, 0.0)["potential"],
+        contact_facets=len(active) + len(pinned),
+        wall_time_s=time.perf_counter() - start,
+        pinned=pinned,
+        kink_forces=-multipliers,
+        gauss_newton_steps=gauss_newton_steps,
+        contact_pairs=active,
+    )
+
+
+def _newton_step(dem, directions, linear, pc, up, active, pinned, exact, rhs, step, iteration):
+    """The (constrained) Newton step of ``_minimise_pairs`` into ``step``; ``rhs`` becomes the
+    force of the Lagrangian. Returns (multipliers, gaps) of the pinned pairs."""
+    H = dem.K.copy()
+    H.setOption(PETSc.Mat.Option.NEW_NONZERO_ALLOCATION_ERR, False)
+    pc.add_hessian(H, up, active, exact)
+    H.assemble()
+    linear.set_operator(H, directions)
+    try:
+        linear.solve(rhs, step, iteration, check=exact)
+        if len(pinned) == 0:
+            return np.zeros(0), np.zeros(0)
+        gradients = [_projected(pc.gap_gradient(up, key), directions) for key in pinned]
+        Z = [dem.create_vector() for _ in pinned]
+        for b, z in zip(gradients, Z):
+            linear.solve(b, z, iteration, check=exact)
+    finally:
+        H.destroy()
+    S = np.array([[b.dot(z) for z in Z] for b in gradients])
+    gaps = pc.pinned_values(up, active, pinned)[0]
+    multipliers = np.linalg.solve(S, gaps + np.array([b.dot(step) for b in gradients]))
+    for m, z, b in zip(multipliers, Z, gradients):
+        step.axpy(-m, z)
+        rhs.axpy(-m, b)  # the force of the Lagrangian: d is a descent direction on g_C = 0
+    return multipliers, gaps
+
+
+def _projected(vec: PETSc.Vec, normals) -> PETSc.Vec:
+    """``vec`` after ``_project``."""
+    _project(vec, normals)
+    return vec

@@ -6,6 +6,7 @@ import pathlib
 import numpy as np
 import pytest
 from mpi4py import MPI
+from petsc4py import PETSc
 
 from dolfinx_dem import _compat, io, meshes, scenes, simulation
 from dolfinx_dem.contact import HalfSpace
@@ -72,17 +73,198 @@ def test_free_body_is_rejected():
         minimise_energy(dem, fixed_mean=(3,))
 
 
-def test_contact_between_bodies_is_rejected_not_ignored():
-    """Two discs resting on a floor, pressed together by gravity and their contact boundary set:
-    minimise_energy cannot treat contact between bodies and says so (it used to minimise as if
-    the discs did not touch each other)."""
+R_DISC, E_DISC, LOAD = 0.2, 25e6, 2e6  # the disc of the hertz scene
+
+
+def disc_on_block(comm, h, stiffness=1.0, width=0.12, height=0.04, scheme="A"):
+    """The hertz scene's disc (radius 0.2 m, centre 1e-6 m above y = R) resting under its body
+    force on an elastic block [-width, width] x [-height, 0] of Young's modulus ``stiffness`` x
+    the disc's, clamped at its bottom: contact between bodies on the facets near y = 0."""
+    import gmsh
+
+    if comm.rank == 0:
+        gmsh.initialize()
+        gmsh.option.setNumber("General.Terminal", 0)
+        disc = gmsh.model.occ.addDisk(0.0, R_DISC + 1e-6, 0.0, R_DISC, R_DISC)
+        block = gmsh.model.occ.addRectangle(-width, -height, 0.0, 2 * width, height)
+        gmsh.model.occ.synchronize()
+        gmsh.model.addPhysicalGroup(2, [disc], 1)
+        gmsh.model.addPhysicalGroup(2, [block], 2)
+        gmsh.option.setNumber("Mesh.MeshSizeMin", h)
+        gmsh.option.setNumber("Mesh.MeshSizeMax", h)
+        gmsh.model.mesh.generate(2)
+    try:
+        mesh, cells = _compat.mesh_from_gmsh_model(gmsh.model, comm, 2)[:2]
+    finally:
+        if comm.rank == 0:
+            gmsh.finalize()
+    materials = {1: ElasticMaterial(E=E_DISC, nu=0.25, rho=1.0, plane="strain"),
+                 2: ElasticMaterial(E=E_DISC * stiffness, nu=0.25, rho=1.0, plane="strain")}
+    bottom = _compat.locate_boundary_facets(mesh, lambda x: np.isclose(x[1], -height))
+    dem = DEMDiscretisation(mesh, materials, scheme, [DirichletBC(bottom, [0.0, 0.0])],
+                            body_force=[0.0, -LOAD], cell_tags=cells)
+    dem.set_contact_boundary(_compat.locate_boundary_facets(mesh, lambda x: (x[1] > -height / 2) & (x[1] < 0.05)))
+    return dem
+
+
+def _disc_figures(dem, result):
+    """(the disc's body number, its load (N/m), the contact force on it: pairs in contact plus
+    the multipliers of pinned pairs (N/m, (2,)), its mean vertical displacement, and the
+    contact half-width: the moment measure of the pair forces at the disc facets' centres)."""
+    comm, pc, geom = dem.comm, dem.pair_contact, dem.geometry
+    up = pc.patch_values(result.u)
+    body = geom.cell_bodies[: dem.n_owned]
+    disc = comm.allreduce(int(body[geom.cell_centres[: dem.n_owned, 1] > 0].max(initial=0)), op=MPI.MAX)
+    volumes = geom.cell_volumes[: dem.n_owned]
+    load = LOAD * comm.allreduce(volumes[body == disc].sum(), op=MPI.SUM)
+    forces = pc.pair_forces(up, result.contact_pairs) + pc.kink_forces(result.pinned, result.kink_forces)
+    forces = comm.allreduce(forces, op=MPI.SUM)[0]
+    force = forces if pc.body_pairs[0][0] == disc else -forces
+    uy = comm.allreduce(volumes[body == disc] @ result.u.array_r.reshape(-1, 2)[body == disc, 1], op=MPI.SUM)
+    uy /= comm.allreduce(volumes[body == disc].sum(), op=MPI.SUM)
+    # normal force of each touching pair (not pinned) at its disc facet's centre
+    L, F = pc.listed, pc.facets_all
+    g, w = pc.pair_states(up)
+    c = np.where(np.isin(pc.pair_keys(), result.contact_pairs), w * g, 0.0)
+    normal = np.where(c != 0, -(L.ZT @ (L.Q @ up + pc._q + L.Z @ c)) * w, 0.0)
+    x = np.where(F.body[L.i] == disc, F.centre[L.i, 0], F.centre[L.j, 0])
+    moments = comm.allreduce(np.array([normal.sum(), normal @ x, normal @ x**2]), op=MPI.SUM)
+    half_width = 2 * np.sqrt(moments[2] / moments[0] - (moments[1] / moments[0]) ** 2)
+    return disc, load, force, uy, half_width
+
+
+@pytest.mark.mpi
+def test_disc_resting_on_an_elastic_block():
+    """Contact between bodies in statics: a disc on an elastic block (the block's size makes the
+    minimum sit on a contact switch: one pair pinned, measured). The gradient of the potential of
+    the dynamics vanishes to 1e-10 of the load's, the contact forces (pinned pair's multiplier
+    included) balance the disc's load to 1e-8, and the solution on this communicator agrees with
+    the serial one (COMM_SELF) to 1e-10."""
+    results = []
+    for comm in [MPI.COMM_WORLD] + ([MPI.COMM_SELF] if MPI.COMM_WORLD.size > 1 else []):
+        dem = disc_on_block(comm, 0.04, width=0.3, height=0.2)
+        result = minimise_energy(dem, fixed_mean=(0,), fixed_rotation=True)
+        assert result.gradient_reduction < 1e-10
+        assert len(result.pinned) == 1 and result.kink_forces[0] > 0  # the kink this mesh has
+        disc, load, force, uy, _ = _disc_figures(dem, result)
+        assert force[1] == pytest.approx(load, rel=1e-8)
+        results.append((result.energy, uy, force[1], result.iterations))
+    assert results[0][3] <= 10
+    for other in results[1:]:
+        assert other[:3] == pytest.approx(results[0][:3], rel=1e-10)
+        assert other[3] == results[0][3]
+
+
+def test_disc_on_a_stiff_block_approaches_the_rigid_plane():
+    """With the block 1e4 times stiffer than the disc, contact between bodies approaches the
+    statics of the same disc on the rigid plane y = 0 (obstacle contact, scene hertz). Measured
+    at h = 0.02 m: the disc's mean vertical displacement differs by 0.32 %, the contact half-width
+    (moment measure of the normal forces at the disc facets' centres) by -1.4 %."""
+    comm = MPI.COMM_WORLD
+    dem = disc_on_block(comm, 0.02, stiffness=1e4)
+    result = minimise_energy(dem, fixed_mean=(0,), fixed_rotation=True)
+    assert result.gradient_reduction < 1e-10
+    disc, load, force, uy, half_width = _disc_figures(dem, result)
+    assert force[1] == pytest.approx(load, rel=1e-8)
+
+    mesh, _, _ = meshes.create_disc(comm, [0.0, R_DISC], R_DISC, 0.02)
+    rigid = DEMDiscretisation(mesh, ElasticMaterial(E=E_DISC, nu=0.25, rho=1.0, plane="strain"), "A",
+                              body_force=[0.0, -LOAD])
+    rigid.set_obstacles([HalfSpace([0.0, 0.0], [0.0, 1.0],
+                                   _compat.locate_boundary_facets(mesh, lambda x: x[1] <= R_DISC), 1e-9)])
+    reference = minimise_energy(rigid, fixed_mean=(0,), fixed_rotation=True)
+    c = rigid.contact
+    reactions = c.reactions(reference.u)
+    x = rigid.geometry.facet_centres[c.facets[: c.num_own], 0]
+    moments = comm.allreduce(np.array([reactions.sum(), reactions @ x, reactions @ x**2]), op=MPI.SUM)
+    rigid_width = 2 * np.sqrt(moments[2] / moments[0] - (moments[1] / moments[0]) ** 2)
+    volumes = rigid.geometry.cell_volumes[: rigid.n_owned]
+    rigid_uy = comm.allreduce(volumes @ reference.u.array_r.reshape(-1, 2)[:, 1], op=MPI.SUM)
+    rigid_uy /= comm.allreduce(volumes.sum(), op=MPI.SUM)
+    assert uy - 1e-6 == pytest.approx(rigid_uy, rel=0.01)  # the disc starts 1e-6 m above the block
+    assert half_width == pytest.approx(rigid_width, rel=0.03)
+
+
+def test_pair_contact_hessian_is_the_derivative_of_the_force():
+    """On a fixed piece (pairs in contact, overlap configuration), the exact Hessian that
+    ``PairContact.add_hessian`` adds (with ``curvature``) is the derivative of the force of the
+    piece: central differences of the force along random directions."""
+    dem = disc_on_block(MPI.COMM_WORLD, 0.04, width=0.3, height=0.2)
+    pc = dem.pair_contact
+    rng = np.random.default_rng(3)
+    u = dem.create_vector()
+    u.array.reshape(-1, 2)[:, 1] = np.where(owned_centres(dem)[:, 1] > 0, -0.01, 0.0)  # the disc pressed in
+    u.array[:] += 1e-4 * rng.standard_normal(u.array.shape)
+    up = pc.prepare(u)[0]
+    active = pc.touching_pairs(up)
+    assert len(active) >= 4
+    H = dem.K.copy()
+    H.setOption(PETSc.Mat.Option.NEW_NONZERO_ALLOCATION_ERR, False)
+    pc.add_hessian(H, up, active, True)
+    H.assemble()
+    plus, minus, Hv = dem.create_vector(), dem.create_vector(), dem.create_vector()
+    for _ in range(3):
+        v = dem.create_vector()
+        v.array[:] = rng.standard_normal(v.array.shape)
+        v.scale(1e-6 / v.norm())  # small enough that no overlap end is crossed
+        for sign, out in ((1.0, plus), (-1.0, minus)):
+            trial = u.copy()
+            trial.axpy(sign, v)
+            dem.force(trial, 0.0, out, contact=False)
+            pc.add_force(trial, out, active)
+        H.mult(v, Hv)
+        plus.axpy(-1.0, minus)  # F(u + v) - F(u - v) = -2 H v
+        plus.axpy(2.0, Hv)
+        assert plus.norm() < 1e-6 * 2 * Hv.norm()
+
+
+def test_pair_statics_ends_with_an_error_when_it_does_not_converge():
+    """Not converged in the iterations allowed: a StaticsError naming the gradient reduction
+    reached, never a result."""
+    dem = disc_on_block(MPI.COMM_WORLD, 0.04)
+    with pytest.raises(StaticsError, match=r"no convergence in 2 iterations \(gradient reduction"):
+        minimise_energy(dem, fixed_mean=(0,), fixed_rotation=True, max_iterations=2)
+    with pytest.raises(ValueError, match="gradient_rtol"):
+        minimise_energy(dem, gradient_rtol=0.0)
+
+
+def test_statics_refuses_obstacles_with_contact_between_bodies():
     mesh, _, _ = meshes.create_discs(MPI.COMM_WORLD, [((0.0, 0.1), 0.1), ((0.25, 0.1), 0.1)], 0.05)
     dem = DEMDiscretisation(mesh, ElasticMaterial(E=100.0, nu=0.2, rho=1.0), "B", body_force=[0.0, -1.0])
     boundary = _compat.exterior_facets(mesh)
     dem.set_obstacles([HalfSpace([0.0, 0.0], [0.0, 1.0], boundary, tolerance=1e-3)])
     dem.set_contact_boundary(boundary)
-    with pytest.raises(ValueError, match="rigid obstacles only, not contact between bodies"):
+    with pytest.raises(ValueError, match="rigid obstacles or contact between bodies, not both"):
         minimise_energy(dem, fixed_mean=(0,))
+
+
+STACKED = {
+    "name": "stacked", "method": "dem-B",
+    "mesh": {"type": "discs", "discs": [[0.0, 0.100001, 0.1], [0.0, -0.1, 0.1]], "h": 0.05},
+    "material": {"E": 1e4, "nu": 0.25, "rho": 1.0},
+    "loads": {"body_force": [0.0, -100.0]},
+    "dirichlet": [{"boundary": "y <= -0.17", "value": [0.0, 0.0]}],
+    "contact": {"boundary": ["abs(y) <= 0.05"]},
+    "statics": {"fixed_mean": [0], "fixed_rotation": True},
+}
+
+
+def test_static_scene_with_contact_between_bodies(tempdir):
+    """A static scene with a [contact] table: a disc resting on another one clamped at its
+    bottom. The run completes; the summary's contact force (pairs in contact plus the pinned
+    pairs' multipliers) balances the upper disc's load; obstacles with contact are refused."""
+    summary = simulation.run(scenes.validate(STACKED), pathlib.Path(tempdir) / "stacked", MPI.COMM_WORLD)
+    assert summary["status"] == "completed" and summary["gradient_norm_reduction"] < 1e-10
+    dem = simulation.build(scenes.validate(STACKED))
+    geom = dem.geometry
+    upper = geom.cell_bodies[: dem.n_owned][geom.cell_centres[: dem.n_owned, 1] > 0]
+    upper = MPI.COMM_WORLD.allreduce(int(upper.max(initial=0)), op=MPI.MAX)
+    area = MPI.COMM_WORLD.allreduce(geom.cell_volumes[: dem.n_owned][geom.cell_bodies[: dem.n_owned] == upper].sum(),
+                                    op=MPI.SUM)
+    force = summary["contact_forces"]["0_1"][1]
+    assert abs(force) == pytest.approx(100.0 * area, rel=1e-8)
+    with pytest.raises(scenes.SceneError, match="obstacles or contact between bodies"):
+        scenes.validate(STACKED | {"obstacles": [{"point": [0.0, -0.3], "normal": [0.0, 1.0], "boundary": "y < 0"}]})
 
 
 def test_static_scene_rejects_time_and_fem_needs_statics():

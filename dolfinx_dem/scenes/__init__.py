@@ -167,6 +167,7 @@ SCHEMA = {
         "fixed_mean": lambda k, v, d: [_integer(f"{k}[{i}]", x, minimum=0) for i, x in enumerate(_list(k, v))],
         "fixed_rotation": lambda k, v, d: _bool(k, v),
         "rtol": lambda k, v, d: _number(k, v, positive=True),
+        "gradient_rtol": lambda k, v, d: _number(k, v, positive=True),
     },
     "output": {
         "every": lambda k, v, d: _integer(k, v),
@@ -321,8 +322,8 @@ def validate(scene: Mapping, mesh_dimension: int | None = None) -> dict:
     if "contact" in scene:
         if scene["method"] == "fem-P2":
             raise SceneError("contact between bodies ('contact' table) needs a DEM method (dem-A or dem-B)")
-        if "statics" in scene:
-            raise SceneError("contact between bodies ('contact' table) is implemented for dynamics only")
+        if "statics" in scene and scene.get("obstacles"):
+            raise SceneError("a static scene takes obstacles or contact between bodies ('contact' table), not both")
     return scene
 
 
