@@ -352,8 +352,9 @@ def interpolate_expression(function, expr) -> None:
     function.interpolate(dolfinx.fem.Expression(expr, points))
 
 
-def newton_solver(comm, F, u, J):
-    """(NewtonSolver, NonlinearProblem) for the residual form F(u; v) = 0 with Jacobian form J.
+def newton_solver(comm, F, u, J, bcs=()):
+    """(NewtonSolver, NonlinearProblem) for the residual form F(u; v) = 0 with Jacobian form J
+    and the Dirichlet conditions ``bcs`` (``dolfinx.fem.DirichletBC``).
 
     The solver's Jacobian matrix is ``solver.A``, its linear solver ``solver.krylov_solver``;
     ``solver.solve(u)`` returns (iterations, converged) and scatters u forward.
@@ -361,7 +362,7 @@ def newton_solver(comm, F, u, J):
     import dolfinx.fem.petsc
     import dolfinx.nls.petsc
 
-    problem = dolfinx.fem.petsc.NonlinearProblem(F, u, bcs=[], J=J)
+    problem = dolfinx.fem.petsc.NonlinearProblem(F, u, bcs=list(bcs), J=J)
     return dolfinx.nls.petsc.NewtonSolver(comm, problem), problem
 
 

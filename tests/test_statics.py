@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 from mpi4py import MPI
 
-from dolfinx_dem import _compat, io, meshes, scenes, simulation
+from dolfinx_dem import _compat, io, meshes, model, scenes, simulation, static_simulation
 from dolfinx_dem.contact import HalfSpace
 from dolfinx_dem.discretisation import DEMDiscretisation, DirichletBC, Traction
 from dolfinx_dem.material import ElasticMaterial
@@ -169,3 +169,21 @@ def test_bar_pressed_on_a_wall_by_a_traction(n):
     assert float(dem.contact.reactions(result.u).sum()) == pytest.approx(p, rel=1e-12)
     with pytest.raises(ValueError, match="must not carry a traction"):
         dem.set_obstacles([HalfSpace([L], [-1.0], tags.find(meshes.XMAX))])
+
+
+@pytest.mark.mpi
+def test_hertz_ball_equilibrium_and_contact_radius(tempdir):
+    """The quarter ball of the hertz3d scene on a coarse mesh: the plane carries the whole body
+    force (the symmetry conditions act on u_x, u_y only), and the contact radius is near Hertz's
+    (a = 0.0384 m; 0.0384 measured at h = 0.04, so 4 % allows for the coarse mesh only)."""
+    scene = scenes.load("hertz3d", {"mesh.h": 0.06, "mesh.refine_h": 0.015})
+    dem = model.build(scene, MPI.COMM_WORLD)
+    result = minimise_energy(dem)
+    assert result.gradient_reduction < 1e-8
+    figures = static_simulation._contact_summary(dem, result.u, result, pathlib.Path(tempdir) / "p.csv",
+                                                 ([0.0, 0.0, 0.0], [0.0, 0.0, 1.0]))
+    volume = MPI.COMM_WORLD.allreduce(dem.mass.array_r[2::3].sum(), op=MPI.SUM)  # rho = 1
+    assert figures["contact_force"] == pytest.approx(3e5 * volume, rel=1e-8)
+    assert figures["contact_radius"] == pytest.approx(0.0384, rel=0.04)
+    reactions = dem.reactions(result.u, 0.0)  # symmetry planes: normal forces only
+    assert np.all(reactions[:, 2] == 0.0) and reactions[0, 1] == reactions[1, 0] == 0.0
