@@ -92,6 +92,26 @@ def test_static_scene_rejects_time_and_fem_needs_statics():
         scenes.load("bar-impact", {"method": "fem-P2"})
 
 
+@pytest.mark.parametrize("overrides, message", [
+    ({"mesh.refine_h": None}, "'mesh.refine_point' and 'mesh.refine_h' go together"),
+    ({"mesh.refine_h": 0.05}, "h_min must satisfy"),
+    ({"mesh.balls": [[0.0, 0.0, 0.2, 0.2], [0.3, 0.0, 0.2, 0.2]]}, "balls 1 and 2 overlap"),
+    ({"mesh.frame": [-1.0, -1.0, -1.0, 1.0, 1.0, 0.3], "mesh.frame_width": 0.1}, "not strictly inside"),
+    ({"mesh.cut": ["x", "w"]}, r"mesh.cut\[1\]"),
+    ({"method": "fem-P2", "mesh.cut": ["x"]}, "'fem-P2' solves the Hertz problems only"),
+    ({"method": "fem-P2", "mesh.refine_point": [0.0, 0.0, 0.1]}, "'fem-P2' solves the Hertz problems only"),
+])
+def test_bad_ball_scenes_are_rejected_before_the_run(overrides, message, tmp_path):
+    scene = scenes.load("hertz3d")
+    for key, value in overrides.items():
+        table, name = key.split(".") if "." in key else (None, key)
+        target = scene[table] if table else scene
+        target.pop(name) if value is None else target.__setitem__(name, value)
+    with pytest.raises(scenes.SceneError, match=message):
+        simulation.run(scenes.validate(scene), tmp_path / "out")
+    assert not (tmp_path / "out").exists()
+
+
 @pytest.mark.mpi
 def test_scheme_b_minimum_on_a_kink(tempdir):
     """Scheme B on the Hertz disc at h = 0.013 (measured: one facet): the minimum of the
