@@ -11,8 +11,8 @@ or ``fem-P2``), the FEM on one more level than the DEM; its finest run is the re
 Reported per run: the contact radius a (moment measure about the z axis,
 a = sqrt(5/2 int r^2 p / int p), ``hertz.contact_radius_moments``: for the DEM the facet
 pressures are uniform on their triangles, for the FEM the Nitsche multiplier is integrated by
-quadrature), the approach -u_z at the top (0, 0, 2R), the contact force against the load on the
-quarter mesh, the relative differences against the finest FEM and against Hertz
+quadrature), the approach -u_z at the top (0, 0, 2R), the contact force on the quarter (in the
+JSON), the relative differences against the finest FEM and against Hertz
 (a_H = (3 P R / (4 E*))^(1/3), P = f 4/3 pi R^3, delta_H = a_H^2 / R), and the wall times.
 Hertz's delta is the approach of points far from the contact; the top of a ball loaded by its
 own weight also moves by the compression of the whole ball, so delta_H is a rough scale only.
@@ -122,12 +122,19 @@ picture) on a shared 2-core machine: orders of magnitude, not careful benchmarks
 
 {table(results)}
 
+The FEM reference converges: successive changes of a {changes(results['fem'], 'a')}, of the
+approach {changes(results['fem'], 'approach')} (relative to the finer run).
+
 ## Criteria
 
 | criterion | verdict |
 |---|---|
 {criteria}
 """
+
+
+def changes(rows: list, key: str) -> str:
+    return ", ".join(f"{100 * (a[key] / b[key] - 1):+.3f}%" for a, b in zip(rows, rows[1:]))
 
 
 if __name__ == "__main__":
