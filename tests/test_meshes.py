@@ -156,9 +156,8 @@ def test_touching_balls_in_a_frame_are_separate_bodies():
     counts = owned_tag_counts(mesh, facet_tags)
     assert set(counts) == {1, 2, 3, 4} and counts[1] == pytest.approx(counts[2], rel=0.2)
     # the inner boundary (tag 3) lies on the opening's faces, the outer (tag 4) on the walls'
-    mesh.topology.create_connectivity(2, 0)
     for tag, (lo, hi) in ((3, frame[:2]), (4, (np.subtract(frame[0], 0.1), np.add(frame[1], 0.1)))):
-        x = mesh.geometry.x[dolfinx.mesh.compute_incident_entities(mesh, facet_tags.find(tag), 2, 0)]
+        x = _compat.facet_cell_and_vertices(mesh, facet_tags.find(tag))[1].reshape(-1, 3)
         on_face = np.isclose(x, lo).any(axis=1) | np.isclose(x, hi).any(axis=1)
         assert on_face.all()
 
