@@ -477,16 +477,16 @@ def solve_hertz(
         h: Mesh size (m) passed to :func:`dolfinx_dem.meshes.create_discs` (``create_balls``
             in 3D), 0 < h < R.
         degree: Lagrange degree of the displacement, 1 or 2.
-        R: Disc radius (m), > 0; centre (0, R).
+        R: Disc (ball) radius (m), > 0; centre (0, R) (in 3D (0, 0, R)).
         E: Young's modulus (Pa), > 0.
-        nu: Poisson's ratio, -1 < nu < 0.5 (plane strain).
-        body_force: Magnitude f (N/m^3) > 0 of the downward body force (0, -f).
+        nu: Poisson's ratio, -1 < nu < 0.5 (plane strain in 2D).
+        body_force: Magnitude f (N/m^3) > 0 of the downward body force (0, -f) or (0, 0, -f).
         gamma0: Nitsche parameter, gamma = gamma0 E / h_K, > 0.
         theta: Nitsche variant, 1 (symmetric), 0 or -1 (skew-symmetric); any value in [-1, 1].
-        exact_gap: Measure the gap from the circle instead of the mesh polygon (see above).
-        singular_method: How the linear solves handle the free x-translation: "regularise"
+        exact_gap: Measure the gap from the circle (sphere) instead of the mesh (see above).
+        singular_method: How the linear solves handle the free x-translation (2D): "regularise"
             (default) or "nullspace" (see the module docstring).
-        regularisation: eps / (E / R^2) of the "regularise" method, > 0.
+        regularisation: eps / (E / R^2) of the "regularise" method (2D), > 0.
         load_steps: Number of equal load increments (>= 1), each solved by Newton.
         rtol: Newton stops when the update's norm is <= rtol times the first update's.
         max_it: Maximum Newton iterations per load step.
