@@ -354,7 +354,7 @@ def interpolate_expression(function, expr) -> None:
 
 def newton_solver(comm, F, u, J, bcs=()):
     """(NewtonSolver, NonlinearProblem) for the residual form F(u; v) = 0 with Jacobian form J
-    and the Dirichlet conditions ``bcs`` (applied to u by the first update).
+    and the Dirichlet conditions ``bcs`` (``dolfinx.fem.DirichletBC``).
 
     The solver's Jacobian matrix is ``solver.A``, its linear solver ``solver.krylov_solver``;
     ``solver.solve(u)`` returns (iterations, converged) and scatters u forward.

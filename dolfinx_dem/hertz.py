@@ -1,11 +1,16 @@
-"""Plane-strain Hertz contact of a cylinder on a rigid plane (paper §5.2): the analytic solution
-and the measurement of a contact half-width from discrete pressures, shared by the DEM and the
-FEM reference.
+"""Hertz contact on a rigid plane: the plane-strain cylinder (paper §5.2) and the 3D ball, their
+analytic solutions and the measurement of the contact size from discrete pressures, shared by
+the DEM and the FEM reference.
 
-For a load P per unit thickness on a cylinder of radius R, E* = E / (1 - nu^2):
+Cylinder (2D), load P per unit thickness, radius R, E* = E / (1 - nu^2):
     a = sqrt(4 P R / (pi E*)),   p(x) = p0 sqrt(1 - x^2 / a^2),   p0 = 2 P / (pi a).
 The paper's disc carries a body force f instead of a point load (P = f pi R^2) and a/R ~ 0.25, so
 Hertz is only an approximation there; the converged FEM is the reference.
+
+Ball (3D), load P, radius R:
+    a = (3 P R / (4 E*))^(1/3),   p(r) = p0 sqrt(1 - r^2 / a^2),   p0 = 3 P / (2 pi a^2),
+and the approach (of the plane and the points of the ball far from the contact) delta = a^2 / R.
+With a body force f, P = f 4/3 pi R^3; again an approximation (a/R ~ 0.2).
 """
 
 from __future__ import annotations
@@ -49,6 +54,26 @@ def hertz_analytic(R: float, E: float, nu: float, body_force: float) -> HertzAna
     E_star = E / (1.0 - nu**2)
     a = np.sqrt(4.0 * load * R / (np.pi * E_star))
     return HertzAnalytic(load=load, E_star=E_star, a=a, p0=2.0 * load / (np.pi * a))
+
+
+class HertzAnalytic3D(typing.NamedTuple):
+    """Hertz contact of a ball on a rigid plane."""
+
+    load: float  # P = f 4/3 pi R^3 (N), the total body force
+    E_star: float  # E / (1 - nu^2) (Pa)
+    a: float  # contact radius (3 P R / (4 E*))^(1/3) (m)
+    p0: float  # maximum pressure 3 P / (2 pi a^2) (Pa)
+    approach: float  # delta = a^2 / R (m)
+
+
+def hertz_analytic_3d(R: float, E: float, nu: float, body_force: float) -> HertzAnalytic3D:
+    """The Hertz values for the ball of radius R (m) under the body force density f (N/m^3),
+    replaced by its resultant P = f 4/3 pi R^3 as a point load (as ``hertz_analytic``)."""
+    cylinder = hertz_analytic(R, E, nu, body_force)  # the same checks, and E*
+    load = body_force * 4.0 / 3.0 * np.pi * R**3
+    a = (3.0 * load * R / (4.0 * cylinder.E_star)) ** (1.0 / 3.0)
+    return HertzAnalytic3D(load=load, E_star=cylinder.E_star, a=a, p0=3.0 * load / (2.0 * np.pi * a**2),
+                           approach=a**2 / R)
 
 
 # --- measuring the contact half-width -----------------------------------------------------------
@@ -147,3 +172,41 @@ def facet_pressure_moments(
                          f"{x1.shape}, {P.shape}")
     xm, dx = 0.5 * (x0 + x1), x1 - x0
     return float(P.sum()), float(P @ xm), float(P @ (xm**2 + dx**2 / 12.0))
+
+
+def contact_radius_moments(m0: float, m2: float) -> float:
+    """Contact radius from the moments of an axisymmetric pressure (the 3D moment measure).
+
+    With ``m0 = integral of p dA`` and ``m2 = integral of r^2 p dA``, r the distance from the
+    axis of symmetry: for the Hertz profile p0 sqrt(1 - r^2 / a^2),
+    ``m0 = 2 pi p0 a^2 / 3`` and ``m2 = 2 pi p0 a^4 integral_0^1 s^3 sqrt(1 - s^2) ds
+    = 4 pi p0 a^4 / 15``, so ``m2 / m0 = 2 a^2 / 5`` and ``a = sqrt(5 m2 / (2 m0))`` exactly.
+    The axis is given, not fitted: a symmetric part of the zone (a quarter) has the same m2 / m0.
+    """
+    if not m0 > 0.0:
+        raise ValueError(f"the total contact force m0 must be > 0, got {m0!r}: no contact")
+    if not m2 > 0.0:
+        raise ValueError("the pressure has no spread (second moment <= 0)")
+    return float(np.sqrt(2.5 * m2 / m0))
+
+
+def triangle_pressure_moments(
+    vertices: npt.ArrayLike, force: npt.ArrayLike, point: npt.ArrayLike, axis: npt.ArrayLike
+) -> tuple[float, float]:
+    """Moments (m0, m2) of a pressure that is uniform on each of a set of flat triangles.
+
+    Triangle f, of vertices ``vertices[f]`` (3, 3), carries the force ``force_f`` (its pressure
+    times its area) uniformly; r is the distance from the line through ``point`` along ``axis``.
+    With w_i the vertices' components perpendicular to the axis (w is affine on the triangle),
+    exactly, ``integral r^2 p = force_f (sum |w_i|^2 + |sum w_i|^2) / 12``.
+    """
+    v = np.asarray(vertices, dtype=np.float64)
+    P = np.asarray(force, dtype=np.float64).reshape(-1)
+    if v.ndim != 3 or v.shape[1:] != (3, 3) or v.shape[0] != P.shape[0]:
+        raise ValueError(f"vertices must have the shape (n, 3, 3) and force (n,), got {v.shape}, {P.shape}")
+    n = np.asarray(axis, dtype=np.float64)
+    n = n / np.linalg.norm(n)
+    w = v - np.asarray(point, dtype=np.float64)
+    w -= (w @ n)[..., None] * n
+    mean_r2 = (np.sum(w**2, axis=(1, 2)) + np.sum(w.sum(axis=1) ** 2, axis=1)) / 12.0
+    return float(P.sum()), float(P @ mean_r2)

@@ -1,14 +1,14 @@
-"""Meshes for dolfinx_dem scenes: boxes with named sides, gmsh discs, and mesh files.
+"""Meshes for dolfinx_dem scenes: boxes with named sides, gmsh discs and balls, and mesh files.
 
 Every function returns ``(mesh, cell_tags, facet_tags)`` (``read_mesh_named`` adds the tags' names):
 
 * ``create_interval``, ``create_rectangle``, ``create_box``: ``cell_tags`` is None (one body);
   ``facet_tags`` marks the boundary facets with 1..2d for the sides x=min, x=max, y=min, y=max,
   z=min, z=max (constants ``XMIN`` ... ``ZMAX``).
-* ``create_disc``, ``create_discs``: cell tag and boundary facet tag = 1-based disc number (the
-  body tag). The discs are separate connected bodies that share no vertex; ``create_discs`` can
-  add rectangles (tags after the discs') and a frame around them (the billiard table), see its
-  docstring.
+* ``create_disc``, ``create_discs``, ``create_balls``: cell tag and boundary facet tag = 1-based
+  disc (ball) number (the body tag). The bodies are separate and share no vertex; rectangles
+  (boxes) can be added after them (tags after the discs', e.g. a block under an indenter) and a
+  frame around them (the billiard table), see the docstrings.
 * ``read_mesh``, ``read_mesh_named``: whatever tags the file holds (see the docstrings), and
   the names of the facet tags (a gmsh file's physical-group names).
 
@@ -151,8 +151,154 @@ def _mesh_from_gmsh(comm: MPI.Comm, build: Callable[[], int]):
     return mesh, cell_tags, facet_tags
 
 
+def _check_round_bodies(word: str, d: int, bodies, h: float, frame, cut, refine, blocks, block_word):
+    """Checked (centres, radii, frame, cut axes, refine, blocks) of ``create_discs``/``create_balls``."""
+    plural = {"rectangle": "rectangles", "box": "boxes"}[block_word]
+    if len(bodies) == 0 and len(blocks) == 0:
+        raise ValueError(f"{word}s must hold at least one (centre, radius) pair (or give {plural})")
+    centres, radii = [], []
+    for i, body in enumerate(bodies, start=1):
+        if len(body) != 2:
+            raise ValueError(f"{word} {i} must be a (centre, radius) pair, got {body!r}")
+        centre = np.asarray(body[0], dtype=np.float64).reshape(-1)
+        radius = float(body[1])
+        if centre.shape != (d,) or not np.all(np.isfinite(centre)):
+            raise ValueError(f"{word} {i}: centre must be {d} finite coordinates, got {body[0]!r}")
+        if not (math.isfinite(radius) and radius > 0):
+            raise ValueError(f"{word} {i}: radius must be > 0, got {body[1]!r}")
+        centres.append(centre)
+        radii.append(radius)
+    if not (math.isfinite(h) and h > 0):
+        raise ValueError(f"mesh size h must be > 0, got {h!r}")
+    for i in range(len(bodies)):
+        for j in range(i):
+            gap = np.linalg.norm(centres[i] - centres[j]) - radii[i] - radii[j]
+            if gap < -1e-12 * (radii[i] + radii[j]):
+                raise ValueError(f"{word}s {j + 1} and {i + 1} overlap (gap {gap:g} m)")
+    corners = [("x0", "x1"), ("y0", "y1"), ("z0", "z1")][:d]
+    shape = "[" + ", ".join([c[0] for c in corners] + [c[1] for c in corners]) + "] with " + \
+        ", ".join(f"{a} < {b}" for a, b in corners)
+    boxes = []
+    for j, block in enumerate(blocks, start=1):
+        b = np.asarray(block, dtype=np.float64).reshape(-1)
+        if b.shape != (2 * d,) or not np.all(np.isfinite(b)) or np.any(b[d:] <= b[:d]):
+            raise ValueError(f"{block_word} {j} must be {shape}, got {block!r}")
+        for i, (c, radius) in enumerate(zip(centres, radii), start=1):
+            if np.linalg.norm(c - np.clip(c, b[:d], b[d:])) < radius * (1 - 1e-12):
+                raise ValueError(f"{block_word} {j} overlaps {word} {i}")
+        for k, other in enumerate(boxes, start=1):
+            if np.all(np.minimum(b[d:], other[d:]) > np.maximum(b[:d], other[:d])):
+                raise ValueError(f"{plural} {k} and {j} overlap")
+        boxes.append(b)
+    if frame is not None:
+        if len(frame) != 3:
+            raise ValueError(f"frame must be (p0, p1, width), got {frame!r}")
+        p0, p1 = _check_corners(frame[0], frame[1], d)
+        width = float(frame[2])
+        if not (math.isfinite(width) and width > 0):
+            raise ValueError(f"frame width must be > 0, got {frame[2]!r}")
+        for i, (c, r) in enumerate(zip(centres, radii), start=1):
+            if np.any(c - r <= p0) or np.any(c + r >= p1):
+                raise ValueError(f"{word} {i} (centre {c.tolist()}, radius {r:g}) is not strictly inside "
+                                 f"the frame's opening {p0.tolist()} - {p1.tolist()}")
+        for j, b in enumerate(boxes, start=1):
+            if np.any(b[:d] <= p0) or np.any(b[d:] >= p1):
+                raise ValueError(f"{block_word} {j} {b.tolist()} is not strictly inside the frame's opening "
+                                 f"{p0.tolist()} - {p1.tolist()}")
+        frame = (p0, p1, width)
+    axes = "xyz"[:d]
+    cut = list(cut or [])
+    if any(a not in axes for a in cut) or len(set(cut)) != len(cut) or len(cut) == d:
+        raise ValueError(f"cut must be distinct axes among {', '.join(axes)}, fewer than {d}, got {cut!r}")
+    cut = [axes.index(a) for a in cut]
+    if refine is not None:
+        if len(refine) != 3:
+            raise ValueError(f"refine must be (point, h_min, radius), got {refine!r}")
+        point = np.asarray(refine[0], dtype=np.float64).reshape(-1)
+        h_min, distance = float(refine[1]), float(refine[2])
+        if point.shape != (d,) or not np.all(np.isfinite(point)):
+            raise ValueError(f"refine point must be {d} finite coordinates, got {refine[0]!r}")
+        if not (math.isfinite(h_min) and 0 < h_min <= h):
+            raise ValueError(f"refine h_min must satisfy 0 < h_min <= h = {h:g}, got {refine[1]!r}")
+        if not (math.isfinite(distance) and distance > 0):
+            raise ValueError(f"refine radius must be > 0, got {refine[2]!r}")
+        refine = (point, h_min, distance)
+    return centres, radii, frame, cut, refine, boxes
+
+
+#: Growth of the mesh size per unit distance outside a refined zone: gradual enough for
+#: well-shaped simplices between the fine and the coarse size.
+_GRADING = 0.5
+
+
+def _create_round_bodies(comm, d, word, bodies, h, frame, cut, refine, blocks, block_word):
+    """``create_discs`` (d = 2) and ``create_balls`` (d = 3): see their docstrings."""
+    centres, radii, frame, cut, refine, boxes = _check_round_bodies(word, d, bodies, h, frame, cut, refine,
+                                                                    blocks, block_word)
+
+    def box(lo, hi) -> int:  # a rectangle (z = 0) or a box, of corners lo < hi
+        return (gmsh.model.occ.addRectangle(lo[0], lo[1], 0.0, *(hi - lo)) if d == 2
+                else gmsh.model.occ.addBox(*lo, *(hi - lo)))
+
+    def build() -> int:
+        occ = gmsh.model.occ
+        gmsh.model.add(word + "s")
+        bodies = []
+        for c, r in zip(centres, radii):
+            body = occ.addDisk(c[0], c[1], 0.0, r, r) if d == 2 else occ.addSphere(*c, r)
+            if cut:
+                # keep x_i >= c_i for the cut axes: intersect with a box past the body elsewhere
+                lo, hi = c - 1.5 * r, c + 1.5 * r
+                lo[cut] = c[cut]
+                kept, _ = occ.intersect([(d, body)], [(d, box(lo, hi))])
+                body = kept[0][1]
+            bodies.append(body)
+        for b in boxes:
+            lo, hi = b[:d].copy(), b[d:]
+            lo[cut] = (lo[cut] + hi[cut]) / 2  # the cut keeps the half past the block's centre too
+            bodies.append(box(lo, hi))
+        if frame is not None:
+            p0, p1, width = frame
+            walls, _ = occ.cut([(d, box(p0 - width, p1 + width))], [(d, box(p0, p1))])
+        occ.synchronize()
+        for tag, body in enumerate(bodies, start=1):
+            gmsh.model.addPhysicalGroup(d, [body], tag)
+            faces = [f for _, f in gmsh.model.getBoundary([(d, body)], oriented=False)]
+            gmsh.model.addPhysicalGroup(d - 1, faces, tag)
+        if frame is not None:
+            n = len(bodies)
+            gmsh.model.addPhysicalGroup(d, [walls[0][1]], n + 1)
+            inner, outer = [], []
+            tol = 1e-9 * float(np.max(p1 - p0))
+            for _, f in gmsh.model.getBoundary(walls, oriented=False):
+                x = np.array(occ.getCenterOfMass(d - 1, f))[:d]
+                (inner if np.all((p0 - tol <= x) & (x <= p1 + tol)) else outer).append(f)
+            gmsh.model.addPhysicalGroup(d - 1, inner, n + 1)
+            gmsh.model.addPhysicalGroup(d - 1, outer, n + 2)
+        gmsh.option.setNumber("Mesh.MeshSizeMax", h)
+        if refine is None:
+            gmsh.option.setNumber("Mesh.MeshSizeMin", h)
+        else:
+            # size h_min within the refined zone, then growing by _GRADING per unit distance up to h
+            point, h_min, distance = refine
+            dist = "Sqrt(" + "+".join(f"({a}-({p!r}))^2" for a, p in zip("xyz", point)) + ")"
+            field = gmsh.model.mesh.field.add("MathEval")
+            gmsh.model.mesh.field.setString(
+                field, "F", f"Min({h!r}, Max({h_min!r}, {h_min!r} + {_GRADING!r}*({dist} - {distance!r})))")
+            gmsh.model.mesh.field.setAsBackgroundMesh(field)
+            gmsh.option.setNumber("Mesh.MeshSizeMin", h_min)
+            for option in ("MeshSizeFromPoints", "MeshSizeFromCurvature", "MeshSizeExtendFromBoundary"):
+                gmsh.option.setNumber(f"Mesh.{option}", 0)
+        gmsh.model.mesh.generate(d)
+        return d
+
+    return _mesh_from_gmsh(comm, build)
+
+
 def create_discs(comm: MPI.Comm, discs: Sequence[tuple[Sequence[float], float]], h: float,
                  frame: tuple[Sequence[float], Sequence[float], float] | None = None,
+                 cut: Sequence[str] | None = None,
+                 refine: tuple[Sequence[float], float, float] | None = None,
                  rectangles: Sequence[Sequence[float]] = ()):
     """Separate discs and rectangles, optionally inside a rectangular frame, meshed with triangles
     of size ~h (m).
@@ -163,89 +309,41 @@ def create_discs(comm: MPI.Comm, discs: Sequence[tuple[Sequence[float], float]],
     rectangle ``j`` (1-based) has cell and boundary facet tag ``n + j`` for n discs (e.g. a block
     under an indenter). ``frame = (p0, p1, width)`` adds the frame [p0 - width, p1 + width] minus
     the open rectangle (p0, p1) (the billiard table of paper §5.4): cell tag ``m + 1``, inner
-    boundary tag ``m + 1``, outer boundary tag ``m + 2`` for m discs and rectangles. The discs
+    boundary tag ``m + 1``, outer boundary tag ``m + 2`` for m discs and rectangles. The bodies
     must lie inside (p0, p1). No two bodies share a vertex.
+
+    ``cut`` (axes "x", "y") keeps the half x_i >= c_i of every disc (a symmetric problem's half
+    disc; the cut edge is part of the boundary tag i). ``refine = (point, h_min, radius)`` sets
+    the size h_min within ``radius`` of ``point``, growing as h_min + 0.5 (distance - radius) up
+    to h further away (e.g. at a contact point).
     """
-    if len(discs) == 0 and len(rectangles) == 0:
-        raise ValueError("discs must hold at least one (centre, radius) pair (or give rectangles)")
-    centres, radii = [], []
-    for i, disc in enumerate(discs, start=1):
-        if len(disc) != 2:
-            raise ValueError(f"disc {i} must be a (centre, radius) pair, got {disc!r}")
-        centre = np.asarray(disc[0], dtype=np.float64).reshape(-1)
-        radius = float(disc[1])
-        if centre.shape != (2,) or not np.all(np.isfinite(centre)):
-            raise ValueError(f"disc {i}: centre must be 2 finite coordinates, got {disc[0]!r}")
-        if not (math.isfinite(radius) and radius > 0):
-            raise ValueError(f"disc {i}: radius must be > 0, got {disc[1]!r}")
-        centres.append(centre)
-        radii.append(radius)
-    if not (math.isfinite(h) and h > 0):
-        raise ValueError(f"mesh size h must be > 0, got {h!r}")
-    for i in range(len(discs)):
-        for j in range(i):
-            gap = np.linalg.norm(centres[i] - centres[j]) - radii[i] - radii[j]
-            if gap < -1e-12 * (radii[i] + radii[j]):
-                raise ValueError(f"discs {j + 1} and {i + 1} overlap (gap {gap:g} m)")
-    boxes = []
-    for j, rect in enumerate(rectangles, start=1):
-        r = np.asarray(rect, dtype=np.float64).reshape(-1)
-        if r.shape != (4,) or not np.all(np.isfinite(r)) or r[2] <= r[0] or r[3] <= r[1]:
-            raise ValueError(f"rectangle {j} must be [x0, y0, x1, y1] with x0 < x1 and y0 < y1, got {rect!r}")
-        for i, (c, radius) in enumerate(zip(centres, radii), start=1):
-            if np.linalg.norm(c - np.clip(c, r[:2], r[2:])) < radius * (1 - 1e-12):
-                raise ValueError(f"rectangle {j} overlaps disc {i}")
-        for k, b in enumerate(boxes, start=1):
-            if np.all(np.minimum(r[2:], b[2:]) > np.maximum(r[:2], b[:2])):
-                raise ValueError(f"rectangles {k} and {j} overlap")
-        boxes.append(r)
-    if frame is not None:
-        if len(frame) != 3:
-            raise ValueError(f"frame must be (p0, p1, width), got {frame!r}")
-        p0, p1 = _check_corners(frame[0], frame[1], 2)
-        width = float(frame[2])
-        if not (math.isfinite(width) and width > 0):
-            raise ValueError(f"frame width must be > 0, got {frame[2]!r}")
-        for i, (c, r) in enumerate(zip(centres, radii), start=1):
-            if np.any(c - r <= p0) or np.any(c + r >= p1):
-                raise ValueError(f"disc {i} (centre {c.tolist()}, radius {r:g}) is not strictly inside "
-                                 f"the frame's opening {p0.tolist()} - {p1.tolist()}")
-
-    def build() -> int:
-        gmsh.model.add("discs")
-        surfaces = [gmsh.model.occ.addDisk(c[0], c[1], 0.0, r, r) for c, r in zip(centres, radii)]
-        surfaces += [gmsh.model.occ.addRectangle(b[0], b[1], 0.0, b[2] - b[0], b[3] - b[1]) for b in boxes]
-        if frame is not None:
-            outer = gmsh.model.occ.addRectangle(p0[0] - width, p0[1] - width, 0.0,
-                                                p1[0] - p0[0] + 2 * width, p1[1] - p0[1] + 2 * width)
-            hole = gmsh.model.occ.addRectangle(p0[0], p0[1], 0.0, p1[0] - p0[0], p1[1] - p0[1])
-            cut, _ = gmsh.model.occ.cut([(2, outer)], [(2, hole)])
-        gmsh.model.occ.synchronize()
-        for tag, surface in enumerate(surfaces, start=1):
-            gmsh.model.addPhysicalGroup(2, [surface], tag)
-            curves = [c for _, c in gmsh.model.getBoundary([(2, surface)], oriented=False)]
-            gmsh.model.addPhysicalGroup(1, curves, tag)
-        if frame is not None:
-            n = len(surfaces)
-            gmsh.model.addPhysicalGroup(2, [cut[0][1]], n + 1)
-            inner, outer_curves = [], []
-            for _, c in gmsh.model.getBoundary(cut, oriented=False):
-                x = gmsh.model.occ.getCenterOfMass(1, c)
-                on_hole = (p0[0] - 1e-9 <= x[0] <= p1[0] + 1e-9) and (p0[1] - 1e-9 <= x[1] <= p1[1] + 1e-9)
-                (inner if on_hole else outer_curves).append(c)
-            gmsh.model.addPhysicalGroup(1, inner, n + 1)
-            gmsh.model.addPhysicalGroup(1, outer_curves, n + 2)
-        gmsh.option.setNumber("Mesh.MeshSizeMin", h)
-        gmsh.option.setNumber("Mesh.MeshSizeMax", h)
-        gmsh.model.mesh.generate(2)
-        return 2
-
-    return _mesh_from_gmsh(comm, build)
+    return _create_round_bodies(comm, 2, "disc", discs, h, frame, cut, refine, rectangles, "rectangle")
 
 
 def create_disc(comm: MPI.Comm, centre: Sequence[float], radius: float, h: float):
     """One disc of the given centre (2,) and radius (m), triangles of size ~h; tags 1."""
     return create_discs(comm, [(centre, radius)], h)
+
+
+def create_balls(comm: MPI.Comm, balls: Sequence[tuple[Sequence[float], float]], h: float,
+                 frame: tuple[Sequence[float], Sequence[float], float] | None = None,
+                 cut: Sequence[str] | None = None,
+                 refine: tuple[Sequence[float], float, float] | None = None,
+                 boxes: Sequence[Sequence[float]] = ()):
+    """Separate balls and boxes, optionally inside a box frame, meshed with tetrahedra of size ~h (m).
+
+    The 3D ``create_discs``: ``balls`` is a sequence of ``(centre (3,), radius)``, touching but
+    not overlapping; ball ``i`` (1-based) has cell tag ``i`` and boundary facet tag ``i``;
+    ``boxes`` (``[x0, y0, z0, x1, y1, z1]``, e.g. a slab under a ball) come after them, tags
+    ``n + j``; ``frame = (p0, p1, width)`` adds the walls [p0 - width, p1 + width] minus the open
+    box (p0, p1), cell tag ``m + 1``, inner boundary tag ``m + 1``, outer boundary tag ``m + 2``
+    for m balls and boxes; no two bodies share a vertex. ``cut`` (axes among "x", "y", "z", at most two) keeps the part
+    x_i >= c_i of every ball: ``cut = ["x", "y"]`` is the quarter ball of a problem symmetric
+    about the planes x = c_x and y = c_y, whose flat faces belong to boundary tag i (select them
+    by a condition such as "x <= 0"). ``refine = (point, h_min, radius)``: size h_min within
+    ``radius`` of ``point``, growing as h_min + 0.5 (distance - radius) up to h.
+    """
+    return _create_round_bodies(comm, 3, "ball", balls, h, frame, cut, refine, boxes, "box")
 
 
 def _xdmf_grid_names(path: pathlib.Path) -> set[str]:

@@ -24,13 +24,13 @@ SERIES_COLUMNS = ("t", "kinetic", "elastic", "stabilisation", "external", "pseud
 
 def create_mesh(comm: MPI.Comm, spec: Mapping):
     """(mesh, cell_tags, facet_tags, names) from the scene's mesh table (``cell_tags``: None for
-    the generated interval, rectangle and box meshes, the disc numbers for discs); ``names`` maps the boundary names
+    the generated interval, rectangle and box meshes, the body numbers for discs and balls); ``names`` maps the boundary names
     the mesh defines to facet tags: the side names of the generated interval, rectangle and box
     meshes (``scenes.SIDES`` for the mesh's dimension), a gmsh file's physical-group names, none
-    for discs and XDMF files."""
+    for discs, balls and XDMF files."""
     kind = spec["type"]
     required = {"interval": ("x0", "x1", "n"), "rectangle": ("p0", "p1", "n"), "box": ("p0", "p1", "n"),
-                "disc": ("centre", "radius", "h"), "discs": ("h",), "file": ("path",)}[kind]
+                "disc": ("centre", "radius", "h"), "discs": ("h",), "balls": ("h",), "file": ("path",)}[kind]
     for key in required:
         if key not in spec:
             raise scenes.SceneError(f"scene key 'mesh.{key}' is missing for a mesh of type {kind!r}")
@@ -43,13 +43,18 @@ def create_mesh(comm: MPI.Comm, spec: Mapping):
         mesh, cell_tags, tags = meshes.create_box(comm, spec["p0"], spec["p1"], spec["n"])
     elif kind == "disc":
         mesh, cell_tags, tags = meshes.create_disc(comm, spec["centre"], spec["radius"], spec["h"])
-    elif kind == "discs":
-        if ("frame" in spec) != ("frame_width" in spec):
-            raise scenes.SceneError("scene keys 'mesh.frame' and 'mesh.frame_width' go together")
-        frame = (spec["frame"][:2], spec["frame"][2:], spec["frame_width"]) if "frame" in spec else None
+    elif kind in ("discs", "balls"):
+        d = 2 if kind == "discs" else 3
+        for a, b in (("frame", "frame_width"), ("refine_point", "refine_h"), ("refine_point", "refine_radius")):
+            if (a in spec) != (b in spec):
+                raise scenes.SceneError(f"scene keys 'mesh.{a}' and 'mesh.{b}' go together")
+        frame = (spec["frame"][:d], spec["frame"][d:], spec["frame_width"]) if "frame" in spec else None
+        refine = (spec["refine_point"], spec["refine_h"], spec["refine_radius"]) if "refine_point" in spec else None
+        create = meshes.create_discs if kind == "discs" else meshes.create_balls
         try:
-            mesh, cell_tags, tags = meshes.create_discs(comm, [(c[:2], c[2]) for c in spec.get("discs", [])], spec["h"],
-                                                        frame, spec.get("rectangles", []))
+            blocks = spec.get("rectangles" if kind == "discs" else "boxes", [])
+            mesh, cell_tags, tags = create(comm, [(c[:d], c[d]) for c in spec.get(kind, [])], spec["h"], frame,
+                                           spec.get("cut"), refine, blocks)
         except ValueError as err:
             raise scenes.SceneError(f"scene table 'mesh': {err}") from None
     else:

@@ -1,10 +1,13 @@
 """The static runner (a scene with a ``statics`` table): DEM energy minimisation, or the DOLFINx P2
-FEM reference for the Hertz disc (method ``fem-P2``). ``StaticRun(scene, comm)`` sets up and checks
+FEM reference for the Hertz disc and ball (method ``fem-P2``). ``StaticRun(scene, comm)`` sets up and checks
 the model before any folder is touched, ``run(output)`` solves and writes. Same output contract
 as a dynamic run (status ``completed``), with one state at t = 0, plus ``contact_pressure.csv``
 (facet or boundary positions and pressures) and the summary keys ``contact_half_width``,
 ``contact_half_width_last``, ``top_vertical_displacement``, ``max_contact_pressure``, ``h`` and
-``iterations``.
+``iterations``; in 3D with one obstacle ``contact_radius``, the moment measure
+``a = sqrt(5/2 integral r^2 p / integral p)`` about the axis through the obstacle's point along its
+normal (``hertz.contact_radius_moments``; exactly a for a Hertz profile, also on a symmetric part
+of the zone such as a quarter: put the point under the ball's centre).
 
 The contact half-width ``contact_half_width`` is the moment measure of the contact pressure,
 ``a = 2 sqrt(integral (x - xc)^2 p / integral p)`` (``hertz.contact_half_width_moments``; exactly a
@@ -47,13 +50,12 @@ def _top_point(dem) -> list[float]:
     return min(candidates, key=lambda c: (abs(c[0] - middle), c[0])).tolist()
 
 
-def _facet_x_ranges(geom, facets: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """(smallest, largest) x coordinate of the vertices of each facet (2D: segment ends)."""
+def _facet_vertices(geom, facets: np.ndarray) -> np.ndarray:
+    """The vertex coordinates of each facet, (n, d, d): the cell's vertices but the opposite one."""
     cells, local = geom.facet_cells[facets, 0], geom.facet_local[facets, 0]
     nv = geom.cell_vertices.shape[1]
     others = (local[:, None] + np.arange(1, nv)[None, :]) % nv  # the vertices other than j
-    x = geom.cell_vertices[cells[:, None], others, 0]
-    return x.min(axis=1), x.max(axis=1)
+    return geom.cell_vertices[cells[:, None], others]
 
 
 def _write_pressure(path: pathlib.Path, comm, x: np.ndarray, p: np.ndarray):
@@ -70,11 +72,7 @@ class StaticRun:
         self.wall = time.perf_counter()
         self.scene, self.comm = scene, comm
         if scene["method"] == "fem-P2":
-            mesh, loads = scene["mesh"], scene.get("loads", {})
-            force = loads.get("body_force", [0.0, 0.0])
-            if mesh["type"] != "disc" or abs(force[0]) > 0 or force[1] >= 0 or mesh["centre"] != [0.0, mesh["radius"]]:
-                raise scenes.SceneError("method 'fem-P2' solves the Hertz disc only: a 'disc' mesh centred at "
-                                        "(0, radius) on the plane y = 0 with a downward 'loads.body_force'")
+            self.fem = _fem_problem(scene)
             self.dem = None
             return
         self.dem = dem = model.build(scene, comm)
@@ -126,11 +124,12 @@ class StaticRun:
         }
         if reactions.size:  # the force each Dirichlet condition exerts on the body
             summary["reactions"] = dict(zip(model.reaction_columns(dem), reactions.ravel().tolist()))
-        if dem.contact is not None:
-            summary.update(_contact_summary(dem, u, result, directory / "contact_pressure.csv"))
         if dem.pair_contact is not None:
             summary.update(_pair_summary(dem, u, result))
         obstacles = [(ob["point"], ob["normal"]) for ob in scene.get("obstacles", [])]
+        if dem.contact is not None:
+            axis = obstacles[0] if dem.d == 3 and len(obstacles) == 1 else None
+            summary.update(_contact_summary(dem, u, result, directory / "contact_pressure.csv", axis))
         if dem.d == 1:
             plotting.plot_bar(dem.mesh, u.array_r.reshape(-1, 1), dem.stress(u, 0.0)[:, 0, 0], directory / "final.png",
                               0.0, obstacles)
@@ -142,35 +141,41 @@ class StaticRun:
 
     def _run_fem(self, directory) -> dict:
         """The DOLFINx P2 FEM reference (fem/hertz.py: Nitsche contact, Newton) for the hertz
-        scene: the paper's disc (centre (0, R), plane y = 0, vertical body force) with the
-        scene's radius, mesh size and material."""
+        scenes: the paper's disc (centre (0, R), plane y = 0, vertical body force) or the quarter
+        ball (centre (0, 0, R), plane z = 0), with the scene's radius, mesh and material."""
         from dolfinx_dem.fem.hertz import solve_hertz
 
         scene, comm = self.scene, self.comm
         mesh, m = scene["mesh"], scene["material"]
-        force = scene.get("loads", {}).get("body_force", [0.0, 0.0])
-        result = solve_hertz(comm, mesh["h"], degree=2, R=mesh["radius"], E=m["E"], nu=m["nu"], body_force=-force[1])
+        result = solve_hertz(comm, mesh["h"], degree=2, E=m["E"], nu=m["nu"], **self.fem)
         result.write_xdmf(directory / "solution.xdmf")
-        _write_pressure(directory / "contact_pressure.csv", comm, result.contact_x[:, None], result.traction_pressure)
         summary = {
             "scene": scene["name"],
             "method": "fem-P2",
             "analysis": "static",
             "status": "completed",
             "h": mesh["h"],
+            "n_cells": result.num_cells,
             "n_dofs": result.num_dofs,
             "iterations": result.iterations,
             "residual": result.residual,
-            "contact_half_width": result.contact_half_width_moment,
-            "contact_half_width_fit": result.contact_half_width,
-            "contact_half_width_traction_moment": result.contact_half_width_moment_traction,
-            "contact_half_width_last": result.contact_half_width_last,
             "top_vertical_displacement": result.top_vertical_displacement,
-            "max_contact_pressure": result.max_contact_pressure,
-            "fitted_max_pressure": result.fit_peak_pressure,
             "contact_force": result.contact_force,
             "processes": comm.size,
         }
+        if result.dim == 2:
+            _write_pressure(directory / "contact_pressure.csv", comm, result.contact_x[:, None],
+                            result.traction_pressure)
+            summary.update({
+                "contact_half_width": result.contact_half_width_moment,
+                "contact_half_width_fit": result.contact_half_width,
+                "contact_half_width_traction_moment": result.contact_half_width_moment_traction,
+                "contact_half_width_last": result.contact_half_width_last,
+                "max_contact_pressure": result.max_contact_pressure,
+                "fitted_max_pressure": result.fit_peak_pressure,
+            })
+        else:
+            summary["contact_radius"] = result.contact_radius
         displacement, von_mises = _fem_cell_fields(result.u, m["E"], m["nu"])
         plotting.plot_cell_field(result.mesh, displacement, von_mises, directory / "final.png",
                                  "von Mises stress (Pa)", scene.get("output", {}).get("picture_scale", 1.0),
@@ -178,10 +183,35 @@ class StaticRun:
         return summary
 
 
-def _contact_summary(dem, u, result, path: pathlib.Path) -> dict:
+def _fem_problem(scene: Mapping) -> dict:
+    """The ``solve_hertz`` arguments (R, body_force, dim, refine) of a ``fem-P2`` scene, which
+    must be one of the Hertz problems of fem/hertz.py."""
+    mesh, loads = scene["mesh"], scene.get("loads", {})
+    force = loads.get("body_force", [0.0, 0.0, 0.0])
+    horizontal, f = force[:-1], -force[-1]
+    if mesh["type"] == "disc" and mesh["centre"] == [0.0, mesh["radius"]]:
+        R, dim = mesh["radius"], 2
+    elif (mesh["type"] == "balls" and len(mesh["balls"]) == 1 and mesh["balls"][0][:3] == [0.0, 0.0, mesh["balls"][0][3]]
+          and mesh.get("cut") == ["x", "y"] and "frame" not in mesh):
+        R, dim = mesh["balls"][0][3], 3
+    else:
+        R = dim = None
+    refine_point = mesh.get("refine_point", [0.0] * (dim or 3))
+    if dim is None or any(horizontal) or not f > 0 or any(refine_point):
+        raise scenes.SceneError(
+            "method 'fem-P2' solves the Hertz problems only: a 'disc' mesh centred at (0, radius) on the plane "
+            "y = 0, or a 'balls' mesh of one ball centred at (0, 0, radius) with cut = ['x', 'y'] on the plane "
+            "z = 0, with a downward 'loads.body_force' (and refinement, if any, at the origin)")
+    refine = (mesh["refine_h"], mesh["refine_radius"]) if "refine_point" in mesh else None
+    return {"R": R, "body_force": f, "dim": dim, "refine": refine}
+
+
+def _contact_summary(dem, u, result, path: pathlib.Path, axis=None) -> dict:
     """The contact figures of a static DEM solution and the file of facet pressures. The own
     facets' pressures are gathered on rank 0 for the file and the half-width fits: output of a
-    static contact zone, not a step of the computation."""
+    static contact zone, not a step of the computation. In 3D with ``axis = (point, normal)``
+    (the one obstacle's) the contact radius is the moment measure about that axis
+    (``hertz.contact_radius_moments``)."""
     c, comm, geom = dem.contact, dem.comm, dem.geometry
     own = c.facets[: c.num_own]
     areas = geom.facet_areas[own]
@@ -189,22 +219,26 @@ def _contact_summary(dem, u, result, path: pathlib.Path) -> dict:
     # facets held on a kink of the potential (statics.minimise_energy) carry their multiplier
     pressure[result.pinned] = result.kink_forces[result.pinned] / areas[result.pinned]
     x = geom.facet_centres[own]
-    x_start, x_end = _facet_x_ranges(geom, own)
-    parts = comm.gather((x, pressure, areas, x_start, x_end), root=0)
+    parts = comm.gather((x, pressure, areas, _facet_vertices(geom, own)), root=0)
 
     def figures():
-        x, p, areas, x0, x1 = (np.concatenate(a) for a in zip(*parts))
+        x, p, areas, vertices = (np.concatenate(a) for a in zip(*parts))
         _write_pressure(path, comm, x, p)
         touching = p > 0
         out = {"max_contact_pressure": float(p.max()),
-               "contact_half_width_last": hertz.contact_half_width_last(x[:, 0], p),
                "contact_facets": int(touching.sum()),
                "contact_force": float((p * areas).sum())}
+        if dem.d <= 2:
+            out["contact_half_width_last"] = hertz.contact_half_width_last(x[:, 0], p)
         if dem.d == 2 and touching.sum() >= 3:
-            moments = hertz.facet_pressure_moments(x0, x1, p * areas)
+            moments = hertz.facet_pressure_moments(vertices[..., 0].min(axis=1), vertices[..., 0].max(axis=1),
+                                                   p * areas)
             out["contact_half_width"] = hertz.contact_half_width_moments(*moments)[0]
             a, p0, _ = hertz.contact_half_width_fit(x[:, 0], p)
             out["contact_half_width_fit"], out["fitted_max_pressure"] = a, p0
+        if axis is not None and touching.sum() >= 3:
+            moments = hertz.triangle_pressure_moments(vertices[touching], (p * areas)[touching], *axis)
+            out["contact_radius"] = hertz.contact_radius_moments(*moments)
         return out
 
     summary = io.call_on_root(comm, figures)
@@ -227,28 +261,33 @@ def _pair_summary(dem, u, result) -> dict:
 
 
 def _fem_cell_fields(u, E: float, nu: float):
-    """Cell-midpoint displacement and plane-strain von Mises stress of a FEM displacement, in the
-    owned DG0 dof order that plotting expects."""
+    """Cell-midpoint displacement and von Mises stress (plane strain in 2D) of a FEM displacement,
+    in the owned DG0 dof order that plotting expects."""
     import dolfinx.fem
     import ufl
 
     from dolfinx_dem import _compat
 
     mesh = u.function_space.mesh
+    d = mesh.topology.dim
     lmbda, mu = E * nu / ((1 + nu) * (1 - 2 * nu)), E / (2 * (1 + nu))
     eps = ufl.sym(ufl.grad(u))
-    sigma = 2 * mu * eps + lmbda * ufl.tr(eps) * ufl.Identity(2)
-    szz = lmbda * ufl.tr(eps)
-    s = sigma - (ufl.tr(sigma) + szz) / 3 * ufl.Identity(2)
-    vm = ufl.sqrt(1.5 * (ufl.inner(s, s) + (szz - (ufl.tr(sigma) + szz) / 3) ** 2))
+    sigma = 2 * mu * eps + lmbda * ufl.tr(eps) * ufl.Identity(d)
+    if d == 2:  # plane strain: the out-of-plane stress szz enters the deviator
+        szz = lmbda * ufl.tr(eps)
+        mean = (ufl.tr(sigma) + szz) / 3
+        s = sigma - mean * ufl.Identity(2)
+        vm = ufl.sqrt(1.5 * (ufl.inner(s, s) + (szz - mean) ** 2))
+    else:
+        vm = ufl.sqrt(1.5 * ufl.inner(ufl.dev(sigma), ufl.dev(sigma)))
     Q = _compat.create_scalar_space(mesh, "DG", 0)
     V0 = _compat.create_vector_space(mesh, "DG", 0)
     q, w = dolfinx.fem.Function(Q), dolfinx.fem.Function(V0)
     q.interpolate(dolfinx.fem.Expression(vm, Q.element.interpolation_points()))
     w.interpolate(u)
-    n = mesh.topology.index_map(2).size_local
+    n = mesh.topology.index_map(d).size_local
     cells = np.arange(n)
     blocks = _compat.cell_dofs(V0)[:n]
     order = np.empty(n, dtype=np.int64)
     order[blocks] = cells  # local cell of each owned DG0 vector block
-    return w.x.array[: 2 * n].reshape(n, 2), q.x.array[_compat.cell_dofs(Q)[order]]
+    return w.x.array[: d * n].reshape(n, d), q.x.array[_compat.cell_dofs(Q)[order]]

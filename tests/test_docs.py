@@ -61,7 +61,7 @@ def test_the_error_table_shows_what_the_command_prints(command, stage, message, 
 
 def test_the_built_in_scenes_and_top_level_keys_are_all_documented():
     section = SCENES_MD[SCENES_MD.index("## Built-in scenes"):SCENES_MD.index("## The command line")]
-    assert set(re.findall(r"\*\*`([a-z-]+)`\*\*", section)) == set(scenes.builtin_names())
+    assert set(re.findall(r"\*\*`([a-z0-9-]+)`\*\*", section)) == set(scenes.builtin_names())
     top = SCENES_MD[SCENES_MD.index("### Top level"):SCENES_MD.index("### `[mesh]`")]
     assert {k for k in scenes.SCHEMA if f"`{k}`" not in top} == set()
 

@@ -218,9 +218,25 @@ def test_p1_converges():
         {"theta": 2.0},
         {"load_steps": 0},
         {"fit_fraction": 0.0},
+        {"dim": 1},
+        {"refine": (0.1, 0.05)},  # h_min > h
     ],
 )
 def test_bad_input(kwargs):
     args = {"h": H_COARSE} | kwargs
     with pytest.raises(ValueError):
         solve_hertz(MPI.COMM_WORLD, **args)
+
+
+@pytest.mark.mpi
+def test_quarter_ball_equilibrium_and_contact_radius():
+    """3D (the quarter ball, symmetry conditions): the Nitsche multiplier balances the body force
+    on the mesh exactly (v = e_z is admissible: the conditions hold u_x, u_y only), and the
+    contact radius is near Hertz's on a coarse mesh (0.0381 m at h = 0.04, h_c = 0.01)."""
+    res = solve_hertz(MPI.COMM_WORLD, 0.06, R=0.2, body_force=3e5, dim=3, refine=(0.015, 0.05))
+    assert res.dim == 3 and res.residual < 1e-8
+    assert res.contact_force == pytest.approx(res.applied_load, rel=1e-8)
+    assert res.applied_load == pytest.approx(3e5 * np.pi * 0.2**3 / 3, rel=0.08)  # quarter ball, inscribed
+    assert res.contact_radius == pytest.approx(res.analytic.a, rel=0.05)
+    assert -res.top_vertical_displacement == pytest.approx(0.0068, rel=0.05)
+    assert np.isnan(res.contact_half_width_moment) and res.contact_x.size == 0  # 2D measures only

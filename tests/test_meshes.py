@@ -149,6 +149,73 @@ def test_disc_errors():
         meshes.create_discs(comm, [], 0.1)
 
 
+def volume_and_node_tags(mesh, cell_tags):
+    """Global volume of a tetrahedral mesh and, per cell node, the cell's tag (all ranks)."""
+    nodes, x = _compat.owned_cell_nodes(mesh)
+    e = x[:, 1:, :] - x[:, :1, :]
+    volume = MPI.COMM_WORLD.allreduce(np.abs(np.linalg.det(e)).sum() / 6.0, MPI.SUM)
+    tag_of_cell = np.zeros(nodes.shape[0], dtype=np.int32)
+    owned = cell_tags.indices < nodes.shape[0]
+    tag_of_cell[cell_tags.indices[owned]] = cell_tags.values[owned]
+    pairs = MPI.COMM_WORLD.allgather((nodes.reshape(-1), np.repeat(tag_of_cell, nodes.shape[1])))
+    return volume, np.concatenate([p[0] for p in pairs]), np.concatenate([p[1] for p in pairs])
+
+
+@pytest.mark.mpi
+def test_touching_balls_in_a_frame_are_separate_bodies():
+    balls = [((0.0, 0.0, 0.0), 0.3), ((0.6, 0.0, 0.0), 0.3)]  # touching at (0.3, 0, 0)
+    frame = ((-0.4, -0.4, -0.4), (1.0, 0.4, 0.4), 0.1)
+    mesh, cell_tags, facet_tags = meshes.create_balls(MPI.COMM_WORLD, balls, 0.1, frame)
+    assert mesh.geometry.dim == 3
+    volume, nodes, tags = volume_and_node_tags(mesh, cell_tags)
+    walls = 1.6 * 1.0 * 1.0 - 1.4 * 0.8 * 0.8
+    assert volume == pytest.approx(2 * 4 / 3 * math.pi * 0.3**3 + walls, rel=0.03)
+    assert set(tags.tolist()) == {1, 2, 3}
+    unique, inverse = np.unique(nodes, return_inverse=True)
+    lowest, highest = np.full(unique.shape, 9), np.zeros(unique.shape, dtype=int)
+    np.minimum.at(lowest, inverse, tags)
+    np.maximum.at(highest, inverse, tags)
+    assert np.all(lowest == highest), "no vertex is shared by two bodies"
+    counts = owned_tag_counts(mesh, facet_tags)
+    assert set(counts) == {1, 2, 3, 4} and counts[1] == pytest.approx(counts[2], rel=0.2)
+    # the inner boundary (tag 3) lies on the opening's faces, the outer (tag 4) on the walls'
+    for tag, (lo, hi) in ((3, frame[:2]), (4, (np.subtract(frame[0], 0.1), np.add(frame[1], 0.1)))):
+        x = _compat.facet_cell_and_vertices(mesh, facet_tags.find(tag))[1].reshape(-1, 3)
+        on_face = np.isclose(x, lo).any(axis=1) | np.isclose(x, hi).any(axis=1)
+        assert on_face.all()
+
+
+def test_quarter_ball_refined_at_the_contact_point():
+    R = 0.2
+    mesh, cell_tags, _ = meshes.create_balls(MPI.COMM_WORLD, [((0.0, 0.0, R), R)], 0.08, cut=["x", "y"],
+                                             refine=((0.0, 0.0, 0.0), 0.01, 0.02))
+    volume, _, tags = volume_and_node_tags(mesh, cell_tags)
+    assert volume == pytest.approx(math.pi * R**3 / 3, rel=0.06)  # inscribed polyhedron and set(tags.tolist()) == {1}
+    x = mesh.geometry.x
+    assert x[:, :2].min() >= -1e-12 and x[:, 2].min() == pytest.approx(0.0, abs=1e-12)
+    # edges near the contact point are ~h_min, those near the top ~h
+    nodes, cx = _compat.owned_cell_nodes(mesh)
+    edge = np.linalg.norm(cx[:, 1] - cx[:, 0], axis=1)
+    centre = cx.mean(axis=1)
+    assert edge[np.linalg.norm(centre, axis=1) < 0.02].mean() < 0.02
+    assert edge[centre[:, 2] > 0.3].mean() > 0.04
+
+
+@pytest.mark.parametrize("kwargs, match", [
+    ({"balls": [((0, 0, 0), 1.0), ((1.5, 0, 0), 1.0)]}, "balls 1 and 2 overlap"),
+    ({"balls": [((0, 0), 1.0)]}, "centre must be 3 finite"),
+    ({"balls": []}, "at least one"),
+    ({"frame": ((-2, -2, -2), (0.5, 2, 2), 0.1)}, "ball 1 .* not strictly inside"),
+    ({"cut": ["x", "y", "z"]}, "cut must be distinct axes"),
+    ({"cut": ["w"]}, "cut must be distinct axes"),
+    ({"refine": ((0, 0, 0), 0.5, 0.1)}, "h_min must satisfy"),
+])
+def test_ball_errors(kwargs, match):
+    args = {"balls": [((0, 0, 0), 1.0)], "h": 0.2} | kwargs
+    with pytest.raises(ValueError, match=match):
+        meshes.create_balls(MPI.COMM_WORLD, **args)
+
+
 @pytest.mark.parametrize(
     "call, match",
     [

@@ -8,7 +8,7 @@ import pytest
 from mpi4py import MPI
 from petsc4py import PETSc
 
-from dolfinx_dem import _compat, io, meshes, scenes, simulation
+from dolfinx_dem import _compat, io, meshes, model, scenes, simulation, static_simulation
 from dolfinx_dem.contact import HalfSpace
 from dolfinx_dem.discretisation import DEMDiscretisation, DirichletBC, Traction
 from dolfinx_dem.material import ElasticMaterial
@@ -274,6 +274,26 @@ def test_static_scene_rejects_time_and_fem_needs_statics():
         scenes.load("bar-impact", {"method": "fem-P2"})
 
 
+@pytest.mark.parametrize("overrides, message", [
+    ({"mesh.refine_h": None}, "'mesh.refine_point' and 'mesh.refine_h' go together"),
+    ({"mesh.refine_h": 0.05}, "h_min must satisfy"),
+    ({"mesh.balls": [[0.0, 0.0, 0.2, 0.2], [0.3, 0.0, 0.2, 0.2]]}, "balls 1 and 2 overlap"),
+    ({"mesh.frame": [-1.0, -1.0, -1.0, 1.0, 1.0, 0.3], "mesh.frame_width": 0.1}, "not strictly inside"),
+    ({"mesh.cut": ["x", "w"]}, r"mesh.cut\[1\]"),
+    ({"method": "fem-P2", "mesh.cut": ["x"]}, "'fem-P2' solves the Hertz problems only"),
+    ({"method": "fem-P2", "mesh.refine_point": [0.0, 0.0, 0.1]}, "'fem-P2' solves the Hertz problems only"),
+])
+def test_bad_ball_scenes_are_rejected_before_the_run(overrides, message, tmp_path):
+    scene = scenes.load("hertz3d")
+    for key, value in overrides.items():
+        table, name = key.split(".") if "." in key else (None, key)
+        target = scene[table] if table else scene
+        target.pop(name) if value is None else target.__setitem__(name, value)
+    with pytest.raises(scenes.SceneError, match=message):
+        simulation.run(scenes.validate(scene), tmp_path / "out")
+    assert not (tmp_path / "out").exists()
+
+
 @pytest.mark.mpi
 def test_scheme_b_minimum_on_a_kink(tempdir):
     """Scheme B on the Hertz disc at h = 0.013 (measured: one facet): the minimum of the
@@ -351,3 +371,21 @@ def test_bar_pressed_on_a_wall_by_a_traction(n):
     assert float(dem.contact.reactions(result.u).sum()) == pytest.approx(p, rel=1e-12)
     with pytest.raises(ValueError, match="must not carry a traction"):
         dem.set_obstacles([HalfSpace([L], [-1.0], tags.find(meshes.XMAX))])
+
+
+@pytest.mark.mpi
+def test_hertz_ball_equilibrium_and_contact_radius(tempdir):
+    """The quarter ball of the hertz3d scene on a coarse mesh: the plane carries the whole body
+    force (the symmetry conditions act on u_x, u_y only), and the contact radius is near Hertz's
+    (a = 0.0384 m; 0.0384 measured at h = 0.04, so 4 % allows for the coarse mesh only)."""
+    scene = scenes.load("hertz3d", {"mesh.h": 0.06, "mesh.refine_h": 0.015})
+    dem = model.build(scene, MPI.COMM_WORLD)
+    result = minimise_energy(dem)
+    assert result.gradient_reduction < 1e-8
+    figures = static_simulation._contact_summary(dem, result.u, result, pathlib.Path(tempdir) / "p.csv",
+                                                 ([0.0, 0.0, 0.0], [0.0, 0.0, 1.0]))
+    volume = MPI.COMM_WORLD.allreduce(dem.mass.array_r[2::3].sum(), op=MPI.SUM)  # rho = 1
+    assert figures["contact_force"] == pytest.approx(3e5 * volume, rel=1e-8)
+    assert figures["contact_radius"] == pytest.approx(0.0384, rel=0.04)
+    reactions = dem.reactions(result.u, 0.0)  # symmetry planes: normal forces only
+    assert np.all(reactions[:, 2] == 0.0) and reactions[0, 1] == reactions[1, 0] == 0.0

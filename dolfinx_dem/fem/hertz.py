@@ -1,8 +1,15 @@
-"""DOLFINx finite-element reference for the static Hertz problem (DEM paper, section 5.2).
+"""DOLFINx finite-element reference for the static Hertz problem (DEM paper, section 5.2), in 2D
+and 3D.
 
-A disc of radius R (m), centre (0, R), in plane strain (Young's modulus E in Pa, Poisson's ratio
-nu), loaded by the body force (0, -f) (N/m^3), rests on the rigid plane y = 0. Contact is
-frictionless on the lower half of the boundary (y < R); there is no Dirichlet condition.
+``dim=2``: a disc of radius R (m), centre (0, R), in plane strain (Young's modulus E in Pa,
+Poisson's ratio nu), loaded by the body force (0, -f) (N/m^3), rests on the rigid plane y = 0.
+Contact is frictionless on the lower half of the boundary (y < R); there is no Dirichlet
+condition. ``dim=3``: a ball of radius R, centre (0, 0, R), body force (0, 0, -f), on the plane
+z = 0; by symmetry only the quarter x >= 0, y >= 0 is meshed (``meshes.create_balls`` with
+``cut``), with u_x = 0 on x = 0 and u_y = 0 on y = 0, which also fix every rigid motion but the
+vertical one (held by the contact). Below, y stands for the vertical coordinate x_{d-1} and e_y
+for its unit vector; the potential contact boundary is the lower half of the sphere (not the
+flat symmetry faces).
 
 Sign conventions (the plane's normal e_y = (0, 1) points into the body's side; ``n`` is the
 outward unit normal of the body, n ~ (0, -1) in the contact zone):
@@ -25,7 +32,7 @@ multiplier ``lambda = [P(u)]_+`` (Pa) is the contact pressure that enters the eq
 the rigid translation v = e_y, ``integral_Gc lambda ds = f |Omega_h|`` exactly
 (``HertzResult.contact_pressure``).
 
-The horizontal rigid translation is free (frictionless contact, no Dirichlet condition): the
+In 2D the horizontal rigid translation is free (frictionless contact, no Dirichlet condition): the
 residual is exactly invariant under ``u -> u + c e_x`` (F(u; e_x) = 0 for every u), so e_x is a
 right and a left null vector of the Jacobian J. It is fixed by the constraint "mass-weighted mean
 of u_x = 0" (as in the DEM; uniform density, so the area-weighted mean), ``m . u = 0`` with
@@ -49,7 +56,7 @@ Newton starts from the rigid translation ``u = (0, -a_H^2 / (2 R))`` (a_H the He
 half-width), which gives a contact zone of about the right size; it converges in 3-5 iterations
 (semi-smooth Newton: the active set settles, then one exact step), so load stepping is optional.
 
-Pressures are sampled at equispaced interior points of the contact facets. Two estimates:
+In 2D, pressures are sampled at equispaced interior points of the contact facets. Two estimates:
 
 * the Nitsche multiplier ``lambda = [p(u_h) - gamma g(u_h)]_+``: >= 0 and in exact equilibrium
   with the load, but it oscillates within each facet (+-10 % on h = 1.2e-2, polygon gap);
@@ -60,6 +67,9 @@ The contact half-width ``a`` is measured by a least-squares fit of the Hertz pro
 traction on the samples in contact (:func:`contact_half_width_fit`: p^2 is quadratic in x),
 which resolves the edge below the mesh size and hardly depends on gamma0; the outermost samples
 with lambda > 0 (:func:`contact_half_width_last`) and the fit to lambda are reported as well.
+In 3D the contact radius is the moment measure of lambda about the z axis,
+``a = sqrt(5/2 integral r^2 lambda / integral lambda)`` (:func:`contact_radius_moments`), and the
+approach is u_z at the top of the ball (0, 0, 2R), a mesh vertex; the samples are 2D only.
 
 Units are SI throughout. :func:`solve_hertz` is collective on ``comm``.
 """
@@ -82,10 +92,13 @@ import dolfinx.mesh
 
 from dolfinx_dem import _compat
 from dolfinx_dem.hertz import (
+    HertzAnalytic,
     contact_half_width_fit,
     contact_half_width_last,
     contact_half_width_moments,
+    contact_radius_moments,
     hertz_analytic,
+    hertz_analytic_3d,
 )
 
 __all__ = [
@@ -138,14 +151,17 @@ def _check_int(name: str, value, minimum: int) -> int:
 class HertzResult:
     """The FEM solution of the Hertz problem and the measured quantities (SI units).
 
-    Pressure samples are on the owned facets of the lower half of the boundary (gathered on every
-    rank, sorted by x): ``samples_per_facet`` equispaced interior points per facet (facet
-    vertices excluded, where the stress jumps between cells).
+    Pressure samples (2D only; empty arrays and NaN in 3D) are on the owned facets of the lower
+    half of the boundary (gathered on every rank, sorted by x): ``samples_per_facet`` equispaced
+    interior points per facet (facet vertices excluded, where the stress jumps between cells).
+    In 3D the forces and the load are those of the quarter ball.
     """
 
     mesh: typing.Any  # dolfinx.mesh.Mesh
     u: typing.Any  # displacement Function (m), Lagrange P1/P2 vector
     h: float  # requested mesh size (m)
+    dim: int  # 2 (disc) or 3 (quarter ball)
+    num_cells: int  # global number of cells
     degree: int
     gamma0: float
     theta: float
@@ -163,17 +179,18 @@ class HertzResult:
     contact_half_width_last: float  # a (m): half the span of the samples with lambda > 0
     contact_half_width_moment: float  # a (m): moment measure of lambda, 2 sqrt(2nd central moment / force)
     contact_half_width_moment_traction: float  # a (m): moment measure of the traction where lambda > 0
-    moment_centre: float  # centre of lambda, integral x lambda / integral lambda (m)
+    moment_centre: float  # centre of lambda, integral x lambda / integral lambda (m); 2D
+    contact_radius: float  # a (m), 3D: moment measure of lambda about the z axis (NaN in 2D)
     fit_peak_pressure: float  # p0 of the fit to the traction (Pa)
     fit_centre: float  # centre of the fitted profile (m)
     max_contact_pressure: float  # max of the traction over the samples with lambda > 0 (Pa)
     max_multiplier: float  # max of lambda (Pa)
-    top_vertical_displacement: float  # u_y at the top of the disc, x = 0 (m)
-    contact_force: float  # integral of lambda over the contact boundary (N/m)
-    applied_load: float  # f |Omega_h| (N/m), the body force on the mesh
-    mean_ux: float  # mass-weighted mean of u_x (m)
-    residual: float  # final ||F(u_h)|| / ||(f, v)||, Euclidean norms of the assembled vectors
-    analytic: HertzAnalytic
+    top_vertical_displacement: float  # u_y at the top of the disc, x = 0 (m); u_z at (0, 0, 2R)
+    contact_force: float  # integral of lambda over the contact boundary (N/m; N in 3D)
+    applied_load: float  # f |Omega_h| (N/m; N in 3D), the body force on the mesh
+    mean_ux: float  # mass-weighted mean of u_x (m); 0 in 3D (symmetry)
+    residual: float  # final ||F(u_h)|| / ||(f, v)||, Euclidean norms of the assembled vectors (free dofs)
+    analytic: typing.Any  # HertzAnalytic (2D) or HertzAnalytic3D (whole ball)
     times: dict  # wall times (s): mesh, setup, solve, postprocess, total (max over ranks)
 
     def write_xdmf(self, path) -> None:
@@ -192,7 +209,7 @@ class HertzResult:
 
 
 def _lame(E: float, nu: float) -> tuple[float, float]:
-    """Plane-strain Lamé parameters (lambda, mu) in Pa."""
+    """Lamé parameters (lambda, mu) in Pa (3D, and plane strain in 2D)."""
     return E * nu / ((1.0 + nu) * (1.0 - 2.0 * nu)), E / (2.0 * (1.0 + nu))
 
 
@@ -204,9 +221,18 @@ def _global_min(comm, values: np.ndarray) -> float:
 def _top_displacement(u, R: float) -> tuple[float, float]:
     """(y_top, u_y) at the top of the mesh at x = 0 (m): on the polygon, not the circle.
 
-    Evaluated in the cell of the owned boundary facet that crosses x = 0 (no point location).
+    2D: evaluated in the cell of the owned boundary facet that crosses x = 0 (no point
+    location). 3D: at the pole (0, 0, 2R), a vertex of the mesh (``create_balls``).
     """
     mesh = u.function_space.mesh
+    if mesh.topology.dim == 3:
+        point = np.array([[0.0, 0.0, 2.0 * R]])
+        cell = _compat.colliding_cells(mesh, point)
+        value = np.real(u.eval(point, cell)).reshape(-1)[2] if cell[0] >= 0 else -np.inf
+        found = mesh.comm.allreduce(value, op=MPI.MAX)  # any process holding the pole
+        if not np.isfinite(found):
+            raise RuntimeError("the top of the ball (0, 0, 2R) is in no cell")
+        return 2.0 * R, float(found)
     facets = _owned(mesh, _compat.locate_boundary_facets(mesh, lambda x: x[1] > R))
     cells, facet_x, _ = _compat.facet_cell_and_vertices(mesh, facets)
     best = (-np.inf, 0.0)
@@ -279,9 +305,7 @@ class _MeanUx:
         self.m = dolfinx.fem.petsc.assemble_vector(dolfinx.fem.form(v[0] * ufl.dx))
         self.m.ghostUpdate(addv=PETSc.InsertMode.ADD, mode=PETSc.ScatterMode.REVERSE)
         self._e_x_function = dolfinx.fem.Function(V)
-        self._e_x_function.interpolate(
-            lambda x: np.stack([np.ones(x.shape[1]), np.zeros(x.shape[1])])
-        )
+        self._e_x_function.interpolate(lambda x: np.stack([np.ones(x.shape[1]), np.zeros(x.shape[1])]))
         self.e_x = _compat.petsc_vec(self._e_x_function)
         self.area = self.m.dot(self.e_x)
 
@@ -292,6 +316,26 @@ class _MeanUx:
     def remove(self, vec: PETSc.Vec) -> None:
         """Subtract the mean x-translation from ``vec`` (owned entries; ghosts untouched)."""
         vec.axpy(-self.mean(vec), self.e_x)
+
+
+def _rigid_motions(V) -> PETSc.NullSpace:
+    """The rigid motions of the vector space V (3 in 2D, 6 in 3D) as an orthonormal PETSc
+    NullSpace, the near null space of elasticity for the AMG."""
+    d = V.mesh.geometry.dim
+    modes = [lambda x, i=i: np.stack([np.full(x.shape[1], float(i == k)) for k in range(d)]) for i in range(d)]
+    for i, j in ((0, 1), (1, 2), (2, 0))[: 1 if d == 2 else 3]:  # rotation in the (x_i, x_j) plane
+        modes.append(lambda x, i=i, j=j: np.stack([-x[j] if k == i else x[i] if k == j else 0.0 * x[0]
+                                                   for k in range(d)]))
+    vectors = []
+    for mode in modes:
+        w = dolfinx.fem.Function(V)
+        w.interpolate(mode)
+        vec = _compat.petsc_vec(w).copy()
+        for other in vectors:  # Gram-Schmidt
+            vec.axpy(-vec.dot(other), other)
+        vec.normalize()
+        vectors.append(vec)
+    return PETSc.NullSpace().create(vectors=vectors, comm=V.mesh.comm)
 
 
 class _Newton:
@@ -308,21 +352,30 @@ class _Newton:
     * "nullspace": e_x as a PETSc MatNullSpace of J and MUMPS with null-pivot detection
       (ICNTL(24) = 1). MUMPS's default threshold does not always see the (round-off) null pivot.
 
-    In both cases the update is projected onto zero mean u_x.
+    In both cases the update is projected onto zero mean u_x. With ``mean_ux=None`` (3D: the
+    symmetry conditions ``bcs`` fix the horizontal motions) J is nonsingular: GMRES + GAMG.
     """
 
     _METHODS = ("regularise", "nullspace")
 
-    def __init__(self, comm, F, u, mean_ux, rtol, atol, max_it, method, regularisation):
+    def __init__(self, comm, F, u, mean_ux, rtol, atol, max_it, method, regularisation, bcs=()):
         V = u.function_space
         du, v = ufl.TrialFunction(V), ufl.TestFunction(V)
         J = ufl.derivative(F, u, du)
         options = {"ksp_type": "preonly", "pc_type": "lu", "pc_factor_mat_solver_type": "mumps"}
-        if method == "regularise":
+        if mean_ux is None:
+            # 3D: the LU's fill makes MUMPS minutes slow from ~40k dofs (300 s against 36 s at
+            # 40k). GMRES, not CG: on coarse meshes the Nitsche term -theta/gamma (p(du), p(v))
+            # makes J slightly indefinite (CG stopped with an indefinite matrix at h = 0.06 m).
+            # Smoothed aggregation AMG with the rigid motions as near null space; updates to
+            # 1e-10 relative residual keep Newton's convergence.
+            method = None
+            options = {"ksp_type": "gmres", "pc_type": "gamg", "ksp_rtol": 1e-10, "ksp_max_it": 5000}
+        elif method == "regularise":
             J = J + regularisation * du[0] * v[0] * ufl.dx
         else:
             options["mat_mumps_icntl_24"] = 1
-        self.solver, self._problem = _compat.newton_solver(comm, F, u, J)
+        self.solver, self._problem = _compat.newton_solver(comm, F, u, J, bcs)
         # DOLFINx 0.5's "residual" criterion divides by the first update's norm, not by the first
         # residual's; the incremental criterion ||du_k|| <= rtol ||du_1|| is used instead (the
         # caller checks the final residual).
@@ -332,7 +385,10 @@ class _Newton:
         self.solver.max_it = max_it
         self.solver.error_on_nonconvergence = False
 
-        self._null_space = None
+        self._null_space = self._near_null_space = None
+        if mean_ux is None:
+            self._near_null_space = _rigid_motions(V)
+            self.solver.A.setNearNullSpace(self._near_null_space)
         if method == "nullspace":
             e_x = self.solver.A.createVecRight()
             e_x.array[:] = mean_ux.e_x.array_r[: e_x.getLocalSize()]
@@ -350,14 +406,19 @@ class _Newton:
             database[self._prefix + key] = value
         self.ksp.setFromOptions()
 
-        def update(_solver, dx: PETSc.Vec, x: PETSc.Vec) -> None:
-            mean_ux.remove(dx)  # the update keeps the mean of u_x (zero) unchanged
-            x.axpy(-1.0, dx)
+        if mean_ux is not None:
+            def update(_solver, dx: PETSc.Vec, x: PETSc.Vec) -> None:
+                mean_ux.remove(dx)  # the update keeps the mean of u_x (zero) unchanged
+                x.axpy(-1.0, dx)
 
-        self.solver.set_update(update)
+            self.solver.set_update(update)
 
     def solve(self, u) -> tuple[int, bool]:
-        return self.solver.solve(u)
+        result = self.solver.solve(u)
+        if self.ksp.getConvergedReason() < 0:
+            raise RuntimeError(f"the linear solve of the last Newton iteration failed (KSP reason "
+                               f"{self.ksp.getConvergedReason()})")
+        return result
 
     def null_pivots(self) -> int:
         """Null pivots MUMPS detected in the last factorisation (0 unless "nullspace")."""
@@ -371,11 +432,16 @@ class _Newton:
             database.delValue(self._prefix + key)
         if self._null_space is not None:
             self._null_space.destroy()
+        if self._near_null_space is not None:
+            self._near_null_space.destroy()
 
 
-def _assembled_norm(form) -> float:
+def _assembled_norm(form, bcs=()) -> float:
+    """Euclidean norm of the assembled vector, without the entries of the Dirichlet dofs (there
+    the residual is the reaction)."""
     vec = dolfinx.fem.petsc.assemble_vector(dolfinx.fem.form(form))
     vec.ghostUpdate(addv=PETSc.InsertMode.ADD, mode=PETSc.ScatterMode.REVERSE)
+    dolfinx.fem.petsc.set_bc(vec, list(bcs), scale=0.0)
     norm = vec.norm()
     vec.destroy()
     return norm
@@ -401,23 +467,26 @@ def solve_hertz(
     fit_fraction: float = 0.2,
     samples_per_facet: int = 8,
     quadrature_degree: typing.Optional[int] = None,
+    dim: int = 2,
+    refine: typing.Optional[tuple[float, float]] = None,
 ) -> HertzResult:
     """Solve the static Hertz problem with P1/P2 FEM and Nitsche frictionless contact.
 
     Args:
         comm: MPI communicator (collective).
-        h: Mesh size (m) passed to :func:`dolfinx_dem.meshes.create_disc`, 0 < h < R.
+        h: Mesh size (m) passed to :func:`dolfinx_dem.meshes.create_discs` (``create_balls``
+            in 3D), 0 < h < R.
         degree: Lagrange degree of the displacement, 1 or 2.
-        R: Disc radius (m), > 0; centre (0, R).
+        R: Disc (ball) radius (m), > 0; centre (0, R) (in 3D (0, 0, R)).
         E: Young's modulus (Pa), > 0.
-        nu: Poisson's ratio, -1 < nu < 0.5 (plane strain).
-        body_force: Magnitude f (N/m^3) > 0 of the downward body force (0, -f).
+        nu: Poisson's ratio, -1 < nu < 0.5 (plane strain in 2D).
+        body_force: Magnitude f (N/m^3) > 0 of the downward body force (0, -f) or (0, 0, -f).
         gamma0: Nitsche parameter, gamma = gamma0 E / h_K, > 0.
         theta: Nitsche variant, 1 (symmetric), 0 or -1 (skew-symmetric); any value in [-1, 1].
-        exact_gap: Measure the gap from the circle instead of the mesh polygon (see above).
-        singular_method: How the linear solves handle the free x-translation: "regularise"
+        exact_gap: Measure the gap from the circle (sphere) instead of the mesh (see above).
+        singular_method: How the linear solves handle the free x-translation (2D): "regularise"
             (default) or "nullspace" (see the module docstring).
-        regularisation: eps / (E / R^2) of the "regularise" method, > 0.
+        regularisation: eps / (E / R^2) of the "regularise" method (2D), > 0.
         load_steps: Number of equal load increments (>= 1), each solved by Newton.
         rtol: Newton stops when the update's norm is <= rtol times the first update's.
         max_it: Maximum Newton iterations per load step.
@@ -425,6 +494,9 @@ def solve_hertz(
         samples_per_facet: Pressure samples per contact facet (>= 1).
         quadrature_degree: Quadrature degree on the contact boundary (default 4 * degree: the
             contact integrand has a kink at the edge of the contact zone).
+        dim: 2 (the disc) or 3 (the quarter ball, see the module docstring).
+        refine: (h_min, radius): mesh size h_min within ``radius`` of the contact point (the
+            ``refine`` of ``create_discs``/``create_balls``); None: uniform h.
 
     Returns:
         A :class:`HertzResult`; its numbers and sample arrays are identical on every rank (the
@@ -433,7 +505,7 @@ def solve_hertz(
     Raises:
         ValueError: bad input. RuntimeError: Newton did not converge.
     """
-    from dolfinx_dem.meshes import create_disc
+    from dolfinx_dem.meshes import create_balls, create_discs
 
     t_start = time.perf_counter()
     h = _check_positive("h (mesh size)", h)
@@ -461,14 +533,25 @@ def solve_hertz(
     if quadrature_degree is None:
         quadrature_degree = 4 * degree
     quadrature_degree = _check_int("quadrature_degree", quadrature_degree, 1)
-    analytic = hertz_analytic(R, E, nu, f)
+    if dim not in (2, 3):
+        raise ValueError(f"dim must be 2 (disc) or 3 (quarter ball), got {dim!r}")
+    d = dim
+    if refine is not None:
+        refine = ((0.0,) * d, *refine)  # at the contact point; create_* check the values
+    analytic = (hertz_analytic if d == 2 else hertz_analytic_3d)(R, E, nu, f)
 
-    mesh, _, _ = create_disc(comm, (0.0, R), R, h)
+    centre = (0.0,) * (d - 1) + (R,)
+    if d == 2:
+        mesh, _, _ = create_discs(comm, [(centre, R)], h, refine=refine)
+    else:
+        mesh, _, _ = create_balls(comm, [(centre, R)], h, cut=["x", "y"], refine=refine)
     t_mesh = time.perf_counter()
 
-    # potential contact boundary: the lower half of the disc
-    fdim = mesh.topology.dim - 1
-    contact_facets = np.sort(_compat.locate_boundary_facets(mesh, lambda x: x[1] < R))
+    # potential contact boundary: the lower half of the circle or sphere (every vertex on it: not
+    # the flat symmetry faces of the quarter ball)
+    fdim = d - 1
+    contact_facets = np.sort(_compat.locate_boundary_facets(
+        mesh, lambda x: (x[d - 1] < R) & (np.sum((x[:d].T - centre) ** 2, axis=1) >= R**2 * (1 - 1e-9))))
     tags = dolfinx.mesh.meshtags(
         mesh, fdim, contact_facets, np.full(contact_facets.size, _CONTACT, dtype=np.int32)
     )
@@ -479,7 +562,7 @@ def solve_hertz(
         subdomain_id=_CONTACT,
         metadata={"quadrature_degree": quadrature_degree},
     )
-    y_plane = 0.0 if exact_gap else _global_min(comm, mesh.geometry.x[:, 1])
+    y_plane = 0.0 if exact_gap else _global_min(comm, mesh.geometry.x[:, d - 1])
 
     # Nitsche residual (module docstring)
     V = _compat.create_vector_space(mesh, "Lagrange", degree)
@@ -491,35 +574,43 @@ def solve_hertz(
         return ufl.sym(ufl.grad(w))
 
     def sigma(w):
-        return lmbda * ufl.tr(eps(w)) * ufl.Identity(2) + 2.0 * mu * eps(w)
+        return lmbda * ufl.tr(eps(w)) * ufl.Identity(d) + 2.0 * mu * eps(w)
 
     n = ufl.FacetNormal(mesh)
-    e_y = ufl.as_vector((0.0, 1.0))
+    e_y = ufl.unit_vector(d - 1, d)  # the vertical direction, normal of the plane
     x = ufl.SpatialCoordinate(mesh)
+    r2 = sum(x[i] ** 2 for i in range(d - 1))  # squared distance from the vertical axis
 
     def pressure(w):
         return ufl.dot(e_y, ufl.dot(sigma(w), n))
 
     gamma = gamma0 * E / ufl.CellDiameter(mesh)
     if exact_gap:
-        gap = R - ufl.sqrt(R**2 - x[0] ** 2) + u[1]  # |x| <= R on the polygon
+        gap = R - ufl.sqrt(R**2 - r2) + u[d - 1]  # r <= R on the polygon
     else:
-        gap = x[1] + u[1] - y_plane
+        gap = x[d - 1] + u[d - 1] - y_plane
     P = pressure(u) - gamma * gap
     multiplier = ufl.conditional(ufl.gt(P, 0.0), P, 0.0)
     load_factor = dolfinx.fem.Constant(mesh, PETSc.ScalarType(1.0))
-    force = ufl.as_vector((0.0, -f * load_factor))
+    force = -f * load_factor * e_y
     load_form = ufl.inner(force, v) * ufl.dx
     F = (
         ufl.inner(sigma(u), eps(v)) * ufl.dx
         - theta / gamma * pressure(u) * pressure(v) * ds_c
-        + 1.0 / gamma * multiplier * (theta * pressure(v) - gamma * v[1]) * ds_c
+        + 1.0 / gamma * multiplier * (theta * pressure(v) - gamma * v[d - 1]) * ds_c
         - load_form
     )
 
-    mean_ux = _MeanUx(V)
+    if d == 2:
+        mean_ux, bcs = _MeanUx(V), []
+    else:  # symmetry: u_x = 0 on x = 0, u_y = 0 on y = 0
+        mean_ux, bcs = None, []
+        for i in range(2):
+            facets = _compat.locate_boundary_facets(mesh, lambda x, i=i: np.abs(x[i]) <= 1e-10 * R)
+            dofs = dolfinx.fem.locate_dofs_topological(V.sub(i), fdim, facets)
+            bcs.append(dolfinx.fem.dirichletbc(PETSc.ScalarType(0.0), dofs, V.sub(i)))
     newton = _Newton(
-        comm, F, u, mean_ux, rtol, 1e-14 * R, max_it, singular_method, regularisation * E / R**2
+        comm, F, u, mean_ux, rtol, 1e-14 * R, max_it, singular_method, regularisation * E / R**2, bcs
     )
     t_setup = time.perf_counter()
     try:
@@ -529,9 +620,7 @@ def solve_hertz(
             if step == 1:
                 # rigid downward translation: a contact zone of about the Hertz width
                 delta = analytic.a**2 / (2.0 * R) / load_steps
-                u.interpolate(
-                    lambda x: np.stack([np.zeros(x.shape[1]), np.full(x.shape[1], -delta)])
-                )
+                u.interpolate(lambda x: np.stack([np.zeros(x.shape[1])] * (d - 1) + [np.full(x.shape[1], -delta)]))
             it, converged = newton.solve(u)
             iterations += int(it)
             if not converged:
@@ -543,33 +632,42 @@ def solve_hertz(
     finally:
         newton.close()
     u_vec = _compat.petsc_vec(u)
-    mean_ux.remove(u_vec)  # round-off only
+    if mean_ux is not None:
+        mean_ux.remove(u_vec)  # round-off only
     u_vec.ghostUpdate(addv=PETSc.InsertMode.INSERT, mode=PETSc.ScatterMode.FORWARD)
     t_solve = time.perf_counter()
 
     # --- postprocessing
-    residual = _assembled_norm(F) / _assembled_norm(load_form)
-    W = _compat.create_tensor_space(mesh, "DG", degree - 1)
-    sigma_h = dolfinx.fem.Function(W)
-    _compat.interpolate_expression(sigma_h, sigma(u))  # exact: sigma(u_h) is in DG(degree-1)
-    samples = _sample_contact(
-        u, sigma_h, _owned(mesh, contact_facets), y_plane, gamma0, E, samples_per_facet, R,
-        exact_gap,
-    )
-    xs, lam, p, g = _gather_sorted(comm, *samples)
-    traction_in_contact = np.where(lam > 0.0, p, 0.0)
-    a_fit, p0_fit, centre = contact_half_width_fit(xs, traction_in_contact, fit_fraction)
+    residual = _assembled_norm(F, bcs) / _assembled_norm(load_form, bcs)
 
     def integral(expr) -> float:
         return comm.allreduce(dolfinx.fem.assemble_scalar(dolfinx.fem.form(expr)), op=MPI.SUM)
 
     contact_force = integral(multiplier * ds_c)
-    # moment measure of the half-width (hertz.contact_half_width_moments), by quadrature on Gc
-    a_moment, moment_centre = contact_half_width_moments(
-        *(integral(multiplier * x[0] ** k * ds_c) for k in range(3)))
     in_contact = ufl.conditional(ufl.gt(P, 0.0), pressure(u), 0.0)
-    a_moment_traction, _ = contact_half_width_moments(
-        *(integral(in_contact * x[0] ** k * ds_c) for k in range(3)))
+    nan, empty = float("nan"), np.zeros(0)
+    if d == 2:
+        W = _compat.create_tensor_space(mesh, "DG", degree - 1)
+        sigma_h = dolfinx.fem.Function(W)
+        _compat.interpolate_expression(sigma_h, sigma(u))  # exact: sigma(u_h) is in DG(degree-1)
+        samples = _sample_contact(
+            u, sigma_h, _owned(mesh, contact_facets), y_plane, gamma0, E, samples_per_facet, R,
+            exact_gap,
+        )
+        xs, lam, p, g = _gather_sorted(comm, *samples)
+        traction_in_contact = np.where(lam > 0.0, p, 0.0)
+        a_fit, p0_fit, fit_centre = contact_half_width_fit(xs, traction_in_contact, fit_fraction)
+        a_fit_multiplier = contact_half_width_fit(xs, lam, fit_fraction)[0]
+        # moment measure of the half-width (hertz.contact_half_width_moments), by quadrature on Gc
+        a_moment, moment_centre = contact_half_width_moments(
+            *(integral(multiplier * x[0] ** k * ds_c) for k in range(3)))
+        a_moment_traction, _ = contact_half_width_moments(
+            *(integral(in_contact * x[0] ** k * ds_c) for k in range(3)))
+        a_radius = nan
+    else:
+        xs = lam = p = g = traction_in_contact = empty
+        a_fit = p0_fit = fit_centre = a_fit_multiplier = a_moment = moment_centre = a_moment_traction = nan
+        a_radius = contact_radius_moments(contact_force, integral(multiplier * r2 * ds_c))
     applied = f * integral(dolfinx.fem.Constant(mesh, PETSc.ScalarType(1.0)) * ufl.dx)
     _, u_top = _top_displacement(u, R)
     t_end = time.perf_counter()
@@ -585,6 +683,8 @@ def solve_hertz(
         mesh=mesh,
         u=u,
         h=h,
+        dim=d,
+        num_cells=mesh.topology.index_map(d).size_global,
         degree=degree,
         gamma0=gamma0,
         theta=theta,
@@ -598,19 +698,20 @@ def solve_hertz(
         traction_pressure=p,
         contact_gap=g,
         contact_half_width=a_fit,
-        contact_half_width_multiplier=contact_half_width_fit(xs, lam, fit_fraction)[0],
-        contact_half_width_last=contact_half_width_last(xs, lam),
+        contact_half_width_multiplier=a_fit_multiplier,
+        contact_half_width_last=contact_half_width_last(xs, lam) if d == 2 else nan,
         contact_half_width_moment=a_moment,
         contact_half_width_moment_traction=a_moment_traction,
         moment_centre=moment_centre,
+        contact_radius=a_radius,
         fit_peak_pressure=p0_fit,
-        fit_centre=centre,
-        max_contact_pressure=float(np.max(traction_in_contact)),
-        max_multiplier=float(np.max(lam)),
+        fit_centre=fit_centre,
+        max_contact_pressure=float(np.max(traction_in_contact)) if d == 2 else nan,
+        max_multiplier=float(np.max(lam)) if d == 2 else nan,
         top_vertical_displacement=float(u_top),
         contact_force=contact_force,
         applied_load=applied,
-        mean_ux=float(mean_ux.mean(u_vec)),
+        mean_ux=float(mean_ux.mean(u_vec)) if mean_ux is not None else 0.0,
         residual=float(residual),
         analytic=analytic,
         times={k: comm.allreduce(t, op=MPI.MAX) for k, t in times.items()},

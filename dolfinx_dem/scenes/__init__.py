@@ -71,7 +71,7 @@ def _field(key, v, d):
     return _vector(key, v, d)
 
 
-MESH_TYPES = ("interval", "rectangle", "box", "disc", "discs", "file")
+MESH_TYPES = ("interval", "rectangle", "box", "disc", "discs", "balls", "file")
 METHODS = ("dem-A", "dem-B", "fem-P2")
 QUADRATURES = ("midpoint", "gauss-legendre-1", "gauss-legendre-2", "gauss-legendre-3", "gauss-legendre-5")
 
@@ -94,9 +94,15 @@ SCHEMA = {
         "h": lambda k, v, d: _number(k, v, positive=True),
         "path": lambda k, v, d: _string(k, v),
         "discs": lambda k, v, d: [_vector(f"{k}[{i}]", x, 3) for i, x in enumerate(_list(k, v))],
+        "balls": lambda k, v, d: [_vector(f"{k}[{i}]", x, 4) for i, x in enumerate(_list(k, v))],
         "rectangles": lambda k, v, d: [_vector(f"{k}[{i}]", x, 4) for i, x in enumerate(_list(k, v))],
-        "frame": lambda k, v, d: _vector(k, v, 4),
+        "boxes": lambda k, v, d: [_vector(f"{k}[{i}]", x, 6) for i, x in enumerate(_list(k, v))],
+        "frame": lambda k, v, d: _vector(k, v, 2 * d if d else None),
         "frame_width": lambda k, v, d: _number(k, v, positive=True),
+        "cut": lambda k, v, d: [_string(f"{k}[{i}]", x, tuple("xyz"[:d])) for i, x in enumerate(_list(k, v))],
+        "refine_point": lambda k, v, d: _vector(k, v, d),
+        "refine_h": lambda k, v, d: _number(k, v, positive=True),
+        "refine_radius": lambda k, v, d: _number(k, v, positive=True),
     },
     "material": {
         "E": lambda k, v, d: _number(k, v),
@@ -240,7 +246,7 @@ def dimension(scene: Mapping) -> int:
         return 1
     if kind in ("rectangle", "disc", "discs"):
         return 2
-    if kind == "box":
+    if kind in ("box", "balls"):
         return 3
     if kind == "file":
         return None  # known once the mesh is read; validate() is called again then

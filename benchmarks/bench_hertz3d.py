@@ -1,0 +1,153 @@
+"""3D static Hertz contact (issue 14): a ball on a rigid plane, DEM against the DOLFINx P2 FEM.
+
+The built-in scene ``hertz3d``: a ball of radius R = 0.2 m, centre (0, 0, R), E = 25 MPa,
+nu = 0.25, body force f = 0.3 MN/m^3 downwards, on the rigid plane z = 0; the quarter x, y >= 0
+with u_x = 0 on x = 0 and u_y = 0 on y = 0, the mesh refined at the contact point (size h_c
+within 0.05 m of the origin, growing to h). Each level s of ``--scales`` divides both sizes by s
+(h = 0.04 / s, h_c = 0.01 / s). The DEM (scheme A, ``statics.minimise_energy``) and the FEM
+(P2, Nitsche, ``fem.hertz.solve_hertz`` with ``dim=3``) run the same scene (``method = dem-A``
+or ``fem-P2``), the FEM on one more level than the DEM; its finest run is the reference.
+
+Reported per run: the contact radius a (moment measure about the z axis,
+a = sqrt(5/2 int r^2 p / int p), ``hertz.contact_radius_moments``: for the DEM the facet
+pressures are uniform on their triangles, for the FEM the Nitsche multiplier is integrated by
+quadrature), the approach -u_z at the top (0, 0, 2R), the contact force on the quarter (in the
+JSON), the relative differences against the finest FEM and against Hertz
+(a_H = (3 P R / (4 E*))^(1/3), P = f 4/3 pi R^3, delta_H = a_H^2 / R), and the wall times.
+Hertz's delta is the approach of points far from the contact; the top of a ball loaded by its
+own weight also moves by the compression of the whole ball, so delta_H is a rough scale only.
+
+    .venv/bin/python benchmarks/bench_hertz3d.py [--scales 1 1.41 2] [--fem-extra 2.83]
+        [--out docs/validation/hertz3d.json]
+
+writes the JSON and, next to it, hertz3d.md (the table; the command, date and commit).
+"""
+
+import argparse
+import datetime
+import json
+import pathlib
+import subprocess
+import sys
+import time
+
+from mpi4py import MPI
+
+from dolfinx_dem import scenes, simulation
+from dolfinx_dem.hertz import hertz_analytic_3d
+
+ROOT = pathlib.Path(__file__).resolve().parents[1]
+H, H_CONTACT = 0.04, 0.01
+
+
+def run(method: str, scale: float, work: pathlib.Path) -> dict:
+    scene = scenes.load("hertz3d", {"method": method, "mesh.h": H / scale, "mesh.refine_h": H_CONTACT / scale})
+    start = time.perf_counter()
+    summary = simulation.run(scene, work / f"{method}-{scale:g}", overwrite=True, quiet=True)
+    return {"method": method, "scale": scale, "h": H / scale, "h_contact": H_CONTACT / scale,
+            "cells": summary["n_cells"], "a": summary["contact_radius"],
+            "approach": -summary["top_vertical_displacement"], "contact_force": summary["contact_force"],
+            "iterations": summary["iterations"], "wall_s": time.perf_counter() - start}
+
+
+def table(results: dict) -> str:
+    ref = results["fem"][-1]
+    hz = results["hertz"]
+    lines = ["| method | h (m) | h_c (m) | cells | a (m) | approach (m) | a - FEM | approach - FEM | a - Hertz "
+             "| approach - Hertz | iterations | wall (s) |", "|" + "---|" * 12]
+    for row in results["dem"] + results["fem"]:
+        rel = lambda key, r: f"{100 * (row[key] / r - 1):+.2f}%"  # noqa: E731
+        lines.append(f"| {'DEM, scheme A' if row['method'] == 'dem-A' else 'FEM P2'} | {row['h']:.4g} "
+                     f"| {row['h_contact']:.4g} | {row['cells']} | {row['a']:.5e} | {row['approach']:.5e} "
+                     f"| {rel('a', ref['a'])} | {rel('approach', ref['approach'])} | {rel('a', hz['a'])} "
+                     f"| {rel('approach', hz['approach'])} | {row['iterations']} | {row['wall_s']:.1f} |")
+    lines.append(f"| Hertz | - | - | - | {hz['a']:.5e} | {hz['approach']:.5e} | - | - | - | - | - | - |")
+    return "\n".join(lines)
+
+
+def main():
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--scales", type=float, nargs="+", default=[1.0, 1.41, 2.0])
+    parser.add_argument("--fem-extra", type=float, nargs="*", default=[2.83],
+                        help="further levels for the FEM only (its finest is the reference)")
+    parser.add_argument("--out", default=str(ROOT / "docs" / "validation" / "hertz3d.json"))
+    parser.add_argument("--work", default="results/bench_hertz3d", help="folder of the runs' outputs")
+    args = parser.parse_args()
+    comm = MPI.COMM_WORLD
+    work = pathlib.Path(args.work)
+    scene = scenes.load("hertz3d")
+    m, (*_, R) = scene["material"], scene["mesh"]["balls"][0]
+    hz = hertz_analytic_3d(R, m["E"], m["nu"], -scene["loads"]["body_force"][2])
+    results = {
+        "command": " ".join(["python", "benchmarks/bench_hertz3d.py"] + sys.argv[1:]),
+        "date": datetime.datetime.now(datetime.timezone.utc).strftime("%Y-%m-%d %H:%M UTC"),
+        "commit": subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=ROOT, capture_output=True,
+                                 text=True).stdout.strip(),
+        "processes": comm.size,
+        "hertz": {"a": hz.a, "approach": hz.approach, "load": hz.load, "p0": hz.p0},
+        "dem": [run("dem-A", s, work) for s in args.scales],
+        "fem": [run("fem-P2", s, work) for s in args.scales + args.fem_extra],
+    }
+    results["fem_aitken"] = {key: aitken([r[key] for r in results["fem"][-3:]]) for key in ("a", "approach")}
+    ref = results["fem"][-1]
+    dem_a = [abs(r["a"] / ref["a"] - 1) for r in results["dem"]]
+    dem_d = [abs(r["approach"] / ref["approach"] - 1) for r in results["dem"]]
+    results["criteria"] = {
+        "dem_finest_a_within_5pct_of_fem": dem_a[-1] < 0.05,
+        "dem_finest_approach_within_5pct_of_fem": dem_d[-1] < 0.05,
+        "dem_a_difference_decreasing": all(x > y for x, y in zip(dem_a, dem_a[1:])),
+        "dem_approach_difference_decreasing": all(x > y for x, y in zip(dem_d, dem_d[1:])),
+    }
+    if comm.rank == 0:
+        out = pathlib.Path(args.out)
+        out.write_text(json.dumps(results, indent=2) + "\n")
+        out.with_suffix(".md").write_text(markdown(results))
+
+
+def markdown(results: dict) -> str:
+    criteria = "\n".join(f"| {k.replace('_', ' ')} | **{'holds' if v else 'fails'}** |"
+                         for k, v in results["criteria"].items())
+    return f"""# 3D static Hertz contact (issue 14)
+
+Written by `{results['command']}` ({results['processes']} process(es)) on {results['date']},
+commit {results['commit']}; the numbers are in [`hertz3d.json`](hertz3d.json).
+
+{__doc__.split(chr(10) + chr(10), 1)[1].rsplit(chr(10) + chr(10) + "    ", 1)[0]}
+
+Hertz: P = {results['hertz']['load']:.5g} N (the whole ball), a = {results['hertz']['a']:.5e} m,
+delta = {results['hertz']['approach']:.5e} m. The relative differences are against the finest FEM
+run and against Hertz. `wall` is the wall time of the whole run (mesh, solve, output files and
+picture) on a shared 2-core machine: orders of magnitude, not careful benchmarks.
+
+## Results
+
+{table(results)}
+
+The FEM reference converges: successive changes of a {changes(results['fem'], 'a')}, of the
+approach {changes(results['fem'], 'approach')} (relative to the finer run). Aitken's extrapolation of
+its three finest runs: a = {results['fem_aitken']['a']:.5e} m, approach =
+{results['fem_aitken']['approach']:.5e} m; the finest DEM run differs from these by
+{100 * (results['dem'][-1]['a'] / results['fem_aitken']['a'] - 1):+.2f}% (a) and
+{100 * (results['dem'][-1]['approach'] / results['fem_aitken']['approach'] - 1):+.2f}% (approach).
+
+## Criteria
+
+| criterion | verdict |
+|---|---|
+{criteria}
+"""
+
+
+def aitken(x: list) -> float:
+    """Aitken's extrapolation x2 - (x2 - x1)^2 / ((x2 - x1) - (x1 - x0)) of three successive values
+    of a geometrically converging sequence (the FEM runs, one refinement factor apart)."""
+    x0, x1, x2 = x
+    return x2 - (x2 - x1) ** 2 / ((x2 - x1) - (x1 - x0))
+
+
+def changes(rows: list, key: str) -> str:
+    return ", ".join(f"{100 * (a[key] / b[key] - 1):+.3f}%" for a, b in zip(rows, rows[1:]))
+
+
+if __name__ == "__main__":
+    main()
