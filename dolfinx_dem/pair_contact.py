@@ -62,6 +62,7 @@ import time
 
 import numpy as np
 import scipy.sparse
+import scipy.sparse.csgraph
 import scipy.spatial
 from mpi4py import MPI
 from petsc4py import PETSc
@@ -572,9 +573,9 @@ class PairContact:
     # -- events --------------------------------------------------------------------------------
     def force_integral(self, up: np.ndarray, vp: np.ndarray, dt: float, out: PETSc.Vec) -> int:
         """out += int_0^dt (F - F_free)(u + tau v) dtau, split at the events and integrated by
-        2-point Gauss-Legendre on each piece (module docstring), for the patch values up, vp of
-        u and v that ``prepare`` returned; returns the largest number of pieces of a pair's
-        integral (collective)."""
+        d-point Gauss-Legendre on each piece (module docstring), for the patch values up, vp of
+        u and v that ``prepare`` returned; returns the number of force evaluations of the pair
+        integral with the most pieces (collective)."""
         start = time.process_time()
         L = self.listed
         ui0, uj0 = self._pair_displacements(up)
@@ -596,49 +597,33 @@ class PairContact:
             # Events of each touching pair: its gap's and its overlap's kinks.
             tau = self._events(touching, ui0, uj0, vi, vj, dt)  # (len(touching), 1 + 2 d^2), inf if none
             a0, a1 = L.Q @ up + self._q, L.Q @ vp
-
-            # Rows' term: int c_p dtau on each pair's own pieces (c_p is of degree d there).
-            rows_ = np.repeat(np.arange(len(touching)), tau.shape[1])
+            # Pairs sharing an own row (N_pp' != 0) are integrated on common pieces: those cut by
+            # the events of their connected component of that relation (an impact in another
+            # component does not split them). There every c_p is a polynomial of degree d, each
+            # pair's force term one of degree 2 d - 1: the d-point rule is exact.
+            N = L.N[touching][:, touching]
+            count, component = scipy.sparse.csgraph.connected_components(N, directed=False)
             finite = np.isfinite(tau.ravel())
-            mid, length = piecewise_midpoints(rows_[finite], tau.ravel()[finite], len(touching), dt)
-            nodes, weights = _gauss_points(mid, length, self._gauss)
-            e = np.repeat(touching, nodes.shape[1])
+            mid, length = piecewise_midpoints(np.repeat(component, tau.shape[1])[finite], tau.ravel()[finite],
+                                              count, dt)
+            nodes, weights = _gauss_points(mid[component], length[component], self._gauss)  # (pairs, K)
+            K = nodes.shape[1]
+            e = np.repeat(touching, K)
             s = nodes.ravel()
-            g, w, _ = self._state(e, ui0[e] + s[:, None] * vi[e], uj0[e] + s[:, None] * vj[e])
-            c_int = scatter_sum(e, weights.ravel() * w * np.minimum(g, 0.0), len(L))
+            g, w, dw = self._state(e, ui0[e] + s[:, None] * vi[e], uj0[e] + s[:, None] * vj[e])
+            c = (w * np.minimum(g, 0.0)).reshape(-1, K)
+            # Rows' term -Q^T Z int c dtau; pairs' term -int (z_p . (a + delta_a)) dc_p/du dtau.
+            c_int = np.zeros(len(L))
+            c_int[touching] = (weights * c).sum(axis=1)
             result -= L.QT @ (L.Z @ c_int)
-
-            # Pairs' term: each touching pair on the pieces cut by the events of the pairs that
-            # share an own row with it.
-            N = L.N[touching].tocoo()  # entries (k, p'): pair touching[k] and its neighbour p'
-            on = np.isin(N.col, touching)
-            k_of, nb, value = N.row[on], N.col[on], N.data[on]
-            nb_t = np.searchsorted(touching, nb)
-            times = tau[nb_t]
-            k_rep = np.repeat(k_of, times.shape[1])
-            finite = np.isfinite(times.ravel())
-            if len(k_of):
-                mid, length = piecewise_midpoints(k_rep[finite], times.ravel()[finite], len(touching), dt)
-                nodes, weights = _gauss_points(mid, length, self._gauss)
-                K = nodes.shape[1]
-                e = np.repeat(touching, K)
-                s = nodes.ravel()
-                g, w, dw = self._state(e, ui0[e] + s[:, None] * vi[e], uj0[e] + s[:, None] * vj[e])
-                mu = ((L.ZT @ a0)[touching, None] + nodes * (L.ZT @ a1)[touching, None]).ravel()
-                # + sum_p' N_{p p'} c_p'(tau) at the pair's nodes
-                entry = np.repeat(np.arange(len(k_of)), K)  # (entries of N) x (nodes)
-                node = (k_of[:, None] * K + np.arange(K)).ravel()  # flat node index of pair k
-                q = np.repeat(nb, K)
-                sq = s[node]
-                gq, wq, _ = self._state(q, ui0[q] + sq[:, None] * vi[q], uj0[q] + sq[:, None] * vj[q])
-                mu += scatter_sum(node, value[entry] * wq * np.minimum(gq, 0.0), len(mu))
-                mu = np.where(g < 0, mu, 0.0) * weights.ravel()
-                result += self._facet_force(e, mu, g, w, dw)
-                pieces = max(pieces, int((length > 0).sum(axis=1).max()))
+            mu = (L.ZT @ a0)[touching, None] + nodes * (L.ZT @ a1)[touching, None] + N @ c
+            mu = np.where(g < 0, mu.ravel(), 0.0) * weights.ravel()
+            result += self._facet_force(e, mu, g, w, dw)
+            pieces = int((length > 0).sum(axis=1).max())
         self.scatter.add(result, out)
         self.seconds += time.process_time() - start
-        self.evaluations += 2 * pieces
-        return 2 * pieces
+        self.evaluations += len(self._gauss[0]) * pieces
+        return len(self._gauss[0]) * pieces
 
     def _events(self, p, ui, uj, vi, vj, dt) -> np.ndarray:
         """Times in (0, dt) where, for the pairs ``p``, the gap or the side of a vertex of one
@@ -909,16 +894,30 @@ def _clip(faces: _Simplices, other: _Simplices, ties: bool) -> tuple[np.ndarray,
     inside the simplices ``other`` (the half-planes m_k . (x - X_k) <= 0 of its faces: Liang-Barsky
     clipping). ``ties``: a face lying on a face of ``other`` with the same outward normal is left
     out, so that a boundary piece common to both simplices is counted once (by ``other``)."""
-    h0 = ((faces.X[:, :, None] - other.X[:, None]) * other.m[:, None]).sum(axis=3)  # (E, face, k)
-    h1 = ((faces.end - faces.X)[:, :, None] * other.m[:, None]).sum(axis=3)  # h0 + t h1 <= 0 inside
+    h0 = _dot(faces.X[:, :, None] - other.X[:, None], other.m[:, None])  # (E, face, k)
+    h1 = _dot((faces.end - faces.X)[:, :, None], other.m[:, None])  # h0 + t h1 <= 0 inside
     with np.errstate(divide="ignore", invalid="ignore"):
         r = -h0 / h1
-    lower = np.where(h1 < 0, r, 0.0).max(axis=2)
-    upper = np.where(h1 > 0, r, 1.0).min(axis=2)
+    lower = _last(np.maximum, np.where(h1 < 0, r, 0.0))
+    upper = _last(np.minimum, np.where(h1 > 0, r, 1.0))
     out = (h1 == 0) & (h0 > 0)
     if ties:
-        out |= (h1 == 0) & (h0 == 0) & ((faces.m[:, :, None] * other.m[:, None]).sum(axis=3) > 0)
-    return lower, np.where(out.any(axis=2), 0.0, np.maximum(upper - lower, 0.0))
+        out |= (h1 == 0) & (h0 == 0) & (_dot(faces.m[:, :, None], other.m[:, None]) > 0)
+    return lower, np.where(_last(np.logical_or, out), 0.0, np.maximum(upper - lower, 0.0))
+
+
+def _dot(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """sum_k a[..., k] b[..., k] over the few components k of the last axis (term by term:
+    faster than a reduction over a short axis, and m . e exactly 0 when m is e turned)."""
+    return _last(np.add, a * b)
+
+
+def _last(op, a: np.ndarray) -> np.ndarray:
+    """The binary ``op`` folded over the (short) last axis of ``a``."""
+    out = a[..., 0]
+    for k in range(1, a.shape[-1]):
+        out = op(out, a[..., k])
+    return out
 
 
 def _boxes_meet(A: _Simplices, B: _Simplices, s0: np.ndarray, s1: np.ndarray, dt: float) -> np.ndarray:
@@ -950,9 +949,9 @@ def _overlap(A: _Simplices, B: _Simplices, s: np.ndarray) -> tuple[np.ndarray, n
         lower, length = _clip(faces, other, ties)
         centre = faces.X + (lower + 0.5 * length)[..., None] * (faces.end - faces.X)
         measure = length * faces.size
-        w = w + ((centre * faces.nu).sum(axis=2) * measure).sum(axis=1)
+        w = w + _last(np.add, _dot(centre, faces.nu) * measure)
     w = w / s.shape[1]
-    dw = (Bs.nu * measure[..., None]).sum(axis=1)
+    dw = _last(np.add, np.swapaxes(Bs.nu, 1, 2) * measure[:, None])
     inside = w > 0
     return np.where(inside, w, 0.0), np.where(inside[:, None], dw, 0.0)
 
