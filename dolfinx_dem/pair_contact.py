@@ -1,4 +1,4 @@
-"""Frictionless contact between deformable bodies (paper §3.4, eq. (22)-(34)), 2D, distributed.
+"""Frictionless contact between deformable bodies (paper §3.4, eq. (22)-(34)), 2D and 3D, distributed.
 
 Candidate facets are declared boundary facets; out of contact they keep their free
 reconstruction u_f^free = R_f u (+ D_f g): u_c for scheme B facets (the facet translates with its
@@ -8,9 +8,13 @@ and f' of facing orientation, the common normal and the normal penetration (eq. 
     n = (|f| n_f - |f'| n_f') / || |f| n_f - |f'| n_f' ||   (normalised; n_f, n_f' outward),
     g = (x_f' + u_f'^free - x_f - u_f^free) . n,             affine in u,
 
-and the overlap w = |f cap f'| is the length of the intersection of the two facets, displaced by
-their free values and projected on the tangent t of n: piecewise affine in u. The contact
-reconstruction (eq. (31)) is, with g^- = min(g, 0),
+(|f| a length in 2D, an area in 3D) and the overlap w = |f cap f'| is the measure of the
+intersection of the two facets, displaced by their free values and projected on the plane normal
+to n (basis t): segments in 2D, triangles in 3D. Each facet translates, so w depends on u through
+the tangential offset s = t (u_f' - u_f) only; it is piecewise affine (2D) or quadratic (3D) in s,
+computed with its exact gradient by clipping each facet's boundary by the other (``_overlap``:
+dw/ds = sum over the faces of f' of their outward normals times their measures inside f). The
+contact reconstruction (eq. (31)) is, with g^- = min(g, 0),
 
     u_f = u_f^free + sum_{f'} (w / |f|) g^- e_f,      u_f' = u_f'^free + sum_f (w / |f'|) g^- e_f',
 
@@ -35,16 +39,18 @@ energy change over its own rows, and the force terms -Q^T delta_a of its own row
 add up to the exact gradient, since z_p . (a + delta_a) is a sum over rows. Forces reach the
 distributed force vector by a reverse scatter of the patch dofs.
 
-Events (paper §4). Along a MEMM free flight u + tau v, g_p and the four facet-end projections are
-affine in tau, so c_p is a quadratic and a pair's force term a cubic between the events where its
-gap changes sign or a facet end crosses the end of the other facet's projection, or where a pair
-sharing one of its rows has such an event. Each pair's term is integrated by 2-point
-Gauss-Legendre on the pieces cut by those events only (an impact elsewhere does not split it),
-and the rows' term -Q^T delta_a, linear in the c_p, by 2-point Gauss-Legendre on each pair's own
-pieces: exact, so the pseudo-energy is conserved to rounding.
+Events (paper §4). Along a MEMM free flight u + tau v, g_p and the side of each vertex of one
+projected facet with respect to each face (end point, edge line) of the other are affine in tau;
+between their roots w is a polynomial of degree d - 1 in tau, c_p of degree d and a pair's force
+term of degree 2 d - 1, exactly integrated by d-point Gauss-Legendre (``_gauss_legendre``). A
+pair's term involves the c_p' of the pairs sharing an own row with it: the pairs of each
+connected component of that relation are integrated on common pieces cut at all the
+component's events (an impact in another component does not split them), and so is the rows'
+term -Q^T delta_a: exact, so the pseudo-energy is conserved to rounding.
 
 Broad phase: pairs are listed (a Verlet list built with a k-d tree on the displaced facet
-centres) when the centres are closer than r = max|f| + skin. Each process sends the records of
+centres) when the centres are closer than r = D + skin, D the largest facet diameter about its
+barycentre (the length in 2D). Each process sends the records of
 its own candidate facets to the processes whose bounding box of local facets (grown by r) meets
 the box of its own facets; the boxes are gathered (one box per process). The list is rebuilt on
 every process when a candidate facet anywhere has moved more than skin/2 since the last build
@@ -75,7 +81,8 @@ from dolfinx_dem.patch import PatchScatter, piecewise_midpoints, scatter_sum
 @dataclasses.dataclass
 class _Facets:
     """Candidate facets (local ones first, then ghosts): global facet number ``key``, owner,
-    body, barycentre, outward unit normal, length, end points, global vertex numbers, scheme A
+    body, barycentre, outward unit normal, measure |f| (``length``: an area in 3D), vertex
+    coordinates (``ends``), global vertex numbers, scheme A
     data (the tensor C a_f / |c| of ``PairContact._directions``), and the free reconstruction
     u_f = R_f u + lift as d rows of M (global dof, value) entries (dof -1: padding)."""
 
@@ -134,14 +141,14 @@ class _Facets:
 
 
 class PairContact:
-    """Contact between candidate facets of a 2D DEMDiscretisation; see the module docstring.
+    """Contact between candidate facets of a 2D or 3D DEMDiscretisation; see the module docstring.
 
     Parameters
     ----------
-    dem : DEMDiscretisation (2D); the candidate facets must be Neumann (boundary) facets.
+    dem : DEMDiscretisation (2D or 3D); the candidate facets must be Neumann (boundary) facets.
     facets : process-local indices of the candidate boundary facets (the contact boundaries).
     self_contact : also pair facets of the same body (never facets that share a vertex).
-    skin : Verlet-list margin (m), default the largest candidate facet length.
+    skin : Verlet-list margin (m), default the largest candidate facet diameter (length in 2D).
     tolerance : how far facets may interpenetrate at t = 0 (m).
     """
 
@@ -398,8 +405,9 @@ class PairContact:
         counts such pairs (``summary.json``: ``contact_pairs_scheme_b_rule``). For isotropic C,
         n . A_f^-1 n = cos t_f / (alpha_f (2 cos^2 t_f (lambda + mu) - lambda)), alpha_f = |f|/|c|,
         t_f the angle between n and n_f: a cell's normal compliance has the sign of its facet
-        normal's side only if cos^2 t_f > kappa = lambda / (2 (lambda + mu)) (nu in plane
-        strain, nu/(1+nu) in plane stress). The rule of eq. (23)-(24) is used when both cells'
+        normal's side only if cos^2 t_f > kappa = lambda / (2 (lambda + mu)) (nu in 3D and plane
+        strain, nu/(1+nu) in plane stress; A_f maps the plane of n and n_f to itself, so the
+        formula holds in 2D and 3D). The rule of eq. (23)-(24) is used when both cells'
         compliances have their sign (n . A_f^-1 n > 0 > n . A_f'^-1 n): then 0 < n . e_f < 1,
         0 < -n . e_f' < 1 and |e_f| = n . e_f / cos t_f < 1/sqrt(kappa), bounded. Otherwise
         D may vanish (unbounded corrections, an arbitrarily stiff pair), be negative (no
@@ -740,7 +748,7 @@ class PairContact:
         return None if first == np.inf else first
 
     def contact_force(self, up: np.ndarray) -> float:
-        """Total normal contact force (N, per unit thickness): the signed sum over touching
+        """Total normal contact force (N; N/m in 2D): the signed sum over touching
         pairs of -(z_p . (a + delta_a)) w_p, the normal force one facet of the pair exerts on
         the other, compression positive (z_p . a' < 0 in compression), so that a pair pulling
         (z_p . a' > 0) lowers it. Between two bodies i, j whose contact facets share one outward
@@ -758,7 +766,7 @@ class PairContact:
 
     def pair_forces(self, up: np.ndarray) -> np.ndarray:
         """This process's part (sum over processes) of the contact force between each pair of
-        ``body_pairs`` (i, j), i < j: the force body j exerts on body i, (n_body_pairs, d) (N/m);
+        ``body_pairs`` (i, j), i < j: the force body j exerts on body i, (n_body_pairs, d) (N; N/m in 2D);
         the force on j is its opposite. Self-contact forces are internal to a body: not counted.
 
         The force on body i is -dV/ds_i, the derivative of the energy with respect to a rigid
@@ -987,8 +995,9 @@ class _Pairs:
     """Facet pairs (f_i, f_j) of the Verlet list (indices into ``PairContact.facets_all``),
     vectorised: the common normal n and an orthonormal basis t (P, d-1, d) of its plane, the
     correction directions e_i, e_j (``PairContact._directions``), the reference gap d0, the
-    facets projected on the plane, si, sj (``_Simplices``, origin at f_i's barycentre); Z = the z_p on the own rows touched (rows, P), its transpose, N = Z^T Z, and the
-    own rows Q on the patch dofs."""
+    facets projected on the plane, si, sj (``_Simplices``, origin at f_i's barycentre); Z = the
+    z_p on the own rows touched (rows, P), its transpose, N = Z^T Z, and the own rows Q on the
+    patch dofs."""
 
     i: np.ndarray
     j: np.ndarray
