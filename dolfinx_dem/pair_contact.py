@@ -639,20 +639,19 @@ class PairContact:
         (len(p), 1 + 2 d^2), inf where there is none. The facets translate, so all are affine in
         tau; between them the clipped boundary of ``_overlap`` keeps its topology, w is a
         polynomial of degree d - 1."""
-        L = self.listed
-        n, t = L.n[p], L.t[p]
-        g0 = L.d0[p] + np.einsum("ei,ei->e", uj[p] - ui[p], n)
-        gs = np.einsum("ei,ei->e", vj[p] - vi[p], n)
+        L, d = self.listed, self.d
+        t = L.t[p]
+        g0 = self._gap(p, ui[p], uj[p])
+        gs = np.einsum("ei,ei->e", vj[p] - vi[p], L.n[p])
         s0 = np.einsum("eki,ei->ek", t, uj[p] - ui[p])  # the tangential offset s0 + tau s1
         s1 = np.einsum("eki,ei->ek", t, vj[p] - vi[p])
         A, B = L.si.take(p), L.sj.take(p).moved(s0)
-        side = lambda x, S: ((x[:, :, None] - S.X[:, None]) * S.m[:, None]).sum(axis=3)  # noqa: E731
-        rate_b = np.einsum("ekx,ex->ek", B.m, s1)
-        rate_a = np.einsum("ekx,ex->ek", A.m, s1)
-        d = self.d
-        v0 = np.concatenate([g0[:, None], side(A.X, B).reshape(-1, d * d), side(B.X, A).reshape(-1, d * d)], axis=1)
-        rate = np.concatenate([gs[:, None], np.repeat(-rate_b[:, None], d, axis=1).reshape(-1, d * d),
-                               np.repeat(rate_a[:, None], d, axis=1).reshape(-1, d * d)], axis=1)
+        # m_k . (x - X_k) for the vertices x of one simplex and the faces k of the other (E, d, d),
+        # as in ``_clip``; B moves by s1 per unit tau
+        side = lambda x, S: _dot(x[:, :, None] - S.X[:, None], S.m[:, None]).reshape(-1, d * d)  # noqa: E731
+        speed = lambda S: np.repeat(_dot(S.m, s1[:, None])[:, None], d, axis=1).reshape(-1, d * d)  # noqa: E731
+        v0 = np.concatenate([g0[:, None], side(A.X, B), side(B.X, A)], axis=1)
+        rate = np.concatenate([gs[:, None], -speed(B), speed(A)], axis=1)
         v1 = v0 + dt * rate
         with np.errstate(divide="ignore", invalid="ignore"):
             tau = np.where(v0 * v1 < 0, -v0 / rate, np.inf)
