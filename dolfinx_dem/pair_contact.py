@@ -618,7 +618,8 @@ class PairContact:
             K = nodes.shape[1]
             e = np.repeat(touching, K)
             s = nodes.ravel()
-            g, w, dw = self._state(e, ui0[e] + s[:, None] * vi[e], uj0[e] + s[:, None] * vj[e])
+            g = self._gap(e, ui0[e] + s[:, None] * vi[e], uj0[e] + s[:, None] * vj[e])
+            w, dw = self._overlap_on_own_pieces(touching, tau, nodes, ui0, uj0, vi, vj, dt)
             c = (w * np.minimum(g, 0.0)).reshape(-1, K)
             # Rows' term -Q^T Z int c dtau; pairs' term -int (z_p . (a + delta_a)) dc_p/du dtau.
             c_int = np.zeros(len(L))
@@ -632,6 +633,32 @@ class PairContact:
         self.seconds += time.process_time() - start
         self.evaluations += len(self._gauss[0]) * pieces
         return len(self._gauss[0]) * pieces
+
+    def _overlap_on_own_pieces(self, p, tau, nodes, ui, uj, vi, vj, dt):
+        """w and dw/du_j of the pairs ``p`` at the times ``nodes`` (len(p), K), flat. Between its
+        own events ``tau`` a pair's w is a polynomial of degree d - 1 and dw one of degree d - 2:
+        each is evaluated (``_state``) at the d Gauss-Legendre nodes of the pair's own pieces
+        only and interpolated from them (Lagrange), exact to rounding, rather than evaluated at
+        every node of the component's pieces."""
+        finite = np.isfinite(tau.ravel())
+        mid, length = piecewise_midpoints(np.repeat(np.arange(len(p)), tau.shape[1])[finite], tau.ravel()[finite],
+                                          len(p), dt)
+        own, _ = _gauss_points(mid, length, self._gauss)  # (len(p), J d)
+        e, s = np.repeat(p, own.shape[1]), own.ravel()
+        w_own, dw_own = self._state(e, ui[e] + s[:, None] * vi[e], uj[e] + s[:, None] * vj[e])[1:]
+        start = mid - 0.5 * length
+        # the own piece of each node: the last non-empty one starting at or before it (padding
+        # and repeated events make empty pieces)
+        begun = (start[:, None, :] <= nodes[:, :, None]) & (length[:, None, :] > 0)
+        piece = np.where(begun, np.arange(start.shape[1]), 0).max(axis=2)
+        rows = np.arange(len(p))[:, None]
+        x = (nodes - start[rows, piece]) / length[rows, piece]
+        xi, d = self._gauss[0], len(self._gauss[0])
+        basis = np.stack([np.prod([(x - xi[l]) / (xi[m] - xi[l]) for l in range(d) if l != m], axis=0)
+                          for m in range(d)], axis=2)  # (len(p), K, d)
+        at = (rows[:, :, None] * own.shape[1] + piece[:, :, None] * d + np.arange(d)).reshape(-1, d)
+        basis = basis.reshape(-1, d)
+        return (basis * w_own[at]).sum(axis=1), np.einsum("nm,nmi->ni", basis, dw_own[at])
 
     def _events(self, p, ui, uj, vi, vj, dt) -> np.ndarray:
         """Times in (0, dt) where, for the pairs ``p``, the gap or the side of a vertex of one
