@@ -46,7 +46,8 @@ term of degree 2 d - 1, exactly integrated by d-point Gauss-Legendre (``_gauss_l
 pair's term involves the c_p' of the pairs sharing an own row with it: the pairs of each
 connected component of that relation are integrated on common pieces cut at all the
 component's events (an impact in another component does not split them), and so is the rows'
-term -Q^T delta_a: exact, so the pseudo-energy is conserved to rounding.
+term -Q^T delta_a: exact, so the pseudo-energy is conserved to rounding. A pair's overlap is
+clipped only at the Gauss nodes of its own pieces and interpolated at the component's nodes.
 
 Broad phase: pairs are listed (a Verlet list built with a k-d tree on the displaced facet
 centres) when the centres are closer than r = D + skin, D the largest facet diameter about its
