@@ -281,6 +281,9 @@ def minimise_energy(
     if dem.prescribed:
         raise NotImplementedError("minimise_energy does not handle prescribed bodies (a translation imposed "
                                   "in time): use a dynamic run (MEMM)")
+    if dem.pair_contact is not None and d != 2:
+        # In 3D the overlaps are quadratic in u on a piece: the Hessian below assumes them affine.
+        raise NotImplementedError("statics with contact between bodies is implemented in 2D, not 3D")
     if dem.pair_contact is not None and dem.contact is not None:
         raise ValueError("minimise_energy takes rigid obstacles or contact between bodies, not both")
     if not 0 < gradient_rtol < 1:

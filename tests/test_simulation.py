@@ -220,8 +220,8 @@ def _snapshot(folder: pathlib.Path) -> dict:
     (["bar-impact", "--set", 'obstacles=[{point=[6.0], normal=[1.0], boundary="left"}]'],
      "obstacle 0 intersects the body at t = 0"),
     (["bar-wave", "--set", "dirichlet=[{boundary=9}]"], "boundary 9 (tag 9) has no facet"),
-    (["block", "--set", 'contact={boundary=["all"]}'],
-     "contact between deformable bodies is implemented in 2D, not 3D"),
+    (["bar-wave", "--set", 'contact={boundary=["right"]}'],
+     "contact between deformable bodies is implemented in 2D and 3D, not 1D"),
     (["cantilever", "--set", 'probes=[{name="p", point=[5.0, 0.0], component=1}]'],
      "probe 'p' at [5.0, 0.0] is outside"),
     (["bar-wave", "--set", 'initial.velocity=["0 * x / 0"]'], "is not finite at t = 0"),
@@ -229,7 +229,7 @@ def _snapshot(folder: pathlib.Path) -> dict:
 ])
 def test_input_errors_leave_the_output_folder_untouched(args, message, overwrite, tmp_path, monkeypatch, capsys):
     """Before: a missing mesh file, a quadrilateral mesh, an overlapping obstacle, an empty tag
-    or contact between 3D bodies were found after the folder was made, and left INCOMPLETE and
+    or contact between 1D bodies were found after the folder was made, and left INCOMPLETE and
     error.txt (next to the old run's files). Now everything is checked first, even with
     --overwrite, which only removes the old run once the new one is ready to start; without it
     a folder of other files gets no INCOMPLETE either."""
