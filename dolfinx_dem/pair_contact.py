@@ -20,7 +20,8 @@ contact reconstruction (eq. (31)) is, with g^- = min(g, 0),
 
 with e_f = n/2, e_f' = -n/2 for scheme B (eq. (26)-(27), theta = 1/2), and for two scheme A
 facets the directions of eq. (23)-(24) where they are well posed (equal normal changes of the two
-tractions on n; the scheme B rule otherwise, counted; see ``_directions``). It equals the free
+tractions on n; the scheme B rule otherwise, counted; see ``_directions``); against a facet of a
+prescribed (rigid) body, e = 0 on it and the whole correction on the other facet. It equals the free
 one when g = 0 or w = 0, so the energy is continuous (§3.4.3). Writing the energy rows
 a = Q u + q (Q = [S; J]) and z_p = Q_f e_f / |f| + Q_f' e_f' / |f'| for a pair p, the rows
 change by delta_a = sum_p c_p z_p with c_p = w_p g_p^-, so that
@@ -181,6 +182,8 @@ class PairContact:
         _check_bodies_share_no_vertex(dem)
         _check_bodies_do_not_overlap(dem)
         self.self_contact = bool(self_contact)
+        self._rigid = np.zeros(geom.num_bodies, dtype=bool)  # the prescribed bodies, by body number
+        self._rigid[dem.prescribed_body_numbers] = True
         self.tolerance = float(tolerance)
 
         # The energy rows this process owns that candidate facets touch, and the local facets:
@@ -345,6 +348,7 @@ class PairContact:
             keep &= ~(same & shared)
         else:
             keep &= ~same
+        keep &= ~(self._rigid[F.body[i]] & self._rigid[F.body[j]])  # two imposed motions: no contact
         i, j = i[keep], j[keep]
         swap = F.key[i] > F.key[j]  # the facet with the smaller global number first: one order
         i, j = np.where(swap, j, i), np.where(swap, i, j)  # on every process
@@ -402,6 +406,10 @@ class PairContact:
         vanish on n, i.e. when n = n_f = -n_f': the free facets carry zero traction on their
         own normals.)
 
+        A facet of a prescribed body (``DEMDiscretisation.prescribed``) moves rigidly with it:
+        e = 0 on it and the other facet takes the whole correction, e_f' = -n (or e_f = n), as a
+        facet on a rigid obstacle does; a pair of two prescribed bodies is not listed.
+
         When eq. (23)-(24) are not well posed the pair uses the scheme B rule; ``scheme_b_pairs``
         counts such pairs (``summary.json``: ``contact_pairs_scheme_b_rule``). For isotropic C,
         n . A_f^-1 n = cos t_f / (alpha_f (2 cos^2 t_f (lambda + mu) - lambda)), alpha_f = |f|/|c|,
@@ -437,6 +445,11 @@ class PairContact:
             counted = k[~posed][F.owner[i[k[~posed]]] == self.comm.rank]  # the first facet's owner counts it
             keys = F.key[i[counted]] * (2**31) + F.key[j[counted]]
             self._scheme_b_rule = np.union1d(self._scheme_b_rule, keys)
+        # A prescribed (rigid) body's facet keeps its imposed motion: the deformable facet takes
+        # the whole correction (theta = 0 or 1 in eq. (26)-(27), as on a rigid obstacle).
+        rigid_i, rigid_j = self._rigid[F.body[i]], self._rigid[F.body[j]]
+        e_i[rigid_i], e_j[rigid_i] = 0.0, -n[rigid_i]
+        e_i[rigid_j], e_j[rigid_j] = n[rigid_j], 0.0
         return e_i, e_j
 
     @property
