@@ -90,6 +90,23 @@ def test_the_reaction_is_the_derivative_of_the_energy_with_respect_to_the_transl
     assert np.allclose(values[-1, :2], reaction, rtol=0, atol=0)
 
 
+def test_a_prescribed_body_is_rigid_at_its_contact_facets():
+    """In contact, the disc's facets keep their imposed translation (no contact correction) and
+    the block's facets take the whole correction: the corrections of a fully overlapping pair
+    close its gap, and the block's facets carry them."""
+    r, _, _ = run(indentation())
+    pc = r.dem.pair_contact
+    up = pc.patch_values(r.stepper.u)
+    delta = pc.facet_corrections(up)
+    on_disc = pc.facets_all.body[: len(pc.facets)] == 1
+    assert r.dem.comm.allreduce(float(np.abs(delta[on_disc]).max(initial=0)), op=MPI.MAX) == 0.0
+    assert r.dem.comm.allreduce(float(np.abs(delta[~on_disc]).max(initial=0)), op=MPI.MAX) > 1e-4
+    L = pc.listed
+    assert np.all(np.where(pc.facets_all.body[L.i] == 1, np.abs(L.e_i).max(axis=1), np.abs(L.e_j).max(axis=1)) == 0)
+    assert np.allclose(np.where(pc.facets_all.body[L.i] == 1, L.e_j.T, L.e_i.T).T,
+                       np.where(pc.facets_all.body[L.i] == 1, -1, 1)[:, None] * L.n, rtol=0, atol=0)
+
+
 def test_a_free_block_pushed_by_a_prescribed_disc_balances_its_energy():
     """No Dirichlet condition: the block is a free body (its mean translation removed from its
     rows), the disc is not; the balance is exact, and the pushed block gains momentum, so the
