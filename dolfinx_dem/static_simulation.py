@@ -1,10 +1,11 @@
 """The static runner (a scene with a ``statics`` table): DEM energy minimisation, or the DOLFINx P2
-FEM reference for the Hertz disc and ball (method ``fem-P2``). ``StaticRun(scene, comm)`` sets up and checks
-the model before any folder is touched, ``run(output)`` solves and writes. Same output contract
+FEM reference for the Hertz disc and ball (method ``fem-P2``). ``StaticRun(scene, comm)`` sets up and
+checks the model before any folder is touched, ``run(output)`` solves and writes. Same output contract
 as a dynamic run (status ``completed``), with one state at t = 0, plus ``contact_pressure.csv``
-(facet or boundary positions and pressures) and the summary keys ``contact_half_width``,
-``contact_half_width_last``, ``top_vertical_displacement``, ``max_contact_pressure``, ``h`` and
-``iterations``; in 3D with one obstacle ``contact_radius``, the moment measure
+(facet or boundary positions and pressures; not for the 3D FEM, which samples no pressure) and
+the summary keys ``contact_half_width``, ``contact_half_width_last`` (1D, 2D),
+``top_vertical_displacement``, ``max_contact_pressure``, ``h`` and ``iterations``; in 3D with
+one obstacle ``contact_radius``, the moment measure
 ``a = sqrt(5/2 integral r^2 p / integral p)`` about the axis through the obstacle's point along its
 normal (``hertz.contact_radius_moments``; exactly a for a Hertz profile, also on a symmetric part
 of the zone such as a quarter: put the point under the ball's centre).

@@ -19,7 +19,13 @@ from dolfinx_dem.fem.hertz import (
     hertz_analytic,
     solve_hertz,
 )
-from dolfinx_dem.hertz import contact_half_width_moments, facet_pressure_moments
+from dolfinx_dem.hertz import (
+    contact_half_width_moments,
+    contact_radius_moments,
+    facet_pressure_moments,
+    hertz_analytic_3d,
+    triangle_pressure_moments,
+)
 
 H_COARSE = 1.2e-2
 U_TOP_FINE = -1.3892e-2  # m, h = 1.5e-3 P2 (measured)
@@ -226,6 +232,32 @@ def test_bad_input(kwargs):
     args = {"h": H_COARSE} | kwargs
     with pytest.raises(ValueError):
         solve_hertz(MPI.COMM_WORLD, **args)
+
+
+def test_contact_radius_of_hertz_profile_on_triangles():
+    """3D moment measure: exact moments of uniform pressures on triangles (tilted, off the
+    axis), and a = sqrt(5/2 m2/m0) recovers the a of a Hertz profile on a quarter of the zone."""
+    # one triangle, force 3, axis z through (1, 0, 0): over the projection (0,0), (1,0), (0,1) of
+    # the tilted triangle r^2 = (x-1)^2 + y^2 averages 1/3
+    tri = np.array([[[1.0, 0.0, 0.0], [2.0, 0.0, 5.0], [1.0, 1.0, 7.0]]])
+    assert triangle_pressure_moments(tri, [3.0], [1.0, 0.0, 0.0], [0.0, 0.0, 2.0]) == pytest.approx((3.0, 1.0))
+    # the quarter zone x, y >= 0 of p0 sqrt(1 - r^2/a^2) on a polar grid of small triangles
+    a, n = 0.04, 400
+    r, t = np.meshgrid(np.linspace(0, 1.1 * a, n + 1), np.linspace(0, np.pi / 2, n + 1), indexing="ij")
+    x = np.stack([r * np.cos(t), r * np.sin(t), np.zeros_like(r)], axis=-1)
+    quads = [x[:-1, :-1], x[1:, :-1], x[1:, 1:], x[:-1, 1:]]
+    tris = np.concatenate([np.stack(quads[:3], axis=2), np.stack([quads[0], quads[2], quads[3]], axis=2)])
+    tris = tris.reshape(-1, 3, 3)
+    area = 0.5 * np.linalg.norm(np.cross(tris[:, 1] - tris[:, 0], tris[:, 2] - tris[:, 0]), axis=1)
+    rc = np.linalg.norm(tris.mean(axis=1), axis=1)
+    force = 3e6 * np.sqrt(np.clip(1 - (rc / a) ** 2, 0, None)) * area
+    assert contact_radius_moments(*triangle_pressure_moments(tris, force, [0, 0, 0], [0, 0, 1])) == \
+        pytest.approx(a, rel=1e-3)
+    with pytest.raises(ValueError, match="no contact"):
+        contact_radius_moments(0.0, 1.0)
+    hz = hertz_analytic_3d(0.2, 25e6, 0.25, 3e5)  # P = f 4/3 pi R^3, a^3 = 3 P R / (4 E*)
+    assert hz.a**3 == pytest.approx(3 * 3e5 * 4 / 3 * np.pi * 0.2**4 / (4 * 25e6 / (1 - 0.25**2)))
+    assert hz.approach == pytest.approx(hz.a**2 / 0.2) and hz.p0 == pytest.approx(1.5 * hz.load / (np.pi * hz.a**2))
 
 
 @pytest.mark.mpi
