@@ -383,7 +383,8 @@ class PairContact:
         # The facet corrections of the known facets, from their owners (outputs).
         self._facet_values = None  # made on first use after a build (outputs): _corrections_everywhere
         self._lift = F.lift
-        # the facets projected on the plane normal to n, origin at f_i's barycentre
+        # the facets projected on the plane normal to n, origin at f_i's barycentre; n . n_f >
+        # |f| / (|f| + |f'|) for facing facets, so no projection degenerates
         project = lambda f: np.einsum("pkx,pax->pka", F.ends[f] - F.centre[i][:, None], t)  # noqa: E731
         self.listed = _Pairs(
             i=i, j=j, n=n, t=t, e_i=e_i, e_j=e_j,
