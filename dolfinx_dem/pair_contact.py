@@ -471,8 +471,16 @@ class PairContact:
             step = dt * (self._R @ vp).reshape(-1, self.d)
             stale = stale or self._moved(uc + step)
         if self.comm.allreduce(stale, op=MPI.LOR):
+            touching = self._touching_keys(up, uc)
             self._build(u)
             up = self.patch_values(u)
+            dropped = np.setdiff1d(touching, self.pair_keys())
+            if self.comm.allreduce(len(dropped), op=MPI.SUM):
+                raise RuntimeError(
+                    "contact between bodies: touching pairs interpenetrate deeper than the pair list radius "
+                    f"({self.radius:.3e} m: facet centres farther apart are not listed), so a list rebuild would "
+                    "drop them and the energy would jump; the bodies are too soft for their load or speed (or pass a "
+                    "larger skin)")
             vp = None if v is None else self.patch_values(v)
             if moving:
                 uc, step = self.free_displacements(up), dt * (self._R @ vp).reshape(-1, self.d)
@@ -485,6 +493,14 @@ class PairContact:
                         "step; reduce the time step or pass a larger skin")
         self.seconds += time.process_time() - start
         return up, vp
+
+    def _touching_keys(self, up: np.ndarray, uc: np.ndarray) -> np.ndarray:
+        """Keys of the listed pairs in contact (g < 0, w > 0) at free displacements ``uc`` (none
+        if the list is stale there: the keys a rebuild must list again)."""
+        if self._moved(uc):
+            return np.empty(0, dtype=np.int64)
+        g, w, _ = self._state(np.arange(len(self.listed)), *self._pair_displacements(up), closed=True)
+        return self.pair_keys()[(g < 0) & (w > 0)]
 
     def _moved(self, uc: np.ndarray) -> bool:
         """Whether a facet known here (local or ghost) with free displacements ``uc`` has moved

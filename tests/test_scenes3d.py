@@ -62,3 +62,17 @@ def test_ball_drop_acts_with_the_floor_and_the_ball_in_the_same_steps():
         both += bool(floor and dem.pair_contact.touching(dem.pair_contact.patch_values(stepper.u)))
     assert both >= 3
     assert drift <= 1e-12
+
+
+def test_a_rebuild_that_would_drop_touching_pairs_is_an_error():
+    """Balls driven into each other deeper than the pair list radius: the pairs listed while
+    they were shallow would be dropped by a rebuild (an energy jump): ``prepare`` raises."""
+    dem = model.build(scenes.load("two-balls", {"mesh.h": 0.06}), MPI.COMM_SELF)
+    c = dem.pair_contact
+    step = 0.2 * c.skin
+    v = cell_vector(dem, lambda x: np.stack([np.where(x[:, 0] < 0.25, 1.0, -1.0), 0 * x[:, 1], 0 * x[:, 2]], axis=1))
+    u = dem.create_vector()
+    with pytest.raises(RuntimeError, match="deeper than the pair list radius"):
+        while u.array.max() < 0.3:
+            c.prepare(u, v, step)
+            u.axpy(step, v)
