@@ -100,13 +100,14 @@ demo: setup
 	$(VENV)/bin/dolfinx-dem run cantilever --out results/cantilever --overwrite
 	@echo "Results of the cantilever scene are in $(CURDIR)/results/cantilever"
 
-# The studies of docs/bench/README.md (~45 min; needs ~17 GB for the largest parallel run).
+# The studies of docs/bench/README.md (~50 min; needs ~17 GB for the largest parallel run).
 bench: export OMP_NUM_THREADS = 1
 bench: setup
 	$(PYTHON) benchmarks/bench_study.py
 	$(PYTHON) benchmarks/bench_signorini.py
 	$(PYTHON) benchmarks/bench_wave2d.py
 	$(PYTHON) benchmarks/bench_contact_scaling.py --out docs/bench/contact_scaling.json
+	$(PYTHON) benchmarks/bench_contact3d.py --out docs/bench/contact3d.json
 	$(PYTHON) benchmarks/bench_parallel.py --out docs/bench/parallel.json
 
 # --- cleaning (keeps .venv) -----------------------------------------------------

@@ -485,8 +485,16 @@ class PairContact:
             step = dt * (self._R @ vp).reshape(-1, self.d)
             stale = stale or self._moved(uc + step)
         if self.comm.allreduce(stale, op=MPI.LOR):
+            touching = self._touching_keys(up, uc)
             self._build(u)
             up = self.patch_values(u)
+            dropped = np.setdiff1d(touching, self.pair_keys())
+            if self.comm.allreduce(len(dropped), op=MPI.SUM):
+                raise RuntimeError(
+                    "contact between bodies: touching pairs interpenetrate deeper than the pair list radius "
+                    f"({self.radius:.3e} m: facet centres farther apart are not listed), so a list rebuild would "
+                    "drop them and the energy would jump; the bodies are too soft for their load or speed (or pass a "
+                    "larger skin)")
             vp = None if v is None else self.patch_values(v)
             if moving:
                 uc, step = self.free_displacements(up), dt * (self._R @ vp).reshape(-1, self.d)
@@ -499,6 +507,14 @@ class PairContact:
                         "step; reduce the time step or pass a larger skin")
         self.seconds += time.process_time() - start
         return up, vp
+
+    def _touching_keys(self, up: np.ndarray, uc: np.ndarray) -> np.ndarray:
+        """Keys of the listed pairs in contact (g < 0, w > 0) at free displacements ``uc`` (none
+        if the list is stale there: the keys a rebuild must list again)."""
+        if self._moved(uc):
+            return np.empty(0, dtype=np.int64)
+        g, w, _ = self._state(np.arange(len(self.listed)), *self._pair_displacements(up), closed=True)
+        return self.pair_keys()[(g < 0) & (w > 0)]
 
     def _moved(self, uc: np.ndarray) -> bool:
         """Whether a facet known here (local or ghost) with free displacements ``uc`` has moved
@@ -527,14 +543,20 @@ class PairContact:
         self._check_listed(uc)
         return uc[self.listed.i], uc[self.listed.j]
 
-    def _state(self, p, ui, uj):
+    def _state(self, p, ui, uj, closed: bool = False):
         """Gap g, overlap w and its gradient dw/du_j = -dw/du_i (d-vectors) of the pairs ``p``
         for their facets' free displacements ui, uj (one row per entry). Each facet translates,
-        so w depends on the tangential offset s = t (u_j - u_i) only (``_overlap``)."""
+        so w depends on the tangential offset s = t (u_j - u_i) only (``_overlap``). ``closed``:
+        w and dw only where g < 0 (0 elsewhere), all that the natural piece c_p = w_p g_p^- reads:
+        the open pairs, most of the list, are not clipped."""
         L = self.listed
-        t = L.t[p]
-        w, dw = _overlap(L.si.take(p), L.sj.take(p), np.einsum("eki,ei->ek", t, uj - ui))
-        return self._gap(p, ui, uj), w, np.einsum("ek,eki->ei", dw, t)
+        g = self._gap(p, ui, uj)
+        w, dw = np.zeros(len(g)), np.zeros((len(g), self.d))
+        e = np.flatnonzero(g < 0) if closed else np.arange(len(g))
+        t = L.t[p[e]]
+        w[e], dw_t = _overlap(L.si.take(p[e]), L.sj.take(p[e]), np.einsum("eki,ei->ek", t, uj[e] - ui[e]))
+        dw[e] = np.einsum("ek,eki->ei", dw_t, t)
+        return g, w, dw
 
     def _gap(self, p, ui, uj):
         """Gap g of the pairs ``p`` (eq. (22), (30)) for their facets' free displacements ui, uj."""
@@ -545,7 +567,7 @@ class PairContact:
         """(elastic, stabilisation) energy changes of this process's own rows (not reduced)."""
         start = time.process_time()
         L = self.listed
-        g, w, _ = self._state(np.arange(len(L)), *self._pair_displacements(up))
+        g, w, _ = self._state(np.arange(len(L)), *self._pair_displacements(up), closed=True)
         elastic = stabilisation = 0.0
         if (g < 0).any():
             a = L.Q @ up + self._q
@@ -564,7 +586,7 @@ class PairContact:
         ui, uj = self._pair_displacements(up)
         p = np.arange(len(L))
         self.evaluations += 1
-        g, w, dw = self._state(p, ui, uj)
+        g, w, dw = self._state(p, ui, uj, closed=active is None)
         on = g < 0 if active is None else np.isin(self.pair_keys(), active)
         c = np.where(on, w * g, 0.0)
         if not (c != 0).any():
@@ -703,7 +725,7 @@ class PairContact:
         complete for the own facets (every pair of an own facet is listed here)."""
         L = self.listed
         p = np.arange(len(L))
-        g, w, _ = self._state(p, *self._pair_displacements(up))
+        g, w, _ = self._state(p, *self._pair_displacements(up), closed=True)
         c = w * np.minimum(g, 0.0)
         n = len(self.facets_all)
         delta = scatter_sum(L.i, (c / self.facets_all.length[L.i])[:, None] * L.e_i, n) + \
@@ -724,7 +746,7 @@ class PairContact:
         corrections of the partners come from their owners (a scatter over the candidates)."""
         L, F = self.listed, self.facets_all
         p = np.arange(len(L))
-        g, w, _ = self._state(p, *self._pair_displacements(up))
+        g, w, _ = self._state(p, *self._pair_displacements(up), closed=True)
         uf = self.free_displacements(up) + self._corrections_everywhere(up)
         worst = 0.0
         pairs = np.flatnonzero((w > 0) & (g < 0))  # the touching pairs: the others correct nothing
@@ -767,7 +789,7 @@ class PairContact:
     def touching(self, up: np.ndarray) -> bool:
         """Whether some pair is in contact (g < 0 with a positive overlap), anywhere (collective)."""
         L = self.listed
-        g, w, _ = self._state(np.arange(len(L)), *self._pair_displacements(up))
+        g, w, _ = self._state(np.arange(len(L)), *self._pair_displacements(up), closed=True)
         return self.comm.allreduce(bool(((g < 0) & (w > 0)).any()), op=MPI.LOR)
 
     def touch_time(self, u0: PETSc.Vec, u1: PETSc.Vec, dt: float) -> float | None:
@@ -776,8 +798,8 @@ class PairContact:
         step); None if no pair touches (collective)."""
         L = self.listed
         p = np.arange(len(L))
-        g0 = self._state(p, *self._pair_displacements(self.patch_values(u0)))[0]
-        g1, w1, _ = self._state(p, *self._pair_displacements(self.patch_values(u1)))
+        g0 = self._gap(p, *self._pair_displacements(self.patch_values(u0)))
+        g1, w1, _ = self._state(p, *self._pair_displacements(self.patch_values(u1)), closed=True)
         touching = (g1 < 0) & (w1 > 0)
         first = np.inf
         if touching.any():
@@ -793,7 +815,7 @@ class PairContact:
         (z_p . a' > 0) lowers it. Between two bodies i, j whose contact facets share one outward
         normal n_i (on i) it is -n_i . F_ij of ``pair_forces`` (collective: own rows' parts summed)."""
         L = self.listed
-        g, w, _ = self._state(np.arange(len(L)), *self._pair_displacements(up))
+        g, w, _ = self._state(np.arange(len(L)), *self._pair_displacements(up), closed=True)
         c = w * np.minimum(g, 0.0)
         total = 0.0
         if (c < 0).any():
@@ -819,7 +841,7 @@ class PairContact:
         pair held on its switch g = 0 carries its multiplier, ``kink_forces``, instead)."""
         L, F = self.listed, self.facets_all
         p = np.arange(len(L))
-        g, w, dw = self._state(p, *self._pair_displacements(up))
+        g, w, dw = self._state(p, *self._pair_displacements(up), closed=active is None)
         c = np.where(g < 0 if active is None else np.isin(self.pair_keys(), active), w * g, 0.0)
         out = np.zeros((len(self.body_pairs), self.d))
         body_i, body_j = F.body[L.i], F.body[L.j]

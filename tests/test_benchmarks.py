@@ -64,6 +64,13 @@ def test_bench_contact_scaling_quick(tmp_path):
     assert data["contact_facets_ratio"] == 5.0 and data["contact_work_ratio"] < 3.0
 
 
+def test_bench_contact3d_quick(tmp_path):
+    _quick("bench_contact3d.py", "--out", str(tmp_path / "contact3d.json"))
+    data = json.loads((tmp_path / "contact3d.json").read_text())
+    assert 0 < data["cradle"]["contact_fraction"] < 1
+    assert [r["idle_balls"] for r in data["idle_balls"]] == [0, 2]
+
+
 def test_bench_parallel_quick(tmp_path):
     _quick("bench_parallel.py", "--out", str(tmp_path / "parallel.json"))
     data = json.loads((tmp_path / "parallel.json").read_text())

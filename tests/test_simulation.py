@@ -15,9 +15,10 @@ from dolfinx_dem.memm import InstabilityError
 
 CLI = str(pathlib.Path(sys.executable).parent / "dolfinx-dem")
 SHORT = {"bar-wave": 0.5, "cantilever": 0.05, "block": 0.05, "bar-impact": 0.2, "bar-bounce": 0.25,
-         "two-disks": 0.1, "billiard": 0.5}
+         "two-disks": 0.1, "billiard": 0.5, "two-balls": 0.05, "cradle": 0.05, "ball-drop": 0.05}
 #: Coarser meshes for the tests of the multi-body scenes.
-COARSE = {"two-disks": {"mesh.h": 0.03}, "billiard": {"mesh.h": 0.25}}
+COARSE = {"two-disks": {"mesh.h": 0.03}, "billiard": {"mesh.h": 0.25}, "two-balls": {"mesh.h": 0.06},
+          "cradle": {"mesh.h": 0.08}, "ball-drop": {"mesh.h": 0.07}}
 SUMMARY_KEYS = {"scene", "method", "n_cells", "n_steps", "dt", "wall_time_s", "pseudo_energy_rel_drift", "stable"}
 
 

@@ -1,0 +1,78 @@
+"""The 3D contact scenes (two-balls, cradle, ball-drop) on coarse meshes, a few steps each."""
+
+import numpy as np
+import pytest
+from mpi4py import MPI
+
+from dolfinx_dem import model, scenes, simulation
+from helpers import cell_vector
+
+
+def test_closed_pairs_state_is_the_full_state_where_gaps_are_negative():
+    """``PairContact._state(closed=True)`` clips only the pairs with g < 0 and gives the same
+    g, w, dw/du there as clipping every listed pair (w = dw = 0 elsewhere)."""
+    dem = model.build(scenes.load("two-balls", {"mesh.h": 0.05}), MPI.COMM_SELF)
+    c = dem.pair_contact
+    u = cell_vector(dem, lambda x: np.stack([np.where(x[:, 0] < 0.25, 0.02, -0.02), 0.002 * x[:, 1],
+                                             np.zeros(len(x))], axis=1))
+    c.prepare(u)
+    p = np.arange(c.num_pairs)
+    ui, uj = c._pair_displacements(c.patch_values(u))
+    g, w, dw = c._state(p, ui, uj)
+    gc, wc, dwc = c._state(p, ui, uj, closed=True)
+    closed = g < 0
+    assert (closed & (w > 0)).sum() > 10
+    assert np.array_equal(gc, g)
+    assert np.array_equal(wc[closed], w[closed]) and np.array_equal(dwc[closed], dw[closed])
+    assert not wc[~closed].any() and not dwc[~closed].any()
+
+
+def test_two_balls_conserve_energy_and_momentum_through_first_contact(tmp_path):
+    """Coarse two-balls, the steps through the first contact: 0.02 m between the spheres closing
+    at 0.6 m/s, a little more between the polyhedra (their facets' gaps along the pair normals
+    at t = 0, at least the gap of the spheres, set the bounds)."""
+    scene = scenes.load("two-balls", {"mesh.h": 0.06, "time.end": 0.05, "time.cfl": 0.5})
+    c = model.build(scene, MPI.COMM_SELF).pair_contact
+    gap = c.smallest_gap(c.patch_values(c.dem.create_vector()))
+    assert 0.02 < gap < 0.03
+    summary = simulation.run(scene, tmp_path, MPI.COMM_SELF, quiet=True)
+    assert gap / 0.6 <= summary["first_contact_time"] < 0.03 / 0.6
+    assert summary["pseudo_energy_rel_drift"] <= 1e-12
+    assert summary["momentum_rel_change"] <= 1e-12
+    header = (tmp_path / "series.csv").read_text().splitlines()[0].split(",")
+    for column in ("contact_force", "penetration", "contact_force_0_1_z", "momentum_z"):
+        assert column in header
+
+
+def test_ball_drop_acts_with_the_floor_and_the_ball_in_the_same_steps():
+    """Coarse ball-drop started just above the slab and moving down: the floor (an obstacle)
+    and the ball (contact between bodies) both act in the same steps, and the pseudo-energy,
+    gravity's potential included, is conserved."""
+    from dolfinx_dem.dynamics import DynamicRun
+
+    scene = scenes.load("ball-drop", {"mesh.h": 0.07, "time.end": 0.06, "time.cfl": 0.5,
+                                      "initial.velocity": ["0", "0", "where(z > 0.045, -0.5, 0.0)"]})
+    run = DynamicRun(scene, MPI.COMM_SELF, quiet=True)
+    stepper, dem = run.stepper, run.dem
+    first, both, drift = run.first, 0, 0.0
+    for _ in range(run.n_steps):
+        diag = stepper.step()
+        drift = max(drift, abs(diag.pseudo_energy - first.pseudo_energy) / max(first.mechanical, diag.mechanical))
+        floor = (dem.contact.gaps(dem.contact.patch_values(stepper.u)) < 0).any()
+        both += bool(floor and dem.pair_contact.touching(dem.pair_contact.patch_values(stepper.u)))
+    assert both >= 3
+    assert drift <= 1e-12
+
+
+def test_a_rebuild_that_would_drop_touching_pairs_is_an_error():
+    """Balls driven into each other deeper than the pair list radius: the pairs listed while
+    they were shallow would be dropped by a rebuild (an energy jump): ``prepare`` raises."""
+    dem = model.build(scenes.load("two-balls", {"mesh.h": 0.06}), MPI.COMM_SELF)
+    c = dem.pair_contact
+    step = 0.2 * c.skin
+    v = cell_vector(dem, lambda x: np.stack([np.where(x[:, 0] < 0.25, 1.0, -1.0), 0 * x[:, 1], 0 * x[:, 2]], axis=1))
+    u = dem.create_vector()
+    with pytest.raises(RuntimeError, match="deeper than the pair list radius"):
+        while u.array.max() < 0.3:
+            c.prepare(u, v, step)
+            u.axpy(step, v)
