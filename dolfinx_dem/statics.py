@@ -123,13 +123,15 @@ class StaticResult:
 class _Constraints:
     """The subspace of the steps: w . d = 0 for the orthonormal ``normals`` w (``_constraints``)
     and d = 0 on the ``held`` dofs (owned, local: the prescribed bodies'), on which the normals
-    vanish (module docstring)."""
+    vanish (module docstring). ``holds``: whether any process holds dofs (the same everywhere:
+    collective calls depend on it)."""
 
     normals: list
     held: np.ndarray
+    holds: bool
 
     def __bool__(self) -> bool:
-        return bool(self.normals) or bool(self.held.size)
+        return bool(self.normals) or self.holds
 
 
 def _constraints(dem, components, rotation) -> _Constraints:
@@ -166,7 +168,7 @@ def _constraints(dem, components, rotation) -> _Constraints:
         for v in normals[:k]:
             w.axpy(-w.dot(v), v)
         w.scale(1.0 / w.norm())
-    return _Constraints(normals, dem.prescribed_dofs)
+    return _Constraints(normals, dem.prescribed_dofs, bool(dem.prescribed))
 
 
 def _hessian(dem, active):
@@ -221,7 +223,7 @@ def _constrained(H, constraints: _Constraints):
     shell = PETSc.Mat().createPython(H.getSizes(), _ConstrainedOperator(H, constraints), comm=H.getComm())
     shell.setUp()
     P = H.copy()
-    if H.getComm().tompi4py().allreduce(constraints.held.size, op=MPI.SUM):
+    if constraints.holds:
         P.zeroRowsColumns((constraints.held + H.getOwnershipRange()[0]).astype(PETSc.IntType), diag=1.0)
     if constraints.normals:
         diagonal = P.getDiagonal()
