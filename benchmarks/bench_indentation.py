@@ -16,10 +16,17 @@ the discrete equilibrium residual), Newton iterations and wall time.
 
     .venv/bin/python benchmarks/bench_indentation.py [--h 0.04 0.02] [--speeds 0.5 0.25] [--slow-h 0.04]
         [--slow-speeds 0.125 0.0625] [--static-h 0.04 0.02] [--out indentation.json]
+    .venv/bin/python benchmarks/bench_indentation.py --merge a.json b.json --out indentation.json
+
+``--merge``: one file of the runs of several (e.g. concurrent) invocations, in their order, with the
+FEM reference (the finest mesh of docs/validation/indentation_fem.json) and the table of
+docs/validation/indentation.md printed: force per indentation and DEM mesh, dynamic (each speed)
+and static, and their relative differences from the FEM force.
 """
 
 import argparse
 import json
+import pathlib
 import time
 
 import numpy as np
@@ -30,6 +37,7 @@ from dolfinx_dem.statics import minimise_energy
 
 INDENTATIONS = (0.005, 0.01, 0.02)
 GAP = 0.002
+FEM = pathlib.Path(__file__).resolve().parents[1] / "docs" / "validation" / "indentation_fem.json"
 
 
 def scene(h: float, speed: float) -> dict:
@@ -94,6 +102,30 @@ def static(h: float) -> dict:
             "wall_time_s": time.perf_counter() - tic}
 
 
+def fem_forces() -> dict:
+    """The FEM reference force P (N/m) per indentation, on its finest mesh."""
+    deltas = json.loads(FEM.read_text())["deltas"]
+    return {str(d): min(deltas[str(d)]["rows"], key=lambda r: r["h"])["P"] for d in INDENTATIONS}
+
+
+def table(data: dict) -> str:
+    """The markdown table of ``data`` (this script's output with ``fem``)."""
+    fem = data["fem"]
+    static = {row["h"]: row["indentations"] for row in data["static"]}
+    lines = ["| delta (m) | h (m) | run | force (N/m) | vs FEM | vs DEM static |", "|---|---|---|---|---|---|"]
+    for d in map(str, INDENTATIONS):
+        lines.append(f"| {d} | | FEM P2 (converged) | {fem[d]:.4g} | | |")
+        for h in sorted({row["h"] for row in data["dynamic"]} | set(static), reverse=True):
+            s = static[h][d]["force"] if h in static else None
+            rows = [("static", s)] if s is not None else []
+            rows += [(f"dynamic {r['speed']:g} m/s", r["force_at_indentation"][d])
+                     for r in data["dynamic"] if r["h"] == h]
+            for name, f in rows:
+                versus = "" if s is None or name == "static" else f"{(f - s) / s:+.1%}"
+                lines.append(f"| {d} | {h:g} | {name} | {f:.4g} | {(f - fem[d]) / fem[d]:+.1%} | {versus} |")
+    return "\n".join(lines)
+
+
 def main():
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--h", type=float, nargs="*", default=[0.04, 0.02])
@@ -103,7 +135,17 @@ def main():
     parser.add_argument("--static-h", type=float, nargs="*", default=[0.04, 0.02])
     parser.add_argument("--curve-every", type=int, default=20)
     parser.add_argument("--out", default="indentation.json")
+    parser.add_argument("--merge", nargs="+", help="files of earlier invocations to merge into --out, nothing run")
     args = parser.parse_args()
+    if args.merge:
+        parts = [json.load(open(path)) for path in args.merge]
+        with open(args.out, "w") as f:
+            data = {"scene": "indentation", "processes": parts[0]["processes"], "fem": fem_forces(),
+                    "dynamic": [r for p in parts for r in p["dynamic"]],
+                    "static": [r for p in parts for r in p["static"]]}
+            json.dump(data, f, indent=1)
+        print(table(data))
+        return
     root = MPI.COMM_WORLD.rank == 0
     dynamic, statics = [], []
     for h in args.h:
