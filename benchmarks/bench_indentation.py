@@ -40,16 +40,17 @@ GAP = 0.002
 FEM = pathlib.Path(__file__).resolve().parents[1] / "docs" / "validation" / "indentation_fem.json"
 
 
-def scene(h: float, speed: float) -> dict:
-    """The built-in scene with mesh size h, the disc moving down at ``speed`` until the last indentation."""
-    s = scenes.load("indentation", {"mesh.h": h, "time.end": (INDENTATIONS[-1] + GAP) / speed})
+def scene(h: float, speed: float, method: str) -> dict:
+    """The built-in scene with mesh size h and ``method``, the disc moving down at ``speed`` until
+    the last indentation."""
+    s = scenes.load("indentation", {"mesh.h": h, "time.end": (INDENTATIONS[-1] + GAP) / speed, "method": method})
     s["prescribed"][0]["velocity"] = [0.0, -speed]
     return s
 
 
-def run(h: float, speed: float, curve_every: int) -> dict:
+def run(h: float, speed: float, curve_every: int, method: str) -> dict:
     tic = time.perf_counter()
-    r = dynamics.DynamicRun(scene(h, speed), MPI.COMM_WORLD, quiet=True)
+    r = dynamics.DynamicRun(scene(h, speed, method), MPI.COMM_WORLD, quiet=True)
     dem, stepper = r.dem, r.stepper
 
     def force() -> float:  # -reaction_disc_y: the block pushed down counts positive
@@ -76,15 +77,15 @@ def run(h: float, speed: float, curve_every: int) -> dict:
         if record:
             curve.append((max(0.0, speed * diag.t - GAP), f))
         previous = f
-    return {"h": h, "speed": speed, "cells": dem.geometry.num_cells_global, "steps": r.n_steps, "dt": r.dt,
+    return {"h": h, "method": method, "speed": speed, "cells": dem.geometry.num_cells_global, "steps": r.n_steps, "dt": r.dt,
             "force_at_indentation": {str(d): at[d] for d in INDENTATIONS},
             "energy_balance": drift / scale, "wall_time_s": time.perf_counter() - tic, "curve": curve}
 
 
-def static(h: float) -> dict:
+def static(h: float, method: str) -> dict:
     """DEM statics at the three indentations on the mesh of size h (one model, three load times)."""
     tic = time.perf_counter()
-    s = scene(h, 1.0)  # U(t) = (0, -t): the load time of indentation d is t = d + GAP
+    s = scene(h, 1.0, method)  # U(t) = (0, -t): the load time of indentation d is t = d + GAP
     for key in ("time", "output"):
         del s[key]
     s["statics"] = {}
@@ -98,7 +99,7 @@ def static(h: float) -> dict:
         rows[str(d)] = {"force": -float(disc), "base_reaction_y": base, "balance": (base + disc) / base,
                         "iterations": result.iterations, "gradient_reduction": result.gradient_reduction,
                         "wall_time_s": result.wall_time_s}
-    return {"h": h, "cells": dem.geometry.num_cells_global, "indentations": rows,
+    return {"h": h, "method": method, "cells": dem.geometry.num_cells_global, "indentations": rows,
             "wall_time_s": time.perf_counter() - tic}
 
 
@@ -133,6 +134,7 @@ def main():
     parser.add_argument("--slow-h", type=float, nargs="*", default=[0.04])
     parser.add_argument("--slow-speeds", type=float, nargs="*", default=[0.125, 0.0625])
     parser.add_argument("--static-h", type=float, nargs="*", default=[0.04, 0.02])
+    parser.add_argument("--method", default="dem-B", choices=["dem-A", "dem-B"])
     parser.add_argument("--curve-every", type=int, default=20)
     parser.add_argument("--out", default="indentation.json")
     parser.add_argument("--merge", nargs="+", help="files of earlier invocations to merge into --out, nothing run")
@@ -150,14 +152,14 @@ def main():
     dynamic, statics = [], []
     for h in args.h:
         for speed in args.speeds + (args.slow_speeds if h in args.slow_h else []):
-            dynamic.append(row := run(h, speed, args.curve_every))
+            dynamic.append(row := run(h, speed, args.curve_every, args.method))
             if root:
                 print(f"dynamic h = {h:g}, speed {speed:g} m/s: {row['cells']} cells, {row['steps']} steps, "
                       f"{row['wall_time_s']:.1f} s; force (N/m) at "
                       + ", ".join(f"{d} m: {f:.4g}" for d, f in row["force_at_indentation"].items())
                       + f"; energy balance {row['energy_balance']:.1e}", flush=True)
     for h in args.static_h:
-        statics.append(row := static(h))
+        statics.append(row := static(h, args.method))
         if root:
             print(f"static h = {h:g}: {row['cells']} cells, {row['wall_time_s']:.1f} s; force (N/m) at "
                   + ", ".join(f"{d} m: {r['force']:.4g} (balance {r['balance']:.1e}, {r['iterations']} it)"

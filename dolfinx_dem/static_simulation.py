@@ -1,7 +1,8 @@
 """The static runner (a scene with a ``statics`` table): DEM energy minimisation, or the DOLFINx P2
 FEM reference for the Hertz disc and ball (method ``fem-P2``). ``StaticRun(scene, comm)`` sets up and checks
 the model before any folder is touched, ``run(output)`` solves and writes. Same output contract
-as a dynamic run (status ``completed``), with one state at t = 0, plus ``contact_pressure.csv``
+as a dynamic run (status ``completed``), with one state at the load time t = ``statics.time``
+(default 0; prescribed bodies held at U(t), their reactions in ``reactions``), plus ``contact_pressure.csv``
 (facet or boundary positions and pressures) and the summary keys ``contact_half_width``,
 ``contact_half_width_last``, ``top_vertical_displacement``, ``max_contact_pressure``, ``h`` and
 ``iterations``; in 3D with one obstacle ``contact_radius``, the moment measure
