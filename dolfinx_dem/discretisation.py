@@ -406,25 +406,30 @@ class DEMDiscretisation:
         u^n = u at t_n to U(t + dt) (the flight is affine within the step, and u follows U(t)
         without accumulating rounding)."""
         d = self.d
+        if position:
+            self.hold(u, t)
         for body, cells in zip(self.prescribed, self._prescribed_cells):
-            ua = u.array.reshape(-1, d)
-            if position:
-                ua[cells] = body.translation(t, d)
             v.array.reshape(-1, d)[cells] = body.velocity if body.velocity is not None else \
-                (body.translation(t + dt, d) - ua[cells]) / dt
+                (body.translation(t + dt, d) - u.array_r.reshape(-1, d)[cells]) / dt
+
+    def hold(self, u: PETSc.Vec, t: float) -> None:
+        """u = U(t) on the prescribed bodies' dofs (the other dofs untouched)."""
+        for body, cells in zip(self.prescribed, self._prescribed_cells):
+            u.array.reshape(-1, self.d)[cells] = body.translation(t, self.d)
 
     @property
     def moving_prescribed(self) -> bool:
         """Whether some prescribed body follows a displacement U(t) (MEMM sets its velocity each step)."""
         return any(body.displacement is not None for body in self.prescribed)
 
-    def prescribed_values(self, u: PETSc.Vec, t: float) -> np.ndarray:
+    def prescribed_values(self, u: PETSc.Vec, t: float, force: PETSc.Vec | None = None) -> np.ndarray:
         """For each prescribed body, its reaction, the force it exerts on the other bodies,
         -(sum of the force on its dofs) = dV/dU, the exact derivative of the potential with
         respect to its translation U, and its translation (its cells' mean u): (n, 2, d), global.
-        Collective (a force evaluation)."""
+        ``force``: the force vector to sum instead of ``force(u, t)`` (statics: the Lagrangian's,
+        whose multipliers carry the pairs held on a contact switch). Collective (a force evaluation)."""
         d = self.d
-        f = self.force(u, t, self._work)
+        f = self.force(u, t, self._work) if force is None else force
         out = np.zeros((len(self.prescribed), 2, d))
         counts = np.zeros(len(self.prescribed))
         for k, cells in enumerate(self._prescribed_cells):

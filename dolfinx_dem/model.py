@@ -161,11 +161,12 @@ def prescribed_columns(dem: DEMDiscretisation) -> tuple[str, ...]:
         f"prescribed_{n}_displacement_{c}" for n in names for c in xyz)
 
 
-def prescribed_values(dem: DEMDiscretisation, u, t: float) -> np.ndarray:
-    """The values of ``prescribed_columns`` (collective)."""
+def prescribed_values(dem: DEMDiscretisation, u, t: float, force=None) -> np.ndarray:
+    """The values of ``prescribed_columns`` (collective; ``force`` as in
+    ``DEMDiscretisation.prescribed_values``)."""
     if not dem.prescribed:
         return np.empty(0)
-    values = dem.prescribed_values(u, t)
+    values = dem.prescribed_values(u, t, force)
     return np.concatenate([values[:, 0].ravel(), values[:, 1].ravel()])
 
 

@@ -1,10 +1,11 @@
 """The static runner (a scene with a ``statics`` table): DEM energy minimisation, or the DOLFINx P2
 FEM reference for the Hertz disc and ball (method ``fem-P2``). ``StaticRun(scene, comm)`` sets up and
 checks the model before any folder is touched, ``run(output)`` solves and writes. Same output contract
-as a dynamic run (status ``completed``), with one state at t = 0, plus ``contact_pressure.csv``
-(facet or boundary positions and pressures; not for the 3D FEM, which samples no pressure) and
-the summary keys ``contact_half_width``, ``contact_half_width_last`` (1D, 2D),
-``top_vertical_displacement``, ``max_contact_pressure``, ``h`` and ``iterations``; in 3D with
+as a dynamic run (status ``completed``), with one state at the load time t = ``statics.time``
+(default 0; prescribed bodies held at U(t), their reactions in ``reactions``), plus
+``contact_pressure.csv`` (facet or boundary positions and pressures; not for the 3D FEM, which
+samples no pressure) and the summary keys ``contact_half_width``, ``contact_half_width_last`` (1D,
+2D), ``top_vertical_displacement``, ``max_contact_pressure``, ``h`` and ``iterations``; in 3D with
 one obstacle ``contact_radius``, the moment measure
 ``a = sqrt(5/2 integral r^2 p / integral p)`` about the axis through the obstacle's point along its
 normal (``hertz.contact_radius_moments``; exactly a for a Hertz profile, also on a symmetric part
@@ -94,21 +95,24 @@ class StaticRun:
         """DEM energy minimisation (statics.minimise_energy)."""
         scene, comm, dem = self.scene, self.comm, self.dem
         options = scene["statics"]
+        t = options.get("time", 0.0)
         result = minimise_energy(dem, options.get("fixed_mean", ()), options.get("fixed_rotation", False),
-                                 options.get("rtol", 1e-12), gradient_rtol=options.get("gradient_rtol", 1e-10))
+                                 options.get("rtol", 1e-12), gradient_rtol=options.get("gradient_rtol", 1e-10), t=t)
         u = result.u
         probes = self.probes
-        energies = dem.energies(u, 0.0)
-        reactions = dem.reactions(u, 0.0)
-        columns = model.SERIES_COLUMNS + model.reaction_columns(dem) + model.contact_columns(dem) + tuple(probes.names)
+        energies = dem.energies(u, t)
+        reactions = dem.reactions(u, t)
+        prescribed = model.prescribed_values(dem, u, t, result.force)  # kinks' multipliers included
+        columns = (model.SERIES_COLUMNS + model.reaction_columns(dem) + model.prescribed_columns(dem)
+                   + model.contact_columns(dem) + tuple(probes.names))
         momenta = [0.0] * dem.d if dem.pair_contact is not None else []  # at rest
         with io.SeriesWriter(comm, directory / "series.csv", columns) as series:
-            series.write([0.0, 0.0, energies["elastic"], energies["stabilisation"], energies["external"],
-                          energies["potential"], *reactions.ravel(), *model.contact_values(dem, u), *momenta,
-                          *probes.values(u, 0.0)])
+            series.write([t, 0.0, energies["elastic"], energies["stabilisation"], energies["external"],
+                          energies["potential"], *reactions.ravel(), *prescribed, *model.contact_values(dem, u),
+                          *momenta, *probes.values(u, t)])
         with io.SolutionWriter(comm, directory, dem.mesh) as solution:
-            solution.write(0.0, {"displacement": dem.function(u, "displacement"),
-                                 "von_mises": dem.scalar_function(dem.von_mises(u, 0.0), "von_mises")})
+            solution.write(t, {"displacement": dem.function(u, "displacement"),
+                               "von_mises": dem.scalar_function(dem.von_mises(u, t), "von_mises")})
         summary = {
             "scene": scene["name"],
             "method": scene["method"],
@@ -119,12 +123,14 @@ class StaticRun:
             "iterations": result.iterations,
             "linear_iterations": result.linear_iterations,
             "gradient_norm_reduction": result.gradient_reduction,
-            "top_vertical_displacement": float(self.top.values(u, 0.0)[0]),
+            "time": t,
+            "top_vertical_displacement": float(self.top.values(u, t)[0]),
             "setup_time_s": self.setup_seconds,
             "processes": comm.size,
         }
-        if reactions.size:  # the force each Dirichlet condition exerts on the body
-            summary["reactions"] = dict(zip(model.reaction_columns(dem), reactions.ravel().tolist()))
+        if reactions.size or prescribed.size:  # the force each Dirichlet condition and prescribed body exerts
+            names = model.reaction_columns(dem) + model.prescribed_columns(dem)[: prescribed.size // 2]
+            summary["reactions"] = dict(zip(names, reactions.ravel().tolist() + prescribed[: prescribed.size // 2].tolist()))
         if dem.pair_contact is not None:
             summary.update(_pair_summary(dem, u, result))
         obstacles = [(ob["point"], ob["normal"]) for ob in scene.get("obstacles", [])]
@@ -132,12 +138,12 @@ class StaticRun:
             axis = obstacles[0] if dem.d == 3 and len(obstacles) == 1 else None
             summary.update(_contact_summary(dem, u, result, directory / "contact_pressure.csv", axis))
         if dem.d == 1:
-            plotting.plot_bar(dem.mesh, u.array_r.reshape(-1, 1), dem.stress(u, 0.0)[:, 0, 0], directory / "final.png",
+            plotting.plot_bar(dem.mesh, u.array_r.reshape(-1, 1), dem.stress(u, t)[:, 0, 0], directory / "final.png",
                               0.0, obstacles)
         else:
-            plotting.plot_cell_field(dem.mesh, u.array_r.reshape(-1, dem.d), dem.von_mises(u, 0.0),
+            plotting.plot_cell_field(dem.mesh, u.array_r.reshape(-1, dem.d), dem.von_mises(u, t),
                                      directory / "final.png", "von Mises stress (Pa)",
-                                     scene.get("output", {}).get("picture_scale", 1.0), obstacles)
+                                     scene.get("output", {}).get("picture_scale", 1.0), obstacles, dem.prescribed_cells)
         return summary
 
     def _run_fem(self, directory) -> dict:

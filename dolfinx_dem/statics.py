@@ -64,6 +64,17 @@ kinks at g_p = 0 get the treatment above, pairs in place of facets: pairs that k
 (the set of pairs in contact returns to an earlier one), or against whose switch the line search
 stalls, are pinned on g_p = 0 by multipliers, with the same kink conditions (-mu_p between 0 and
 the force r_p = -w_p z_p . (a + delta_a) the pair would carry in contact).
+
+Prescribed bodies (``discretisation.PrescribedBody``, paper eq. (35b) for their dynamics). The
+potential is minimised at a load time t: the Dirichlet and traction data are those of time t and
+each prescribed body is held at its translation U(t). The iteration starts from u holding U(t)
+on their dofs p and works in the subspace {d_p = 0}: ``_Constraints`` zeroes those dofs in every
+right-hand side, step and gap gradient (the projector of the linear constraints above is extended
+by the coordinate projector onto d_p = 0, which commutes with it: the constraint normals vanish on
+prescribed bodies), the constrained operator is the identity on them, and the gradient norm leaves
+them out. The force on their dofs is the reaction: a prescribed body's reaction
+(``DEMDiscretisation.prescribed_values``) is dV/dU, the force it exerts on the other bodies, as in
+the dynamics.
 """
 
 from __future__ import annotations
@@ -97,6 +108,9 @@ class StaticResult:
     # the normal contact force of each, -mu_p.
     pinned: np.ndarray
     kink_forces: np.ndarray
+    # -grad of the Lagrangian at u, not projected: zero on the free dofs up to the tolerance, and on
+    # a prescribed body's dofs minus its reaction (DEMDiscretisation.prescribed_values(u, t, force))
+    force: PETSc.Vec
     gauss_newton_steps: int = 0  # contact between bodies: Newton steps taken with the Gauss-Newton H
     contact_pairs: np.ndarray | None = None  # contact between bodies: keys of the pairs in contact (not pinned)
 
@@ -105,9 +119,24 @@ class StaticResult:
         return self.gradient_norm / self.gradient_norm_initial
 
 
-def _constraints(dem, components, rotation):
-    """Orthonormal normals w of the linear constraints w . u = 0, for each body (connected
-    component) without a Dirichlet condition: its mass-weighted mean displacement in
+@dataclasses.dataclass(frozen=True)
+class _Constraints:
+    """The subspace of the steps: w . d = 0 for the orthonormal ``normals`` w (``_constraints``)
+    and d = 0 on the ``held`` dofs (owned, local: the prescribed bodies'), on which the normals
+    vanish (module docstring). ``holds``: whether any process holds dofs (the same everywhere:
+    collective calls depend on it)."""
+
+    normals: list
+    held: np.ndarray
+    holds: bool
+
+    def __bool__(self) -> bool:
+        return bool(self.normals) or self.holds
+
+
+def _constraints(dem, components, rotation) -> _Constraints:
+    """The normals w of the linear constraints w . u = 0 (orthonormal), for each body (connected
+    component) without a Dirichlet condition or a prescribed motion: its mass-weighted mean displacement in
     ``components`` and, if ``rotation``, its mass-weighted mean rotation sum_c m_c (x_c - x_G) x
     u_c (2D). Bodies held by a Dirichlet condition get none: a constraint there would add a
     spurious force (a body pressed on a clamped one must not share its constraints)."""
@@ -118,6 +147,7 @@ def _constraints(dem, components, rotation):
     body = geom.cell_bodies[: dem.n_owned]
     held = np.zeros(geom.num_bodies, dtype=np.int64)
     held[geom.cell_bodies[geom.facet_cells[dem.reconstruction.dirichlet_facets, 0]]] = 1
+    held[dem.prescribed_body_numbers] = 1
     comm = dem.comm
     comm.Allreduce(MPI.IN_PLACE, held, op=MPI.MAX)
     normals = []
@@ -138,7 +168,7 @@ def _constraints(dem, components, rotation):
         for v in normals[:k]:
             w.axpy(-w.dot(v), v)
         w.scale(1.0 / w.norm())
-    return normals
+    return _Constraints(normals, dem.prescribed_dofs, bool(dem.prescribed))
 
 
 def _hessian(dem, active):
@@ -153,10 +183,12 @@ def _hessian(dem, active):
     return H
 
 
-def _project(x: PETSc.Vec, normals) -> None:
-    """x <- P x, P the orthogonal projector onto {w . x = 0 for the orthonormal normals w}: one
-    reduction for all the normals (CG applies P twice per iteration; in parallel the latency of
-    the reductions dominated)."""
+def _project(x: PETSc.Vec, constraints: _Constraints) -> None:
+    """x <- P x, P the orthogonal projector onto the subspace of ``constraints``: x_p = 0 on the
+    held dofs, and w . x = 0 for the orthonormal normals w, with one reduction for all the normals
+    (CG applies P twice per iteration; in parallel the latency of the reductions dominated)."""
+    x.array[constraints.held] = 0.0
+    normals = constraints.normals
     if normals:
         dots = np.array([w.array_r @ x.array_r for w in normals])
         x.getComm().tompi4py().Allreduce(MPI.IN_PLACE, dots, op=MPI.SUM)
@@ -165,32 +197,37 @@ def _project(x: PETSc.Vec, normals) -> None:
 
 class _ConstrainedOperator:
     """P H P + (I - P): symmetric positive definite when H is positive definite on range(P), and
-    equal to H on it, so CG on range(P) solves the constrained minimisation."""
+    equal to H on it (the identity on the held dofs and the normals), so CG on range(P) solves the
+    constrained minimisation."""
 
-    def __init__(self, H, normals):
-        self.H, self.normals = H, normals
+    def __init__(self, H, constraints: _Constraints):
+        self.H, self.constraints = H, constraints
         self.work = H.createVecRight()
 
     def mult(self, mat, x, y):
         x.copy(self.work)
-        _project(self.work, self.normals)
+        _project(self.work, self.constraints)
         self.H.mult(self.work, y)
-        _project(y, self.normals)
+        _project(y, self.constraints)
         y.axpy(1.0, x)
         y.axpy(-1.0, self.work)
 
 
-def _constrained(H, normals):
+def _constrained(H, constraints: _Constraints):
     """(operator, preconditioning matrix) for the constrained solve; without constraints H itself.
-    The preconditioner is built from H with a tiny diagonal shift, which keeps it definite when
-    the constrained directions are in (or near) the null space of H."""
-    if not normals:
+    The preconditioner is built from H with the held rows and columns replaced by the identity's
+    (exactly P H P + (I - P) for them) and, with normals, a tiny diagonal shift, which keeps it
+    definite when the constrained directions are in (or near) the null space of H."""
+    if not constraints:
         return H, H
-    shell = PETSc.Mat().createPython(H.getSizes(), _ConstrainedOperator(H, normals), comm=H.getComm())
+    shell = PETSc.Mat().createPython(H.getSizes(), _ConstrainedOperator(H, constraints), comm=H.getComm())
     shell.setUp()
     P = H.copy()
-    diagonal = P.getDiagonal()
-    P.shift(1e-8 * diagonal.max()[1])
+    if constraints.holds:
+        P.zeroRowsColumns((constraints.held + H.getOwnershipRange()[0]).astype(PETSc.IntType), diag=1.0)
+    if constraints.normals:
+        diagonal = P.getDiagonal()
+        P.shift(1e-8 * diagonal.max()[1])
     return shell, P
 
 
@@ -208,8 +245,9 @@ class _Linear:
         ksp.setFromOptions()
         self.iterations = 0
 
-    def set_operator(self, H, normals) -> None:
-        self.ksp.setOperators(*_constrained(H, normals))
+    def set_operator(self, H, constraints: _Constraints) -> None:
+        self.ksp.setOperators(*_constrained(H, constraints))
+        self.held = constraints.held
 
     def solve(self, b, x, iteration: int, check: bool = False) -> None:
         """x = A^-1 b; ``check``: also fail when the true residual exceeds 1e3 rtol |b| (CG
@@ -217,6 +255,7 @@ class _Linear:
         and be far off)."""
         x.set(0.0)
         self.ksp.solve(b, x)
+        x.array[self.held] = 0.0  # the step leaves the prescribed bodies where they are
         self.iterations += self.ksp.getIterationNumber()
         reason = self.ksp.getConvergedReason()
         if check and reason >= 0:
@@ -255,8 +294,9 @@ def minimise_energy(
     max_iterations: int = 50,
     gradient_rtol: float = 1e-10,
     curvature: bool = True,
+    t: float = 0.0,
 ) -> StaticResult:
-    """Minimise the DEM potential energy at t = 0 (see the module docstring).
+    """Minimise the DEM potential energy at the load time t (see the module docstring).
 
     Parameters
     ----------
@@ -272,15 +312,16 @@ def minimise_energy(
     curvature : contact between bodies only: try the exact Hessian of the piece first, falling
         back to its Gauss-Newton part for an iteration where CG breaks down or the step is not a
         descent direction (default); False: the Gauss-Newton part always (module docstring).
+    t : the load time (s): the Dirichlet and traction values of time t (those declared time
+        dependent), and the prescribed bodies held at their translation U(t).
     """
     d = dem.d
     if any(not (0 <= i < d) for i in fixed_mean):
         raise ValueError(f"fixed_mean components must be in [0, {d}), got {list(fixed_mean)}")
     if not 0 < rtol < 1:
         raise ValueError(f"rtol must lie in (0, 1), got {rtol}")
-    if dem.prescribed:
-        raise NotImplementedError("minimise_energy does not handle prescribed bodies (a translation imposed "
-                                  "in time): use a dynamic run (MEMM)")
+    if not np.isfinite(t):
+        raise ValueError(f"the load time t must be finite, got {t}")
     if dem.pair_contact is not None and d != 2:
         # In 3D the overlaps are quadratic in u on a piece: the Hessian below assumes them affine.
         raise NotImplementedError("statics with contact between bodies is implemented in 2D, not 3D")
@@ -297,20 +338,23 @@ def minimise_energy(
     directions = _constraints(dem, fixed_mean, fixed_rotation)
     same = lambda x, y: comm.allreduce(bool(np.array_equal(x, y)), op=MPI.LAND)  # noqa: E731
 
-    zero, rhs, u = dem.create_vector(), dem.create_vector(), dem.create_vector()  # u starts at 0
-    force = dem.create_vector()
-    dem.force(zero, 0.0, force)
+    # u starts at 0, the prescribed bodies at U(t)
+    rhs, u, force = dem.create_vector(), dem.create_vector(), dem.create_vector()
+    dem.hold(u, t)
+    if dem.pair_contact is not None:
+        dem.pair_contact.prepare(u)
+    dem.force(u, t, force)
     _project(force, directions)
     norm0 = force.norm()
     if dem.pair_contact is not None:
-        return _minimise_pairs(dem, directions, norm0, _Linear(dem, rtol), gradient_rtol, curvature,
+        return _minimise_pairs(dem, u, t, directions, norm0, _Linear(dem, rtol), gradient_rtol, curvature,
                                max_iterations, start)
 
     pinned = np.zeros(0, dtype=bool)
     if c is not None:
         # Start from the facets touching the obstacle at u = 0 (smallest gap); the iteration
         # adds the facets the solution pushes into it and releases those it lifts off.
-        g = c.own_gaps(zero)
+        g = c.own_gaps(u)
         h = comm.allreduce(dem.geometry.facet_diameters[c.facets[: c.num_own]].min(initial=np.inf), op=MPI.MIN)
         active = g <= comm.allreduce(g.min(initial=np.inf), op=MPI.MIN) + 1e-9 * h
         pinned = np.zeros_like(active)
@@ -320,7 +364,7 @@ def minimise_energy(
     multipliers, facets = np.zeros(0), []
 
     def potential(vec):
-        return dem.energies(vec, 0.0)["potential"]
+        return dem.energies(vec, t)["potential"]
 
     def pinned_values(values: np.ndarray) -> np.ndarray:
         """Per-facet values of the own facets -> the pinned facets' values, in ``facets`` order."""
@@ -331,14 +375,14 @@ def minimise_energy(
         # any) held on the obstacle, g_C(u + d) = 0, by Lagrange multipliers mu:
         # d = z_0 - Z mu, H_A z_0 = F_A, H_A Z = P grad g_C, (grad g_C . Z) mu = g_C(u) + grad g_C . z_0.
         H = _hessian(dem, active) if c is not None else dem.K
-        dem.force(u, 0.0, rhs, contact=False)
+        dem.force(u, t, rhs, contact=False)
         if c is not None:
             c.add_force(u, rhs, active)
         _project(rhs, directions)
         linear.set_operator(H, directions)
         linear.solve(rhs, step, iteration)
         if c is None:
-            step.copy(u)
+            u.axpy(1.0, step)
             break
         facets = _global(comm, pinned)
         if facets:
@@ -407,41 +451,44 @@ def minimise_energy(
 
     # Gradient of the Lagrangian at the end: grad V of the active piece minus the pinned facets'
     # multiplier forces (= grad V itself when no facet is pinned).
-    dem.force(u, 0.0, force, contact=False)
+    dem.force(u, t, force, contact=False)
     if c is not None:
         c.add_force(u, force, active)
-    _project(force, directions)
     kink_forces = np.zeros(c.num_own) if c is not None else np.zeros(0)
     facets = _global(comm, pinned) if c is not None else []
     for (r, k), m in zip(facets, multipliers if facets else []):
-        force.axpy(-m, _gap_gradient(dem, (r, k), directions))
+        force.axpy(-m, c.gap_gradient(r, k))
         if r == comm.rank:
             kink_forces[k] = -m
+    gradient = force.copy()
+    _project(gradient, directions)
     return StaticResult(
         u=u,
         iterations=iteration,
         linear_iterations=linear.iterations,
         gradient_norm_initial=norm0,
-        gradient_norm=force.norm(),
-        energy=dem.energies(u, 0.0)["potential"],
+        gradient_norm=gradient.norm(),
+        energy=dem.energies(u, t)["potential"],
         contact_facets=comm.allreduce(int((active | pinned).sum()), op=MPI.SUM) if c is not None else 0,
         wall_time_s=time.perf_counter() - start,
         pinned=pinned.copy() if c is not None else np.zeros(0, dtype=bool),
         kink_forces=kink_forces,
+        force=force,
     )
 
 
-def _minimise_pairs(dem, directions, norm0: float, linear: _Linear, gradient_rtol: float, curvature: bool,
-                    max_iterations: int, start: float) -> StaticResult:
-    """Damped Newton on the pieces of the potential with contact between bodies, pairs keyed by
-    ``PairContact.pair_keys``, kinks held by multipliers (module docstring, "Contact between
-    bodies")."""
+def _minimise_pairs(dem, u, t: float, directions, norm0: float, linear: _Linear, gradient_rtol: float,
+                    curvature: bool, max_iterations: int, start: float) -> StaticResult:
+    """Damped Newton on the pieces of the potential with contact between bodies from ``u`` (the
+    start, updated in place) at the load time t, pairs keyed by ``PairContact.pair_keys``, kinks
+    held by multipliers (module docstring, "Contact between bodies")."""
     comm, pc = dem.comm, dem.pair_contact
-    u, rhs, step, trial = (dem.create_vector() for _ in range(4))
+    rhs, step, trial = (dem.create_vector() for _ in range(3))
     up = pc.prepare(u)[0]
     # Start from the overlapping pairs of smallest gap (as for obstacles): the piece that holds
-    # a body which only contact holds.
-    active = pc.touching_pairs(up, pc.smallest_gap(up) + 1e-9 * pc.skin)
+    # a body which only contact holds; or from the pairs in contact at the start, where a
+    # prescribed body held at U(t) penetrates another.
+    active = pc.touching_pairs(up, max(0.0, pc.smallest_gap(up) + 1e-9 * pc.skin))
     if len(active) == 0:
         raise StaticsError("no pair of contact candidate facets faces another: contact between bodies cannot "
                            "hold them (check the contact boundary)")
@@ -450,15 +497,17 @@ def _minimise_pairs(dem, directions, norm0: float, linear: _Linear, gradient_rto
 
     def potential(vec) -> float:
         pc.prepare(vec)  # a trial point may move facets by more than skin/2: rebuild the list
-        return dem.energies(vec, 0.0)["potential"]
+        return dem.energies(vec, t)["potential"]
 
-    def lagrangian_force(vec, out) -> None:
-        """out = -grad V_A(vec) - sum_C mu_p grad g_p, projected (-grad V without pinned pairs)."""
-        dem.force(vec, 0.0, out, contact=False)
+    def lagrangian_force(vec, out, project: bool = True) -> None:
+        """out = -grad V_A(vec) - sum_C mu_p grad g_p, projected unless not ``project`` (-grad V
+        without pinned pairs)."""
+        dem.force(vec, t, out, contact=False)
         pc.add_force(vec, out, active)
-        _project(out, directions)
         for key, m in zip(pinned, multipliers):
-            out.axpy(-m, _projected(pc.gap_gradient(pc.patch_values(vec), key), directions))
+            out.axpy(-m, pc.gap_gradient(pc.patch_values(vec), key))
+        if project:
+            _project(out, directions)
 
     norm, gauss_newton_steps = norm0, 0
     for iteration in range(1, max_iterations + 1):
@@ -544,17 +593,20 @@ def _minimise_pairs(dem, directions, norm0: float, linear: _Linear, gradient_rto
         raise StaticsError(f"no convergence in {max_iterations} iterations (gradient reduction {norm / norm0:.2e}, "
                            f"target {gradient_rtol:g}, {len(pinned)} pairs held on a contact switch)")
     linear.destroy()
+    force = dem.create_vector()
+    lagrangian_force(u, force, project=False)
     return StaticResult(
         u=u,
         iterations=iteration,
         linear_iterations=linear.iterations,
         gradient_norm_initial=norm0,
         gradient_norm=norm,
-        energy=dem.energies(u, 0.0)["potential"],
+        energy=dem.energies(u, t)["potential"],
         contact_facets=len(active) + len(pinned),
         wall_time_s=time.perf_counter() - start,
         pinned=pinned,
         kink_forces=-multipliers,
+        force=force,
         gauss_newton_steps=gauss_newton_steps,
         contact_pairs=active,
     )
@@ -587,7 +639,7 @@ def _newton_step(dem, directions, linear, pc, up, active, pinned, exact, rhs, st
     return multipliers, gaps
 
 
-def _projected(vec: PETSc.Vec, normals) -> PETSc.Vec:
+def _projected(vec: PETSc.Vec, constraints: _Constraints) -> PETSc.Vec:
     """``vec`` after ``_project``."""
-    _project(vec, normals)
+    _project(vec, constraints)
     return vec

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 from mpi4py import MPI
 
-from dolfinx_dem import dynamics, meshes, model, scenes, statics
+from dolfinx_dem import dynamics, io, meshes, model, scenes, statics
 from dolfinx_dem.discretisation import DEMDiscretisation, DirichletBC, PrescribedBody, Traction
 from dolfinx_dem.material import ElasticMaterial
 
@@ -210,8 +210,8 @@ def test_bad_prescribed_bodies_are_rejected_by_the_discretisation():
         DEMDiscretisation(mesh, MATERIAL, "B", tractions=[Traction(top, [0.0, 1.0])], cell_tags=tags,
                           prescribed=[PrescribedBody(1, velocity=[0.0, 1.0])])
     dem = DEMDiscretisation(mesh, MATERIAL, "B", cell_tags=tags, prescribed=[PrescribedBody(1, velocity=[0.0, 1.0])])
-    with pytest.raises(NotImplementedError, match="prescribed bodies"):
-        statics.minimise_energy(dem)
+    with pytest.raises(ValueError, match="the load time t must be finite"):
+        statics.minimise_energy(dem, t=np.nan)
     box, _, _ = meshes.create_box(comm, [0.0, 0.0, 0.0], [1.0, 1.0, 1.0], [1, 1, 1])
     cells = np.arange(box.topology.index_map(3).size_local, dtype=np.int32)
     with pytest.raises(ValueError, match="implemented in 2D, not 3D"):
@@ -219,7 +219,49 @@ def test_bad_prescribed_bodies_are_rejected_by_the_discretisation():
                           prescribed=[PrescribedBody(1, velocity=[0.0, 0.0, 1.0])])
 
 
-def test_a_static_scene_refuses_prescribed_bodies():
-    scene = {k: v for k, v in indentation().items() if k not in ("time", "contact")} | {"statics": {}}
-    with pytest.raises(scenes.SceneError, match="dynamics only"):
-        scenes.validate(scene)
+def static_indentation(t: float) -> dict:
+    """``indentation()`` as a static scene at the load time t (the disc at U(t) = (0, -t))."""
+    return {k: v for k, v in indentation().items() if k != "time"} | {"statics": {"time": t}}
+
+
+def solve_static(t: float, comm=MPI.COMM_WORLD):
+    """(dem, result) of minimise_energy on ``static_indentation(t)``."""
+    dem = model.build(scenes.validate(static_indentation(t)), comm)
+    return dem, statics.minimise_energy(dem, t=t)
+
+
+@pytest.mark.mpi
+def test_statics_holds_the_prescribed_disc_and_balances_its_reaction():
+    """The disc sits at U(t), the block is in equilibrium between the disc and the base (their
+    reactions cancel), any process count agrees with one process, and the reaction is the
+    derivative of the minimum energy with respect to the disc's translation (envelope theorem:
+    dV*/dt = dV/dU . dU/dt = -reaction_y)."""
+    t = 0.0105  # indentation 0.01
+    dem, result = solve_static(t)
+    assert result.gradient_reduction < 1e-10
+    disc, base = dem.prescribed_values(result.u, t, result.force)[0], dem.reactions(result.u, t)[0]
+    assert np.allclose(disc[1], [0.0, -t], rtol=0, atol=1e-15)
+    assert disc[0][1] < 0 and np.abs(disc[0] + base).max() < 1e-8 * abs(base[1])
+    if MPI.COMM_WORLD.size > 1:
+        serial_dem, serial = solve_static(t, MPI.COMM_SELF)
+        assert np.allclose(disc, serial_dem.prescribed_values(serial.u, t, serial.force)[0], rtol=1e-8, atol=0)
+        assert abs(result.energy - serial.energy) < 1e-10 * abs(serial.energy)
+    eps = 1e-5
+    energies = [solve_static(t + s)[1].energy for s in (-eps, eps)]
+    assert abs((energies[1] - energies[0]) / (2 * eps) + disc[0][1]) < 1e-5 * abs(disc[0][1])
+
+
+def test_a_static_scene_with_a_prescribed_disc_reports_its_reaction(tmp_path):
+    """StaticRun writes the prescribed columns at the load time and the disc's reaction, minus the
+    base's, in the summary; a load time that is not a number is refused."""
+    from dolfinx_dem.static_simulation import StaticRun
+
+    summary = StaticRun(scenes.validate(static_indentation(0.0105)), MPI.COMM_SELF).run(
+        io.OutputDirectory(tmp_path / "out", MPI.COMM_SELF))
+    reactions = summary["reactions"]
+    assert summary["time"] == 0.0105 and reactions["reaction_disc_y"] < 0
+    assert abs(reactions["reaction_disc_y"] + reactions["reaction_base_y"]) < 1e-8 * reactions["reaction_base_y"]
+    series = np.genfromtxt(tmp_path / "out" / "series.csv", delimiter=",", names=True)
+    assert series["t"] == 0.0105 and np.isclose(series["prescribed_disc_displacement_y"], -0.0105, rtol=1e-14, atol=0)
+    with pytest.raises(scenes.SceneError, match="'statics.time' must be a finite number"):
+        scenes.validate(static_indentation(0.0) | {"statics": {"time": "1"}})

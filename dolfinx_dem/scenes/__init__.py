@@ -174,6 +174,7 @@ SCHEMA = {
         "fixed_rotation": lambda k, v, d: _bool(k, v),
         "rtol": lambda k, v, d: _number(k, v, positive=True),
         "gradient_rtol": lambda k, v, d: _number(k, v, positive=True),
+        "time": lambda k, v, d: _number(k, v),
     },
     "output": {
         "every": lambda k, v, d: _integer(k, v),
@@ -310,8 +311,6 @@ def validate(scene: Mapping, mesh_dimension: int | None = None) -> dict:
         raise SceneError(f"scene keys 'dirichlet[].name' and 'prescribed[].name' name the reaction columns and must "
                          f"be unique together, got {reactions} (unnamed: the number in the list of both)")
     if "statics" in scene:
-        if "prescribed" in scene:
-            raise SceneError("prescribed bodies ('prescribed' tables) are implemented for dynamics only")
         for section in ("time", "initial"):
             if section in scene:
                 raise SceneError(f"a static scene ('statics' table) takes no '{section}' table")
