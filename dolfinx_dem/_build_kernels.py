@@ -27,6 +27,11 @@ ffibuilder.cdef(
                               const int32_t *qt2_rows, const double *qt2_vals, const int32_t *rowptr2,
                               const int32_t *cols2, const double *vals2, const int64_t *key2,
                               const double *x, double *r, double *acc);
+    void dem_overlap(int64_t n, int32_t dim, const int64_t *p, const double *XA, const double *mA,
+                     const double *nuA, const double *sizeA, const double *XB, const double *mB,
+                     const double *nuB, const double *sizeB, const double *s, double *w, double *dw);
+    void dem_boxes_meet(int64_t n, int32_t dim, const int64_t *p, const double *XA, const double *XB,
+                        const double *s0, const double *s1, double dt, int8_t *out);
     """
 )
 # -O3, no -march=native: the module must run on any x86-64 the package is installed for.

@@ -76,6 +76,7 @@ from mpi4py import MPI
 from petsc4py import PETSc
 
 from dolfinx_dem.halo import owned_facet_marks
+from dolfinx_dem.kernels import lib, pointer
 from dolfinx_dem.patch import PatchScatter, piecewise_midpoints, scatter_sum
 
 
@@ -533,7 +534,7 @@ class PairContact:
         so w depends on the tangential offset s = t (u_j - u_i) only (``_overlap``)."""
         L = self.listed
         t = L.t[p]
-        w, dw = _overlap(L.si.take(p), L.sj.take(p), np.einsum("eki,ei->ek", t, uj - ui))
+        w, dw = _overlap(L.si, L.sj, p, np.einsum("eki,ei->ek", t, uj - ui))
         return self._gap(p, ui, uj), w, np.einsum("ek,eki->ei", dw, t)
 
     def _gap(self, p, ui, uj):
@@ -545,11 +546,15 @@ class PairContact:
         """(elastic, stabilisation) energy changes of this process's own rows (not reduced)."""
         start = time.process_time()
         L = self.listed
-        g, w, _ = self._state(np.arange(len(L)), *self._pair_displacements(up))
+        ui, uj = self._pair_displacements(up)
+        g = self._gap(np.arange(len(L)), ui, uj)
         elastic = stabilisation = 0.0
-        if (g < 0).any():
+        neg = np.flatnonzero(g < 0)  # c_p = w_p g_p^- vanishes on the others: no overlap to compute
+        if neg.size:
+            c = np.zeros(len(L))
+            c[neg] = self._state(neg, ui[neg], uj[neg])[1] * g[neg]
             a = L.Q @ up + self._q
-            delta = L.Z @ (w * np.minimum(g, 0.0))
+            delta = L.Z @ c
             change = a * delta + 0.5 * delta**2
             elastic, stabilisation = float(change[self._is_elastic_row].sum()), float(change[~self._is_elastic_row].sum())
         self.seconds += time.process_time() - start
@@ -609,7 +614,7 @@ class PairContact:
         # projections' bounding boxes overlapping at some time): the others add exact zeros,
         # and splitting their neighbours at their events would only cost.
         touching = np.flatnonzero((g0 < 0) | (g1 < 0))
-        touching = touching[_boxes_meet(L.si.take(touching), L.sj.take(touching),
+        touching = touching[_boxes_meet(L.si, L.sj, touching,
                                         np.einsum("pki,pi->pk", L.t[touching], uj0[touching] - ui0[touching]),
                                         np.einsum("pki,pi->pk", L.t[touching], vj[touching] - vi[touching]), dt)]
         result = np.zeros_like(up)
@@ -687,7 +692,7 @@ class PairContact:
         s1 = np.einsum("eki,ei->ek", t, vj[p] - vi[p])
         A, B = L.si.take(p), L.sj.take(p).moved(s0)
         # m_k . (x - X_k) for the vertices x of one simplex and the faces k of the other (E, d, d),
-        # as in ``_clip``; B moves by s1 per unit tau
+        # as in ``_overlap``; B moves by s1 per unit tau
         side = lambda x, S: _dot(x[:, :, None] - S.X[:, None], S.m[:, None]).reshape(-1, d * d)  # noqa: E731
         speed = lambda S: np.repeat(_dot(S.m, s1[:, None])[:, None], d, axis=1).reshape(-1, d * d)  # noqa: E731
         v0 = np.concatenate([g0[:, None], side(A.X, B), side(B.X, A)], axis=1)
@@ -1033,6 +1038,7 @@ class _Simplices:
 
     @staticmethod
     def of(X: np.ndarray) -> _Simplices:
+        X = np.ascontiguousarray(X, dtype=np.float64)  # the layout of the kernel ``dem_overlap``
         if X.shape[2] == 1:  # segments: the faces are the vertices, each facing away from the other
             end, m, size = X, X - X[:, ::-1], np.ones(X.shape[:2])
         else:
@@ -1053,23 +1059,6 @@ class _Simplices:
         return _Simplices(self.X + s[:, None], self.end + s[:, None], self.m, self.nu, self.size)
 
 
-def _clip(faces: _Simplices, other: _Simplices, ties: bool) -> tuple[np.ndarray, np.ndarray]:
-    """The part [lower, lower + length] (fractions of each face, (E, d)) of the faces of ``faces``
-    inside the simplices ``other`` (the half-planes m_k . (x - X_k) <= 0 of its faces: Liang-Barsky
-    clipping). ``ties``: a face lying on a face of ``other`` with the same outward normal is left
-    out, so that a boundary piece common to both simplices is counted once (by ``other``)."""
-    h0 = _dot(faces.X[:, :, None] - other.X[:, None], other.m[:, None])  # (E, face, k)
-    h1 = _dot((faces.end - faces.X)[:, :, None], other.m[:, None])  # h0 + t h1 <= 0 inside
-    with np.errstate(divide="ignore", invalid="ignore"):
-        r = -h0 / h1
-    lower = _last(np.maximum, np.where(h1 < 0, r, 0.0))
-    upper = _last(np.minimum, np.where(h1 > 0, r, 1.0))
-    out = (h1 == 0) & (h0 > 0)
-    if ties:
-        out |= (h1 == 0) & (h0 == 0) & (_dot(faces.m[:, :, None], other.m[:, None]) > 0)
-    return lower, np.where(_last(np.logical_or, out), 0.0, np.maximum(upper - lower, 0.0))
-
-
 def _dot(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """sum_k a[..., k] b[..., k] over the few components k of the last axis (term by term:
     faster than a reduction over a short axis, and m . e exactly 0 when m is e turned)."""
@@ -1084,40 +1073,37 @@ def _last(op, a: np.ndarray) -> np.ndarray:
     return out
 
 
-def _boxes_meet(A: _Simplices, B: _Simplices, s0: np.ndarray, s1: np.ndarray, dt: float) -> np.ndarray:
-    """Whether the bounding boxes of A and B + s0 + tau s1 overlap (open sets) for some tau in
-    [0, dt]: else A cap (B + s) has no area during the step."""
-    lo = B.X.min(axis=1) - A.X.max(axis=1) + s0  # overlap on axis k while lo_k + tau s1_k < 0 < hi_k + tau s1_k
-    hi = B.X.max(axis=1) - A.X.min(axis=1) + s0
-    start, stop = np.zeros(len(s0)), np.full(len(s0), float(dt))
-    for x, rate in ((lo, s1), (-hi, -s1)):  # x + tau rate < 0
-        with np.errstate(divide="ignore", invalid="ignore"):
-            root = -x / rate
-        stop = np.minimum(stop, np.where(rate > 0, root, np.inf).min(axis=1))
-        start = np.maximum(start, np.where(rate < 0, root, -np.inf).max(axis=1))
-        start[((rate == 0) & (x >= 0)).any(axis=1)] = np.inf
-    return start < stop
+def _boxes_meet(A: _Simplices, B: _Simplices, p: np.ndarray, s0: np.ndarray, s1: np.ndarray,
+                dt: float) -> np.ndarray:
+    """Whether the bounding boxes of A_p and B_p + s0 + tau s1 overlap (open sets) for some tau
+    in [0, dt], for the simplex pairs p (E,) and offsets s0, s1 (E, d-1): else A cap (B + s) has
+    no area during the step (the compiled kernel ``dem_boxes_meet``)."""
+    p = np.ascontiguousarray(p, dtype=np.int64)
+    out = np.empty(len(p), dtype=np.int8)
+    lib.dem_boxes_meet(len(p), s0.shape[1], pointer(p), pointer(A.X), pointer(B.X), pointer(np.ascontiguousarray(s0)),
+                       pointer(np.ascontiguousarray(s1)), float(dt), pointer(out))
+    return out.view(bool)
 
 
-def _overlap(A: _Simplices, B: _Simplices, s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """w = |A cap (B + s)| and its gradient dw/ds (E, d-1) for the offsets s (E, d-1).
+def _overlap(A: _Simplices, B: _Simplices, p: np.ndarray, s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """w = |A_p cap (B_p + s)| and its gradient dw/ds (E, d-1) for the simplex pairs p (E,) and
+    the offsets s (E, d-1): the compiled kernel ``dem_overlap`` (kernels.c).
 
     The divergence theorem, div x = d - 1 in the plane: w = 1/(d-1) int over the boundary of
     A cap (B + s) of x . nu, whose pieces are the faces of A clipped by B + s and the faces of
     B + s clipped by A (a face counts nu_k . x at its clipped centre times its clipped measure).
-    Translating B + s by ds moves only its own boundary pieces inside A: dw/ds = sum_k nu_k
+    Each face is clipped by the half-planes m_k . (x - X_k) <= 0 of the other simplex's faces
+    (Liang-Barsky); a face of B + s lying on a face of A with the same outward normal is left
+    out, so that a boundary piece common to both simplices is counted once (by A). Translating
+    B + s by ds moves only its own boundary pieces inside A: dw/ds = sum_k nu_k
     |face_k(B + s) cap A|. Both are exact where w is smooth (off the events of ``_events``)."""
-    Bs = B.moved(s)
-    w = 0.0
-    for faces, other, ties in ((A, Bs, False), (Bs, A, True)):
-        lower, length = _clip(faces, other, ties)
-        centre = faces.X + (lower + 0.5 * length)[..., None] * (faces.end - faces.X)
-        measure = length * faces.size
-        w = w + _last(np.add, _dot(centre, faces.nu) * measure)
-    w = w / s.shape[1]
-    dw = _last(np.add, np.swapaxes(Bs.nu, 1, 2) * measure[:, None])
-    inside = w > 0
-    return np.where(inside, w, 0.0), np.where(inside[:, None], dw, 0.0)
+    p = np.ascontiguousarray(p, dtype=np.int64)
+    s = np.ascontiguousarray(s, dtype=np.float64)
+    w, dw = np.empty(len(p)), np.empty(s.shape)
+    lib.dem_overlap(len(p), s.shape[1], pointer(p), *(pointer(getattr(S, f)) for S in (A, B)
+                                                      for f in ("X", "m", "nu", "size")),
+                    pointer(s), pointer(w), pointer(dw))
+    return w, dw
 
 
 def _adjugate_times(A: np.ndarray, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
