@@ -30,8 +30,9 @@ ffibuilder.cdef(
     void dem_overlap(int64_t n, int32_t dim, const int64_t *p, const double *XA, const double *mA,
                      const double *nuA, const double *sizeA, const double *XB, const double *mB,
                      const double *nuB, const double *sizeB, const double *s, double *w, double *dw);
-    void dem_boxes_meet(int64_t n, int32_t dim, const int64_t *p, const double *XA, const double *XB,
-                        const double *s0, const double *s1, double dt, int8_t *out);
+    void dem_pair_screen(int64_t n_pairs, int32_t d, const int64_t *i, const int64_t *j, const double *n,
+                         const double *t, const double *d0, const double *XA, const double *XB,
+                         const double *uc, const double *vc, double dt, int8_t *out);
     """
 )
 # -O3, no -march=native: the module must run on any x86-64 the package is installed for.

@@ -330,40 +330,88 @@ void dem_overlap(int64_t n, int32_t dim, const int64_t *restrict p, const double
   }
 }
 
-/* Whether the bounding boxes of A_q and B_q + s0_i + tau s1_i (see dem_overlap; dim components)
- * overlap (open sets) for some tau in [0, dt], for the n pairs q = p[i]: out[i] = 1 or 0
- * (pair_contact._boxes_meet). */
-void dem_boxes_meet(int64_t n, int32_t dim, const int64_t *restrict p, const double *restrict XA,
-                    const double *restrict XB, const double *restrict s0,
-                    const double *restrict s1, double dt, int8_t *restrict out)
+/* Bounding boxes (see dem_overlap; dim components) of A and B + s0 + tau s1 overlap (open sets)
+ * for some tau in [0, dt]. */
+static int32_t boxes_meet(int32_t nv, int32_t dim, const double *XA, const double *XB,
+                          const double *s0, const double *s1, double dt)
 {
-  const int32_t nv = dim + 1, stride = nv * dim;
-  for (int64_t i = 0; i < n; ++i)
+  double la[2], ha[2], lb[2], hb[2];
+  box(nv, dim, XA, la, ha);
+  box(nv, dim, XB, lb, hb);
+  double start = 0.0, stop = dt;
+  for (int32_t c = 0; c < dim; ++c)
   {
-    double la[2], ha[2], lb[2], hb[2];
-    box(nv, dim, XA + p[i] * stride, la, ha);
-    box(nv, dim, XB + p[i] * stride, lb, hb);
-    double start = 0.0, stop = dt;
+    /* on axis c the boxes overlap while lo + tau rate < 0 < hi + tau rate */
+    const double lo = lb[c] - ha[c] + s0[c], hi = hb[c] - la[c] + s0[c];
+    const double rate = s1[c];
+    if (rate > 0)
+    {
+      const double a = -lo / rate, b = hi / -rate;
+      stop = a < stop ? a : stop;
+      start = b > start ? b : start;
+    }
+    else if (rate < 0)
+    {
+      const double a = -lo / rate, b = hi / -rate;
+      start = a > start ? a : start;
+      stop = b < stop ? b : stop;
+    }
+    else if (lo >= 0 || hi <= 0)
+      start = INFINITY;
+  }
+  return start < stop;
+}
+
+/* The pairs p of facets (i[p], j[p]) (d components, d = 2 or 3) whose c_p = w_p g_p^- may not
+ * vanish for the free facet displacements uc + tau vc, 0 <= tau <= dt (uc, vc: n_facets x d):
+ * the gap g = d0 + (u_j - u_i) . n negative at an end, and the bounding boxes of the projected
+ * simplices XA and XB + t (u_j - u_i) (t: d - 1 rows of d) overlapping at some tau (open sets).
+ * Without vc (NULL): g < 0 at uc and boxes not apart (as in dem_overlap). out[p] = 1 or 0. */
+void dem_pair_screen(int64_t n_pairs, int32_t d, const int64_t *restrict i, const int64_t *restrict j,
+                     const double *restrict n, const double *restrict t, const double *restrict d0,
+                     const double *restrict XA, const double *restrict XB, const double *restrict uc,
+                     const double *restrict vc, double dt, int8_t *restrict out)
+{
+  const int32_t dim = d - 1, stride = d * dim;
+  for (int64_t p = 0; p < n_pairs; ++p)
+  {
+    double du[3], dv[3], g0 = 0.0, g1 = 0.0;
+    for (int32_t k = 0; k < d; ++k)
+    {
+      du[k] = uc[j[p] * d + k] - uc[i[p] * d + k];
+      g0 += du[k] * n[p * d + k];
+    }
+    g0 = d0[p] + g0;
+    for (int32_t k = 0; k < d; ++k)
+    {
+      dv[k] = vc ? vc[j[p] * d + k] - vc[i[p] * d + k] : 0.0;
+      g1 += (du[k] + dt * dv[k]) * n[p * d + k];
+    }
+    g1 = d0[p] + g1;
+    if (!(g0 < 0 || g1 < 0))
+    {
+      out[p] = 0;
+      continue;
+    }
+    double s0[2], s1[2];
     for (int32_t c = 0; c < dim; ++c)
     {
-      /* on axis c the boxes overlap while lo + tau rate < 0 < hi + tau rate */
-      const double lo = lb[c] - ha[c] + s0[i * dim + c], hi = hb[c] - la[c] + s0[i * dim + c];
-      const double rate = s1[i * dim + c];
-      if (rate > 0)
+      s0[c] = s1[c] = 0.0;
+      for (int32_t k = 0; k < d; ++k)
       {
-        const double a = -lo / rate, b = hi / -rate;
-        stop = a < stop ? a : stop;
-        start = b > start ? b : start;
+        s0[c] += t[(p * dim + c) * d + k] * du[k];
+        s1[c] += t[(p * dim + c) * d + k] * dv[k];
       }
-      else if (rate < 0)
-      {
-        const double a = -lo / rate, b = hi / -rate;
-        start = a > start ? a : start;
-        stop = b < stop ? b : stop;
-      }
-      else if (lo >= 0 || hi <= 0)
-        start = INFINITY;
     }
-    out[i] = start < stop;
+    if (vc)
+      out[p] = boxes_meet(d, dim, XA + p * stride, XB + p * stride, s0, s1, dt);
+    else
+    {
+      double Y[6];
+      for (int32_t k = 0; k < d; ++k)
+        for (int32_t c = 0; c < dim; ++c)
+          Y[k * dim + c] = XB[p * stride + k * dim + c] + s0[c];
+      out[p] = !boxes_apart(d, dim, XA + p * stride, Y);
+    }
   }
 }

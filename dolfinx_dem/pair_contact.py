@@ -537,6 +537,18 @@ class PairContact:
         w, dw = _overlap(L.si, L.sj, p, np.einsum("eki,ei->ek", t, uj - ui))
         return self._gap(p, ui, uj), w, np.einsum("ek,eki->ei", dw, t)
 
+    def _screen(self, uc: np.ndarray, vc: np.ndarray | None = None, dt: float = 0.0) -> np.ndarray:
+        """The listed pairs whose c_p = w_p g_p^- may not vanish for the free facet displacements
+        ``uc`` + tau ``vc``, 0 <= tau <= dt (known facets' rows): their gap negative at an end
+        and their projections' bounding boxes overlapping at some tau; without ``vc``, those
+        with g_p < 0 whose boxes are not apart at ``uc`` (the compiled kernel
+        ``dem_pair_screen``: one pass over the list)."""
+        L = self.listed
+        out = np.empty(len(L), dtype=np.int8)
+        lib.dem_pair_screen(len(L), self.d, pointer(L.i), pointer(L.j), pointer(L.n), pointer(L.t), pointer(L.d0),
+                            pointer(L.si.X), pointer(L.sj.X), pointer(uc), pointer(vc), float(dt), pointer(out))
+        return np.flatnonzero(out)
+
     def _gap(self, p, ui, uj):
         """Gap g of the pairs ``p`` (eq. (22), (30)) for their facets' free displacements ui, uj."""
         L = self.listed
@@ -546,13 +558,14 @@ class PairContact:
         """(elastic, stabilisation) energy changes of this process's own rows (not reduced)."""
         start = time.process_time()
         L = self.listed
-        ui, uj = self._pair_displacements(up)
-        g = self._gap(np.arange(len(L)), ui, uj)
+        uc = self.free_displacements(up)
+        self._check_listed(uc)
+        neg = self._screen(uc)  # c_p = w_p g_p^- vanishes on the others: no overlap to compute
         elastic = stabilisation = 0.0
-        neg = np.flatnonzero(g < 0)  # c_p = w_p g_p^- vanishes on the others: no overlap to compute
         if neg.size:
+            g, w, _ = self._state(neg, uc[L.i[neg]], uc[L.j[neg]])
             c = np.zeros(len(L))
-            c[neg] = self._state(neg, ui[neg], uj[neg])[1] * g[neg]
+            c[neg] = w * np.minimum(g, 0.0)
             a = L.Q @ up + self._q
             delta = L.Z @ c
             change = a * delta + 0.5 * delta**2
@@ -604,19 +617,13 @@ class PairContact:
         integral with the most pieces (collective)."""
         start = time.process_time()
         L = self.listed
-        ui0, uj0 = self._pair_displacements(up)
-        vc = (self._R @ vp).reshape(-1, self.d)
-        vi, vj = vc[L.i], vc[L.j]
-        self._check_listed(self.free_displacements(up) + dt * vc)
-        p = np.arange(len(L))
-        g0, g1 = self._gap(p, ui0, uj0), self._gap(p, ui0 + dt * vi, uj0 + dt * vj)
-        # The pairs whose c_p may not vanish during the step (their gap negative at an end, their
-        # projections' bounding boxes overlapping at some time): the others add exact zeros,
-        # and splitting their neighbours at their events would only cost.
-        touching = np.flatnonzero((g0 < 0) | (g1 < 0))
-        touching = touching[_boxes_meet(L.si, L.sj, touching,
-                                        np.einsum("pki,pi->pk", L.t[touching], uj0[touching] - ui0[touching]),
-                                        np.einsum("pki,pi->pk", L.t[touching], vj[touching] - vi[touching]), dt)]
+        uc, vc = self.free_displacements(up), (self._R @ vp).reshape(-1, self.d)
+        self._check_listed(uc)
+        self._check_listed(uc + dt * vc)
+        # The pairs whose c_p may not vanish during the step (``_screen``): the others add exact
+        # zeros, and splitting their neighbours at their events would only cost.
+        touching = self._screen(uc, vc, dt)
+        ui0, uj0, vi, vj = uc[L.i[touching]], uc[L.j[touching]], vc[L.i[touching]], vc[L.j[touching]]
         result = np.zeros_like(up)
         pieces = 0
         if touching.size:
@@ -634,9 +641,9 @@ class PairContact:
                                               count, dt)
             nodes, weights = _gauss_points(mid[component], length[component], self._gauss)  # (pairs, K)
             K = nodes.shape[1]
-            e = np.repeat(touching, K)
+            e, r = np.repeat(touching, K), np.repeat(np.arange(len(touching)), K)  # pair, its row
             s = nodes.ravel()
-            g = self._gap(e, ui0[e] + s[:, None] * vi[e], uj0[e] + s[:, None] * vj[e])
+            g = self._gap(e, ui0[r] + s[:, None] * vi[r], uj0[r] + s[:, None] * vj[r])
             w, dw = self._overlap_on_own_pieces(touching, tau, nodes, ui0, uj0, vi, vj, dt)
             c = (w * np.minimum(g, 0.0)).reshape(-1, K)
             # Rows' term -Q^T Z int c dtau; pairs' term -int (z_p . (a + delta_a)) dc_p/du dtau.
@@ -653,7 +660,8 @@ class PairContact:
         return len(self._gauss[0]) * pieces
 
     def _overlap_on_own_pieces(self, p, tau, nodes, ui, uj, vi, vj, dt):
-        """w and dw/du_j of the pairs ``p`` at the times ``nodes`` (len(p), K), flat. Between its
+        """w and dw/du_j of the pairs ``p`` (their facets' displacements ui, uj and velocities vi,
+        vj, one row per pair) at the times ``nodes`` (len(p), K), flat. Between its
         own events ``tau`` a pair's w is a polynomial of degree d - 1 and dw one of degree d - 2:
         each is evaluated (``_state``) at the d Gauss-Legendre nodes of the pair's own pieces
         only and interpolated from them (Lagrange), exact to rounding, rather than evaluated at
@@ -662,8 +670,8 @@ class PairContact:
         mid, length = piecewise_midpoints(np.repeat(np.arange(len(p)), tau.shape[1])[finite], tau.ravel()[finite],
                                           len(p), dt)
         own, _ = _gauss_points(mid, length, self._gauss)  # (len(p), J d)
-        e, s = np.repeat(p, own.shape[1]), own.ravel()
-        w_own, dw_own = self._state(e, ui[e] + s[:, None] * vi[e], uj[e] + s[:, None] * vj[e])[1:]
+        e, r, s = np.repeat(p, own.shape[1]), np.repeat(np.arange(len(p)), own.shape[1]), own.ravel()
+        w_own, dw_own = self._state(e, ui[r] + s[:, None] * vi[r], uj[r] + s[:, None] * vj[r])[1:]
         start = mid - 0.5 * length
         # the own piece of each node: the last non-empty one starting at or before it (padding
         # and repeated events make empty pieces)
@@ -679,17 +687,18 @@ class PairContact:
         return (basis * w_own[at]).sum(axis=1), np.einsum("nm,nmi->ni", basis, dw_own[at])
 
     def _events(self, p, ui, uj, vi, vj, dt) -> np.ndarray:
-        """Times in (0, dt) where, for the pairs ``p``, the gap or the side of a vertex of one
+        """Times in (0, dt) where, for the pairs ``p`` (their facets' displacements ui, uj and
+        velocities vi, vj, one row per pair), the gap or the side of a vertex of one
         projected facet with respect to (the line of) a face of the other changes sign,
         (len(p), 1 + 2 d^2), inf where there is none. The facets translate, so all are affine in
         tau; between them the clipped boundary of ``_overlap`` keeps its topology, w is a
         polynomial of degree d - 1."""
         L, d = self.listed, self.d
         t = L.t[p]
-        g0 = self._gap(p, ui[p], uj[p])
-        gs = np.einsum("ei,ei->e", vj[p] - vi[p], L.n[p])
-        s0 = np.einsum("eki,ei->ek", t, uj[p] - ui[p])  # the tangential offset s0 + tau s1
-        s1 = np.einsum("eki,ei->ek", t, vj[p] - vi[p])
+        g0 = self._gap(p, ui, uj)
+        gs = np.einsum("ei,ei->e", vj - vi, L.n[p])
+        s0 = np.einsum("eki,ei->ek", t, uj - ui)  # the tangential offset s0 + tau s1
+        s1 = np.einsum("eki,ei->ek", t, vj - vi)
         A, B = L.si.take(p), L.sj.take(p).moved(s0)
         # m_k . (x - X_k) for the vertices x of one simplex and the faces k of the other (E, d, d),
         # as in ``_overlap``; B moves by s1 per unit tau
@@ -1071,18 +1080,6 @@ def _last(op, a: np.ndarray) -> np.ndarray:
     for k in range(1, a.shape[-1]):
         out = op(out, a[..., k])
     return out
-
-
-def _boxes_meet(A: _Simplices, B: _Simplices, p: np.ndarray, s0: np.ndarray, s1: np.ndarray,
-                dt: float) -> np.ndarray:
-    """Whether the bounding boxes of A_p and B_p + s0 + tau s1 overlap (open sets) for some tau
-    in [0, dt], for the simplex pairs p (E,) and offsets s0, s1 (E, d-1): else A cap (B + s) has
-    no area during the step (the compiled kernel ``dem_boxes_meet``)."""
-    p = np.ascontiguousarray(p, dtype=np.int64)
-    out = np.empty(len(p), dtype=np.int8)
-    lib.dem_boxes_meet(len(p), s0.shape[1], pointer(p), pointer(A.X), pointer(B.X), pointer(np.ascontiguousarray(s0)),
-                       pointer(np.ascontiguousarray(s1)), float(dt), pointer(out))
-    return out.view(bool)
 
 
 def _overlap(A: _Simplices, B: _Simplices, p: np.ndarray, s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
