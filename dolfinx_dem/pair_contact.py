@@ -564,10 +564,8 @@ class PairContact:
         elastic = stabilisation = 0.0
         if neg.size:
             g, w, _ = self._state(neg, uc[L.i[neg]], uc[L.j[neg]])
-            c = np.zeros(len(L))
-            c[neg] = w * np.minimum(g, 0.0)
             a = L.Q @ up + self._q
-            delta = L.Z @ c
+            delta = L.ZT[neg].T @ (w * np.minimum(g, 0.0))  # Z c, c = 0 off neg: those columns only
             change = a * delta + 0.5 * delta**2
             elastic, stabilisation = float(change[self._is_elastic_row].sum()), float(change[~self._is_elastic_row].sum())
         self.seconds += time.process_time() - start
@@ -646,11 +644,11 @@ class PairContact:
             g = self._gap(e, ui0[r] + s[:, None] * vi[r], uj0[r] + s[:, None] * vj[r])
             w, dw = self._overlap_on_own_pieces(touching, tau, nodes, ui0, uj0, vi, vj, dt)
             c = (w * np.minimum(g, 0.0)).reshape(-1, K)
-            # Rows' term -Q^T Z int c dtau; pairs' term -int (z_p . (a + delta_a)) dc_p/du dtau.
-            c_int = np.zeros(len(L))
-            c_int[touching] = (weights * c).sum(axis=1)
-            result -= L.QT @ (L.Z @ c_int)
-            mu = (L.ZT @ a0)[touching, None] + nodes * (L.ZT @ a1)[touching, None] + N @ c
+            # Rows' term -Q^T Z int c dtau; pairs' term -int (z_p . (a + delta_a)) dc_p/du dtau
+            # (z_p of the touching pairs only: the rows of Z^T of the others are not read).
+            ZT = L.ZT[touching]
+            result -= L.QT @ (ZT.T @ (weights * c).sum(axis=1))
+            mu = (ZT @ a0)[:, None] + nodes * (ZT @ a1)[:, None] + N @ c
             mu = np.where(g < 0, mu.ravel(), 0.0) * weights.ravel()
             result += self._facet_force(e, mu, g, w, dw)
             pieces = int((length > 0).sum(axis=1).max())
