@@ -639,9 +639,10 @@ class PairContact:
                                               count, dt)
             nodes, weights = _gauss_points(mid[component], length[component], self._gauss)  # (pairs, K)
             K = nodes.shape[1]
-            e, r = np.repeat(touching, K), np.repeat(np.arange(len(touching)), K)  # pair, its row
-            s = nodes.ravel()
-            g = self._gap(e, ui0[r] + s[:, None] * vi[r], uj0[r] + s[:, None] * vj[r])
+            e = np.repeat(touching, K)
+            # the gap, affine along the flight: at tau = 0 plus tau times its rate
+            rate = np.einsum("pi,pi->p", vj - vi, L.n[touching])
+            g = (self._gap(touching, ui0, uj0)[:, None] + nodes * rate[:, None]).ravel()
             w, dw = self._overlap_on_own_pieces(touching, tau, nodes, ui0, uj0, vi, vj, dt)
             c = (w * np.minimum(g, 0.0)).reshape(-1, K)
             # Rows' term -Q^T Z int c dtau; pairs' term -int (z_p . (a + delta_a)) dc_p/du dtau
@@ -682,7 +683,10 @@ class PairContact:
                           for m in range(d)], axis=2)  # (len(p), K, d)
         at = (rows[:, :, None] * own.shape[1] + piece[:, :, None] * d + np.arange(d)).reshape(-1, d)
         basis = basis.reshape(-1, d)
-        return (basis * w_own[at]).sum(axis=1), np.einsum("nm,nmi->ni", basis, dw_own[at])
+        w, dw = basis[:, 0] * w_own[at[:, 0]], basis[:, :1] * dw_own[at[:, 0]]
+        for m in range(1, d):
+            w, dw = w + basis[:, m] * w_own[at[:, m]], dw + basis[:, m : m + 1] * dw_own[at[:, m]]
+        return w, dw
 
     def _events(self, p, ui, uj, vi, vj, dt) -> np.ndarray:
         """Times in (0, dt) where, for the pairs ``p`` (their facets' displacements ui, uj and
