@@ -415,3 +415,51 @@ void dem_pair_screen(int64_t n_pairs, int32_t d, const int64_t *restrict i, cons
     }
   }
 }
+
+/* Lagrange interpolation of pair_contact._overlap_on_own_pieces, for n_rows pairs: each has
+ * n_own pieces (start, length; empty ones of length 0) with values w_own (n_gauss per piece, at
+ * the nodes xi of [0, 1] scaled to the piece) and gradients dw_own (width components each), and
+ * n_nodes times ``nodes``. At each time x: the last non-empty piece starting at or before it (the
+ * first piece if none), and the Lagrange interpolation of its values, summed in the order of
+ * the nodes. w (n_rows n_nodes) and dw (n_rows n_nodes width) are overwritten. */
+void dem_interpolate_own(int64_t n_rows, int32_t n_own, int32_t n_nodes, int32_t n_gauss, int32_t width,
+                         const double *restrict start, const double *restrict length,
+                         const double *restrict nodes, const double *restrict xi,
+                         const double *restrict w_own, const double *restrict dw_own,
+                         double *restrict w, double *restrict dw)
+{
+  for (int64_t r = 0; r < n_rows; ++r)
+  {
+    const double *s = start + r * n_own, *len = length + r * n_own;
+    for (int32_t k = 0; k < n_nodes; ++k)
+    {
+      const int64_t out = r * n_nodes + k;
+      const double t = nodes[out];
+      int32_t piece = 0;
+      for (int32_t j = 0; j < n_own; ++j)
+        if (s[j] <= t && len[j] > 0)
+          piece = j;
+      const double x = (t - s[piece]) / len[piece];
+      const int64_t at = (r * n_own + piece) * n_gauss;
+      double wsum = 0.0, dsum[3] = {0.0, 0.0, 0.0};
+      for (int32_t m = 0; m < n_gauss; ++m)
+      {
+        double basis = 1.0;
+        int32_t first = 1;
+        for (int32_t l = 0; l < n_gauss; ++l)
+          if (l != m)
+          {
+            const double factor = (x - xi[l]) / (xi[m] - xi[l]);
+            basis = first ? factor : basis * factor;
+            first = 0;
+          }
+        wsum = m == 0 ? basis * w_own[at + m] : wsum + basis * w_own[at + m];
+        for (int32_t c = 0; c < width; ++c)
+          dsum[c] = m == 0 ? basis * dw_own[(at + m) * width + c] : dsum[c] + basis * dw_own[(at + m) * width + c];
+      }
+      w[out] = wsum;
+      for (int32_t c = 0; c < width; ++c)
+        dw[out * width + c] = dsum[c];
+    }
+  }
+}

@@ -672,20 +672,13 @@ class PairContact:
         e, r, s = np.repeat(p, own.shape[1]), np.repeat(np.arange(len(p)), own.shape[1]), own.ravel()
         w_own, dw_own = self._state(e, ui[r] + s[:, None] * vi[r], uj[r] + s[:, None] * vj[r])[1:]
         start = mid - 0.5 * length
-        # the own piece of each node: the last non-empty one starting at or before it (padding
-        # and repeated events make empty pieces)
-        begun = (start[:, None, :] <= nodes[:, :, None]) & (length[:, None, :] > 0)
-        piece = np.where(begun, np.arange(start.shape[1]), 0).max(axis=2)
-        rows = np.arange(len(p))[:, None]
-        x = (nodes - start[rows, piece]) / length[rows, piece]
-        xi, d = self._gauss[0], len(self._gauss[0])
-        basis = np.stack([np.prod([(x - xi[l]) / (xi[m] - xi[l]) for l in range(d) if l != m], axis=0)
-                          for m in range(d)], axis=2)  # (len(p), K, d)
-        at = (rows[:, :, None] * own.shape[1] + piece[:, :, None] * d + np.arange(d)).reshape(-1, d)
-        basis = basis.reshape(-1, d)
-        w, dw = basis[:, 0] * w_own[at[:, 0]], basis[:, :1] * dw_own[at[:, 0]]
-        for m in range(1, d):
-            w, dw = w + basis[:, m] * w_own[at[:, m]], dw + basis[:, m : m + 1] * dw_own[at[:, m]]
+        # the own piece of each node (the last non-empty one starting at or before it: padding
+        # and repeated events make empty pieces) and the interpolation: ``dem_interpolate_own``
+        xi = self._gauss[0]
+        w, dw = np.empty(nodes.size), np.empty((nodes.size, self.d))
+        lib.dem_interpolate_own(len(p), start.shape[1], nodes.shape[1], len(xi), self.d, pointer(start),
+                                pointer(length), pointer(nodes), pointer(xi), pointer(w_own), pointer(dw_own),
+                                pointer(w), pointer(dw))
         return w, dw
 
     def _events(self, p, ui, uj, vi, vj, dt) -> np.ndarray:
