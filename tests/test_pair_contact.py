@@ -737,7 +737,8 @@ def test_overlap_of_random_triangles():
     assert np.abs(w - reference).max() < 1e-14 and (w > 0).sum() > 100
     h = 1e-7
     fd = np.stack([(_overlap(_Simplices.of(A), _Simplices.of(B), pairs, s + h * e)[0]
-                    - _overlap(_Simplices.of(A), _Simplices.of(B), pairs, s - h * e)[0]) / (2 * h) for e in np.eye(2)], axis=1)
+                    - _overlap(_Simplices.of(A), _Simplices.of(B), pairs, s - h * e)[0]) / (2 * h)
+                   for e in np.eye(2)], axis=1)
     assert np.abs(dw - fd).max() < 1e-7
 
 
