@@ -27,6 +27,15 @@ ffibuilder.cdef(
                               const int32_t *qt2_rows, const double *qt2_vals, const int32_t *rowptr2,
                               const int32_t *cols2, const double *vals2, const int64_t *key2,
                               const double *x, double *r, double *acc);
+    void dem_overlap(int64_t n, int32_t dim, const int64_t *p, const double *XA, const double *mA,
+                     const double *nuA, const double *sizeA, const double *XB, const double *mB,
+                     const double *nuB, const double *sizeB, const double *s, double *w, double *dw);
+    void dem_pair_screen(int64_t n_pairs, int32_t d, const int64_t *i, const int64_t *j, const double *n,
+                         const double *t, const double *d0, const double *XA, const double *XB,
+                         const double *uc, const double *vc, double dt, int8_t *out);
+    void dem_interpolate_own(int64_t n_rows, int32_t n_own, int32_t n_nodes, int32_t n_gauss, int32_t width,
+                             const double *start, const double *length, const double *nodes, const double *xi,
+                             const double *w_own, const double *dw_own, double *w, double *dw);
     """
 )
 # -O3, no -march=native: the module must run on any x86-64 the package is installed for.

@@ -201,3 +201,265 @@ void dem_gram_abs_rowsums(int64_t n_out, const int32_t *restrict qt_ptr,
     r[i] = s;
   }
 }
+
+/* Clipping of pair_contact._overlap, for one face f of a simplex F (nv vertices X of dim
+ * components; face f runs from X[f] to X[next[f]]) against the simplex O (vertices Y, outward
+ * face normals m): the part [lower, lower + length] of the face inside O (the half-planes
+ * m_k . (x - Y_k) <= 0, Liang-Barsky). With ties, a face lying on a face of O with the same
+ * outward normal (mF: its own normal) is out. The same operations in the same order as numpy's. */
+static void clip_face(int32_t nv, int32_t dim, const int32_t *next, const double *X, int32_t f,
+                      const double *mF, const double *Y, const double *m, int32_t ties,
+                      double *lower, double *length)
+{
+  double e[2];
+  for (int32_t c = 0; c < dim; ++c)
+    e[c] = X[next[f] * dim + c] - X[f * dim + c];
+  double lo = 0.0, up = 1.0;
+  int32_t out = 0;
+  for (int32_t k = 0; k < nv; ++k)
+  {
+    double h0 = (X[f * dim] - Y[k * dim]) * m[k * dim], h1 = e[0] * m[k * dim];
+    for (int32_t c = 1; c < dim; ++c)
+    {
+      h0 = h0 + (X[f * dim + c] - Y[k * dim + c]) * m[k * dim + c];
+      h1 = h1 + e[c] * m[k * dim + c];
+    }
+    const double r = -h0 / h1;
+    const double l = h1 < 0 ? r : 0.0, u = h1 > 0 ? r : 1.0;
+    lo = k == 0 ? l : (l > lo ? l : lo);
+    up = k == 0 ? u : (u < up ? u : up);
+    if (h1 == 0 && h0 > 0)
+      out = 1;
+    if (ties && h1 == 0 && h0 == 0)
+    {
+      double mm = mF[f * dim] * m[k * dim];
+      for (int32_t c = 1; c < dim; ++c)
+        mm = mm + mF[f * dim + c] * m[k * dim + c];
+      if (mm > 0)
+        out = 1;
+    }
+  }
+  const double span = up - lo;
+  *lower = lo;
+  *length = out ? 0.0 : (span > 0.0 ? span : 0.0);
+}
+
+/* The smallest and largest coordinates (lo, hi: dim each) of nv points X of dim components. */
+static void box(int32_t nv, int32_t dim, const double *X, double *lo, double *hi)
+{
+  for (int32_t c = 0; c < dim; ++c)
+  {
+    lo[c] = hi[c] = X[c];
+    for (int32_t k = 1; k < nv; ++k)
+    {
+      const double x = X[k * dim + c];
+      lo[c] = x < lo[c] ? x : lo[c];
+      hi[c] = x > hi[c] ? x : hi[c];
+    }
+  }
+}
+
+/* Whether the bounding boxes of the simplices X and Y are strictly apart (a gap on some axis):
+ * then their intersection is empty. */
+static int32_t boxes_apart(int32_t nv, int32_t dim, const double *X, const double *Y)
+{
+  double lx[2], hx[2], ly[2], hy[2];
+  box(nv, dim, X, lx, hx);
+  box(nv, dim, Y, ly, hy);
+  for (int32_t c = 0; c < dim; ++c)
+    if (ly[c] > hx[c] || hy[c] < lx[c])
+      return 1;
+  return 0;
+}
+
+/* w = |A_q cap (B_q + s_i)| and dw/ds (see pair_contact._overlap) for n offsets s_i (dim
+ * components, dim = 1 or 2) of the simplex pairs q = p[i]: vertices X (nv = dim + 1 per simplex,
+ * dim components each), outward face normals m and their unit vectors nu (one per face), face
+ * measures size. w (n) and dw (n dim) are overwritten; both are 0 where the bounding boxes of
+ * A_q and B_q + s_i are apart (no clipping). */
+void dem_overlap(int64_t n, int32_t dim, const int64_t *restrict p, const double *restrict XA,
+                 const double *restrict mA, const double *restrict nuA, const double *restrict sizeA,
+                 const double *restrict XB, const double *restrict mB, const double *restrict nuB,
+                 const double *restrict sizeB, const double *restrict s, double *restrict w,
+                 double *restrict dw)
+{
+  const int32_t nv = dim + 1, stride = nv * dim;
+  const int32_t next[3] = {dim == 1 ? 0 : 1, dim == 1 ? 1 : 2, 0};  /* a face's end vertex */
+  for (int64_t i = 0; i < n; ++i)
+  {
+    const int64_t q = p[i];
+    const double *X = XA + q * stride, *m = mA + q * stride, *nu = nuA + q * stride;
+    const double *mb = mB + q * stride, *nub = nuB + q * stride;
+    double Y[6];
+    for (int32_t k = 0; k < nv; ++k)
+      for (int32_t c = 0; c < dim; ++c)
+        Y[k * dim + c] = XB[q * stride + k * dim + c] + s[i * dim + c];
+    if (boxes_apart(nv, dim, X, Y))
+    {
+      w[i] = 0.0;
+      for (int32_t c = 0; c < dim; ++c)
+        dw[i * dim + c] = 0.0;
+      continue;
+    }
+    double total = 0.0, grad[2] = {0.0, 0.0};
+    for (int32_t side = 0; side < 2; ++side)
+    {
+      const double *F = side ? Y : X, *mF = side ? mb : m, *nuF = side ? nub : nu;
+      const double *size = side ? sizeB + q * nv : sizeA + q * nv;
+      double sum = 0.0;
+      for (int32_t f = 0; f < nv; ++f)
+      {
+        double lower, length;
+        clip_face(nv, dim, next, F, f, mF, side ? X : Y, side ? m : mb, side, &lower, &length);
+        const double at = lower + 0.5 * length, measure = length * size[f];
+        double x = (F[f * dim] + at * (F[next[f] * dim] - F[f * dim])) * nuF[f * dim];
+        for (int32_t c = 1; c < dim; ++c)
+          x = x + (F[f * dim + c] + at * (F[next[f] * dim + c] - F[f * dim + c])) * nuF[f * dim + c];
+        sum = f == 0 ? x * measure : sum + x * measure;
+        if (side)
+          for (int32_t c = 0; c < dim; ++c)
+            grad[c] = f == 0 ? nuF[f * dim + c] * measure : grad[c] + nuF[f * dim + c] * measure;
+      }
+      total = total + sum;
+    }
+    total = total / dim;
+    const int32_t inside = total > 0;
+    w[i] = inside ? total : 0.0;
+    for (int32_t c = 0; c < dim; ++c)
+      dw[i * dim + c] = inside ? grad[c] : 0.0;
+  }
+}
+
+/* Bounding boxes (see dem_overlap; dim components) of A and B + s0 + tau s1 overlap (open sets)
+ * for some tau in [0, dt]. */
+static int32_t boxes_meet(int32_t nv, int32_t dim, const double *XA, const double *XB,
+                          const double *s0, const double *s1, double dt)
+{
+  double la[2], ha[2], lb[2], hb[2];
+  box(nv, dim, XA, la, ha);
+  box(nv, dim, XB, lb, hb);
+  double start = 0.0, stop = dt;
+  for (int32_t c = 0; c < dim; ++c)
+  {
+    /* on axis c the boxes overlap while lo + tau rate < 0 < hi + tau rate */
+    const double lo = lb[c] - ha[c] + s0[c], hi = hb[c] - la[c] + s0[c];
+    const double rate = s1[c];
+    if (rate > 0)
+    {
+      const double a = -lo / rate, b = hi / -rate;
+      stop = a < stop ? a : stop;
+      start = b > start ? b : start;
+    }
+    else if (rate < 0)
+    {
+      const double a = -lo / rate, b = hi / -rate;
+      start = a > start ? a : start;
+      stop = b < stop ? b : stop;
+    }
+    else if (lo >= 0 || hi <= 0)
+      start = INFINITY;
+  }
+  return start < stop;
+}
+
+/* The pairs p of facets (i[p], j[p]) (d components, d = 2 or 3) whose c_p = w_p g_p^- may not
+ * vanish for the free facet displacements uc + tau vc, 0 <= tau <= dt (uc, vc: n_facets x d):
+ * the gap g = d0 + (u_j - u_i) . n negative at an end, and the bounding boxes of the projected
+ * simplices XA and XB + t (u_j - u_i) (t: d - 1 rows of d) overlapping at some tau (open sets).
+ * Without vc (NULL): g < 0 at uc and boxes not apart (as in dem_overlap). out[p] = 1 or 0. */
+void dem_pair_screen(int64_t n_pairs, int32_t d, const int64_t *restrict i, const int64_t *restrict j,
+                     const double *restrict n, const double *restrict t, const double *restrict d0,
+                     const double *restrict XA, const double *restrict XB, const double *restrict uc,
+                     const double *restrict vc, double dt, int8_t *restrict out)
+{
+  const int32_t dim = d - 1, stride = d * dim;
+  for (int64_t p = 0; p < n_pairs; ++p)
+  {
+    double du[3], dv[3], g0 = 0.0, g1 = 0.0;
+    for (int32_t k = 0; k < d; ++k)
+    {
+      du[k] = uc[j[p] * d + k] - uc[i[p] * d + k];
+      g0 += du[k] * n[p * d + k];
+    }
+    g0 = d0[p] + g0;
+    for (int32_t k = 0; k < d; ++k)
+    {
+      dv[k] = vc ? vc[j[p] * d + k] - vc[i[p] * d + k] : 0.0;
+      g1 += (du[k] + dt * dv[k]) * n[p * d + k];
+    }
+    g1 = d0[p] + g1;
+    if (!(g0 < 0 || g1 < 0))
+    {
+      out[p] = 0;
+      continue;
+    }
+    double s0[2], s1[2];
+    for (int32_t c = 0; c < dim; ++c)
+    {
+      s0[c] = s1[c] = 0.0;
+      for (int32_t k = 0; k < d; ++k)
+      {
+        s0[c] += t[(p * dim + c) * d + k] * du[k];
+        s1[c] += t[(p * dim + c) * d + k] * dv[k];
+      }
+    }
+    if (vc)
+      out[p] = boxes_meet(d, dim, XA + p * stride, XB + p * stride, s0, s1, dt);
+    else
+    {
+      double Y[6];
+      for (int32_t k = 0; k < d; ++k)
+        for (int32_t c = 0; c < dim; ++c)
+          Y[k * dim + c] = XB[p * stride + k * dim + c] + s0[c];
+      out[p] = !boxes_apart(d, dim, XA + p * stride, Y);
+    }
+  }
+}
+
+/* Lagrange interpolation of pair_contact._overlap_on_own_pieces, for n_rows pairs: each has
+ * n_own pieces (start, length; empty ones of length 0) with values w_own (n_gauss per piece, at
+ * the nodes xi of [0, 1] scaled to the piece) and gradients dw_own (width components each), and
+ * n_nodes times ``nodes``. At each time x: the last non-empty piece starting at or before it (the
+ * first piece if none), and the Lagrange interpolation of its values, summed in the order of
+ * the nodes. w (n_rows n_nodes) and dw (n_rows n_nodes width) are overwritten. */
+void dem_interpolate_own(int64_t n_rows, int32_t n_own, int32_t n_nodes, int32_t n_gauss, int32_t width,
+                         const double *restrict start, const double *restrict length,
+                         const double *restrict nodes, const double *restrict xi,
+                         const double *restrict w_own, const double *restrict dw_own,
+                         double *restrict w, double *restrict dw)
+{
+  for (int64_t r = 0; r < n_rows; ++r)
+  {
+    const double *s = start + r * n_own, *len = length + r * n_own;
+    for (int32_t k = 0; k < n_nodes; ++k)
+    {
+      const int64_t out = r * n_nodes + k;
+      const double t = nodes[out];
+      int32_t piece = 0;
+      for (int32_t j = 0; j < n_own; ++j)
+        if (s[j] <= t && len[j] > 0)
+          piece = j;
+      const double x = (t - s[piece]) / len[piece];
+      const int64_t at = (r * n_own + piece) * n_gauss;
+      double wsum = 0.0, dsum[3] = {0.0, 0.0, 0.0};
+      for (int32_t m = 0; m < n_gauss; ++m)
+      {
+        double basis = 1.0;
+        int32_t first = 1;
+        for (int32_t l = 0; l < n_gauss; ++l)
+          if (l != m)
+          {
+            const double factor = (x - xi[l]) / (xi[m] - xi[l]);
+            basis = first ? factor : basis * factor;
+            first = 0;
+          }
+        wsum = m == 0 ? basis * w_own[at + m] : wsum + basis * w_own[at + m];
+        for (int32_t c = 0; c < width; ++c)
+          dsum[c] = m == 0 ? basis * dw_own[(at + m) * width + c] : dsum[c] + basis * dw_own[(at + m) * width + c];
+      }
+      w[out] = wsum;
+      for (int32_t c = 0; c < width; ++c)
+        dw[out * width + c] = dsum[c];
+    }
+  }
+}

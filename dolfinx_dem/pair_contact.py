@@ -76,6 +76,7 @@ from mpi4py import MPI
 from petsc4py import PETSc
 
 from dolfinx_dem.halo import owned_facet_marks
+from dolfinx_dem.kernels import lib, pointer
 from dolfinx_dem.patch import PatchScatter, piecewise_midpoints, scatter_sum
 
 
@@ -554,9 +555,21 @@ class PairContact:
         w, dw = np.zeros(len(g)), np.zeros((len(g), self.d))
         e = np.flatnonzero(g < 0) if closed else np.arange(len(g))
         t = L.t[p[e]]
-        w[e], dw_t = _overlap(L.si.take(p[e]), L.sj.take(p[e]), np.einsum("eki,ei->ek", t, uj[e] - ui[e]))
+        w[e], dw_t = _overlap(L.si, L.sj, p[e], np.einsum("eki,ei->ek", t, uj[e] - ui[e]))
         dw[e] = np.einsum("ek,eki->ei", dw_t, t)
         return g, w, dw
+
+    def _screen(self, uc: np.ndarray, vc: np.ndarray | None = None, dt: float = 0.0) -> np.ndarray:
+        """The listed pairs whose c_p = w_p g_p^- may not vanish for the free facet displacements
+        ``uc`` + tau ``vc``, 0 <= tau <= dt (known facets' rows): their gap negative at an end
+        and their projections' bounding boxes overlapping at some tau; without ``vc``, those
+        with g_p < 0 whose boxes are not apart at ``uc`` (the compiled kernel
+        ``dem_pair_screen``: one pass over the list)."""
+        L = self.listed
+        out = np.empty(len(L), dtype=np.int8)
+        lib.dem_pair_screen(len(L), self.d, pointer(L.i), pointer(L.j), pointer(L.n), pointer(L.t), pointer(L.d0),
+                            pointer(L.si.X), pointer(L.sj.X), pointer(uc), pointer(vc), float(dt), pointer(out))
+        return np.flatnonzero(out)
 
     def _gap(self, p, ui, uj):
         """Gap g of the pairs ``p`` (eq. (22), (30)) for their facets' free displacements ui, uj."""
@@ -567,11 +580,14 @@ class PairContact:
         """(elastic, stabilisation) energy changes of this process's own rows (not reduced)."""
         start = time.process_time()
         L = self.listed
-        g, w, _ = self._state(np.arange(len(L)), *self._pair_displacements(up), closed=True)
+        uc = self.free_displacements(up)
+        self._check_listed(uc)
+        neg = self._screen(uc)  # c_p = w_p g_p^- vanishes on the others: no overlap to compute
         elastic = stabilisation = 0.0
-        if (g < 0).any():
+        if neg.size:
+            g, w, _ = self._state(neg, uc[L.i[neg]], uc[L.j[neg]])
             a = L.Q @ up + self._q
-            delta = L.Z @ (w * np.minimum(g, 0.0))
+            delta = L.ZT[neg].T @ (w * np.minimum(g, 0.0))  # Z c, c = 0 off neg: those columns only
             change = a * delta + 0.5 * delta**2
             elastic, stabilisation = float(change[self._is_elastic_row].sum()), float(change[~self._is_elastic_row].sum())
         self.seconds += time.process_time() - start
@@ -621,19 +637,13 @@ class PairContact:
         integral with the most pieces (collective)."""
         start = time.process_time()
         L = self.listed
-        ui0, uj0 = self._pair_displacements(up)
-        vc = (self._R @ vp).reshape(-1, self.d)
-        vi, vj = vc[L.i], vc[L.j]
-        self._check_listed(self.free_displacements(up) + dt * vc)
-        p = np.arange(len(L))
-        g0, g1 = self._gap(p, ui0, uj0), self._gap(p, ui0 + dt * vi, uj0 + dt * vj)
-        # The pairs whose c_p may not vanish during the step (their gap negative at an end, their
-        # projections' bounding boxes overlapping at some time): the others add exact zeros,
-        # and splitting their neighbours at their events would only cost.
-        touching = np.flatnonzero((g0 < 0) | (g1 < 0))
-        touching = touching[_boxes_meet(L.si.take(touching), L.sj.take(touching),
-                                        np.einsum("pki,pi->pk", L.t[touching], uj0[touching] - ui0[touching]),
-                                        np.einsum("pki,pi->pk", L.t[touching], vj[touching] - vi[touching]), dt)]
+        uc, vc = self.free_displacements(up), (self._R @ vp).reshape(-1, self.d)
+        self._check_listed(uc)
+        self._check_listed(uc + dt * vc)
+        # The pairs whose c_p may not vanish during the step (``_screen``): the others add exact
+        # zeros, and splitting their neighbours at their events would only cost.
+        touching = self._screen(uc, vc, dt)
+        ui0, uj0, vi, vj = uc[L.i[touching]], uc[L.j[touching]], vc[L.i[touching]], vc[L.j[touching]]
         result = np.zeros_like(up)
         pieces = 0
         if touching.size:
@@ -652,15 +662,16 @@ class PairContact:
             nodes, weights = _gauss_points(mid[component], length[component], self._gauss)  # (pairs, K)
             K = nodes.shape[1]
             e = np.repeat(touching, K)
-            s = nodes.ravel()
-            g = self._gap(e, ui0[e] + s[:, None] * vi[e], uj0[e] + s[:, None] * vj[e])
+            # the gap, affine along the flight: at tau = 0 plus tau times its rate
+            rate = np.einsum("pi,pi->p", vj - vi, L.n[touching])
+            g = (self._gap(touching, ui0, uj0)[:, None] + nodes * rate[:, None]).ravel()
             w, dw = self._overlap_on_own_pieces(touching, tau, nodes, ui0, uj0, vi, vj, dt)
             c = (w * np.minimum(g, 0.0)).reshape(-1, K)
-            # Rows' term -Q^T Z int c dtau; pairs' term -int (z_p . (a + delta_a)) dc_p/du dtau.
-            c_int = np.zeros(len(L))
-            c_int[touching] = (weights * c).sum(axis=1)
-            result -= L.QT @ (L.Z @ c_int)
-            mu = (L.ZT @ a0)[touching, None] + nodes * (L.ZT @ a1)[touching, None] + N @ c
+            # Rows' term -Q^T Z int c dtau; pairs' term -int (z_p . (a + delta_a)) dc_p/du dtau
+            # (z_p of the touching pairs only: the rows of Z^T of the others are not read).
+            ZT = L.ZT[touching]
+            result -= L.QT @ (ZT.T @ (weights * c).sum(axis=1))
+            mu = (ZT @ a0)[:, None] + nodes * (ZT @ a1)[:, None] + N @ c
             mu = np.where(g < 0, mu.ravel(), 0.0) * weights.ravel()
             result += self._facet_force(e, mu, g, w, dw)
             pieces = int((length > 0).sum(axis=1).max())
@@ -670,7 +681,8 @@ class PairContact:
         return len(self._gauss[0]) * pieces
 
     def _overlap_on_own_pieces(self, p, tau, nodes, ui, uj, vi, vj, dt):
-        """w and dw/du_j of the pairs ``p`` at the times ``nodes`` (len(p), K), flat. Between its
+        """w and dw/du_j of the pairs ``p`` (their facets' displacements ui, uj and velocities vi,
+        vj, one row per pair) at the times ``nodes`` (len(p), K), flat. Between its
         own events ``tau`` a pair's w is a polynomial of degree d - 1 and dw one of degree d - 2:
         each is evaluated (``_state``) at the d Gauss-Legendre nodes of the pair's own pieces
         only and interpolated from them (Lagrange), exact to rounding, rather than evaluated at
@@ -679,37 +691,34 @@ class PairContact:
         mid, length = piecewise_midpoints(np.repeat(np.arange(len(p)), tau.shape[1])[finite], tau.ravel()[finite],
                                           len(p), dt)
         own, _ = _gauss_points(mid, length, self._gauss)  # (len(p), J d)
-        e, s = np.repeat(p, own.shape[1]), own.ravel()
-        w_own, dw_own = self._state(e, ui[e] + s[:, None] * vi[e], uj[e] + s[:, None] * vj[e])[1:]
+        e, r, s = np.repeat(p, own.shape[1]), np.repeat(np.arange(len(p)), own.shape[1]), own.ravel()
+        w_own, dw_own = self._state(e, ui[r] + s[:, None] * vi[r], uj[r] + s[:, None] * vj[r])[1:]
         start = mid - 0.5 * length
-        # the own piece of each node: the last non-empty one starting at or before it (padding
-        # and repeated events make empty pieces)
-        begun = (start[:, None, :] <= nodes[:, :, None]) & (length[:, None, :] > 0)
-        piece = np.where(begun, np.arange(start.shape[1]), 0).max(axis=2)
-        rows = np.arange(len(p))[:, None]
-        x = (nodes - start[rows, piece]) / length[rows, piece]
-        xi, d = self._gauss[0], len(self._gauss[0])
-        basis = np.stack([np.prod([(x - xi[l]) / (xi[m] - xi[l]) for l in range(d) if l != m], axis=0)
-                          for m in range(d)], axis=2)  # (len(p), K, d)
-        at = (rows[:, :, None] * own.shape[1] + piece[:, :, None] * d + np.arange(d)).reshape(-1, d)
-        basis = basis.reshape(-1, d)
-        return (basis * w_own[at]).sum(axis=1), np.einsum("nm,nmi->ni", basis, dw_own[at])
+        # the own piece of each node (the last non-empty one starting at or before it: padding
+        # and repeated events make empty pieces) and the interpolation: ``dem_interpolate_own``
+        xi = self._gauss[0]
+        w, dw = np.empty(nodes.size), np.empty((nodes.size, self.d))
+        lib.dem_interpolate_own(len(p), start.shape[1], nodes.shape[1], len(xi), self.d, pointer(start),
+                                pointer(length), pointer(nodes), pointer(xi), pointer(w_own), pointer(dw_own),
+                                pointer(w), pointer(dw))
+        return w, dw
 
     def _events(self, p, ui, uj, vi, vj, dt) -> np.ndarray:
-        """Times in (0, dt) where, for the pairs ``p``, the gap or the side of a vertex of one
+        """Times in (0, dt) where, for the pairs ``p`` (their facets' displacements ui, uj and
+        velocities vi, vj, one row per pair), the gap or the side of a vertex of one
         projected facet with respect to (the line of) a face of the other changes sign,
         (len(p), 1 + 2 d^2), inf where there is none. The facets translate, so all are affine in
         tau; between them the clipped boundary of ``_overlap`` keeps its topology, w is a
         polynomial of degree d - 1."""
         L, d = self.listed, self.d
         t = L.t[p]
-        g0 = self._gap(p, ui[p], uj[p])
-        gs = np.einsum("ei,ei->e", vj[p] - vi[p], L.n[p])
-        s0 = np.einsum("eki,ei->ek", t, uj[p] - ui[p])  # the tangential offset s0 + tau s1
-        s1 = np.einsum("eki,ei->ek", t, vj[p] - vi[p])
+        g0 = self._gap(p, ui, uj)
+        gs = np.einsum("ei,ei->e", vj - vi, L.n[p])
+        s0 = np.einsum("eki,ei->ek", t, uj - ui)  # the tangential offset s0 + tau s1
+        s1 = np.einsum("eki,ei->ek", t, vj - vi)
         A, B = L.si.take(p), L.sj.take(p).moved(s0)
         # m_k . (x - X_k) for the vertices x of one simplex and the faces k of the other (E, d, d),
-        # as in ``_clip``; B moves by s1 per unit tau
+        # as in ``_overlap``; B moves by s1 per unit tau
         side = lambda x, S: _dot(x[:, :, None] - S.X[:, None], S.m[:, None]).reshape(-1, d * d)  # noqa: E731
         speed = lambda S: np.repeat(_dot(S.m, s1[:, None])[:, None], d, axis=1).reshape(-1, d * d)  # noqa: E731
         v0 = np.concatenate([g0[:, None], side(A.X, B), side(B.X, A)], axis=1)
@@ -1055,6 +1064,7 @@ class _Simplices:
 
     @staticmethod
     def of(X: np.ndarray) -> _Simplices:
+        X = np.ascontiguousarray(X, dtype=np.float64)  # the layout of the kernel ``dem_overlap``
         if X.shape[2] == 1:  # segments: the faces are the vertices, each facing away from the other
             end, m, size = X, X - X[:, ::-1], np.ones(X.shape[:2])
         else:
@@ -1075,23 +1085,6 @@ class _Simplices:
         return _Simplices(self.X + s[:, None], self.end + s[:, None], self.m, self.nu, self.size)
 
 
-def _clip(faces: _Simplices, other: _Simplices, ties: bool) -> tuple[np.ndarray, np.ndarray]:
-    """The part [lower, lower + length] (fractions of each face, (E, d)) of the faces of ``faces``
-    inside the simplices ``other`` (the half-planes m_k . (x - X_k) <= 0 of its faces: Liang-Barsky
-    clipping). ``ties``: a face lying on a face of ``other`` with the same outward normal is left
-    out, so that a boundary piece common to both simplices is counted once (by ``other``)."""
-    h0 = _dot(faces.X[:, :, None] - other.X[:, None], other.m[:, None])  # (E, face, k)
-    h1 = _dot((faces.end - faces.X)[:, :, None], other.m[:, None])  # h0 + t h1 <= 0 inside
-    with np.errstate(divide="ignore", invalid="ignore"):
-        r = -h0 / h1
-    lower = _last(np.maximum, np.where(h1 < 0, r, 0.0))
-    upper = _last(np.minimum, np.where(h1 > 0, r, 1.0))
-    out = (h1 == 0) & (h0 > 0)
-    if ties:
-        out |= (h1 == 0) & (h0 == 0) & (_dot(faces.m[:, :, None], other.m[:, None]) > 0)
-    return lower, np.where(_last(np.logical_or, out), 0.0, np.maximum(upper - lower, 0.0))
-
-
 def _dot(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """sum_k a[..., k] b[..., k] over the few components k of the last axis (term by term:
     faster than a reduction over a short axis, and m . e exactly 0 when m is e turned)."""
@@ -1106,40 +1099,25 @@ def _last(op, a: np.ndarray) -> np.ndarray:
     return out
 
 
-def _boxes_meet(A: _Simplices, B: _Simplices, s0: np.ndarray, s1: np.ndarray, dt: float) -> np.ndarray:
-    """Whether the bounding boxes of A and B + s0 + tau s1 overlap (open sets) for some tau in
-    [0, dt]: else A cap (B + s) has no area during the step."""
-    lo = B.X.min(axis=1) - A.X.max(axis=1) + s0  # overlap on axis k while lo_k + tau s1_k < 0 < hi_k + tau s1_k
-    hi = B.X.max(axis=1) - A.X.min(axis=1) + s0
-    start, stop = np.zeros(len(s0)), np.full(len(s0), float(dt))
-    for x, rate in ((lo, s1), (-hi, -s1)):  # x + tau rate < 0
-        with np.errstate(divide="ignore", invalid="ignore"):
-            root = -x / rate
-        stop = np.minimum(stop, np.where(rate > 0, root, np.inf).min(axis=1))
-        start = np.maximum(start, np.where(rate < 0, root, -np.inf).max(axis=1))
-        start[((rate == 0) & (x >= 0)).any(axis=1)] = np.inf
-    return start < stop
-
-
-def _overlap(A: _Simplices, B: _Simplices, s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """w = |A cap (B + s)| and its gradient dw/ds (E, d-1) for the offsets s (E, d-1).
+def _overlap(A: _Simplices, B: _Simplices, p: np.ndarray, s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """w = |A_p cap (B_p + s)| and its gradient dw/ds (E, d-1) for the simplex pairs p (E,) and
+    the offsets s (E, d-1): the compiled kernel ``dem_overlap`` (kernels.c).
 
     The divergence theorem, div x = d - 1 in the plane: w = 1/(d-1) int over the boundary of
     A cap (B + s) of x . nu, whose pieces are the faces of A clipped by B + s and the faces of
     B + s clipped by A (a face counts nu_k . x at its clipped centre times its clipped measure).
-    Translating B + s by ds moves only its own boundary pieces inside A: dw/ds = sum_k nu_k
+    Each face is clipped by the half-planes m_k . (x - X_k) <= 0 of the other simplex's faces
+    (Liang-Barsky); a face of B + s lying on a face of A with the same outward normal is left
+    out, so that a boundary piece common to both simplices is counted once (by A). Translating
+    B + s by ds moves only its own boundary pieces inside A: dw/ds = sum_k nu_k
     |face_k(B + s) cap A|. Both are exact where w is smooth (off the events of ``_events``)."""
-    Bs = B.moved(s)
-    w = 0.0
-    for faces, other, ties in ((A, Bs, False), (Bs, A, True)):
-        lower, length = _clip(faces, other, ties)
-        centre = faces.X + (lower + 0.5 * length)[..., None] * (faces.end - faces.X)
-        measure = length * faces.size
-        w = w + _last(np.add, _dot(centre, faces.nu) * measure)
-    w = w / s.shape[1]
-    dw = _last(np.add, np.swapaxes(Bs.nu, 1, 2) * measure[:, None])
-    inside = w > 0
-    return np.where(inside, w, 0.0), np.where(inside[:, None], dw, 0.0)
+    p = np.ascontiguousarray(p, dtype=np.int64)
+    s = np.ascontiguousarray(s, dtype=np.float64)
+    w, dw = np.empty(len(p)), np.empty(s.shape)
+    lib.dem_overlap(len(p), s.shape[1], pointer(p), *(pointer(getattr(S, f)) for S in (A, B)
+                                                      for f in ("X", "m", "nu", "size")),
+                    pointer(s), pointer(w), pointer(dw))
+    return w, dw
 
 
 def _adjugate_times(A: np.ndarray, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

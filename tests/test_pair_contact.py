@@ -711,12 +711,13 @@ def test_overlap_of_triangles_and_its_gradient(B, s, kind):
     from dolfinx_dem.pair_contact import _overlap, _Simplices
 
     A, B, s = UNIT[None], np.asarray(B, float)[None], np.asarray(s, float)[None]
-    w, dw = _overlap(_Simplices.of(A), _Simplices.of(B), s)
+    pair = np.zeros(1, dtype=np.int64)
+    w, dw = _overlap(_Simplices.of(A), _Simplices.of(B), pair, s)
     assert w[0] == pytest.approx(_clipped_area(A[0], B[0] + s[0]), abs=1e-15)
     if kind == "smooth":
         h = 1e-6
-        fd = [(_overlap(_Simplices.of(A), _Simplices.of(B), s + h * e)[0][0]
-               - _overlap(_Simplices.of(A), _Simplices.of(B), s - h * e)[0][0]) / (2 * h) for e in np.eye(2)]
+        fd = [(_overlap(_Simplices.of(A), _Simplices.of(B), pair, s + h * e)[0][0]
+               - _overlap(_Simplices.of(A), _Simplices.of(B), pair, s - h * e)[0][0]) / (2 * h) for e in np.eye(2)]
         assert np.abs(dw[0] - fd).max() < 1e-9
     if kind == "touching":
         assert w[0] == 0.0 and not dw.any()
@@ -730,12 +731,14 @@ def test_overlap_of_random_triangles():
     rng = np.random.default_rng(0)
     A, B = rng.random((400, 3, 2)), rng.random((400, 3, 2)) - 0.3
     s = 0.3 * rng.standard_normal((400, 2))
-    w, dw = _overlap(_Simplices.of(A), _Simplices.of(B), s)
+    pairs = np.arange(400)
+    w, dw = _overlap(_Simplices.of(A), _Simplices.of(B), pairs, s)
     reference = [_clipped_area(A[k], B[k] + s[k]) for k in range(len(A))]
     assert np.abs(w - reference).max() < 1e-14 and (w > 0).sum() > 100
     h = 1e-7
-    fd = np.stack([(_overlap(_Simplices.of(A), _Simplices.of(B), s + h * e)[0]
-                    - _overlap(_Simplices.of(A), _Simplices.of(B), s - h * e)[0]) / (2 * h) for e in np.eye(2)], axis=1)
+    fd = np.stack([(_overlap(_Simplices.of(A), _Simplices.of(B), pairs, s + h * e)[0]
+                    - _overlap(_Simplices.of(A), _Simplices.of(B), pairs, s - h * e)[0]) / (2 * h)
+                   for e in np.eye(2)], axis=1)
     assert np.abs(dw - fd).max() < 1e-7
 
 
