@@ -78,6 +78,9 @@ class StaticRun:
             self.dem = None
             return
         self.dem = dem = model.build(scene, comm)
+        if dem.pair_contact is not None and dem.d != 2:
+            raise scenes.SceneError("a static scene with contact between bodies ('contact' table) is implemented "
+                                    "in 2D, not 3D")
         self.top = model.Probes(dem, [{"name": "top", "point": _top_point(dem), "component": dem.d - 1}])
         self.probes = model.Probes(dem, scene.get("probes", []))
         self.setup_seconds = comm.allreduce(time.perf_counter() - self.wall, op=MPI.MAX)

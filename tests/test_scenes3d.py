@@ -76,3 +76,15 @@ def test_a_rebuild_that_would_drop_touching_pairs_is_an_error():
         while u.array.max() < 0.3:
             c.prepare(u, v, step)
             u.axpy(step, v)
+
+
+def test_a_static_3d_scene_with_contact_between_bodies_is_refused_before_the_run(tmp_path):
+    """Statics with contact between bodies is 2D (its Hessian takes the overlaps as affine on a
+    piece): a 3D static scene with a 'contact' table is a clear error, and no folder is made."""
+    scene = scenes.load("two-balls", {"mesh.h": 0.06})
+    for key in ("time", "initial"):
+        scene.pop(key)
+    scene["statics"] = {}
+    with pytest.raises(scenes.SceneError, match="contact between bodies .* in 2D, not 3D"):
+        simulation.run(scenes.validate(scene), tmp_path / "out", MPI.COMM_SELF, quiet=True)
+    assert not (tmp_path / "out").exists()
