@@ -36,6 +36,13 @@ ffibuilder.cdef(
     void dem_interpolate_own(int64_t n_rows, int32_t n_own, int32_t n_nodes, int32_t n_gauss, int32_t width,
                              const double *start, const double *length, const double *nodes, const double *xi,
                              const double *w_own, const double *dw_own, double *w, double *dw);
+    void dem_csr_rows_apply(int64_t n_sel, const int64_t *sel, const int32_t *indptr, const int32_t *indices,
+                            const double *data, int32_t m, const double *X, double *Y);
+    void dem_csr_rows_apply_transpose(int64_t n_sel, const int64_t *sel, const int32_t *indptr,
+                                      const int32_t *indices, const double *data, int32_t m, const double *X,
+                                      double *Y);
+    int64_t dem_components(int64_t n_sel, const int64_t *sel, const int32_t *indptr, const int32_t *indices,
+                           const int64_t *position, int64_t *parent, int64_t *label);
     """
 )
 # -O3, no -march=native: the module must run on any x86-64 the package is installed for.

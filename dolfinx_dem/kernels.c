@@ -463,3 +463,86 @@ void dem_interpolate_own(int64_t n_rows, int32_t n_own, int32_t n_nodes, int32_t
     }
   }
 }
+
+/* Selected rows of a CSR matrix A (indptr, indices int32) applied to m columns X (row-major,
+ * n_cols x m): Y[k, c] = sum over row sel[k] of A[sel[k], j] X[j, c] (Y: n_sel x m, overwritten),
+ * summed in the order of the row's entries. pair_contact's z_p . a for the touching pairs only:
+ * no sliced copy of the matrix. */
+void dem_csr_rows_apply(int64_t n_sel, const int64_t *restrict sel, const int32_t *restrict indptr,
+                        const int32_t *restrict indices, const double *restrict data, int32_t m,
+                        const double *restrict X, double *restrict Y)
+{
+  for (int64_t k = 0; k < n_sel; ++k)
+  {
+    double *y = Y + k * m;
+    for (int32_t c = 0; c < m; ++c)
+      y[c] = 0.0;
+    for (int32_t e = indptr[sel[k]]; e < indptr[sel[k] + 1]; ++e)
+    {
+      const double a = data[e];
+      const double *x = X + (int64_t)indices[e] * m;
+      for (int32_t c = 0; c < m; ++c)
+        y[c] += a * x[c];
+    }
+  }
+}
+
+/* The transpose: Y[j, c] += A[sel[k], j] X[k, c] over the selected rows, in the order of sel
+ * and of each row's entries (Y: n_cols x m, accumulated into). Z c = (Z^T)^T c for the pairs
+ * sel with c nonzero. */
+void dem_csr_rows_apply_transpose(int64_t n_sel, const int64_t *restrict sel, const int32_t *restrict indptr,
+                                  const int32_t *restrict indices, const double *restrict data, int32_t m,
+                                  const double *restrict X, double *restrict Y)
+{
+  for (int64_t k = 0; k < n_sel; ++k)
+  {
+    const double *x = X + k * m;
+    for (int32_t e = indptr[sel[k]]; e < indptr[sel[k] + 1]; ++e)
+    {
+      const double a = data[e];
+      double *y = Y + (int64_t)indices[e] * m;
+      for (int32_t c = 0; c < m; ++c)
+        y[c] += a * x[c];
+    }
+  }
+}
+
+static int64_t find_root(int64_t *parent, int64_t k)
+{
+  while (parent[k] != k)
+  {
+    parent[k] = parent[parent[k]];
+    k = parent[k];
+  }
+  return k;
+}
+
+/* Connected components of the graph of the selected vertices sel (sorted) whose edges are the
+ * entries of the symmetric CSR pattern (indptr, indices) between two selected vertices;
+ * position[v] = the index of v in sel, -1 if not selected (n_vertices). label[k] (n_sel): the
+ * component of sel[k], numbered 0, 1, ... by first appearance in sel; returns their count.
+ * parent: work space of n_sel. */
+int64_t dem_components(int64_t n_sel, const int64_t *restrict sel, const int32_t *restrict indptr,
+                       const int32_t *restrict indices, const int64_t *restrict position,
+                       int64_t *restrict parent, int64_t *restrict label)
+{
+  for (int64_t k = 0; k < n_sel; ++k)
+    parent[k] = k;
+  for (int64_t k = 0; k < n_sel; ++k)
+    for (int32_t e = indptr[sel[k]]; e < indptr[sel[k] + 1]; ++e)
+    {
+      const int64_t other = position[indices[e]];
+      if (other < 0)
+        continue;
+      const int64_t a = find_root(parent, k), b = find_root(parent, other);
+      if (a != b)
+        parent[a > b ? a : b] = a < b ? a : b; /* the smaller index is the root */
+    }
+  int64_t count = 0;
+  for (int64_t k = 0; k < n_sel; ++k)
+  {
+    const int64_t root = find_root(parent, k);
+    label[k] = root == k ? count++ : label[root]; /* a root is its component's first vertex */
+  }
+  return count;
+}

@@ -65,12 +65,12 @@ a step that moves a facet by more than skin/2.
 from __future__ import annotations
 
 import dataclasses
+import functools
 from collections.abc import Mapping
 import time
 
 import numpy as np
 import scipy.sparse
-import scipy.sparse.csgraph
 import scipy.spatial
 from mpi4py import MPI
 from petsc4py import PETSc
@@ -246,6 +246,7 @@ class PairContact:
         self.seconds = 0.0  # processor time of the contact work in force integrals and energies
         self._template = zero = dem.create_vector()  # the layout of the scatters' source vectors
         self.scatter = None  # the patch scatter, made by each list build
+        self._last = None  # the _At of the last displacement evaluated (a step's end is the next one's start)
         self._build(zero)
         up = self.patch_values(zero)
         g, w = self._state(np.arange(len(self.listed)), *self._pair_displacements(up))[:2]
@@ -479,7 +480,7 @@ class PairContact:
         start = time.process_time()
         up = self.patch_values(u)
         vp = None if v is None else self.patch_values(v)
-        uc = self.free_displacements(up)
+        uc = self._at(up).uc
         stale = self._moved(uc)
         moving = v is not None and dt != 0.0
         if moving:
@@ -534,6 +535,15 @@ class PairContact:
         """The values of ``vec`` at the patch dofs (collective); valid until the next rebuild."""
         return self.scatter.gather(vec)
 
+    def _at(self, up: np.ndarray) -> _At:
+        """The contact state at patch values ``up`` (``_At``), kept for the next call: the energy
+        at the end of a step, the per-step outputs and the next step's flight start at the same
+        displacement. Reused only for the same list and bit-identical values."""
+        last = self._last
+        if last is None or last.listed is not self.listed or not np.array_equal(last.up, up):
+            last = self._last = _At(self, up)
+        return last
+
     def free_displacements(self, up: np.ndarray) -> np.ndarray:
         """Free reconstructions u_f of the known candidate facets (local, then ghosts), (n, d),
         from patch values ``up``."""
@@ -579,16 +589,10 @@ class PairContact:
     def energy_correction(self, up: np.ndarray) -> tuple[float, float]:
         """(elastic, stabilisation) energy changes of this process's own rows (not reduced)."""
         start = time.process_time()
-        L = self.listed
-        uc = self.free_displacements(up)
-        self._check_listed(uc)
-        neg = self._screen(uc)  # c_p = w_p g_p^- vanishes on the others: no overlap to compute
+        at = self._at(up)
         elastic = stabilisation = 0.0
-        if neg.size:
-            g, w, _ = self._state(neg, uc[L.i[neg]], uc[L.j[neg]])
-            a = L.Q @ up + self._q
-            delta = L.ZT[neg].T @ (w * np.minimum(g, 0.0))  # Z c, c = 0 off neg: those columns only
-            change = a * delta + 0.5 * delta**2
+        if at.closed.size:
+            change = at.a * at.delta + 0.5 * at.delta**2
             elastic, stabilisation = float(change[self._is_elastic_row].sum()), float(change[~self._is_elastic_row].sum())
         self.seconds += time.process_time() - start
         return elastic, stabilisation
@@ -637,25 +641,26 @@ class PairContact:
         integral with the most pieces (collective)."""
         start = time.process_time()
         L = self.listed
-        uc, vc = self.free_displacements(up), (self._R @ vp).reshape(-1, self.d)
+        at = self._at(up)
+        uc, vc = at.uc, (self._R @ vp).reshape(-1, self.d)
         self._check_listed(uc)
         self._check_listed(uc + dt * vc)
         # The pairs whose c_p may not vanish during the step (``_screen``): the others add exact
         # zeros, and splitting their neighbours at their events would only cost.
         touching = self._screen(uc, vc, dt)
-        ui0, uj0, vi, vj = uc[L.i[touching]], uc[L.j[touching]], vc[L.i[touching]], vc[L.j[touching]]
         result = np.zeros_like(up)
         pieces = 0
         if touching.size:
+            ui0, uj0, vi, vj = uc[L.i[touching]], uc[L.j[touching]], vc[L.i[touching]], vc[L.j[touching]]
             # Events of each touching pair: its gap's and its overlap's kinks.
             tau = self._events(touching, ui0, uj0, vi, vj, dt)  # (len(touching), 1 + 2 d^2), inf if none
-            a0, a1 = L.Q @ up + self._q, L.Q @ vp
+            # z_p . a at tau = 0 and its rate, of the touching pairs (compiled: no sliced Z)
+            za = L.z.rows_apply(touching, np.stack([at.a, L.Q @ vp], axis=1))
             # Pairs sharing an own row (N_pp' != 0) are integrated on common pieces: those cut by
             # the events of their connected component of that relation (an impact in another
             # component does not split them). There every c_p is a polynomial of degree d, each
             # pair's force term one of degree 2 d - 1: the d-point rule is exact.
-            N = L.N[touching][:, touching]
-            count, component = scipy.sparse.csgraph.connected_components(N, directed=False)
+            count, component = L.coupling.components(touching)
             finite = np.isfinite(tau.ravel())
             mid, length = piecewise_midpoints(np.repeat(component, tau.shape[1])[finite], tau.ravel()[finite],
                                               count, dt)
@@ -668,10 +673,11 @@ class PairContact:
             w, dw = self._overlap_on_own_pieces(touching, tau, nodes, ui0, uj0, vi, vj, dt)
             c = (w * np.minimum(g, 0.0)).reshape(-1, K)
             # Rows' term -Q^T Z int c dtau; pairs' term -int (z_p . (a + delta_a)) dc_p/du dtau
-            # (z_p of the touching pairs only: the rows of Z^T of the others are not read).
-            ZT = L.ZT[touching]
-            result -= L.QT @ (ZT.T @ (weights * c).sum(axis=1))
-            mu = (ZT @ a0)[:, None] + nodes * (ZT @ a1)[:, None] + N @ c
+            # (z_p of the touching pairs only; N c with c = 0 off them).
+            result -= L.QT @ L.z.rows_apply_transpose(touching, (weights * c).sum(axis=1))
+            C = np.zeros((len(L), K))
+            C[touching] = c
+            mu = za[:, :1] + nodes * za[:, 1:] + L.coupling.rows_apply(touching, C)
             mu = np.where(g < 0, mu.ravel(), 0.0) * weights.ravel()
             result += self._facet_force(e, mu, g, w, dw)
             pieces = int((length > 0).sum(axis=1).max())
@@ -732,13 +738,10 @@ class PairContact:
     def facet_corrections(self, up: np.ndarray) -> np.ndarray:
         """u_f - u_f^free of the local facets (eq. (31), directions of ``_directions``), (n_local, d):
         complete for the own facets (every pair of an own facet is listed here)."""
-        L = self.listed
-        p = np.arange(len(L))
-        g, w, _ = self._state(p, *self._pair_displacements(up), closed=True)
-        c = w * np.minimum(g, 0.0)
-        n = len(self.facets_all)
-        delta = scatter_sum(L.i, (c / self.facets_all.length[L.i])[:, None] * L.e_i, n) + \
-            scatter_sum(L.j, (c / self.facets_all.length[L.j])[:, None] * L.e_j, n)
+        L, F, at = self.listed, self.facets_all, self._at(up)
+        i, j, c, n = L.i[at.closed], L.j[at.closed], at.c, len(F)  # c = 0 off the closed pairs
+        delta = scatter_sum(i, (c / F.length[i])[:, None] * L.e_i[at.closed], n) + \
+            scatter_sum(j, (c / F.length[j])[:, None] * L.e_j[at.closed], n)
         return delta[: len(self.facets)]
 
     def gradient_correction(self, up: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -753,17 +756,16 @@ class PairContact:
         facet has one partner covering it exactly; partial overlaps (facets sliding against each
         other) leave a gap of the order of the cell gap times the uncovered fraction. The
         corrections of the partners come from their owners (a scatter over the candidates)."""
-        L, F = self.listed, self.facets_all
-        p = np.arange(len(L))
-        g, w, _ = self._state(p, *self._pair_displacements(up), closed=True)
-        uf = self.free_displacements(up) + self._corrections_everywhere(up)
+        L, F, at = self.listed, self.facets_all, self._at(up)
+        uf = at.uc + self._corrections_everywhere(up)
         worst = 0.0
-        pairs = np.flatnonzero((w > 0) & (g < 0))  # the touching pairs: the others correct nothing
+        touch = at.w > 0  # of the closed pairs (g < 0): the touching pairs; the others correct nothing
+        pairs = at.closed[touch]
         if len(pairs):
             i, j = L.i[pairs], L.j[pairs]
             gap = np.einsum("pi,pi->p", F.centre[j] + uf[j] - F.centre[i] - uf[i], L.n[pairs])
             nf = len(F)
-            ww = w[pairs]
+            ww = at.w[touch]
             weight = np.bincount(i, ww, nf) + np.bincount(j, ww, nf)
             mean = np.bincount(i, ww * gap, nf) + np.bincount(j, ww * gap, nf)
             own = np.zeros(nf, dtype=bool)
@@ -806,13 +808,14 @@ class PairContact:
         at which the first pair touching at the end closed its gap (gaps are affine along the
         step); None if no pair touches (collective)."""
         L = self.listed
-        p = np.arange(len(L))
-        g0 = self._gap(p, *self._pair_displacements(self.patch_values(u0)))
-        g1, w1, _ = self._state(p, *self._pair_displacements(self.patch_values(u1)), closed=True)
-        touching = (g1 < 0) & (w1 > 0)
+        uc0 = self.free_displacements(self.patch_values(u0))
+        self._check_listed(uc0)
+        at = self._at(self.patch_values(u1))
+        touching = at.w > 0  # of the closed pairs (g < 0)
         first = np.inf
         if touching.any():
-            g0, g1 = np.maximum(g0[touching], 0.0), g1[touching]
+            p = at.closed[touching]
+            g0, g1 = np.maximum(self._gap(p, uc0[L.i[p]], uc0[L.j[p]]), 0.0), at.g[touching]
             first = float(dt * (g0 / (g0 - g1)).min())
         first = self.comm.allreduce(first, op=MPI.MIN)
         return None if first == np.inf else first
@@ -823,15 +826,11 @@ class PairContact:
         the other, compression positive (z_p . a' < 0 in compression), so that a pair pulling
         (z_p . a' > 0) lowers it. Between two bodies i, j whose contact facets share one outward
         normal n_i (on i) it is -n_i . F_ij of ``pair_forces`` (collective: own rows' parts summed)."""
-        L = self.listed
-        g, w, _ = self._state(np.arange(len(L)), *self._pair_displacements(up), closed=True)
-        c = w * np.minimum(g, 0.0)
+        at = self._at(up)
         total = 0.0
-        if (c < 0).any():
-            a = L.Q @ up + self._q
-            mu = L.ZT @ (a + L.Z @ c)
-            touching = g < 0  # summed alone: the sum must not depend on the pairs listed around them
-            total = -float((mu * w)[touching].sum())
+        if (at.c < 0).any():
+            # over the closed pairs (g < 0) alone: the sum must not depend on the pairs listed around them
+            total = -float((at.mu * at.w).sum())
         return self.comm.allreduce(total, op=MPI.SUM)
 
     def pair_forces(self, up: np.ndarray, active: np.ndarray | None = None) -> np.ndarray:
@@ -849,16 +848,22 @@ class PairContact:
         own rows, as in ``force_correction``; ``active`` imposes the piece as there (statics: a
         pair held on its switch g = 0 carries its multiplier, ``kink_forces``, instead)."""
         L, F = self.listed, self.facets_all
-        p = np.arange(len(L))
-        g, w, dw = self._state(p, *self._pair_displacements(up), closed=active is None)
-        c = np.where(g < 0 if active is None else np.isin(self.pair_keys(), active), w * g, 0.0)
         out = np.zeros((len(self.body_pairs), self.d))
-        body_i, body_j = F.body[L.i], F.body[L.j]
+        if active is None:  # the natural piece: the closed pairs of the step's state
+            at = self._at(up)
+            p, g, w, dw, c = at.closed, at.g, at.w, at.dw, at.c
+        else:
+            p = np.arange(len(L))
+            g, w, dw = self._state(p, *self._pair_displacements(up))
+            c = np.where(np.isin(self.pair_keys(), active), w * g, 0.0)
+        body_i, body_j = F.body[L.i[p]], F.body[L.j[p]]
         on = (c != 0) & (body_i != body_j)
         if on.any():
-            a = L.Q @ up + self._q
-            mu = (L.ZT @ (a + L.Z @ c))[on]
-            force_i = mu[:, None] * (w[on, None] * L.n[on] + g[on, None] * dw[on])
+            if active is None:
+                mu = at.mu[on]
+            else:
+                mu = (L.ZT @ (L.Q @ up + self._q + L.Z @ c))[on]
+            force_i = mu[:, None] * (w[on, None] * L.n[p[on]] + g[on, None] * dw[on])
             sign = np.where(body_i[on] < body_j[on], 1.0, -1.0)  # the force on the lower-numbered body
             np.add.at(out, self._body_pair_index[body_i[on], body_j[on]], sign[:, None] * force_i)
         return out
@@ -1172,6 +1177,107 @@ class _Pairs:
 
     def __len__(self) -> int:
         return len(self.i)
+
+    @functools.cached_property
+    def z(self) -> _CSR:
+        """Z^T (the z_p, one row per pair) for the compiled products over the touching pairs."""
+        return _CSR(self.ZT)
+
+    @functools.cached_property
+    def coupling(self) -> _CSR:
+        """N = Z^T Z (pairs sharing an own row), for products and components over the touching pairs."""
+        return _CSR(self.N)
+
+
+class _At:
+    """The contact state of a ``PairContact`` at one displacement (patch values ``up``), each part
+    computed on first use: the free facet displacements ``uc``; the listed pairs ``closed`` whose
+    c_p = w_p g_p^- may not vanish (``PairContact._screen``: g_p < 0, projections not apart; the
+    list checked valid there), their g, w, dw/du_j and c = w g^-; the energy rows a = Q u + q of
+    the own rows, their change delta = Z c and mu_p = z_p . (a + delta) of the closed pairs (own
+    rows' part). The energy of a step's end, the outputs there and the next step's flight share
+    it (``PairContact._at``)."""
+
+    def __init__(self, contact: PairContact, up: np.ndarray):
+        self.contact, self.listed, self.up = contact, contact.listed, up.copy()
+        self.uc = contact.free_displacements(self.up)
+
+    @functools.cached_property
+    def closed(self) -> np.ndarray:
+        self.contact._check_listed(self.uc)
+        return self.contact._screen(self.uc)
+
+    @functools.cached_property
+    def state(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        L, p = self.listed, self.closed
+        return self.contact._state(p, self.uc[L.i[p]], self.uc[L.j[p]])
+
+    @property
+    def g(self) -> np.ndarray:
+        return self.state[0]
+
+    @property
+    def w(self) -> np.ndarray:
+        return self.state[1]
+
+    @property
+    def dw(self) -> np.ndarray:
+        return self.state[2]
+
+    @functools.cached_property
+    def c(self) -> np.ndarray:
+        return self.w * np.minimum(self.g, 0.0)
+
+    @functools.cached_property
+    def a(self) -> np.ndarray:
+        return self.listed.Q @ self.up + self.contact._q
+
+    @functools.cached_property
+    def delta(self) -> np.ndarray:
+        return self.listed.z.rows_apply_transpose(self.closed, self.c)  # Z c: c = 0 off the closed pairs
+
+    @functools.cached_property
+    def mu(self) -> np.ndarray:
+        return self.listed.z.rows_apply(self.closed, self.a + self.delta)
+
+
+class _CSR:
+    """A CSR matrix's arrays for the compiled kernels ``dem_csr_rows_apply(_transpose)`` and
+    ``dem_components``: products and graphs over a few selected rows (the touching pairs' of a
+    list of thousands) without slicing the matrix."""
+
+    def __init__(self, A: scipy.sparse.csr_matrix):
+        self.shape = A.shape
+        self.indptr = np.ascontiguousarray(A.indptr, dtype=np.int32)
+        self.indices = np.ascontiguousarray(A.indices, dtype=np.int32)
+        self.data = np.ascontiguousarray(A.data, dtype=np.float64)
+
+    def rows_apply(self, sel: np.ndarray, X: np.ndarray) -> np.ndarray:
+        """A[sel] @ X, X (n_cols,) or (n_cols, m)."""
+        X = np.ascontiguousarray(X, dtype=np.float64)
+        Y = np.empty((len(sel),) + X.shape[1:])
+        lib.dem_csr_rows_apply(len(sel), pointer(sel), pointer(self.indptr), pointer(self.indices), pointer(self.data),
+                               int(np.prod(X.shape[1:], dtype=np.int64)), pointer(X), pointer(Y))
+        return Y
+
+    def rows_apply_transpose(self, sel: np.ndarray, X: np.ndarray) -> np.ndarray:
+        """A[sel]^T @ X, X (len(sel),) or (len(sel), m)."""
+        X = np.ascontiguousarray(X, dtype=np.float64)
+        Y = np.zeros((self.shape[1],) + X.shape[1:])
+        lib.dem_csr_rows_apply_transpose(len(sel), pointer(sel), pointer(self.indptr), pointer(self.indices),
+                                         pointer(self.data), int(np.prod(X.shape[1:], dtype=np.int64)), pointer(X),
+                                         pointer(Y))
+        return Y
+
+    def components(self, sel: np.ndarray) -> tuple[int, np.ndarray]:
+        """The connected components of the graph of A's (symmetric) pattern restricted to the rows and
+        columns ``sel`` (sorted): their count and each row's component, numbered by first appearance."""
+        position = np.full(self.shape[0], -1, dtype=np.int64)
+        position[sel] = np.arange(len(sel))
+        parent, label = np.empty(len(sel), dtype=np.int64), np.empty(len(sel), dtype=np.int64)
+        count = lib.dem_components(len(sel), pointer(sel), pointer(self.indptr), pointer(self.indices),
+                                   pointer(position), pointer(parent), pointer(label))
+        return int(count), label
 
 
 def _check_bodies_do_not_overlap(dem):
