@@ -42,7 +42,13 @@ ffibuilder.cdef(
                                       const int32_t *indices, const double *data, int32_t m, const double *X,
                                       double *Y);
     int64_t dem_components(int64_t n_sel, const int64_t *sel, const int32_t *indptr, const int32_t *indices,
-                           const int64_t *position, int64_t *parent, int64_t *label);
+                           int64_t *first, int64_t *parent, int64_t *label);
+    void dem_csr_rows_pattern(int64_t n_sel, const int64_t *sel, const int32_t *indptr, const int32_t *indices,
+                              int8_t *mark);
+    void dem_pair_events(int64_t n, int32_t d, const int64_t *p, const int64_t *i, const int64_t *j,
+                         const double *normal, const double *t, const double *d0, const double *XA,
+                         const double *mA, const double *XB, const double *mB, const double *uc,
+                         const double *vc, double dt, double *tau);
     """
 )
 # -O3, no -march=native: the module must run on any x86-64 the package is installed for.

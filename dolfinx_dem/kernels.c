@@ -517,13 +517,13 @@ static int64_t find_root(int64_t *parent, int64_t k)
   return k;
 }
 
-/* Connected components of the graph of the selected vertices sel (sorted) whose edges are the
- * entries of the symmetric CSR pattern (indptr, indices) between two selected vertices;
- * position[v] = the index of v in sel, -1 if not selected (n_vertices). label[k] (n_sel): the
+/* Connected components of the selected rows sel of a CSR pattern (indptr, indices) when two rows
+ * are linked by a common column (for Z^T: the pairs sharing an own row). label[k] (n_sel): the
  * component of sel[k], numbered 0, 1, ... by first appearance in sel; returns their count.
+ * first: n_cols, set by the caller to -1 (work space: the first selected row met in each column);
  * parent: work space of n_sel. */
 int64_t dem_components(int64_t n_sel, const int64_t *restrict sel, const int32_t *restrict indptr,
-                       const int32_t *restrict indices, const int64_t *restrict position,
+                       const int32_t *restrict indices, int64_t *restrict first,
                        int64_t *restrict parent, int64_t *restrict label)
 {
   for (int64_t k = 0; k < n_sel; ++k)
@@ -531,10 +531,13 @@ int64_t dem_components(int64_t n_sel, const int64_t *restrict sel, const int32_t
   for (int64_t k = 0; k < n_sel; ++k)
     for (int32_t e = indptr[sel[k]]; e < indptr[sel[k] + 1]; ++e)
     {
-      const int64_t other = position[indices[e]];
-      if (other < 0)
+      const int32_t col = indices[e];
+      if (first[col] < 0)
+      {
+        first[col] = k;
         continue;
-      const int64_t a = find_root(parent, k), b = find_root(parent, other);
+      }
+      const int64_t a = find_root(parent, k), b = find_root(parent, first[col]);
       if (a != b)
         parent[a > b ? a : b] = a < b ? a : b; /* the smaller index is the root */
     }
@@ -542,7 +545,81 @@ int64_t dem_components(int64_t n_sel, const int64_t *restrict sel, const int32_t
   for (int64_t k = 0; k < n_sel; ++k)
   {
     const int64_t root = find_root(parent, k);
-    label[k] = root == k ? count++ : label[root]; /* a root is its component's first vertex */
+    label[k] = root == k ? count++ : label[root]; /* a root is its component's first row */
   }
   return count;
+}
+
+/* The columns met by the selected rows of a CSR pattern: mark[indices[e]] = 1 (mark: n_cols,
+ * set by the caller to 0). The own rows the touching pairs' z_p touch. */
+void dem_csr_rows_pattern(int64_t n_sel, const int64_t *restrict sel, const int32_t *restrict indptr,
+                          const int32_t *restrict indices, int8_t *restrict mark)
+{
+  for (int64_t k = 0; k < n_sel; ++k)
+    for (int32_t e = indptr[sel[k]]; e < indptr[sel[k] + 1]; ++e)
+      mark[indices[e]] = 1;
+}
+
+/* Events of pair_contact.PairContact._events for the pairs p[e] of facets (i, j) (n, t, d0 per
+ * pair; XA, mA, XB, mB the projected simplices, d vertices of dim = d - 1 coordinates and their
+ * faces' normals m) along the flight uc + tau vc (n_facets x d): the times in (0, dt) where the
+ * gap, or the side m_k . (x - X_k) of a vertex x of one simplex to the line of face k of the
+ * other (B moved by the tangential offset s0 + tau s1), changes sign; INFINITY where none.
+ * tau: n x (1 + 2 d^2), columns [gap, (vertex a of A, face k of B) at 1 + a d + k, (vertex a of
+ * B, face k of A) at 1 + d^2 + a d + k]. */
+void dem_pair_events(int64_t n, int32_t d, const int64_t *restrict p, const int64_t *restrict i,
+                     const int64_t *restrict j, const double *restrict normal, const double *restrict t,
+                     const double *restrict d0, const double *restrict XA, const double *restrict mA,
+                     const double *restrict XB, const double *restrict mB, const double *restrict uc,
+                     const double *restrict vc, double dt, double *restrict tau)
+{
+  const int32_t dim = d - 1, stride = d * dim, width = 1 + 2 * d * d;
+  for (int64_t e = 0; e < n; ++e)
+  {
+    const int64_t q = p[e];
+    double du[3], dv[3], g0 = 0.0, gs = 0.0, s0[2], s1[2];
+    for (int32_t k = 0; k < d; ++k)
+    {
+      du[k] = uc[j[q] * d + k] - uc[i[q] * d + k];
+      dv[k] = vc[j[q] * d + k] - vc[i[q] * d + k];
+      g0 += du[k] * normal[q * d + k];
+      gs += dv[k] * normal[q * d + k];
+    }
+    g0 = d0[q] + g0;
+    for (int32_t c = 0; c < dim; ++c)
+    {
+      s0[c] = s1[c] = 0.0;
+      for (int32_t k = 0; k < d; ++k)
+      {
+        s0[c] += t[(q * dim + c) * d + k] * du[k];
+        s1[c] += t[(q * dim + c) * d + k] * dv[k];
+      }
+    }
+    const double *xa = XA + q * stride, *ma = mA + q * stride, *xb = XB + q * stride, *mb = mB + q * stride;
+    double v0[19], rate[19];
+    v0[0] = g0;
+    rate[0] = gs;
+    for (int32_t a = 0; a < d; ++a)
+      for (int32_t k = 0; k < d; ++k)
+      {
+        double side_ab = 0.0, side_ba = 0.0, speed_b = 0.0, speed_a = 0.0;
+        for (int32_t c = 0; c < dim; ++c)
+        {
+          side_ab += (xa[a * dim + c] - (xb[k * dim + c] + s0[c])) * mb[k * dim + c];
+          side_ba += ((xb[a * dim + c] + s0[c]) - xa[k * dim + c]) * ma[k * dim + c];
+          speed_b += mb[k * dim + c] * s1[c];
+          speed_a += ma[k * dim + c] * s1[c];
+        }
+        v0[1 + a * d + k] = side_ab;
+        rate[1 + a * d + k] = -speed_b;
+        v0[1 + d * d + a * d + k] = side_ba;
+        rate[1 + d * d + a * d + k] = speed_a;
+      }
+    for (int32_t k = 0; k < width; ++k)
+    {
+      const double v1 = v0[k] + dt * rate[k];
+      const double root = -v0[k] / rate[k];
+      tau[e * width + k] = (v0[k] * v1 < 0 && root > 0 && root < dt) ? root : INFINITY;
+    }
+  }
 }

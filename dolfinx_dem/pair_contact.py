@@ -577,8 +577,9 @@ class PairContact:
         ``dem_pair_screen``: one pass over the list)."""
         L = self.listed
         out = np.empty(len(L), dtype=np.int8)
-        lib.dem_pair_screen(len(L), self.d, pointer(L.i), pointer(L.j), pointer(L.n), pointer(L.t), pointer(L.d0),
-                            pointer(L.si.X), pointer(L.sj.X), pointer(uc), pointer(vc), float(dt), pointer(out))
+        P = L.pointers
+        lib.dem_pair_screen(len(L), self.d, P["i"], P["j"], P["n"], P["t"], P["d0"], L.si.pointers[0], L.sj.pointers[0],
+                            pointer(uc), pointer(vc), float(dt), pointer(out))
         return np.flatnonzero(out)
 
     def _gap(self, p, ui, uj):
@@ -591,9 +592,10 @@ class PairContact:
         start = time.process_time()
         at = self._at(up)
         elastic = stabilisation = 0.0
-        if at.closed.size:
-            change = at.a * at.delta + 0.5 * at.delta**2
-            elastic, stabilisation = float(change[self._is_elastic_row].sum()), float(change[~self._is_elastic_row].sum())
+        if at.closed.size:  # delta = 0 off at.rows
+            delta, elastic_row = at.delta[at.rows], self._is_elastic_row[at.rows]
+            change = at.a[at.rows] * delta + 0.5 * delta**2
+            elastic, stabilisation = float(change[elastic_row].sum()), float(change[~elastic_row].sum())
         self.seconds += time.process_time() - start
         return elastic, stabilisation
 
@@ -620,10 +622,11 @@ class PairContact:
         """R^T of the facet forces -mu dc_p/du of the entries (pairs p): dc/du_f' = w n + g dw,
         dc/du_f = -(that)."""
         L = self.listed
+        d = self.d
         dc = mu[:, None] * (w[:, None] * L.n[p] + g[:, None] * dw)
-        n = len(self.facets_all)
-        facet_force = scatter_sum(L.i[p], dc, n) - scatter_sum(L.j[p], dc, n)
-        return self._RT @ facet_force.ravel()
+        dofs = np.concatenate([L.i[p], L.j[p]])[:, None] * d + np.arange(d)
+        facet_force = np.bincount(dofs.ravel(), np.concatenate([dc, -dc]).ravel(), len(self.facets_all) * d)
+        return self._RT @ facet_force
 
     def add(self, correction: np.ndarray, out: PETSc.Vec, scale: float = 1.0) -> None:
         """out += scale * correction (patch values; a reverse scatter, collective)."""
@@ -653,14 +656,19 @@ class PairContact:
         if touching.size:
             ui0, uj0, vi, vj = uc[L.i[touching]], uc[L.j[touching]], vc[L.i[touching]], vc[L.j[touching]]
             # Events of each touching pair: its gap's and its overlap's kinks.
-            tau = self._events(touching, ui0, uj0, vi, vj, dt)  # (len(touching), 1 + 2 d^2), inf if none
-            # z_p . a at tau = 0 and its rate, of the touching pairs (compiled: no sliced Z)
-            za = L.z.rows_apply(touching, np.stack([at.a, L.Q @ vp], axis=1))
+            tau = self._events(touching, uc, vc, dt)  # (len(touching), 1 + 2 d^2), inf if none
+            # the energy rows a = a0 + tau a1 on the own rows the touching pairs' z_p touch (the
+            # others are not read), and z_p . a0, z_p . a1 (compiled: no sliced Q or Z)
+            rows = L.z.pattern(touching)
+            a = np.zeros((L.Q.shape[0], 2))
+            a[rows] = L.q.rows_apply(rows, np.stack([up, vp], axis=1))
+            a[rows, 0] += self._q[rows]
+            za = L.z.rows_apply(touching, a)
             # Pairs sharing an own row (N_pp' != 0) are integrated on common pieces: those cut by
             # the events of their connected component of that relation (an impact in another
             # component does not split them). There every c_p is a polynomial of degree d, each
             # pair's force term one of degree 2 d - 1: the d-point rule is exact.
-            count, component = L.coupling.components(touching)
+            count, component = L.z.components(touching)
             finite = np.isfinite(tau.ravel())
             mid, length = piecewise_midpoints(np.repeat(component, tau.shape[1])[finite], tau.ravel()[finite],
                                               count, dt)
@@ -673,11 +681,9 @@ class PairContact:
             w, dw = self._overlap_on_own_pieces(touching, tau, nodes, ui0, uj0, vi, vj, dt)
             c = (w * np.minimum(g, 0.0)).reshape(-1, K)
             # Rows' term -Q^T Z int c dtau; pairs' term -int (z_p . (a + delta_a)) dc_p/du dtau
-            # (z_p of the touching pairs only; N c with c = 0 off them).
-            result -= L.QT @ L.z.rows_apply_transpose(touching, (weights * c).sum(axis=1))
-            C = np.zeros((len(L), K))
-            C[touching] = c
-            mu = za[:, :1] + nodes * za[:, 1:] + L.coupling.rows_apply(touching, C)
+            # (z_p of the touching pairs only; N c = Z^T (Z c), c = 0 off them).
+            result -= L.q.rows_apply_transpose(rows, L.z.rows_apply_transpose(touching, (weights * c).sum(axis=1))[rows])
+            mu = za[:, :1] + nodes * za[:, 1:] + L.z.rows_apply(touching, L.z.rows_apply_transpose(touching, c))
             mu = np.where(g < 0, mu.ravel(), 0.0) * weights.ravel()
             result += self._facet_force(e, mu, g, w, dw)
             pieces = int((length > 0).sum(axis=1).max())
@@ -709,30 +715,20 @@ class PairContact:
                                 pointer(w), pointer(dw))
         return w, dw
 
-    def _events(self, p, ui, uj, vi, vj, dt) -> np.ndarray:
-        """Times in (0, dt) where, for the pairs ``p`` (their facets' displacements ui, uj and
-        velocities vi, vj, one row per pair), the gap or the side of a vertex of one
+    def _events(self, p: np.ndarray, uc: np.ndarray, vc: np.ndarray, dt: float) -> np.ndarray:
+        """Times in (0, dt) where, for the pairs ``p`` along the flight uc + tau vc of the free
+        facet displacements (known facets' rows), the gap or the side of a vertex of one
         projected facet with respect to (the line of) a face of the other changes sign,
-        (len(p), 1 + 2 d^2), inf where there is none. The facets translate, so all are affine in
-        tau; between them the clipped boundary of ``_overlap`` keeps its topology, w is a
-        polynomial of degree d - 1."""
+        (len(p), 1 + 2 d^2), inf where there is none (the compiled kernel ``dem_pair_events``).
+        The facets translate, so all are affine in tau; between them the clipped boundary of
+        ``_overlap`` keeps its topology, w is a polynomial of degree d - 1."""
         L, d = self.listed, self.d
-        t = L.t[p]
-        g0 = self._gap(p, ui, uj)
-        gs = np.einsum("ei,ei->e", vj - vi, L.n[p])
-        s0 = np.einsum("eki,ei->ek", t, uj - ui)  # the tangential offset s0 + tau s1
-        s1 = np.einsum("eki,ei->ek", t, vj - vi)
-        A, B = L.si.take(p), L.sj.take(p).moved(s0)
-        # m_k . (x - X_k) for the vertices x of one simplex and the faces k of the other (E, d, d),
-        # as in ``_overlap``; B moves by s1 per unit tau
-        side = lambda x, S: _dot(x[:, :, None] - S.X[:, None], S.m[:, None]).reshape(-1, d * d)  # noqa: E731
-        speed = lambda S: np.repeat(_dot(S.m, s1[:, None])[:, None], d, axis=1).reshape(-1, d * d)  # noqa: E731
-        v0 = np.concatenate([g0[:, None], side(A.X, B), side(B.X, A)], axis=1)
-        rate = np.concatenate([gs[:, None], -speed(B), speed(A)], axis=1)
-        v1 = v0 + dt * rate
-        with np.errstate(divide="ignore", invalid="ignore"):
-            tau = np.where(v0 * v1 < 0, -v0 / rate, np.inf)
-        return np.where((tau > 0) & (tau < dt), tau, np.inf)
+        tau = np.empty((len(p), 1 + 2 * d * d))
+        P = L.pointers
+        lib.dem_pair_events(len(p), d, pointer(p), P["i"], P["j"], P["n"], P["t"], P["d0"], L.si.pointers[0],
+                            L.si.pointers[1], L.sj.pointers[0], L.sj.pointers[1], pointer(uc), pointer(vc), float(dt),
+                            pointer(tau))
+        return tau
 
     # -- outputs -------------------------------------------------------------------------------
     def facet_corrections(self, up: np.ndarray) -> np.ndarray:
@@ -1082,12 +1078,10 @@ class _Simplices:
         nu = np.divide(m, norm, out=np.zeros_like(m), where=norm > 0)
         return _Simplices(X, end, m, nu, size)
 
-    def take(self, p: np.ndarray) -> _Simplices:
-        return _Simplices(*(getattr(self, f.name)[p] for f in dataclasses.fields(self)))
-
-    def moved(self, s: np.ndarray) -> _Simplices:
-        """The simplices translated by s (E, d-1)."""
-        return _Simplices(self.X + s[:, None], self.end + s[:, None], self.m, self.nu, self.size)
+    @functools.cached_property
+    def pointers(self) -> tuple:
+        """C pointers to X, m, nu, size for the kernels (made once: a pointer costs microseconds)."""
+        return tuple(pointer(getattr(self, f)) for f in ("X", "m", "nu", "size"))
 
 
 def _dot(a: np.ndarray, b: np.ndarray) -> np.ndarray:
@@ -1119,9 +1113,7 @@ def _overlap(A: _Simplices, B: _Simplices, p: np.ndarray, s: np.ndarray) -> tupl
     p = np.ascontiguousarray(p, dtype=np.int64)
     s = np.ascontiguousarray(s, dtype=np.float64)
     w, dw = np.empty(len(p)), np.empty(s.shape)
-    lib.dem_overlap(len(p), s.shape[1], pointer(p), *(pointer(getattr(S, f)) for S in (A, B)
-                                                      for f in ("X", "m", "nu", "size")),
-                    pointer(s), pointer(w), pointer(dw))
+    lib.dem_overlap(len(p), s.shape[1], pointer(p), *A.pointers, *B.pointers, pointer(s), pointer(w), pointer(dw))
     return w, dw
 
 
@@ -1179,14 +1171,20 @@ class _Pairs:
         return len(self.i)
 
     @functools.cached_property
+    def pointers(self) -> dict:
+        """C pointers to i, j, n, t, d0 for the kernels (made once)."""
+        return {name: pointer(getattr(self, name)) for name in ("i", "j", "n", "t", "d0")}
+
+    @functools.cached_property
     def z(self) -> _CSR:
         """Z^T (the z_p, one row per pair) for the compiled products over the touching pairs."""
         return _CSR(self.ZT)
 
     @functools.cached_property
-    def coupling(self) -> _CSR:
-        """N = Z^T Z (pairs sharing an own row), for products and components over the touching pairs."""
-        return _CSR(self.N)
+    def q(self) -> _CSR:
+        """Q (own rows, patch dofs), for products on the touching pairs' rows only."""
+        return _CSR(self.Q)
+
 
 
 class _At:
@@ -1229,8 +1227,16 @@ class _At:
         return self.w * np.minimum(self.g, 0.0)
 
     @functools.cached_property
+    def rows(self) -> np.ndarray:
+        """The own rows the closed pairs' z_p touch: the only rows their c_p change or read."""
+        return self.listed.z.pattern(self.closed)
+
+    @functools.cached_property
     def a(self) -> np.ndarray:
-        return self.listed.Q @ self.up + self.contact._q
+        """a = Q u + q on ``rows`` (0 on the others, which nothing here reads)."""
+        a = np.zeros(self.listed.Q.shape[0])
+        a[self.rows] = self.listed.q.rows_apply(self.rows, self.up) + self.contact._q[self.rows]
+        return a
 
     @functools.cached_property
     def delta(self) -> np.ndarray:
@@ -1242,41 +1248,47 @@ class _At:
 
 
 class _CSR:
-    """A CSR matrix's arrays for the compiled kernels ``dem_csr_rows_apply(_transpose)`` and
-    ``dem_components``: products and graphs over a few selected rows (the touching pairs' of a
-    list of thousands) without slicing the matrix."""
+    """A CSR matrix's arrays for the compiled kernels ``dem_csr_rows_*`` and ``dem_components``:
+    products, patterns and graphs over a few selected rows (the touching pairs' of a list of
+    thousands) without slicing the matrix."""
 
     def __init__(self, A: scipy.sparse.csr_matrix):
         self.shape = A.shape
         self.indptr = np.ascontiguousarray(A.indptr, dtype=np.int32)
         self.indices = np.ascontiguousarray(A.indices, dtype=np.int32)
         self.data = np.ascontiguousarray(A.data, dtype=np.float64)
+        self._pointers = (pointer(self.indptr), pointer(self.indices), pointer(self.data))
 
     def rows_apply(self, sel: np.ndarray, X: np.ndarray) -> np.ndarray:
         """A[sel] @ X, X (n_cols,) or (n_cols, m)."""
         X = np.ascontiguousarray(X, dtype=np.float64)
         Y = np.empty((len(sel),) + X.shape[1:])
-        lib.dem_csr_rows_apply(len(sel), pointer(sel), pointer(self.indptr), pointer(self.indices), pointer(self.data),
-                               int(np.prod(X.shape[1:], dtype=np.int64)), pointer(X), pointer(Y))
+        lib.dem_csr_rows_apply(len(sel), pointer(sel), *self._pointers, X.size // max(len(X), 1), pointer(X),
+                               pointer(Y))
         return Y
 
     def rows_apply_transpose(self, sel: np.ndarray, X: np.ndarray) -> np.ndarray:
         """A[sel]^T @ X, X (len(sel),) or (len(sel), m)."""
         X = np.ascontiguousarray(X, dtype=np.float64)
         Y = np.zeros((self.shape[1],) + X.shape[1:])
-        lib.dem_csr_rows_apply_transpose(len(sel), pointer(sel), pointer(self.indptr), pointer(self.indices),
-                                         pointer(self.data), int(np.prod(X.shape[1:], dtype=np.int64)), pointer(X),
-                                         pointer(Y))
+        lib.dem_csr_rows_apply_transpose(len(sel), pointer(sel), *self._pointers, X.size // max(len(X), 1),
+                                         pointer(X), pointer(Y))
         return Y
 
+    def pattern(self, sel: np.ndarray) -> np.ndarray:
+        """The columns (sorted) of the entries of the rows ``sel``."""
+        mark = np.zeros(self.shape[1], dtype=np.int8)
+        lib.dem_csr_rows_pattern(len(sel), pointer(sel), *self._pointers[:2], pointer(mark))
+        return np.flatnonzero(mark)
+
     def components(self, sel: np.ndarray) -> tuple[int, np.ndarray]:
-        """The connected components of the graph of A's (symmetric) pattern restricted to the rows and
-        columns ``sel`` (sorted): their count and each row's component, numbered by first appearance."""
-        position = np.full(self.shape[0], -1, dtype=np.int64)
-        position[sel] = np.arange(len(sel))
+        """The connected components of the rows ``sel`` when two rows are linked by a common column
+        (for Z^T: pairs sharing an own row, N_pp' != 0): their count and each row's component,
+        numbered by first appearance."""
+        first = np.full(self.shape[1], -1, dtype=np.int64)
         parent, label = np.empty(len(sel), dtype=np.int64), np.empty(len(sel), dtype=np.int64)
-        count = lib.dem_components(len(sel), pointer(sel), pointer(self.indptr), pointer(self.indices),
-                                   pointer(position), pointer(parent), pointer(label))
+        count = lib.dem_components(len(sel), pointer(sel), *self._pointers[:2], pointer(first), pointer(parent),
+                                   pointer(label))
         return int(count), label
 
 
