@@ -49,6 +49,11 @@ ffibuilder.cdef(
                          const double *normal, const double *t, const double *d0, const double *XA,
                          const double *mA, const double *XB, const double *mB, const double *uc,
                          const double *vc, double dt, double *tau);
+    void dem_overlap_own(int64_t n, int32_t d, const int64_t *p, const int64_t *i, const int64_t *j, const double *t,
+                         const double *uc, const double *vc, int32_t n_tau, const double *tau, double dt,
+                         int32_t n_gauss, const double *xi, const double *XA, const double *mA, const double *nuA,
+                         const double *sizeA, const double *XB, const double *mB, const double *nuB,
+                         const double *sizeB, double *start, double *length, double *w, double *dw);
     """
 )
 # -O3, no -march=native: the module must run on any x86-64 the package is installed for.

@@ -272,6 +272,54 @@ static int32_t boxes_apart(int32_t nv, int32_t dim, const double *X, const doubl
   return 0;
 }
 
+/* w = |A_q cap (B_q + s)| and dw/ds (dim components) of one simplex pair q; see dem_overlap. */
+static void overlap_one(int32_t dim, int64_t q, const double *XA, const double *mA, const double *nuA,
+                        const double *sizeA, const double *XB, const double *mB, const double *nuB,
+                        const double *sizeB, const double *s, double *w, double *dw)
+{
+  const int32_t nv = dim + 1, stride = nv * dim;
+  const int32_t next[3] = {dim == 1 ? 0 : 1, dim == 1 ? 1 : 2, 0};  /* a face's end vertex */
+  const double *X = XA + q * stride, *m = mA + q * stride, *nu = nuA + q * stride;
+  const double *mb = mB + q * stride, *nub = nuB + q * stride;
+  double Y[6];
+  for (int32_t k = 0; k < nv; ++k)
+    for (int32_t c = 0; c < dim; ++c)
+      Y[k * dim + c] = XB[q * stride + k * dim + c] + s[c];
+  if (boxes_apart(nv, dim, X, Y))
+  {
+    *w = 0.0;
+    for (int32_t c = 0; c < dim; ++c)
+      dw[c] = 0.0;
+    return;
+  }
+  double total = 0.0, grad[2] = {0.0, 0.0};
+  for (int32_t side = 0; side < 2; ++side)
+  {
+    const double *F = side ? Y : X, *mF = side ? mb : m, *nuF = side ? nub : nu;
+    const double *size = side ? sizeB + q * nv : sizeA + q * nv;
+    double sum = 0.0;
+    for (int32_t f = 0; f < nv; ++f)
+    {
+      double lower, length;
+      clip_face(nv, dim, next, F, f, mF, side ? X : Y, side ? m : mb, side, &lower, &length);
+      const double at = lower + 0.5 * length, measure = length * size[f];
+      double x = (F[f * dim] + at * (F[next[f] * dim] - F[f * dim])) * nuF[f * dim];
+      for (int32_t c = 1; c < dim; ++c)
+        x = x + (F[f * dim + c] + at * (F[next[f] * dim + c] - F[f * dim + c])) * nuF[f * dim + c];
+      sum = f == 0 ? x * measure : sum + x * measure;
+      if (side)
+        for (int32_t c = 0; c < dim; ++c)
+          grad[c] = f == 0 ? nuF[f * dim + c] * measure : grad[c] + nuF[f * dim + c] * measure;
+    }
+    total = total + sum;
+  }
+  total = total / dim;
+  const int32_t inside = total > 0;
+  *w = inside ? total : 0.0;
+  for (int32_t c = 0; c < dim; ++c)
+    dw[c] = inside ? grad[c] : 0.0;
+}
+
 /* w = |A_q cap (B_q + s_i)| and dw/ds (see pair_contact._overlap) for n offsets s_i (dim
  * components, dim = 1 or 2) of the simplex pairs q = p[i]: vertices X (nv = dim + 1 per simplex,
  * dim components each), outward face normals m and their unit vectors nu (one per face), face
@@ -283,50 +331,85 @@ void dem_overlap(int64_t n, int32_t dim, const int64_t *restrict p, const double
                  const double *restrict sizeB, const double *restrict s, double *restrict w,
                  double *restrict dw)
 {
-  const int32_t nv = dim + 1, stride = nv * dim;
-  const int32_t next[3] = {dim == 1 ? 0 : 1, dim == 1 ? 1 : 2, 0};  /* a face's end vertex */
   for (int64_t i = 0; i < n; ++i)
+    overlap_one(dim, p[i], XA, mA, nuA, sizeA, XB, mB, nuB, sizeB, s + i * dim, w + i, dw + i * dim);
+}
+
+/* pair_contact.PairContact._overlap_on_own_pieces before its interpolation: for the pairs p[e]
+ * of facets (i, j) moving along uc + tau vc (n_facets x d), with their events tau (n_tau per
+ * pair, INFINITY: none; in (0, dt)), the own pieces of [0, dt] cut at the sorted events (padded
+ * with empty pieces up to n_tau + 1: start, length, as patch.piecewise_midpoints and
+ * _gauss_points compute them), and at the n_gauss nodes xi of each non-empty piece w and
+ * dw/du_j = t^T dw/ds (d components) at the tangential offset s = t (u_j - u_i)
+ * (overlap_one); 0 on empty pieces. t: the pairs' tangent bases (d - 1 rows of d). */
+void dem_overlap_own(int64_t n, int32_t d, const int64_t *restrict p, const int64_t *restrict i,
+                     const int64_t *restrict j, const double *restrict t, const double *restrict uc,
+                     const double *restrict vc, int32_t n_tau, const double *restrict tau, double dt,
+                     int32_t n_gauss, const double *restrict xi, const double *restrict XA,
+                     const double *restrict mA, const double *restrict nuA, const double *restrict sizeA,
+                     const double *restrict XB, const double *restrict mB, const double *restrict nuB,
+                     const double *restrict sizeB, double *restrict start, double *restrict length,
+                     double *restrict w, double *restrict dw)
+{
+  const int32_t dim = d - 1, n_own = n_tau + 1;
+  for (int64_t e = 0; e < n; ++e)
   {
-    const int64_t q = p[i];
-    const double *X = XA + q * stride, *m = mA + q * stride, *nu = nuA + q * stride;
-    const double *mb = mB + q * stride, *nub = nuB + q * stride;
-    double Y[6];
-    for (int32_t k = 0; k < nv; ++k)
-      for (int32_t c = 0; c < dim; ++c)
-        Y[k * dim + c] = XB[q * stride + k * dim + c] + s[i * dim + c];
-    if (boxes_apart(nv, dim, X, Y))
+    const int64_t q = p[e];
+    double points[40];
+    int32_t k = 0;
+    points[k++] = 0.0;
+    for (int32_t m = 0; m < n_tau; ++m)
     {
-      w[i] = 0.0;
-      for (int32_t c = 0; c < dim; ++c)
-        dw[i * dim + c] = 0.0;
-      continue;
-    }
-    double total = 0.0, grad[2] = {0.0, 0.0};
-    for (int32_t side = 0; side < 2; ++side)
-    {
-      const double *F = side ? Y : X, *mF = side ? mb : m, *nuF = side ? nub : nu;
-      const double *size = side ? sizeB + q * nv : sizeA + q * nv;
-      double sum = 0.0;
-      for (int32_t f = 0; f < nv; ++f)
+      const double x = tau[e * n_tau + m];
+      if (!isfinite(x))
+        continue;
+      int32_t at = k; /* insertion sort */
+      while (at > 1 && points[at - 1] > x)
       {
-        double lower, length;
-        clip_face(nv, dim, next, F, f, mF, side ? X : Y, side ? m : mb, side, &lower, &length);
-        const double at = lower + 0.5 * length, measure = length * size[f];
-        double x = (F[f * dim] + at * (F[next[f] * dim] - F[f * dim])) * nuF[f * dim];
-        for (int32_t c = 1; c < dim; ++c)
-          x = x + (F[f * dim + c] + at * (F[next[f] * dim + c] - F[f * dim + c])) * nuF[f * dim + c];
-        sum = f == 0 ? x * measure : sum + x * measure;
-        if (side)
-          for (int32_t c = 0; c < dim; ++c)
-            grad[c] = f == 0 ? nuF[f * dim + c] * measure : grad[c] + nuF[f * dim + c] * measure;
+        points[at] = points[at - 1];
+        --at;
       }
-      total = total + sum;
+      points[at] = x;
+      ++k;
     }
-    total = total / dim;
-    const int32_t inside = total > 0;
-    w[i] = inside ? total : 0.0;
-    for (int32_t c = 0; c < dim; ++c)
-      dw[i * dim + c] = inside ? grad[c] : 0.0;
+    while (k < n_own + 1)
+      points[k++] = dt;
+    for (int32_t piece = 0; piece < n_own; ++piece)
+    {
+      const double mid = 0.5 * (points[piece] + points[piece + 1]), len = points[piece + 1] - points[piece];
+      const double first = mid - 0.5 * len;
+      const int64_t row = e * n_own + piece;
+      start[row] = first;
+      length[row] = len;
+      for (int32_t g = 0; g < n_gauss; ++g)
+      {
+        const int64_t node = row * n_gauss + g;
+        if (!(len > 0))
+        {
+          w[node] = 0.0;
+          for (int32_t c = 0; c < d; ++c)
+            dw[node * d + c] = 0.0;
+          continue;
+        }
+        const double time = first + xi[g] * len;
+        double du[3], s[2], dws[2];
+        for (int32_t c = 0; c < d; ++c)
+          du[c] = (uc[j[q] * d + c] + time * vc[j[q] * d + c]) - (uc[i[q] * d + c] + time * vc[i[q] * d + c]);
+        for (int32_t r = 0; r < dim; ++r)
+        {
+          s[r] = 0.0;
+          for (int32_t c = 0; c < d; ++c)
+            s[r] += t[(q * dim + r) * d + c] * du[c];
+        }
+        overlap_one(dim, q, XA, mA, nuA, sizeA, XB, mB, nuB, sizeB, s, w + node, dws);
+        for (int32_t c = 0; c < d; ++c)
+        {
+          dw[node * d + c] = 0.0;
+          for (int32_t r = 0; r < dim; ++r)
+            dw[node * d + c] += dws[r] * t[(q * dim + r) * d + c];
+        }
+      }
+    }
   }
 }
 

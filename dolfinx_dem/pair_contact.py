@@ -712,7 +712,7 @@ class PairContact:
             # the gap, affine along the flight: at tau = 0 plus tau times its rate
             rate = np.einsum("pi,pi->p", vj - vi, L.n[touching])
             g = (self._gap(touching, ui0, uj0)[:, None] + nodes * rate[:, None]).ravel()
-            w, dw = self._overlap_on_own_pieces(touching, tau, nodes, ui0, uj0, vi, vj, dt)
+            w, dw = self._overlap_on_own_pieces(touching, tau, nodes, uc, vc, dt)
             c = (w * np.minimum(g, 0.0)).reshape(-1, K)
             # Rows' term -Q^T Z int c dtau; pairs' term -int (z_p . (a + delta_a)) dc_p/du dtau
             # (z_p of the touching pairs only; N c = Z^T (Z c), c = 0 off them).
@@ -726,27 +726,27 @@ class PairContact:
         self.evaluations += len(self._gauss[0]) * pieces
         return len(self._gauss[0]) * pieces
 
-    def _overlap_on_own_pieces(self, p, tau, nodes, ui, uj, vi, vj, dt):
-        """w and dw/du_j of the pairs ``p`` (their facets' displacements ui, uj and velocities vi,
-        vj, one row per pair) at the times ``nodes`` (len(p), K), flat. Between its
-        own events ``tau`` a pair's w is a polynomial of degree d - 1 and dw one of degree d - 2:
-        each is evaluated (``_state``) at the d Gauss-Legendre nodes of the pair's own pieces
-        only and interpolated from them (Lagrange), exact to rounding, rather than evaluated at
-        every node of the component's pieces."""
-        finite = np.isfinite(tau.ravel())
-        mid, length = piecewise_midpoints(np.repeat(np.arange(len(p)), tau.shape[1])[finite], tau.ravel()[finite],
-                                          len(p), dt)
-        own, _ = _gauss_points(mid, length, self._gauss)  # (len(p), J d)
-        e, r, s = np.repeat(p, own.shape[1]), np.repeat(np.arange(len(p)), own.shape[1]), own.ravel()
-        w_own, dw_own = self._state(e, ui[r] + s[:, None] * vi[r], uj[r] + s[:, None] * vj[r])[1:]
-        start = mid - 0.5 * length
+    def _overlap_on_own_pieces(self, p, tau, nodes, uc, vc, dt):
+        """w and dw/du_j of the pairs ``p`` along the flight uc + tau vc of the free facet
+        displacements, at the times ``nodes`` (len(p), K), flat. Between its own events ``tau`` a
+        pair's w is a polynomial of degree d - 1 and dw one of degree d - 2: each is evaluated at
+        the d Gauss-Legendre nodes of the pair's own pieces only (``dem_overlap_own``: the
+        overlap of ``_overlap``) and interpolated from them (Lagrange, ``dem_interpolate_own``),
+        exact to rounding, rather than evaluated at every node of the component's pieces."""
+        L, d = self.listed, self.d
+        xi = self._gauss[0]
+        n_own = tau.shape[1] + 1
+        start, length = np.empty((len(p), n_own)), np.empty((len(p), n_own))
+        w_own, dw_own = np.empty((len(p), n_own * len(xi))), np.empty((len(p), n_own * len(xi), d))
+        P = L.pointers
+        lib.dem_overlap_own(len(p), d, pointer(p), P["i"], P["j"], P["t"], pointer(uc), pointer(vc), tau.shape[1],
+                            pointer(tau), float(dt), len(xi), pointer(xi), *L.si.pointers, *L.sj.pointers,
+                            pointer(start), pointer(length), pointer(w_own), pointer(dw_own))
         # the own piece of each node (the last non-empty one starting at or before it: padding
         # and repeated events make empty pieces) and the interpolation: ``dem_interpolate_own``
-        xi = self._gauss[0]
-        w, dw = np.empty(nodes.size), np.empty((nodes.size, self.d))
-        lib.dem_interpolate_own(len(p), start.shape[1], nodes.shape[1], len(xi), self.d, pointer(start),
-                                pointer(length), pointer(nodes), pointer(xi), pointer(w_own), pointer(dw_own),
-                                pointer(w), pointer(dw))
+        w, dw = np.empty(nodes.size), np.empty((nodes.size, d))
+        lib.dem_interpolate_own(len(p), n_own, nodes.shape[1], len(xi), d, pointer(start), pointer(length),
+                                pointer(nodes), pointer(xi), pointer(w_own), pointer(dw_own), pointer(w), pointer(dw))
         return w, dw
 
     def _events(self, p: np.ndarray, uc: np.ndarray, vc: np.ndarray, dt: float) -> np.ndarray:
