@@ -706,3 +706,26 @@ void dem_pair_events(int64_t n, int32_t d, const int64_t *restrict p, const int6
     }
   }
 }
+
+/* The facet forces of pair_contact.PairContact._facet_force: for the entries k (pairs p[k] of
+ * facets (i, j), normals n), dc = mu_k (w_k n + g_k dw_k) (d components) is added to facet i's
+ * row of out and subtracted from facet j's (out: n_facets x d, accumulated into, in the order of
+ * the entries). */
+void dem_pair_facet_forces(int64_t n_entries, int32_t d, const int64_t *restrict p, const int64_t *restrict i,
+                           const int64_t *restrict j, const double *restrict normal, const double *restrict mu,
+                           const double *restrict g, const double *restrict w, const double *restrict dw,
+                           double *restrict out)
+{
+  for (int64_t k = 0; k < n_entries; ++k)
+  {
+    if (mu[k] == 0.0)
+      continue; /* adds exact zeros */
+    const int64_t q = p[k];
+    for (int32_t c = 0; c < d; ++c)
+    {
+      const double dc = mu[k] * (w[k] * normal[q * d + c] + g[k] * dw[k * d + c]);
+      out[i[q] * d + c] += dc;
+      out[j[q] * d + c] -= dc;
+    }
+  }
+}

@@ -656,10 +656,9 @@ class PairContact:
         """R^T of the facet forces -mu dc_p/du of the entries (pairs p): dc/du_f' = w n + g dw,
         dc/du_f = -(that)."""
         L = self.listed
-        d = self.d
-        dc = mu[:, None] * (w[:, None] * L.n[p] + g[:, None] * dw)
-        dofs = np.concatenate([L.i[p], L.j[p]])[:, None] * d + np.arange(d)
-        facet_force = np.bincount(dofs.ravel(), np.concatenate([dc, -dc]).ravel(), len(self.facets_all) * d)
+        P, facet_force = L.pointers, np.zeros(len(self.facets_all) * self.d)
+        lib.dem_pair_facet_forces(len(p), self.d, pointer(p), P["i"], P["j"], P["n"], pointer(mu), pointer(g),
+                                  pointer(w), pointer(dw), pointer(facet_force))  # compiled: ``dem_pair_facet_forces``
         return self._RT @ facet_force
 
     def add(self, correction: np.ndarray, out: PETSc.Vec, scale: float = 1.0) -> None:
