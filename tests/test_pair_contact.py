@@ -725,6 +725,31 @@ def test_overlap_of_triangles_and_its_gradient(B, s, kind):
         assert w[0] == 0.0 and not dw.any()
 
 
+def test_selected_rows_products_and_components():
+    """The compiled products over selected rows of a sparse matrix (the touching pairs' rows of
+    Z^T and Q), their columns and the components of rows sharing a column, against scipy."""
+    import scipy.sparse
+    import scipy.sparse.csgraph
+    from dolfinx_dem.pair_contact import _CSR
+
+    rng = np.random.default_rng(1)
+    A = scipy.sparse.random(300, 200, density=0.01, format="csr", random_state=rng)
+    sel = np.sort(rng.choice(300, 40, replace=False)).astype(np.int64)
+    M, X, Y = _CSR(A), rng.standard_normal((200, 3)), rng.standard_normal((40, 2))
+    assert np.allclose(M.rows_apply(sel, X), A[sel] @ X, rtol=0, atol=1e-14)
+    assert np.allclose(M.rows_apply(sel, X[:, 0]), A[sel] @ X[:, 0], rtol=0, atol=1e-14)
+    assert np.allclose(M.rows_apply_transpose(sel, Y), A[sel].T @ Y, rtol=0, atol=1e-14)
+    assert np.array_equal(M.pattern(sel), np.unique(A[sel].indices))
+    count, label = M.components(sel)
+    B = A[sel].astype(bool).astype(np.int64)
+    expected_count, expected = scipy.sparse.csgraph.connected_components(B @ B.T, directed=False)
+    assert count == expected_count and 1 < count < len(sel)
+    # the same partition, numbered 0, 1, ... by first appearance
+    first = np.unique(label, return_index=True)[1]
+    assert len(first) == count and np.all(np.diff(first) > 0)
+    assert len({(a, b) for a, b in zip(label, expected)}) == count
+
+
 def test_overlap_of_random_triangles():
     """Random triangles of both orientations: area against clipping, gradient against central
     differences."""
