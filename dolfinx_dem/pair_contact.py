@@ -364,9 +364,10 @@ class PairContact:
         else:
             ghosts, uc_ghosts = local.take(np.empty(0, dtype=np.int64)), np.zeros((0, d))
         if not stale and np.isin(ghosts.key, self.facets_all.key[nl:]).all():
-            # nothing new near this process: its list stands (the patch scatter is remade, the
-            # same dofs, as its creation is collective)
+            # nothing new near this process: its list stands (the scatters are remade with the
+            # same dofs, as every process makes them after a round: their creation is collective)
             self.scatter = PatchScatter(self._template, self.scatter.dofs)
+            self._facet_values = None
             return
         F = _Facets.concatenate([local, ghosts])
         ucF = np.concatenate([uc, uc_ghosts])
