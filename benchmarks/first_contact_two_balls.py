@@ -3,7 +3,8 @@
 Until they touch the balls translate rigidly at +-0.3 m/s, so each listed pair's gap is affine in
 time: the first contact is the earliest time at which a pair's gap closes with a positive
 overlap. A run's `first_contact_time` (interpolated within its step) should equal it; the spheres
-touch at 0.02 / 0.6 s, the polyhedra later (their facets lie inside the spheres).
+touch at 0.02 / 0.6 s, the polyhedra later (their facets lie inside the spheres): `late_steps` is
+the delay in time steps of the scene.
 
     .venv/bin/python benchmarks/first_contact_two_balls.py ['{"mesh.h": 0.06}']
 """
@@ -14,12 +15,13 @@ import sys
 import numpy as np
 from mpi4py import MPI
 
-from dolfinx_dem import model, scenes
+from dolfinx_dem import dynamics, model, scenes
 
 
 def main():
     overrides = json.loads(sys.argv[1]) if len(sys.argv) > 1 else {}
-    dem = model.build(scenes.load("two-balls", overrides), MPI.COMM_SELF)
+    scene = scenes.load("two-balls", overrides)
+    dem = model.build(scene, MPI.COMM_SELF)
     c = dem.pair_contact
     x = dem.geometry.cell_centres[: dem.n_owned]
     v = dem.create_vector()
@@ -38,7 +40,11 @@ def main():
         t = closing[k] * (1 + 1e-12)  # just after the closure: the overlap there
         if c._state(p[[k]], ui[[k]] + t * vi[[k]], uj[[k]] + t * vj[[k]])[1][0] > 0:
             first = closing[k]
-    print(json.dumps({"first_contact_polyhedra": first, "first_contact_spheres": 0.02 / 0.6}))
+    spheres = 0.02 / 0.6
+    dt = dynamics.time_step(dem, scene["time"])
+    print(json.dumps({"first_contact_polyhedra": first, "first_contact_spheres": spheres, "dt": dt,
+                      "late_steps": (first - spheres) / dt, "cells": dem.n_owned,
+                      "candidate_facets": c.num_facets, "listed_pairs": c.num_pairs}))
 
 
 if __name__ == "__main__":
