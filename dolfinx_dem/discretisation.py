@@ -520,13 +520,14 @@ class DEMDiscretisation:
 
         self.contact = RigidContact(self, obstacles) if obstacles else None
 
-    def set_contact_boundary(self, facets, self_contact: bool = False, tolerance: float = 0.0) -> None:
+    def set_contact_boundary(self, facets, self_contact: bool = False, tolerance: float = 0.0,
+                             skin: float | None = None) -> None:
         """Frictionless contact between the bodies of the mesh on the given (process-local)
         boundary facets (``pair_contact.PairContact``, paper §3.4.3): the rule of eq. (31) for
         scheme B facets, of eq. (23)-(24) for pairs of scheme A facets."""
         from dolfinx_dem.pair_contact import PairContact
 
-        self.pair_contact = PairContact(self, facets, self_contact=self_contact, tolerance=tolerance)
+        self.pair_contact = PairContact(self, facets, self_contact=self_contact, tolerance=tolerance, skin=skin)
 
     @property
     def contacts(self) -> tuple:

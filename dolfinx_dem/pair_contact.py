@@ -50,16 +50,19 @@ component's events (an impact in another component does not split them), and so 
 term -Q^T delta_a: exact, so the pseudo-energy is conserved to rounding. A pair's overlap is
 clipped only at the Gauss nodes of its own pieces and interpolated at the component's nodes.
 
-Broad phase: pairs are listed (a Verlet list built with a k-d tree on the displaced facet
-centres) when the centres are closer than r = D + skin, D the largest facet diameter about its
-barycentre (the length in 2D). Each process sends the records of
-its own candidate facets to the processes whose bounding box of local facets (grown by r) meets
-the box of its own facets; the boxes are gathered (one box per process). The list is rebuilt on
-every process when a candidate facet anywhere has moved more than skin/2 since the last build
-(one logical reduction per step in ``prepare``): then no unlisted pair can touch. ``prepare``
-checks both ends of the coming step (the flight is affine); every evaluation checks that the list
-is valid for its displacements and raises otherwise (never a silently incomplete list); so does
-a step that moves a facet by more than skin/2.
+Broad phase: a pair is listed (a Verlet list built with a k-d tree on the displaced facet
+centres) when its centres are closer than r_p = rho_f + rho_f' + (s_f + s_f')/2, rho the largest
+distance from a facet's barycentre to its vertices (half the length in 2D) and s its Verlet skin,
+by default its own diameter 2 rho (or one uniform skin given by the user): the list follows the
+local facet size, so a contact zone refined far below the rest of the boundary lists few pairs.
+Each process sends the records of its own candidate facets to the processes whose bounding box
+of local facets (grown by the largest r_p) meets the box of its own facets; the boxes are
+gathered (one box per process). The list is rebuilt on every process when a candidate facet
+anywhere has moved more than half its skin since the last build (one logical reduction per step
+in ``prepare``): an unlisted pair's centres are then still farther apart than rho_f + rho_f', so
+its facets cannot touch. ``prepare`` checks both ends of the coming step (the flight is affine);
+every evaluation checks that the list is valid for its displacements and raises otherwise (never
+a silently incomplete list); so does a step that moves a facet by more than half its skin.
 """
 
 from __future__ import annotations
@@ -151,7 +154,8 @@ class PairContact:
     dem : DEMDiscretisation (2D or 3D); the candidate facets must be Neumann (boundary) facets.
     facets : process-local indices of the candidate boundary facets (the contact boundaries).
     self_contact : also pair facets of the same body (never facets that share a vertex).
-    skin : Verlet-list margin (m), default the largest candidate facet diameter (length in 2D).
+    skin : one Verlet-list margin (m) for every facet; default each facet's own diameter about its
+        barycentre (its length in 2D).
     tolerance : how far facets may interpenetrate at t = 0 (m).
     """
 
@@ -221,14 +225,18 @@ class PairContact:
         self._is_elastic_row = rows.elastic[own_rows[touched]]
         an = geom.facet_area_normals[self.cells, geom.facet_local[self.facets, 0]]
         self._grad_weights = an / geom.cell_volumes[self.cells, None]
-        # the largest facet diameter about its barycentre (the length in 2D): facets closer than
-        # that plus the skin are listed
-        reach = np.linalg.norm(self._facets.ends - self._facets.centre[:, None], axis=2).max(initial=0.0)
-        size = 2.0 * self.comm.allreduce(float(reach), op=MPI.MAX)
-        self.skin = float(size if skin is None else skin)
-        if not self.skin > 0:
+        # Verlet skins: each facet's own diameter about its barycentre (the length in 2D) unless
+        # one uniform skin is given; the list radius of a pair is its facets' reaches plus their
+        # mean skin (``_build``), so a refined contact zone lists few pairs.
+        if skin is not None and not skin > 0:
             raise ValueError(f"the Verlet skin must be > 0, got {skin}")
-        self.radius = size + self.skin
+        self._uniform_skin = None if skin is None else float(skin)
+        reach = _reach(self._facets)
+        skins = self._skins(reach)
+        # the smallest skin (a length scale for tolerances) and the largest pair radius (the
+        # reach of the broad phase's exchange between processes)
+        self.skin = self.comm.allreduce(float(skins.min(initial=np.inf)), op=MPI.MIN)
+        self.radius = self.comm.allreduce(float((2.0 * reach + skins).max(initial=0.0)), op=MPI.MAX)
         self._gauss = _gauss_legendre(d)
 
         # The body pairs (i < j) whose force is an output: both bodies hold candidate facets.
@@ -338,10 +346,18 @@ class PairContact:
         ucF = np.concatenate([uc, uc_ghosts])
         nl = len(local)
 
-        tree = scipy.spatial.cKDTree(F.centre + ucF)
+        x = F.centre + ucF
+        reach = _reach(F)
+        skins = self._skins(reach)
+        tree = scipy.spatial.cKDTree(x)
         pairs = tree.query_pairs(r, output_type="ndarray")
         i, j = pairs[:, 0], pairs[:, 1]
         keep = (i < nl) | (j < nl)  # with a local facet
+        # a pair's own radius: its facets' reaches plus their mean skin. Until a facet moves
+        # more than half its skin (``_moved``) an unlisted pair's centres stay farther apart
+        # than its reaches: the facets cannot touch.
+        dx = x[j] - x[i]
+        keep &= np.einsum("pi,pi->p", dx, dx) < (reach[i] + reach[j] + 0.5 * (skins[i] + skins[j]))**2
         keep &= np.einsum("pi,pi->p", F.normal[i], F.normal[j]) < 0  # facing facets only
         same = F.body[i] == F.body[j]
         if self.self_contact:
@@ -394,6 +410,7 @@ class PairContact:
             Z=Z, ZT=Z.T.tocsr(), N=(Z.T @ Z).tocsr(), Q=Qp, QT=Qp.T.tocsr(),
         )
         self._reference = ucF.copy()
+        self._half_skin2 = 0.25 * skins**2  # of the known facets
         self.rebuilds += 1
 
     def _directions(self, F: _Facets, i: np.ndarray, j: np.ndarray, n: np.ndarray):
@@ -493,19 +510,23 @@ class PairContact:
             if self.comm.allreduce(len(dropped), op=MPI.SUM):
                 raise RuntimeError(
                     "contact between bodies: touching pairs interpenetrate deeper than the pair list radius "
-                    f"({self.radius:.3e} m: facet centres farther apart are not listed), so a list rebuild would "
+                    "(their facets' reaches plus their mean skin: facet centres farther apart are not listed), so a "
+                    "list rebuild would "
                     "drop them and the energy would jump; the bodies are too soft for their load or speed (or pass a "
                     "larger skin)")
             vp = None if v is None else self.patch_values(v)
             if moving:
                 uc, step = self.free_displacements(up), dt * (self._R @ vp).reshape(-1, self.d)
-                too_far = self._moved(uc + step)
-                if self.comm.allreduce(too_far, op=MPI.LOR):
+                moved = np.einsum("ni,ni->n", uc + step - self._reference, uc + step - self._reference)
+                k = int(np.argmax(moved / self._half_skin2)) if len(moved) else 0
+                worst = (float(moved[k] / self._half_skin2[k]), float(np.linalg.norm(step[k])),
+                         float(2.0 * np.sqrt(self._half_skin2[k]))) if len(moved) else (0.0, 0.0, 0.0)
+                ratio, motion, skin = self.comm.allreduce(worst, op=MPI.MAX)  # the worst facet's
+                if ratio > 1.0:
                     raise RuntimeError(
-                        f"contact between bodies: a candidate facet moves "
-                        f"{self.comm.allreduce(float(np.linalg.norm(step, axis=1).max(initial=0)), op=MPI.MAX):.3e} m "
-                        f"in one step, more than half the Verlet skin ({self.skin:.3e} m): no pair list covers the "
-                        "step; reduce the time step or pass a larger skin")
+                        f"contact between bodies: a candidate facet moves {motion:.3e} m in one step, more than half "
+                        f"the Verlet skin ({skin:.3e} m): no pair list covers the step; reduce the time step or "
+                        "pass a larger skin")
         self.seconds += time.process_time() - start
         return up, vp
 
@@ -517,11 +538,24 @@ class PairContact:
         g, w, _ = self._state(np.arange(len(self.listed)), *self._pair_displacements(up), closed=True)
         return self.pair_keys()[(g < 0) & (w > 0)]
 
+    def _skins(self, reach: np.ndarray) -> np.ndarray:
+        """The Verlet skins of facets of reaches ``reach``: the uniform skin if one was given,
+        else each facet's diameter about its barycentre, 2 reach."""
+        return 2.0 * reach if self._uniform_skin is None else np.full(len(reach), self._uniform_skin)
+
     def _moved(self, uc: np.ndarray) -> bool:
         """Whether a facet known here (local or ghost) with free displacements ``uc`` has moved
-        more than skin/2 since the last list build (a pair not listed might then touch)."""
+        more than half its skin since the last list build (a pair not listed might then touch)."""
         moved = uc - self._reference
-        return bool(np.einsum("ni,ni->n", moved, moved).max(initial=0.0) > 0.25 * self.skin**2)
+        return bool((np.einsum("ni,ni->n", moved, moved) > self._half_skin2).any())
+
+    def motion_ratio(self, dp: np.ndarray) -> float:
+        """The largest motion of a candidate facet's free reconstruction for the patch values
+        ``dp`` of a displacement change, relative to half its skin (collective): a change with a
+        ratio up to 1 meets no pair that the list built before it misses."""
+        motion2 = np.einsum("ni,ni->n", *2 * ((self._R @ dp).reshape(-1, self.d),))
+        ratio = np.sqrt((motion2 / self._half_skin2).max(initial=0.0))
+        return self.comm.allreduce(float(ratio), op=MPI.MAX)
 
     def _check_listed(self, uc: np.ndarray):
         if self._moved(uc):
@@ -942,12 +976,6 @@ class PairContact:
         self.comm.Allreduce(MPI.IN_PLACE, out, op=MPI.SUM)
         return out[0], out[1]
 
-    def largest_motion(self, dp: np.ndarray) -> float:
-        """The largest motion of a candidate facet's free reconstruction for the patch values
-        ``dp`` of a displacement change (m, collective)."""
-        motion = np.linalg.norm((self._R @ dp).reshape(-1, self.d), axis=1).max(initial=0.0)
-        return self.comm.allreduce(float(motion), op=MPI.MAX)
-
     def switches_crossed(self, up: np.ndarray, dp: np.ndarray, alpha: float, piece: np.ndarray) -> np.ndarray:
         """Sorted keys (every process; collective) of the overlapping pairs whose gap, affine
         along the step u + tau d (patch values ``up``, ``dp``), reaches its switch g = 0 for some
@@ -1019,6 +1047,11 @@ class PairContact:
             self._scheme_b_rule = np.asarray(state["scheme_b_rule"], dtype=np.int64)
             self.rebuilds, self.evaluations = (int(x) for x in state["counters"])
             self.seconds = float(state["seconds"][0])
+
+
+def _reach(F: _Facets) -> np.ndarray:
+    """The largest distance from each facet's barycentre to its vertices (half the length in 2D)."""
+    return np.linalg.norm(F.ends - F.centre[:, None], axis=2).max(axis=1, initial=0.0)
 
 
 def _gauss_legendre(d: int) -> tuple[np.ndarray, np.ndarray]:

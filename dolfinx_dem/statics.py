@@ -58,8 +58,8 @@ method on the pieces rather than one solve per piece:
     A = {g_p(u) < 0, w_p > 0}, until the gradient has fallen by ``gradient_rtol``.
 
 Active sets are sorted arrays of pair keys (the pairs' global facet numbers): the Verlet list is
-rebuilt at any trial point where facets moved more than skin/2, and no step may move a facet by
-more than skin/2 (bodies must not pass through each other, where V is unbounded below). The
+rebuilt at any trial point where facets moved more than half their skins, and no step may move a
+facet by more than half its skin (bodies must not pass through each other, where V is unbounded below). The
 kinks at g_p = 0 get the treatment above, pairs in place of facets: pairs that keep switching
 (the set of pairs in contact returns to an earlier one), or against whose switch the line search
 stalls, are pinned on g_p = 0 by multipliers, with the same kink conditions (-mu_p between 0 and
@@ -532,13 +532,13 @@ def _minimise_pairs(dem, u, t: float, directions, norm0: float, linear: _Linear,
         # rounding of V (the last Newton steps) cannot be measured: the full step is taken, and
         # so is the first step onto newly pinned pairs (it moves them onto their switch).
         slope, v0, alpha = -rhs.dot(step), potential(u), 1.0
-        # No facet may move more than skin/2 in one step: the pairs it would meet are then all in
+        # No facet may move more than half its skin in one step: the pairs it would meet are then all in
         # the list built at u, and a long step (a piece that holds a body weakly, e.g. by a pair
         # of small overlap) cannot carry one body through another, where V is not bounded below.
-        motion = pc.largest_motion(pc.patch_values(step))
-        if motion > 0.5 * pc.skin:
-            step.scale(0.5 * pc.skin / motion)
-            slope *= 0.5 * pc.skin / motion
+        ratio = pc.motion_ratio(pc.patch_values(step))
+        if ratio > 1.0:
+            step.scale(1.0 / ratio)
+            slope /= ratio
         entering = len(pinned) and np.abs(gaps).max() > 1e-12 * pc.skin
         while -slope > 1e-13 * abs(v0) and not entering:
             u.copy(trial)
