@@ -57,12 +57,15 @@ by default its own diameter 2 rho (or one uniform skin given by the user): the l
 local facet size, so a contact zone refined far below the rest of the boundary lists few pairs.
 Each process sends the records of its own candidate facets to the processes whose bounding box
 of local facets (grown by the largest r_p) meets the box of its own facets; the boxes are
-gathered (one box per process). The list is rebuilt on every process when a candidate facet
-anywhere has moved more than half its skin since the last build (one logical reduction per step
-in ``prepare``): an unlisted pair's centres are then still farther apart than rho_f + rho_f', so
-its facets cannot touch. ``prepare`` checks both ends of the coming step (the flight is affine);
-every evaluation checks that the list is valid for its displacements and raises otherwise (never
-a silently incomplete list); so does a step that moves a facet by more than half its skin.
+gathered (one box per process). A process's list is stale when a facet it knows (local or ghost)
+has moved more than half its skin since it built the list: an unlisted pair's centres are then
+still farther apart than rho_f + rho_f', so its facets cannot touch. When a process is stale
+(one logical reduction per step in ``prepare``), a round of the lists exchanges the records
+(``_build``); the stale processes and those that receive a facet new to them rebuild, the others
+keep their lists: a fast facet does not rebuild the lists far from it. ``prepare`` checks both
+ends of the coming step (the flight is affine); every evaluation checks that the list is valid
+for its displacements and raises otherwise (never a silently incomplete list); so does a step
+that moves a facet by more than half its skin.
 """
 
 from __future__ import annotations
@@ -304,22 +307,38 @@ class PairContact:
         )
 
     # -- broad phase ---------------------------------------------------------------------------
-    def _build(self, u: PETSc.Vec):
-        """The Verlet list at displacements ``u``: ghost records from the processes whose own
-        facets may come near this process's local facets, then the facing pairs with a local
-        facet whose displaced centres are closer than ``radius`` (collective)."""
+    def _build(self, u: PETSc.Vec, stale: bool = True):
+        """A round of the Verlet lists at displacements ``u`` (collective): every process sends
+        the records of its own candidate facets to the processes whose local facets may come
+        near them; then a process rebuilds its list (the facing pairs with a local facet whose
+        displaced centres are closer than their radius) if it is ``stale`` or received a facet
+        it did not know, and the others keep theirs: a fast facet rebuilds the lists of the
+        processes near it only.
+
+        Why a kept list stays valid: each process checks its known facets against the places
+        they had at its last rebuild (``_moved``), so its own pairs are safe; a facet it does
+        not know was sent by no one, i.e. lies (at its owner's reference place and here) farther
+        than the largest pair radius from the box of this process's local facets (at their
+        references and here, whichever a rebuild in this round leaves as the reference): it
+        cannot reach one of them before one of the two moves more than half its skin, which
+        starts a new round."""
         comm, d = self.comm, self.d
         local = self._facets
+        nl = len(local)
         # Free displacements of the local facets at u: from the previous patch, which holds their
         # dofs, or (first build) through a scatter of those dofs only.
         scatter = self.scatter if self.scatter is not None else \
             PatchScatter(self._template, np.unique(local.R_dofs[local.R_dofs >= 0]))
         uc = _free(local, scatter.dofs, scatter.gather(u))
-        x = local.centre + uc
+        # the places of the local facets: here, and at their references if this process may keep
+        # its list
+        places = [uc] if stale else [uc, self._reference[:nl]]
+        x = [local.centre + p for p in places]
         own = slice(0, self.num_own)
         empty = np.array([np.inf] * d + [-np.inf] * d)
-        box_own = np.concatenate([x[own].min(axis=0), x[own].max(axis=0)]) if self.num_own else empty
-        box_local = np.concatenate([x.min(axis=0), x.max(axis=0)]) if len(x) else empty
+        box = lambda y: np.concatenate([y.min(axis=0), y.max(axis=0)]) if len(y) else empty  # noqa: E731
+        box_own = box(np.concatenate([y[own] for y in x]))
+        box_local = box(np.concatenate(x))
         boxes = np.array(comm.allgather(np.concatenate([box_own, box_local])))
         r = self.radius
         meets = np.all(boxes[:, 2 * d : 3 * d] - r <= box_own[d:], axis=1) & \
@@ -328,10 +347,12 @@ class PairContact:
         floats, ints = local.take(np.arange(self.num_own)).records()
         floats = np.concatenate([floats, uc[own]], axis=1)  # with the sender's displacements
         # to each process whose local facets' box, widened by r, meets the own facets: those
-        # own facets inside it (the only ones that can pair with its local facets)
+        # own facets inside it at either place (the only ones that can pair with its local facets)
         send = [None] * comm.size
         for q in np.flatnonzero(meets):
-            near = np.all((x[own] >= boxes[q, 2 * d : 3 * d] - r) & (x[own] <= boxes[q, 3 * d :] + r), axis=1)
+            near = np.zeros(self.num_own, dtype=bool)
+            for y in x:
+                near |= np.all((y[own] >= boxes[q, 2 * d : 3 * d] - r) & (y[own] <= boxes[q, 3 * d :] + r), axis=1)
             send[q] = (floats[near], ints[near])
         received = [m for m in comm.alltoall(send) if m is not None]
         if received:
@@ -342,9 +363,14 @@ class PairContact:
             uc_ghosts = rf[new, -d:]
         else:
             ghosts, uc_ghosts = local.take(np.empty(0, dtype=np.int64)), np.zeros((0, d))
+        if not stale and np.isin(ghosts.key, self.facets_all.key[nl:]).all():
+            # nothing new near this process: its list stands (the scatters are remade with the
+            # same dofs, as every process makes them after a round: their creation is collective)
+            self.scatter = PatchScatter(self._template, self.scatter.dofs)
+            self._facet_values = None
+            return
         F = _Facets.concatenate([local, ghosts])
         ucF = np.concatenate([uc, uc_ghosts])
-        nl = len(local)
 
         x = F.centre + ucF
         reach = _reach(F)
@@ -486,12 +512,13 @@ class PairContact:
     def prepare(self, u: PETSc.Vec, v: PETSc.Vec | None = None,
                 dt: float = 0.0) -> tuple[np.ndarray, np.ndarray | None]:
         """Make the Verlet list valid for the states u + tau v, 0 <= tau <= dt (u alone without
-        v): rebuild it at u on every process if a candidate facet anywhere would move more than
-        skin/2 from where it was at the last build. The free facet displacements are affine in
+        v): if a candidate facet known to some process would move more than half its skin from
+        where it was at that process's last build, a round of the lists at u (``_build``), which
+        rebuilds them on that process and on those that receive a facet new to them. The free facet displacements are affine in
         tau, so checking both ends covers the whole flight. ``MEMM`` calls this before every
         step's force integral, whatever the quadrature, and at ``initialise``; call it before
         evaluating forces or energies at displacements of your own. Collective (one logical
-        reduction). Returns the patch values of u and v (None without v), gathered after any
+        reduction, and the round's exchanges). Returns the patch values of u and v (None without v), gathered after any
         rebuild: arrays of patch values gathered before a rebuild are invalid after it."""
         start = time.process_time()
         up = self.patch_values(u)
@@ -504,7 +531,7 @@ class PairContact:
             stale = stale or self._moved(uc + step)
         if self.comm.allreduce(stale, op=MPI.LOR):
             touching = self._touching_keys(up, uc)
-            self._build(u)
+            self._build(u, stale)
             up = self.patch_values(u)
             dropped = np.setdiff1d(touching, self.pair_keys())
             if self.comm.allreduce(len(dropped), op=MPI.SUM):

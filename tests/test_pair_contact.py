@@ -877,3 +877,45 @@ def test_self_contact_closes_a_slot_in_3d():
         drift = max(drift, abs(diag.pseudo_energy - first.pseudo_energy) / first.mechanical)
         touched += c.touching(c.patch_values(stepper.u))
     assert touched >= 5 and drift < 1e-12
+
+
+@pytest.mark.mpi
+def test_a_list_round_rebuilds_only_the_lists_near_moving_facets():
+    """Two discs collide while two more rest 1.2 m below them (farther than any pair radius),
+    every boundary a candidate: the rounds of the Verlet lists that the moving facets start
+    rebuild the lists of the processes that know a moving facet only; the others keep theirs
+    (on 2 and 3 processes the deterministic partition leaves one with resting discs alone). The
+    motion equals that of one process to rounding: a kept list is complete."""
+
+    def run(comm):
+        centres = [(0.14, 2.27), (0.36, 2.27), (0.14, 1.07), (0.36, 1.07)]
+        mesh = meshes.create_discs(comm, [(c, 0.1) for c in centres], 0.04)[0]
+        dem = DEMDiscretisation(mesh, SOFT, "B")
+        dem.set_contact_boundary(_compat.exterior_facets(mesh))
+        stepper = MEMM(dem, 0.2 * dem.stable_time_step())
+        velocity = lambda x: approach(x) * (x[:, 1] > 1.67)[:, None]  # noqa: E731
+        stepper.initialise(dem.create_vector(), cell_vector(dem, velocity))
+        for _ in range(150):
+            stepper.step()
+        c = dem.pair_contact
+        moving = c.facets_all.centre[:, 1] > 1.67
+        assert moving.any() or c.rebuilds == 1  # a process that knows no moving facet never rebuilt
+        assert not moving.any() or c.rebuilds > 3
+        x = dem.geometry.cell_centres[: dem.n_owned]
+        return dem, stepper, c, x
+
+    dem, stepper, c, x = run(MPI.COMM_WORLD)
+    comm = dem.comm
+    if comm.size > 1:
+        assert comm.allreduce(c.rebuilds == 1, op=MPI.LOR)  # some process kept its list throughout
+    serial_dem, serial, _, serial_x = run(MPI.COMM_SELF)
+    assert serial_dem.pair_contact.rebuilds > 3
+    # the same cells by their barycentres: the displacements agree to rounding
+    import scipy.spatial
+
+    distance, found = scipy.spatial.cKDTree(serial_x).query(x)
+    assert distance.max(initial=0.0) < 1e-12
+    u_serial = serial.u.array_r.reshape(-1, 2)
+    scale = np.abs(u_serial).max()
+    assert scale > 1e-3  # the moving discs moved
+    assert np.abs(stepper.u.array_r.reshape(-1, 2) - u_serial[found]).max(initial=0.0) < 1e-12 * scale
