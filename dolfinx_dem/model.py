@@ -137,7 +137,7 @@ def build(scene: Mapping, comm: MPI.Comm = MPI.COMM_WORLD) -> DEMDiscretisation:
         c = scene["contact"]
         facets = np.unique(np.concatenate([_boundary_facets(mesh, tags, names, b, f"contact.boundary[{k}]")
                                            for k, b in enumerate(c["boundary"])]))
-        dem.set_contact_boundary(facets, c.get("self_contact", False), c.get("tolerance", 0.0))
+        dem.set_contact_boundary(facets, c.get("self_contact", False), c.get("tolerance", 0.0), c.get("skin"))
     return dem
 
 

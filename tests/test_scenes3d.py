@@ -88,3 +88,11 @@ def test_a_static_3d_scene_with_contact_between_bodies_is_refused_before_the_run
     with pytest.raises(scenes.SceneError, match="contact between bodies .* in 2D, not 3D"):
         simulation.run(scenes.validate(scene), tmp_path / "out", MPI.COMM_SELF, quiet=True)
     assert not (tmp_path / "out").exists()
+
+
+def test_contact_skin_is_a_scene_key():
+    """``contact.skin``: one Verlet skin for every facet (> 0), passed to the pair list."""
+    with pytest.raises(scenes.SceneError, match="contact.skin' must be > 0"):
+        scenes.load("two-balls", {"mesh.h": 0.06, "contact.skin": 0.0})
+    dem = model.build(scenes.load("two-balls", {"mesh.h": 0.06, "contact.skin": 0.05}), MPI.COMM_SELF)
+    assert dem.pair_contact.skin == 0.05

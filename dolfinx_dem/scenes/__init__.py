@@ -157,6 +157,7 @@ SCHEMA = {
                                      for i, x in enumerate(_list(k, v))],
         "self_contact": lambda k, v, d: _bool(k, v),
         "tolerance": lambda k, v, d: _number(k, v, nonnegative=True),
+        "skin": lambda k, v, d: _number(k, v, positive=True),
     },
     "prescribed": [{
         "tag": lambda k, v, d: _integer(k, v, minimum=0),
