@@ -88,6 +88,7 @@ class PairContactStatistics:
             "contact_pairs_scheme_b_rule": c.scheme_b_pairs,
             "first_contact_time": self.first_contact,
             "max_penetration": self.penetration,
+            "max_penetration_over_facet_size": self.penetration / c.facet_size,
             "contact_seconds": comm.allreduce(c.seconds, op=MPI.MAX),
             "contact_fraction": comm.allreduce(c.seconds / stepping_seconds if stepping_seconds > 0 else 0.0,
                                                op=MPI.MAX),
