@@ -236,6 +236,9 @@ class PairContact:
         self._uniform_skin = None if skin is None else float(skin)
         reach = _reach(self._facets)
         skins = self._skins(reach)
+        # the mean diameter of the candidate facets (about their barycentres): the scale of the
+        # penetration the reconstructions may leave (``penetration``)
+        self.facet_size = 2.0 * self.comm.allreduce(float(reach[: self.num_own].sum()), op=MPI.SUM) / self.num_facets
         # the smallest skin (a length scale for tolerances) and the largest pair radius (the
         # reach of the broad phase's exchange between processes)
         self.skin = self.comm.allreduce(float(skins.min(initial=np.inf)), op=MPI.MIN)

@@ -93,6 +93,7 @@ class PairContactStatistics:
             "contact_pairs_scheme_b_rule": c.scheme_b_pairs,
             "first_contact_time": self.first_contact,
             "max_penetration": self.penetration,
+            "max_penetration_over_facet_size": self.penetration / c.facet_size,
             # all contact work of the steps, outputs included, over the steps and those outputs
             "contact_seconds": comm.allreduce(c.seconds + self.output_seconds, op=MPI.MAX),
             "contact_output_seconds": comm.allreduce(self.output_seconds, op=MPI.MAX),

@@ -96,3 +96,18 @@ def test_contact_skin_is_a_scene_key():
         scenes.load("two-balls", {"mesh.h": 0.06, "contact.skin": 0.0})
     dem = model.build(scenes.load("two-balls", {"mesh.h": 0.06, "contact.skin": 0.05}), MPI.COMM_SELF)
     assert dem.pair_contact.skin == 0.05
+
+
+@pytest.mark.parametrize("ratio, noted", [(0.28, False), (1.3, True)])
+def test_a_deep_penetration_is_noted(tmp_path, monkeypatch, capsys, ratio, noted):
+    """A run whose contact surfaces interpenetrated by more than half the candidate facets' size
+    prints a note (3D facet mosaics can open holes under a strong load); two-balls' default
+    (0.28) does not."""
+    from dolfinx_dem import cli
+
+    summary = {"scene": "two-balls", "method": "dem-B", "status": "completed", "conservative": True,
+               "n_steps": 1, "dt": 1.0, "n_cells": 1, "wall_time_s": 1.0, "pseudo_energy_rel_drift": 0.0,
+               "max_penetration": ratio * 0.0334, "max_penetration_over_facet_size": ratio}
+    monkeypatch.setattr(simulation, "run", lambda *args, **kwargs: summary)
+    assert cli.main(["run", "two-balls", "--out", str(tmp_path / "out")]) == 0
+    assert ("note: the contact surfaces interpenetrated" in capsys.readouterr().out) == noted
