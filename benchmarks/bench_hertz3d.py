@@ -239,6 +239,7 @@ difference between the DEM's and the FEM's F on the same mesh is
 | criterion | verdict |
 |---|---|
 {criteria}
+{verdict_note(results)}
 
 Measured alongside (not the issue's criteria): whether the magnitude of each error term above
 decreases from level to level, and whether the DEM's contact force equals the FEM's on every mesh
@@ -248,6 +249,14 @@ decreases from level to level, and whether the DEM's contact force equals the FE
 |---|---|---|
 {diagnostics}
 """
+
+
+def verdict_note(results: dict) -> str:
+    if results["criteria"]["dem_a_difference_decreasing"]:
+        return ""
+    return ("\nThe a criterion is not met: the difference from the finest FEM run does not decrease from "
+            "level to level. Why, and what the DEM's a converges to, is measured in "
+            "[`hertz3d_diagnostics.md`](hertz3d_diagnostics.md) (its conclusion).\n")
 
 
 def values(v: list) -> str:
