@@ -200,15 +200,27 @@ def markdown(data: dict, bench: dict) -> str:
     exponent = (np.log(loads[-1]["a"] / loads[0]["a"]) / np.log(loads[-1]["contact_force"] / loads[0]["contact_force"])
                 if len(loads) >= 2 else float("nan"))
     fine = [r for r in dem if r["scale"] >= GROUPS[0][0]]
-    side = {r["scale"]: r["facet_side"] for r in dem}
+    sides = {r["scale"]: r["facet_side"] for r in dem}
+    uniform = groups(dem, "a_uniform_exact_load", a_ref)
+    barycentre = groups(dem, "a_point_exact_load", a_ref)
+    fem_groups = groups([r | {"facet_side": sides[r["scale"]]} for r in fem if r["scale"] in sides], "a_exact_load", a_ref)
     scatter = "\n".join(
-        f"| {n} | {side:.4g} | {pct(mu)} | {100 * sd:.3f}% | {pct(mp)} | {100 * sp:.3f}% | {pct(mf)} | {100 * sf:.3f}% |"
-        for (n, side, mu, sd), (_, _, mp, sp), (_, _, mf, sf) in zip(
-            groups(dem, "a_uniform_exact_load", a_ref), groups(dem, "a_point_exact_load", a_ref),
-            groups([r | {"facet_side": side[r["scale"]]} for r in fem if r["scale"] in side], "a_exact_load", a_ref)))
-    barycentre = np.array([r["a_point_exact_load"] / a_ref - 1 for r in fine])
-    barycentre_mean, barycentre_error = barycentre.mean(), barycentre.std(ddof=1) / np.sqrt(len(barycentre))
-    finest = max(dem, key=lambda r: r["cells"])
+        f"| {n} | {side:.4g} | {pct(mu)} | {100 * su:.3f}% | {pct(mb)} | {100 * sb:.3f}% | {pct(mf)} | {100 * sf:.3f}% |"
+        for (n, side, mu, su), (_, _, mb, sb), (_, _, mf, sf) in zip(uniform, barycentre, fem_groups))
+    errors = [g[3] / np.sqrt(g[0]) for g in barycentre]  # standard errors of the group means
+    group_means = ", ".join(f"{pct(g[2])} +- {100 * e:.3f}%" for g, e in zip(barycentre, errors))
+    within = all(abs(g[2]) <= 2 * e for g, e in zip(barycentre, errors))
+    scatters = ", ".join(f"{100 * g[3]:.3f}% (facet side {1e3 * g[1]:.1f} mm)" for g in barycentre)
+    uniform_means = ", ".join(f"{pct(g[2])} at {1e3 * g[1]:.1f} mm" for g in uniform)
+    values = np.array([r["a_point_exact_load"] / a_ref - 1 for r in fine])
+    mean, error = values.mean(), values.std(ddof=1) / np.sqrt(len(values))
+    first, finest = dem[0], max(dem, key=lambda r: r["cells"])
+    weight = {r["scale"]: r["contact_force"] / r["exact_quarter_load"] - 1 for r in dem}
+    fem_pair = bench["fem"][-2]["a_exact_load"] / bench["fem"][-1]["a_exact_load"] - 1
+    fem_within = max(abs(r["a_exact_load"] / a_ref - 1) for r in fem if r["scale"] >= 1.8)
+    kink = max(max((abs(k["a_at_r_f"] - k["a_at_0"]) / r["a_uniform"] for k in r["kink_facets"]), default=0.0)
+               for r in dem if r["scale"] >= 2.4)
+    issue = ", ".join(pct(r["a"] / bench["fem"][-1]["a"] - 1) for r in bench["dem"])
     force = max(abs(r["contact_force"] / r["weight"] - 1) for r in dem)
     runs = "\n".join(f"- `{r['command']}` on {r['date']}, commit {r['commit']} (load average {r['load']})"
                      for r in data["runs"])
@@ -261,39 +273,39 @@ part of the error that depends on where the facets fall relative to the edge of 
 
 - Statics: the contact force equals the weight of the meshed quarter on every DEM run, to
   {force:.1e} (relative); the FEM's is the same on the same mesh (hertz3d.md).
-- The meshed ball's weight: F / (P/4) - 1 from {pct(dem[0]['contact_force'] / dem[0]['exact_quarter_load'] - 1)} (s = {dem[0]['scale']:g}) to
-  {pct(finest['contact_force'] / finest['exact_quarter_load'] - 1)} (s = {finest['scale']:g}); with the measured exponent {exponent:.3f} of a(P) it
-  lowers a by a third of that in both methods. At P, the FEM's two finest runs (hertz3d.md,
-  s = {bench['fem'][-2]['scale']:g} and {bench['fem'][-1]['scale']:g}) agree to {pct(bench['fem'][-2]['a_exact_load'] / bench['fem'][-1]['a_exact_load'] - 1)}, and its levels s >= 1.8 here lie within
-  {100 * max(abs(r['a_exact_load'] / a_ref - 1) for r in fem if r['scale'] >= 1.8):.3f}% below ref: the FEM's raw a converges from below because its mesh's weight
-  does; at P it is converged to a few 0.01 %.
+- The meshed ball's weight: F / (P/4) - 1 from {pct(weight[first['scale']])} (s = {first['scale']:g}) to
+  {pct(weight[finest['scale']])} (s = {finest['scale']:g}); with the measured exponent {exponent:.3f} of a(P) it lowers a by
+  a third of that in both methods. At P, the FEM's two finest runs (hertz3d.md, s =
+  {bench['fem'][-2]['scale']:g} and {bench['fem'][-1]['scale']:g}) agree to {pct(fem_pair)}, and its levels s >= 1.8 here lie within {100 * fem_within:.3f}%
+  of ref: the FEM's raw a converges from below because its mesh's weight does; at P it is
+  converged to a few 0.01 %.
 - The two DEM measures differ by the triangles' own second moments, a uniform / a barycentre =
-  sqrt(1 + spread): {50 * dem[0]['spread']:.2f}% of a (s = {dem[0]['scale']:g}) down to {50 * finest['spread']:.3f}% (s = {finest['scale']:g}), smoothly,
-  like the facet side squared. The scatter between nearby levels is the same for both (table
+  sqrt(1 + spread): about {50 * first['spread']:.2f}% of a (s = {first['scale']:g}) down to {50 * finest['spread']:.3f}% (s = {finest['scale']:g}),
+  smoothly, like the facet side squared. The scatter between nearby levels is the same for both (table
   above): it is in the facet forces, not in the measure.
 - At P, a barycentre shows no offset from ref above the scatter: its group means (table above)
-  are {", ".join(f"{pct(g[2])} +- {100 * g[3] / np.sqrt(g[0]):.3f}%" for g in groups(dem, "a_point_exact_load", a_ref))} (+- the standard error),
-  of either sign and within two standard errors of 0; over all {len(fine)} levels s >= {GROUPS[0][0]:g} the mean is
-  {pct(barycentre_mean)} +- {100 * barycentre_error:.3f}%. a uniform carries in addition the spread (previous item).
+  are {group_means} (+- the standard error){", each within two standard errors of 0" if within else ""};
+  over all {len(fine)} levels s >= {GROUPS[0][0]:g} the mean is {pct(mean)} +- {100 * error:.3f}%. a uniform carries in
+  addition the spread (previous item).
 - Kink facets (held on g_f = 0 with a force between 0 and r_f) are 0 to 2 per level; one of them
-  moves a by up to {100 * max(max((abs(k['a_at_r_f'] - k['a_at_0']) / r['a_uniform'] for k in r['kink_facets']), default=0) for r in dem if r['scale'] >= 2.4):.2f}% over its admissible interval on the levels s >= 2.4.
+  moves a by up to {100 * kink:.2f}% over its admissible interval on the levels s >= 2.4.
 
 ## Conclusion
 
 The DEM's contact radius converges to the FEM's. At the same load, the moment measure of the
 DEM's facet forces (at the barycentres, where the method measures the gaps) differs from the
-converged FEM by {pct(barycentre_mean)} on average over {len(fine)} levels, with no trend above a
-scatter between nearby levels (standard deviation) of {", ".join(f"{100 * g[3]:.3f}% (facet side {1e3 * g[1]:.1f} mm)" for g in groups(dem, "a_point_exact_load", a_ref))},
+converged FEM by {pct(mean)} on average over {len(fine)} levels, with no trend above a scatter
+between nearby levels (standard deviation) of {scatters},
 which decreases with the facet size. The measure of hertz3d.md (the issue's: facet pressures uniform on
 their triangles) adds the triangles' own second moments, a bias of +{50 * finest['spread']:.3f}% of a on the
 finest level that falls like the facet side squared; the raw difference from the finest FEM run
-adds the meshed ball's weight, {pct((finest['contact_force'] / finest['exact_quarter_load']) ** (1 / 3) - 1)} of a on the finest level, shared by the FEM.
+adds the meshed ball's weight, {pct((1 + weight[finest['scale']]) ** (1 / 3) - 1)} of a on the finest level, shared by the FEM.
 On the four levels of hertz3d.md these terms are of the same size as the scatter and partly
-cancel, so the difference ({", ".join(pct(r["a"] / bench["fem"][-1]["a"] - 1) for r in bench["dem"])}) does not decrease from level to
+cancel, so the difference ({issue}) does not decrease from level to
 level, and on levels one factor sqrt(2) apart it cannot be expected to: the scatter at one level
 is as large as the mean change to the next. What the measurements support: at P, the mean
 difference of the issue's measure from the FEM falls with the facet size
-({", ".join(f"{pct(g[2])} at {1e3 * g[1]:.1f} mm" for g in groups(dem, "a_uniform_exact_load", a_ref))}), about as the
+({uniform_means}), about as the
 triangles' own second moments do, and no offset of the DEM's facet forces from the FEM larger
 than the scatter remains.
 """
