@@ -11,7 +11,8 @@ or ``fem-P2``), the FEM on one more level than the DEM; its finest run is the re
 Reported per run: the contact radius a (moment measure about the z axis,
 a = sqrt(5/2 int r^2 p / int p), ``hertz.contact_radius_moments``: for the DEM the facet
 pressures are uniform on their triangles, for the FEM the Nitsche multiplier is integrated by
-quadrature), the approach -u_z at the top (0, 0, 2R), the contact force on the quarter (in the
+quadrature; for the DEM also ``a_barycentre``, the same moments of its facet forces at the
+facets' barycentres, summary key ``contact_radius_barycentre``), the approach -u_z at the top (0, 0, 2R), the contact force on the quarter (in the
 JSON), the relative differences against the finest FEM and against Hertz
 (a_H = (3 P R / (4 E*))^(1/3), P = f 4/3 pi R^3, delta_H = a_H^2 / R), and the wall times.
 Hertz's delta is the approach of points far from the contact; the top of a ball loaded by its
