@@ -281,8 +281,9 @@ part of the error that depends on where the facets fall relative to the edge of 
   converged to a few 0.01 %.
 - The two DEM measures differ by the triangles' own second moments, a uniform / a barycentre =
   sqrt(1 + spread): about {50 * first['spread']:.2f}% of a (s = {first['scale']:g}) down to {50 * finest['spread']:.3f}% (s = {finest['scale']:g}),
-  smoothly, like the facet side squared. The scatter between nearby levels is the same for both (table
-  above): it is in the facet forces, not in the measure.
+  smoothly, like the facet side squared. Their difference is smooth from level to level, so the
+  scatter between nearby levels (table above, of the same size for both; a uniform's includes
+  the change of the spread within a group) is in the facet forces, not in the measure.
 - At P, a barycentre shows no offset from ref above the scatter: its group means (table above)
   are {group_means} (+- the standard error){", each within two standard errors of 0" if within else ""};
   over all {len(fine)} levels s >= {GROUPS[0][0]:g} the mean is {pct(mean)} +- {100 * error:.3f}%. a uniform carries in
