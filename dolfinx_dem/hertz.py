@@ -210,3 +210,25 @@ def triangle_pressure_moments(
     w -= (w @ n)[..., None] * n
     mean_r2 = (np.sum(w**2, axis=(1, 2)) + np.sum(w.sum(axis=1) ** 2, axis=1)) / 12.0
     return float(P.sum()), float(P @ mean_r2)
+
+
+def point_force_moments(
+    points: npt.ArrayLike, force: npt.ArrayLike, point: npt.ArrayLike, axis: npt.ArrayLike
+) -> tuple[float, float]:
+    """Moments (m0, m2) of point forces: ``force_f`` at ``points[f]`` (n, 3), r the distance
+    from the line through ``point`` along ``axis``: ``m0 = sum force_f``, ``m2 = sum force_f r_f^2``.
+
+    The DEM's facet forces act where its facets' gaps are measured, at their barycentres; the
+    same forces spread uniformly over their triangles (``triangle_pressure_moments``) have the
+    larger m2, by each triangle's own second moment about its barycentre, force_f sum |e_i|^2 / 12
+    (e_i its vertices about the barycentre, perpendicular to the axis).
+    """
+    x = np.asarray(points, dtype=np.float64)
+    P = np.asarray(force, dtype=np.float64).reshape(-1)
+    if x.ndim != 2 or x.shape[1] != 3 or x.shape[0] != P.shape[0]:
+        raise ValueError(f"points must have the shape (n, 3) and force (n,), got {x.shape}, {P.shape}")
+    n = np.asarray(axis, dtype=np.float64)
+    n = n / np.linalg.norm(n)
+    w = x - np.asarray(point, dtype=np.float64)
+    w -= (w @ n)[:, None] * n
+    return float(P.sum()), float(P @ np.sum(w**2, axis=1))

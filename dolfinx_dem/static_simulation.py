@@ -9,7 +9,10 @@ samples no pressure) and the summary keys ``contact_half_width``, ``contact_half
 one obstacle ``contact_radius``, the moment measure
 ``a = sqrt(5/2 integral r^2 p / integral p)`` about the axis through the obstacle's point along its
 normal (``hertz.contact_radius_moments``; exactly a for a Hertz profile, also on a symmetric part
-of the zone such as a quarter: put the point under the ball's centre).
+of the zone such as a quarter: put the point under the ball's centre), with each facet's pressure
+uniform on its triangle, and ``contact_radius_barycentre``, the same moments of the facet forces
+at the facets' barycentres (``hertz.point_force_moments``: where the DEM measures the gaps; smaller
+by the triangles' own second moments, O(h^2), docs/validation/hertz3d_diagnostics.md).
 
 The contact half-width ``contact_half_width`` is the moment measure of the contact pressure,
 ``a = 2 sqrt(integral (x - xc)^2 p / integral p)`` (``hertz.contact_half_width_moments``; exactly a
@@ -247,8 +250,11 @@ def _contact_summary(dem, u, result, path: pathlib.Path, axis=None) -> dict:
             a, p0, _ = hertz.contact_half_width_fit(x[:, 0], p)
             out["contact_half_width_fit"], out["fitted_max_pressure"] = a, p0
         if axis is not None and touching.sum() >= 3:
-            moments = hertz.triangle_pressure_moments(vertices[touching], (p * areas)[touching], *axis)
-            out["contact_radius"] = hertz.contact_radius_moments(*moments)
+            forces = (p * areas)[touching]
+            out["contact_radius"] = hertz.contact_radius_moments(
+                *hertz.triangle_pressure_moments(vertices[touching], forces, *axis))
+            out["contact_radius_barycentre"] = hertz.contact_radius_moments(
+                *hertz.point_force_moments(x[touching], forces, *axis))
         return out
 
     summary = io.call_on_root(comm, figures)

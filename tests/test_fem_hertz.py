@@ -24,6 +24,7 @@ from dolfinx_dem.hertz import (
     contact_radius_moments,
     facet_pressure_moments,
     hertz_analytic_3d,
+    point_force_moments,
     triangle_pressure_moments,
 )
 
@@ -253,6 +254,17 @@ def test_contact_radius_of_hertz_profile_on_triangles():
     force = 3e6 * np.sqrt(np.clip(1 - (rc / a) ** 2, 0, None)) * area
     assert contact_radius_moments(*triangle_pressure_moments(tris, force, [0, 0, 0], [0, 0, 1])) == \
         pytest.approx(a, rel=1e-3)
+    # the same forces at the barycentres: smaller m2, by the triangles' own second moments
+    centres = tris.mean(axis=1)
+    m0, m2 = point_force_moments(centres, force, [0, 0, 0], [0, 0, 1])
+    e = tris - centres[:, None, :]
+    assert m2 == pytest.approx(triangle_pressure_moments(tris, force, [0, 0, 0], [0, 0, 1])[1]
+                               - force @ np.sum(e**2, axis=(1, 2)) / 12, rel=1e-12)
+    assert contact_radius_moments(m0, m2) == pytest.approx(a, rel=1e-3)
+    # off the axis: the force 2 at (4, 3, 9) about the axis z through (1, -1, 0), r^2 = 9 + 16
+    assert point_force_moments([[4.0, 3.0, 9.0]], [2.0], [1.0, -1.0, 0.0], [0.0, 0.0, 3.0]) == (2.0, 50.0)
+    with pytest.raises(ValueError, match="shape"):
+        point_force_moments([[0.0, 0.0]], [1.0], [0, 0, 0], [0, 0, 1])
     with pytest.raises(ValueError, match="no contact"):
         contact_radius_moments(0.0, 1.0)
     hz = hertz_analytic_3d(0.2, 25e6, 0.25, 3e5)  # P = f 4/3 pi R^3, a^3 = 3 P R / (4 E*)
