@@ -1,9 +1,10 @@
 """A flat contact: two soft cubes (0.2 m, E = 100 Pa, nu = 0.2, rho = 100 kg/m^3, scheme B, gmsh
 size H) 0.01 m apart along x meet head-on at +-0.3 m/s (the material and speed of `two-balls`);
 the largest `penetration` over the run and the contact states at the given times
-(``contact_states.save``, for ``contact_coverage.py``). OFFSET shifts the right cube in y and z.
+(``contact_states.save``, for ``contact_coverage.py``). OFFSET shifts the right cube in y and z;
+``--no-sliding``: the diagnostic of ``contact_states.py``.
 
-    .venv/bin/python benchmarks/two_cubes_impact.py H OFFSET OUT/tag 0.05 0.1 0.2 0.3
+    .venv/bin/python benchmarks/two_cubes_impact.py H OFFSET OUT/tag 0.05 0.1 0.2 0.3 [--no-sliding]
 """
 
 import pathlib
@@ -13,7 +14,7 @@ import numpy as np
 from mpi4py import MPI
 
 sys.path.insert(0, str(pathlib.Path(__file__).resolve().parents[1] / "tests"))
-from contact_states import save  # noqa: E402
+from contact_states import save, without_sliding  # noqa: E402
 from helpers import cell_vector, gmsh_mesh  # noqa: E402
 
 from dolfinx_dem import _compat  # noqa: E402
@@ -23,7 +24,10 @@ from dolfinx_dem.memm import MEMM  # noqa: E402
 
 
 def main():
-    h, offset, out, times = float(sys.argv[1]), float(sys.argv[2]), sys.argv[3], [float(t) for t in sys.argv[4:]]
+    args = [a for a in sys.argv[1:] if a != "--no-sliding"]
+    if "--no-sliding" in sys.argv:
+        without_sliding()
+    h, offset, out, times = float(args[0]), float(args[1]), args[2], [float(t) for t in args[3:]]
 
     def build(gmsh):
         for k, corner in enumerate([(0.0, -0.1, -0.1), (0.21, -0.1 + offset, -0.1 + offset)]):
