@@ -26,7 +26,6 @@ itself on a 1D bar and 1.1-1.4 lambda_max on the 2D and 3D scenes, so the bound'
 from __future__ import annotations
 
 import numpy as np
-import scipy.sparse
 from mpi4py import MPI
 from petsc4py import PETSc
 
@@ -81,8 +80,8 @@ def largest_eigenvalue_bound(factored: FactoredStiffness, row_keys: np.ndarray, 
     local row, increasing along them, that orders the rows of all processes independently of the
     partition; ghost_owners : the rank owning each ghost dof of ``factored``; inverse_mass : M^-1
     with the layout of the dofs. Costs ``iterations`` passes over the rows of Q through each owned
-    dof, a transpose of the local rows (the size of Q, freed on return) and fetching the rows of
-    other processes that reach owned dofs once (from the neighbours only).
+    dof, the pattern of the transposed local rows (4 bytes per entry of Q, freed on return) and
+    fetching the rows of other processes that reach owned dofs once (from the neighbours only).
     """
     if iterations < 1:
         raise ValueError(f"iterations must be >= 1, got {iterations}")
@@ -90,20 +89,22 @@ def largest_eigenvalue_bound(factored: FactoredStiffness, row_keys: np.ndarray, 
     if len(row_keys) != factored.n_rows or np.any(np.diff(row_keys) <= 0):
         raise ValueError("row_keys must increase along the local rows of Q")
     start, stop = inverse_mass.getOwnershipRange()
-    # Q^T on the owned dofs: for each, this process's rows through it (in row order, so in key
-    # order), and the rows of other processes through it.
-    nnz = int(factored.rowptr[-1])
-    own = scipy.sparse.csr_matrix((factored.vals[:nnz], factored.cols[:nnz], factored.rowptr),
-                                  shape=(factored.n_rows, n + len(factored.ghosts)))
-    qt = own.tocsc()
-    del own
+    # The pattern of Q^T on the owned dofs: for each, this process's rows through it (in row
+    # order, so in key order), and the rows of other processes through it; the kernel reads the
+    # values from the rows (4 bytes per entry of Q, not the 12 of a transposed copy).
+    qt_ptr = np.empty(n + 1, dtype=np.int32)
+    lib.dem_transpose_pattern(factored.n_rows, pointer(factored.rowptr), pointer(factored.cols), n,
+                              pointer(qt_ptr), ffi.NULL)
+    qt_rows = np.empty(int(qt_ptr[-1]), dtype=np.int32)
+    lib.dem_transpose_pattern(factored.n_rows, pointer(factored.rowptr), pointer(factored.cols), n,
+                              pointer(qt_ptr), pointer(qt_rows))
     keys2, ptr2, global2, vals2 = _rows_of_other_processes(factored, row_keys, ghost_owners, start)
     mine2 = (global2 >= start) & (global2 < stop)
     rows2 = np.repeat(np.arange(len(keys2), dtype=np.int32), np.diff(ptr2))
     order = np.argsort(global2[mine2], kind="stable")  # by owned dof, rows in key order
     dof2 = global2[mine2][order] - start
     qt2_ptr = np.concatenate([[0], np.cumsum(np.bincount(dof2, minlength=n))]).astype(np.int32)
-    qt2_rows, qt2_vals = np.ascontiguousarray(rows2[mine2][order]), np.ascontiguousarray(vals2[mine2][order])
+    qt2_rows = np.ascontiguousarray(rows2[mine2][order])
     # the dofs the rows read: the held ones (owned, then ghosts), then any others
     ghosts = factored.ghosts
     by_value = np.argsort(ghosts)
@@ -124,11 +125,11 @@ def largest_eigenvalue_bound(factored: FactoredStiffness, row_keys: np.ndarray, 
     x = inverse_mass.duplicate()
     x_reach = PETSc.Vec().createSeq(len(reach), comm=self_comm)
     scatter = PETSc.Scatter().create(x, PETSc.IS().createGeneral(reach, comm=self_comm), x_reach, None)
-    arrays = (pointer(qt.indptr), pointer(qt.indices), pointer(qt.data), pointer(factored.rowptr),
-              pointer(factored.cols), pointer(factored.vals), pointer(np.ascontiguousarray(row_keys)),
-              pointer(qt2_ptr), pointer(qt2_rows), pointer(qt2_vals), pointer(ptr2), pointer(cols2),
-              pointer(vals2), pointer(keys2))
-    keep = (row_keys, qt2_ptr, qt2_rows, qt2_vals, ptr2, cols2, vals2, keys2)  # noqa: F841 (alive for the pointers)
+    row_keys = np.ascontiguousarray(row_keys)
+    arrays = (pointer(qt_ptr), pointer(qt_rows), pointer(factored.rowptr), pointer(factored.cols),
+              pointer(factored.vals), pointer(row_keys), pointer(qt2_ptr), pointer(qt2_rows), pointer(ptr2),
+              pointer(cols2), pointer(vals2), pointer(keys2))
+    keep = (row_keys, qt_ptr, qt_rows, qt2_ptr, qt2_rows, ptr2, cols2, vals2, keys2)  # noqa: F841 (alive for the pointers)
     s = np.sqrt(inverse_mass.array_r)
     acc = np.zeros(len(reach))  # the kernel's workspace, left zero
     r = np.empty(n)
