@@ -134,10 +134,16 @@ def _sort_rows_globally(Q: scipy.sparse.csr_matrix, columns: np.ndarray) -> None
     order = np.argsort(columns, kind="stable").astype(np.int32)  # local column of each global rank
     rank = np.empty_like(order)
     rank[order] = np.arange(len(order), dtype=np.int32)
-    Q.indices[:] = rank[Q.indices]
+    _renumber(Q.indices, rank)
     Q.has_sorted_indices = False
     Q.sort_indices()
-    Q.indices[:] = order[Q.indices]
+    _renumber(Q.indices, order)
+
+
+def _renumber(indices: np.ndarray, new: np.ndarray, block: int = 2**22) -> None:
+    """indices[k] = new[indices[k]] in place, a block at a time (no temporary of the size of Q)."""
+    for a in range(0, len(indices), block):
+        indices[a : a + block] = new[indices[a : a + block]]
 
 
 class DEMDiscretisation:
@@ -245,15 +251,16 @@ class DEMDiscretisation:
         #: extrapolated interior facets (reconstruction.py), counted once: by the owner of their jump row
         self.num_extrapolated_facets = self.comm.allreduce(
             int(np.isin(rec.extrapolated_facets, mine).sum()), op=MPI.SUM)
+        n_own_jumps = len(mine)
+        del mark, marked, facet_marks, interior, c, touches, g, first_cell, owned_jumps, order, mine  # before Q
 
         # The energy rows a = Q u + q this process holds: S rows of the owned cells, then J rows of
-        # the interior facets of the owned cells; the first ``len(mine)`` J rows are its own. Its
+        # the interior facets of the owned cells; the first ``n_own_jumps`` J rows are its own. Its
         # own rows, a prefix of rows.Q, are its part of Q: the force is -Q^T (Q w + q) + f (see
         # ``force``), applied in one pass over them (``factored``). Q is stored once, with the
         # held dofs as columns (``columns`` maps them to global dofs); a PETSc copy is made only
         # on demand (``assemble_Q``).
-        self.columns = (geom.cell_global[:, None] * d + np.arange(d)).ravel()  # local dof -> global dof
-        self.rows: EnergyRows = compute_energy_rows(geom, materials, rec, self.n_owned, jump_facets, len(mine))
+        self.rows: EnergyRows = compute_energy_rows(geom, materials, rec, self.n_owned, jump_facets, n_own_jumps)
         _sort_rows_globally(self.rows.Q, self.columns)
         self._n_elastic_rows = self.n_owned * d * (d + 1) // 2  # local rows of Q that belong to S
         self._n_own_rows = int(self.rows.owned.sum())
@@ -552,6 +559,12 @@ class DEMDiscretisation:
     def ghost_owners(self) -> np.ndarray:
         """The rank owning each ghost dof of ``factored`` (the held dofs of other processes)."""
         return np.repeat(self.geometry.cell_owner[self.n_owned:], self.d)
+
+    @property
+    def columns(self) -> np.ndarray:
+        """The global dof of each local dof (the held cells' dofs, owned first), the columns of
+        ``rows.Q`` (made on each call: 16 bytes per cell not held)."""
+        return (self.geometry.cell_global[:, None] * self.d + np.arange(self.d)).ravel()
 
     def assemble_Q(self) -> PETSc.Mat:
         """A PETSc copy of Q = [S; J] (rows: this process's own rows; columns: the dofs), for
