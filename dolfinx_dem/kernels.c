@@ -137,13 +137,14 @@ void dem_memm_update(int64_t n_blocks, int32_t bs, double dt, double c, double *
   sums[2] += external;
 }
 
-/* The pattern of the columns j < n_cols of a CSR (rowptr, cols) of n_rows rows: the rows with
- * an entry in column j, increasing, are rows[ptr[j] .. ptr[j + 1]). With rows NULL only ptr
- * (n_cols + 1 entries) is computed; then, with rows of ptr[n_cols] entries, the rows (ptr is
- * used as the cursor and restored). A transpose without values: 4 bytes per entry. */
+/* The pattern of the columns first <= j < first + n_cols of a CSR (rowptr, cols) of n_rows rows:
+ * the rows with an entry in column j, increasing, are rows[ptr[j - first] .. ptr[j - first + 1]).
+ * With rows NULL only ptr (n_cols + 1 entries) is computed; then, with rows of ptr[n_cols]
+ * entries, the rows (ptr is used as the cursor and restored). A transpose without values: 4 bytes
+ * per entry. */
 void dem_transpose_pattern(int64_t n_rows, const int32_t *restrict rowptr,
-                           const int32_t *restrict cols, int32_t n_cols, int32_t *restrict ptr,
-                           int32_t *restrict rows)
+                           const int32_t *restrict cols, int32_t first, int32_t n_cols,
+                           int32_t *restrict ptr, int32_t *restrict rows)
 {
   if (!rows)
   {
@@ -151,27 +152,27 @@ void dem_transpose_pattern(int64_t n_rows, const int32_t *restrict rowptr,
       ptr[j] = 0;
     for (int64_t i = 0; i < n_rows; ++i)
       for (int32_t q = rowptr[i]; q < rowptr[i + 1]; ++q)
-        if (cols[q] < n_cols)
-          ++ptr[cols[q] + 1];
+        if (cols[q] >= first && cols[q] - first < n_cols)
+          ++ptr[cols[q] - first + 1];
     for (int32_t j = 0; j < n_cols; ++j)
       ptr[j + 1] += ptr[j];
     return;
   }
   for (int64_t i = 0; i < n_rows; ++i)
     for (int32_t q = rowptr[i]; q < rowptr[i + 1]; ++q)
-      if (cols[q] < n_cols)
-        rows[ptr[cols[q]]++] = (int32_t)i;
+      if (cols[q] >= first && cols[q] - first < n_cols)
+        rows[ptr[cols[q] - first]++] = (int32_t)i;
   for (int32_t j = n_cols; j > 0; --j) /* ptr[j] is now the old ptr[j + 1]: shift back */
     ptr[j] = ptr[j - 1];
   ptr[0] = 0;
 }
 
 /* Row sums of |Q^T Q| weighted by x, for the stable time step bound:
- *   r_i = sum_j |(Q^T Q)_ij| x_j   for each of the n_out owned dofs i
- * (x NULL: r_i = (Q^T Q)_ii = sum_k Q_ki^2). The rows of Q through dof i come from two sets,
- * each a CSR (rowptr, cols, vals) with a key per row: this process's rows, listed for dof i by
- * (qt_ptr, qt_rows) in increasing key (``dem_transpose_pattern``), and rows of other processes
- * (set 2, the same layout); both are visited merged in increasing key, a numbering of the rows
+ *   r_i = sum_j |(Q^T Q)_ij| x_j   for the n_out owned dofs i = first, first + 1, ...
+ * (x NULL: r_i = (Q^T Q)_ii = sum_k Q_ki^2; r is indexed from first). The rows of Q through dof i
+ * come from two sets, each a CSR (rowptr, cols, vals) with a key per row: this process's rows,
+ * listed for dof i by (qt_ptr, qt_rows) at i - first in increasing key (``dem_transpose_pattern``
+ * of the same columns), and rows of other processes (set 2, listed by qt2_ptr at i); both are visited merged in increasing key, a numbering of the rows
  * that does not depend on the partition, and each row's columns in the order of the global dof
  * numbering: the same sums, to the bit, on any number of processes. Column numbers index x and
  * acc (zeros of the length of x, left zero); owned dof i is column i in both sets, and Q_ki is
@@ -194,7 +195,7 @@ static inline double row_entry(const dem_row_set *set, int32_t k, int64_t i)
   return 0.0;
 }
 
-void dem_gram_abs_rowsums(int64_t n_out, const int32_t *restrict qt_ptr,
+void dem_gram_abs_rowsums(int64_t first, int64_t n_out, const int32_t *restrict qt_ptr,
                           const int32_t *restrict qt_rows, const int32_t *restrict rowptr,
                           const int32_t *restrict cols, const double *restrict vals,
                           const int64_t *restrict key, const int32_t *restrict qt2_ptr,
@@ -205,13 +206,13 @@ void dem_gram_abs_rowsums(int64_t n_out, const int32_t *restrict qt_ptr,
 {
   const dem_row_set sets[2] = {{qt_ptr, qt_rows, rowptr, cols, vals, key},
                                {qt2_ptr, qt2_rows, rowptr2, cols2, vals2, key2}};
-  for (int64_t i = 0; i < n_out; ++i)
+  for (int64_t i = first; i < first + n_out; ++i)
   {
     double s = 0.0;
     for (int pass = (x ? 0 : 1); pass < 2; ++pass) /* 0: accumulate, 1: harvest (or diagonal) */
     {
-      int32_t p[2] = {qt_ptr[i], qt2_ptr[i]};
-      const int32_t end[2] = {qt_ptr[i + 1], qt2_ptr[i + 1]};
+      int32_t p[2] = {qt_ptr[i - first], qt2_ptr[i]};
+      const int32_t end[2] = {qt_ptr[i - first + 1], qt2_ptr[i + 1]};
       while (p[0] < end[0] || p[1] < end[1])
       {
         int which = 0;
