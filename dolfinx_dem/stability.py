@@ -52,7 +52,9 @@ def _rows_of_other_processes(factored: FactoredStiffness, row_keys: np.ndarray, 
     and their CSR with global column numbers, rows in increasing key."""
     comm, n_od = factored.comm, factored.n_owned
     rowptr, cols, vals = factored.rowptr, factored.cols, factored.vals
-    positions = np.flatnonzero(cols[: rowptr[-1]] >= n_od)
+    block = 2**22  # entries scanned at a time (no mask of the size of Q)
+    positions = np.concatenate([np.flatnonzero(cols[a : min(a + block, rowptr[-1])] >= n_od) + a
+                                for a in range(0, int(rowptr[-1]), block)] + [np.empty(0, dtype=np.int64)])
     rows = np.searchsorted(rowptr, positions, side="right") - 1
     pairs = np.unique(rows.astype(np.int64) * comm.size + ghost_owners[cols[positions] - n_od])
     rows, destinations = pairs // comm.size, pairs % comm.size
@@ -167,14 +169,14 @@ def largest_eigenvalue_bound(factored: FactoredStiffness, row_keys: np.ndarray, 
     w = np.maximum(w / comm.allreduce(w.max() if n else 0.0, op=MPI.MAX), np.finfo(float).tiny)
     bound = np.inf
     for _ in range(iterations):
-        x.array[:] = s * w
+        np.multiply(s, w, out=x.array)
         scatter.scatter(x, x_reach, PETSc.InsertMode.INSERT_VALUES, PETSc.ScatterMode.FORWARD)
         rowsums(pointer(x_reach.array))
-        b = s * r  # (|Kt| w)_i
-        local = (b / w).max() if n else 0.0
+        b = np.multiply(s, r, out=r)  # (|Kt| w)_i, in place (vectors of the mesh's size: memory)
+        local = np.divide(b, w, out=w).max() if n else 0.0  # w is replaced below
         bound = min(bound, comm.allreduce(local, op=MPI.MAX))
         top = comm.allreduce(b.max() if n else 0.0, op=MPI.MAX)
-        w = np.maximum(b / top, np.finfo(float).tiny)  # a dof without stiffness keeps a positive weight
+        w = np.maximum(np.divide(b, top, out=w), np.finfo(float).tiny, out=w)  # a dof without stiffness keeps a positive weight
     x.destroy()
     x_reach.destroy()
     scatter.destroy()
