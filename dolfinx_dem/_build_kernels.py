@@ -21,12 +21,13 @@ ffibuilder.cdef(
                          const double *minv, double *u, const double *v_next, double *v_prev,
                          const double *f, int32_t advance, const int32_t *body, double *momentum,
                          double *sums);
-    void dem_gram_abs_rowsums(int64_t n_out, const int32_t *qt_ptr, const int32_t *qt_rows,
-                              const double *qt_vals, const int32_t *rowptr, const int32_t *cols,
-                              const double *vals, const int64_t *key, const int32_t *qt2_ptr,
-                              const int32_t *qt2_rows, const double *qt2_vals, const int32_t *rowptr2,
-                              const int32_t *cols2, const double *vals2, const int64_t *key2,
-                              const double *x, double *r, double *acc);
+    void dem_transpose_pattern(int64_t n_rows, const int32_t *rowptr, const int32_t *cols, int32_t first,
+                               int32_t n_cols, int32_t *ptr, int32_t *rows);
+    void dem_gram_abs_rowsums(int64_t first, int64_t n_out, const int32_t *qt_ptr, const int32_t *qt_rows,
+                              const int32_t *rowptr, const int32_t *cols, const double *vals,
+                              const int64_t *key, const int32_t *qt2_ptr, const int32_t *qt2_rows,
+                              const int32_t *rowptr2, const int32_t *cols2, const double *vals2,
+                              const int64_t *key2, const double *x, double *r, double *acc);
     void dem_overlap(int64_t n, int32_t dim, const int64_t *p, const double *XA, const double *mA,
                      const double *nuA, const double *sizeA, const double *XB, const double *mB,
                      const double *nuB, const double *sizeB, const double *s, double *w, double *dw);

@@ -134,10 +134,16 @@ def _sort_rows_globally(Q: scipy.sparse.csr_matrix, columns: np.ndarray) -> None
     order = np.argsort(columns, kind="stable").astype(np.int32)  # local column of each global rank
     rank = np.empty_like(order)
     rank[order] = np.arange(len(order), dtype=np.int32)
-    Q.indices[:] = rank[Q.indices]
+    _renumber(Q.indices, rank)
     Q.has_sorted_indices = False
     Q.sort_indices()
-    Q.indices[:] = order[Q.indices]
+    _renumber(Q.indices, order)
+
+
+def _renumber(indices: np.ndarray, new: np.ndarray, block: int = 2**22) -> None:
+    """indices[k] = new[indices[k]] in place, a block at a time (no temporary of the size of Q)."""
+    for a in range(0, len(indices), block):
+        indices[a : a + block] = new[indices[a : a + block]]
 
 
 class DEMDiscretisation:
@@ -244,21 +250,27 @@ class DEMDiscretisation:
         self.num_multi_neumann_cells = self.comm.allreduce(len(self.multi_neumann_cells), op=MPI.SUM)
         #: extrapolated interior facets (reconstruction.py), counted once: by the owner of their jump row
         self.num_extrapolated_facets = self.comm.allreduce(
-            int(np.isin(rec.stencils.extrapolated, mine).sum()), op=MPI.SUM)
+            int(np.isin(rec.extrapolated_facets, mine).sum()), op=MPI.SUM)
+        n_own_jumps = len(mine)
+        del mark, marked, facet_marks, interior, c, touches, g, first_cell, owned_jumps, order, mine  # before Q
 
         # The energy rows a = Q u + q this process holds: S rows of the owned cells, then J rows of
-        # the interior facets of the owned cells; the first ``len(mine)`` J rows are its own. Its
+        # the interior facets of the owned cells; the first ``n_own_jumps`` J rows are its own. Its
         # own rows, a prefix of rows.Q, are its part of Q: the force is -Q^T (Q w + q) + f (see
         # ``force``), applied in one pass over them (``factored``). Q is stored once, with the
         # held dofs as columns (``columns`` maps them to global dofs); a PETSc copy is made only
         # on demand (``assemble_Q``).
-        self.columns = (geom.cell_global[:, None] * d + np.arange(d)).ravel()  # local dof -> global dof
-        self.rows: EnergyRows = compute_energy_rows(geom, materials, rec, self.n_owned, jump_facets, len(mine))
+        self.rows: EnergyRows = compute_energy_rows(geom, materials, rec, self.n_owned, jump_facets, n_own_jumps)
         _sort_rows_globally(self.rows.Q, self.columns)
         self._n_elastic_rows = self.n_owned * d * (d + 1) // 2  # local rows of Q that belong to S
         self._n_own_rows = int(self.rows.owned.sum())
-        self._Q_dirichlet = self.rows.Q_dirichlet[: self._n_own_rows]
-        self._Q_traction = (self.rows.QF[: self._n_own_rows] @ rec.N).tocsr()  # the traction lift's rows
+        Q_dirichlet = self.rows.Q_dirichlet[: self._n_own_rows]
+        Q_traction = (self.rows.QF[: self._n_own_rows] @ rec.N).tocsr()  # the traction lift's rows
+        # the own rows that the data reach (a boundary layer), and their rows of Q_D and Q_N only
+        self._lift_rows = np.flatnonzero(np.diff(Q_dirichlet.indptr) + np.diff(Q_traction.indptr)).astype(np.int32)
+        self._Q_dirichlet, self._Q_traction = Q_dirichlet[self._lift_rows], Q_traction[self._lift_rows]
+        del Q_dirichlet, Q_traction
+        self._q = np.zeros(self._n_own_rows)  # q(t) on the own rows, zero off ``_lift_rows``
         self._dirichlet_condition = condition[is_dirichlet]  # of each Dirichlet facet
         self.factored = FactoredStiffness(self.comm, self.rows.Q, self._n_own_rows, self._n_elastic_rows,
                                           self.n_owned * d, self.columns[self.n_owned * d:])
@@ -280,8 +292,8 @@ class DEMDiscretisation:
 
         self.external_force = self.create_vector()  # f(t): the body force and the tractions' (P^T t_w)
         self._rhs = self.create_vector()  # f(t) - Q^T q(t)
-        self._held = self.factored.create_vector()  # u at the held dofs (``gradient``, ``reactions``)
-        self._work = self.create_vector()
+        self._held = None  # u at the held dofs (``gradient``, ``reactions``), made on first use
+        self._work = None  # a work vector of ``energies`` and ``prescribed_values``, made on first use
         self._lift_time = None
         self._time_dependent = any(bc.time_dependent for _, bc in self._dirichlet + self._tractions)
         self._update_data(0.0)
@@ -333,7 +345,7 @@ class DEMDiscretisation:
         self._own_tractions = np.searchsorted(rec.traction_facets, own)
         self._traction_weights = np.repeat(geom.facet_areas[own], d)  # |f| per own traction dof
         dofs = (own[:, None] * d + np.arange(d)).ravel()
-        self._P_traction = rec.R[dofs].T.tocsr()  # (held dofs, own traction dofs)
+        self._P_traction = rec.R[dofs].T  # (held dofs, own traction dofs); CSC: no pointer per held dof
         self._DN_traction = (rec.D[dofs], rec.N[dofs])
         self._traction_force = self.factored.create_vector() if len(self._tractions) else None
 
@@ -429,7 +441,7 @@ class DEMDiscretisation:
         ``force``: the force vector to sum instead of ``force(u, t)`` (statics: the Lagrangian's,
         whose multipliers carry the pairs held on a contact switch). Collective (a force evaluation)."""
         d = self.d
-        f = self.force(u, t, self._work) if force is None else force
+        f = self.force(u, t, self._work_vector()) if force is None else force
         out = np.zeros((len(self.prescribed), 2, d))
         counts = np.zeros(len(self.prescribed))
         for k, cells in enumerate(self._prescribed_cells):
@@ -549,6 +561,12 @@ class DEMDiscretisation:
         """The rank owning each ghost dof of ``factored`` (the held dofs of other processes)."""
         return np.repeat(self.geometry.cell_owner[self.n_owned:], self.d)
 
+    @property
+    def columns(self) -> np.ndarray:
+        """The global dof of each local dof (the held cells' dofs, owned first), the columns of
+        ``rows.Q`` (made on each call: 16 bytes per cell not held)."""
+        return (self.geometry.cell_global[:, None] * self.d + np.arange(self.d)).ravel()
+
     def assemble_Q(self) -> PETSc.Mat:
         """A PETSc copy of Q = [S; J] (rows: this process's own rows; columns: the dofs), for
         PETSc products and studies; the caller destroys it. Forces and energies do not need it:
@@ -604,7 +622,7 @@ class DEMDiscretisation:
             return
         g, tr = self.dirichlet_values(t).ravel(), self.traction_values(t).ravel()
         self._g, self._t = g, tr
-        self._q = self._Q_dirichlet @ g + self._Q_traction @ tr  # (local rows of Q,)
+        self._q[self._lift_rows] = self._Q_dirichlet @ g + self._Q_traction @ tr
         self.body_force.copy(self.external_force)
         self._traction_constant = 0.0
         if self._traction_force is not None:
@@ -659,9 +677,6 @@ class DEMDiscretisation:
         rows that Dirichlet values or traction lifts reach: (local row indices (int32), values); q
         is zero elsewhere."""
         self._update_data(t)
-        if not hasattr(self, "_lift_rows"):
-            self._lift_rows = np.flatnonzero(np.diff(self._Q_dirichlet.indptr) + np.diff(self._Q_traction.indptr)
-                                             ).astype(np.int32)
         return self._lift_rows, self._q[self._lift_rows]
 
     # -- forces and energies -----------------------------------------------------------------
@@ -689,7 +704,7 @@ class DEMDiscretisation:
         global sums, and ``potential``, their total: the potential whose exact gradient ``force``
         computes."""
         self._update_data(t)
-        squares = self.factored.residual(self.relative_displacement(u), self._q, self._work)
+        squares = self.factored.residual(self.relative_displacement(u), self._q, self._work_vector())
         local = np.array([0.5 * squares[0], 0.5 * squares[1], -self.external_potential(u, t)])
         for c in self.contacts:  # this process's part of the contact energy changes
             local[:2] += c.energy_correction(c.patch_values(u))
@@ -714,8 +729,16 @@ class DEMDiscretisation:
             np.add.at(G, cells, change)
         return G
 
+    def _work_vector(self) -> PETSc.Vec:
+        """A work vector of the dof layout (``energies``, ``prescribed_values``), made on first use."""
+        if self._work is None:
+            self._work = self.create_vector()
+        return self._work
+
     def _held_values(self, u: PETSc.Vec) -> np.ndarray:
         """u at the held dofs (owned, then ghosts), a view of ``_held``. Collective."""
+        if self._held is None:
+            self._held = self.factored.create_vector()
         held = self.factored.local_array(self._held)
         held[: self.n_owned * self.d] = u.array_r
         self._held.ghostUpdate(PETSc.InsertMode.INSERT_VALUES, PETSc.ScatterMode.FORWARD)
@@ -733,8 +756,9 @@ class DEMDiscretisation:
         Dirichlet facet are not included. At equilibrium the reactions balance the loads."""
         self._update_data(t)
         if not hasattr(self, "_reaction_rows"):
-            rows = np.flatnonzero(np.diff(self._Q_dirichlet.indptr))
-            self._reaction_rows = rows, self.rows.Q[rows], self._Q_dirichlet[rows].T.tocsr()
+            fixed = np.diff(self._Q_dirichlet.indptr) > 0  # of the lift rows
+            rows = self._lift_rows[fixed]
+            self._reaction_rows = rows, self.rows.Q[rows], self._Q_dirichlet[fixed].T.tocsr()
         rows, Q, QD_T = self._reaction_rows
         dVdg = QD_T @ (Q @ self._held_values(u) + self._q[rows])
         if self._traction_force is not None:

@@ -102,8 +102,9 @@ class FactoredStiffness:
         w (owned dofs; None: zero) and out are vectors of the dof layout. Returns the squares of
         a summed over this process's elastic and stabilisation rows. Collective."""
         if self._work is None:
-            self._work = (self.create_vector(), self.create_vector(), np.zeros(self.n_rows), np.zeros(2))
-        x, z, a, sums = self._work
+            self._work = (self.create_vector(), self.create_vector(), np.zeros(2))
+        x, z, sums = self._work
+        a = np.empty(self.n_rows)  # not kept: 8 bytes per row, as much as the vectors of 3 dofs per row
         x_local = self.local_array(x)
         if w is None:
             x_local[:] = 0.0

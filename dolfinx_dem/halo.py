@@ -165,15 +165,18 @@ def build_halo(mesh, dofs: np.ndarray, owned_range: tuple[int, int],
     ints = np.concatenate(held_ints)
     floats = np.concatenate(held_floats)
     mark_columns = {name: slice(2 + 3 * nv + k * nv, 2 + 3 * nv + (k + 1) * nv) for k, name in enumerate(names)}
+    # copies of the columns, not views: a view would keep the whole record array (14 integers
+    # per 2D cell) alive in the geometry
+    column = lambda columns: np.ascontiguousarray(ints[:, columns])  # noqa: E731
     return LocalCells(
         num_owned=n,
-        global_index=ints[:, 0],
-        owner=ints[:, 1],
+        global_index=column(0),
+        owner=column(1),
         layer=np.concatenate(held_layer),
         vertices=floats.reshape(-1, nv, d),
-        vertex_ids=ints[:, vertex_columns],
-        facet_ids=ints[:, 2 + 2 * nv : 2 + 3 * nv],
-        marks={name: ints[:, mark_columns[name]] for name in names},
+        vertex_ids=column(vertex_columns),
+        facet_ids=column(slice(2 + 2 * nv, 2 + 3 * nv)),
+        marks={name: column(mark_columns[name]) for name in names},
         owned_range=(int(start), int(stop)),
         num_cells_global=local.num_cells_global,
     )

@@ -137,42 +137,82 @@ void dem_memm_update(int64_t n_blocks, int32_t bs, double dt, double c, double *
   sums[2] += external;
 }
 
+/* The pattern of the columns first <= j < first + n_cols of a CSR (rowptr, cols) of n_rows rows:
+ * the rows with an entry in column j, increasing, are rows[ptr[j - first] .. ptr[j - first + 1]).
+ * With rows NULL only ptr (n_cols + 1 entries) is computed; then, with rows of ptr[n_cols]
+ * entries, the rows (ptr is used as the cursor and restored). A transpose without values: 4 bytes
+ * per entry. */
+void dem_transpose_pattern(int64_t n_rows, const int32_t *restrict rowptr,
+                           const int32_t *restrict cols, int32_t first, int32_t n_cols,
+                           int32_t *restrict ptr, int32_t *restrict rows)
+{
+  if (!rows)
+  {
+    for (int32_t j = 0; j <= n_cols; ++j)
+      ptr[j] = 0;
+    for (int64_t i = 0; i < n_rows; ++i)
+      for (int32_t q = rowptr[i]; q < rowptr[i + 1]; ++q)
+        if (cols[q] >= first && cols[q] - first < n_cols)
+          ++ptr[cols[q] - first + 1];
+    for (int32_t j = 0; j < n_cols; ++j)
+      ptr[j + 1] += ptr[j];
+    return;
+  }
+  for (int64_t i = 0; i < n_rows; ++i)
+    for (int32_t q = rowptr[i]; q < rowptr[i + 1]; ++q)
+      if (cols[q] >= first && cols[q] - first < n_cols)
+        rows[ptr[cols[q] - first]++] = (int32_t)i;
+  for (int32_t j = n_cols; j > 0; --j) /* ptr[j] is now the old ptr[j + 1]: shift back */
+    ptr[j] = ptr[j - 1];
+  ptr[0] = 0;
+}
+
 /* Row sums of |Q^T Q| weighted by x, for the stable time step bound:
- *   r_i = sum_j |(Q^T Q)_ij| x_j   for each of the n_out owned dofs i
- * (x NULL: r_i = (Q^T Q)_ii = sum_k Q_ki^2). The rows of Q through dof i come from two sets,
- * each a CSR (rowptr, cols, vals) with a key per row: this process's rows, listed for dof i by
- * (qt_ptr, qt_rows, qt_vals) in increasing key, and rows of other processes (set 2, the same
- * layout); both are visited merged in increasing key, a numbering of the rows that does not
- * depend on the partition, and each row's columns in the order of the global dof numbering: the
- * same sums, to the bit, on any number of processes. Column numbers index x and acc (zeros of
- * the length of x, left zero). Row i of Q^T Q is accumulated in acc, then harvested: the first
- * visit of a column j adds |acc_j| x_j and zeroes acc_j, so later visits add 0. */
+ *   r_i = sum_j |(Q^T Q)_ij| x_j   for the n_out owned dofs i = first, first + 1, ...
+ * (x NULL: r_i = (Q^T Q)_ii = sum_k Q_ki^2; r is indexed from first). The rows of Q through dof i
+ * come from two sets, each a CSR (rowptr, cols, vals) with a key per row: this process's rows,
+ * listed for dof i by (qt_ptr, qt_rows) at i - first in increasing key (``dem_transpose_pattern``
+ * of the same columns), and rows of other processes (set 2, listed by qt2_ptr at i); both are visited merged in increasing key, a numbering of the rows
+ * that does not depend on the partition, and each row's columns in the order of the global dof
+ * numbering: the same sums, to the bit, on any number of processes. Column numbers index x and
+ * acc (zeros of the length of x, left zero); owned dof i is column i in both sets, and Q_ki is
+ * read from row k (no transposed values are stored). Row i of Q^T Q is accumulated in acc,
+ * then harvested: the first visit of a column j adds |acc_j| x_j and zeroes acc_j, so later
+ * visits add 0. */
 typedef struct
 {
   const int32_t *qt_ptr, *qt_rows, *rowptr, *cols;
-  const double *qt_vals, *vals;
+  const double *vals;
   const int64_t *key;
 } dem_row_set;
 
-void dem_gram_abs_rowsums(int64_t n_out, const int32_t *restrict qt_ptr,
-                          const int32_t *restrict qt_rows, const double *restrict qt_vals,
-                          const int32_t *restrict rowptr, const int32_t *restrict cols,
-                          const double *restrict vals, const int64_t *restrict key,
-                          const int32_t *restrict qt2_ptr, const int32_t *restrict qt2_rows,
-                          const double *restrict qt2_vals, const int32_t *restrict rowptr2,
+/* Q_ki: the entry of column i in row k of a set (each column appears once in a row). */
+static inline double row_entry(const dem_row_set *set, int32_t k, int64_t i)
+{
+  for (int32_t q = set->rowptr[k]; q < set->rowptr[k + 1]; ++q)
+    if (set->cols[q] == i)
+      return set->vals[q];
+  return 0.0;
+}
+
+void dem_gram_abs_rowsums(int64_t first, int64_t n_out, const int32_t *restrict qt_ptr,
+                          const int32_t *restrict qt_rows, const int32_t *restrict rowptr,
+                          const int32_t *restrict cols, const double *restrict vals,
+                          const int64_t *restrict key, const int32_t *restrict qt2_ptr,
+                          const int32_t *restrict qt2_rows, const int32_t *restrict rowptr2,
                           const int32_t *restrict cols2, const double *restrict vals2,
                           const int64_t *restrict key2, const double *restrict x,
                           double *restrict r, double *restrict acc)
 {
-  const dem_row_set sets[2] = {{qt_ptr, qt_rows, rowptr, cols, qt_vals, vals, key},
-                               {qt2_ptr, qt2_rows, rowptr2, cols2, qt2_vals, vals2, key2}};
-  for (int64_t i = 0; i < n_out; ++i)
+  const dem_row_set sets[2] = {{qt_ptr, qt_rows, rowptr, cols, vals, key},
+                               {qt2_ptr, qt2_rows, rowptr2, cols2, vals2, key2}};
+  for (int64_t i = first; i < first + n_out; ++i)
   {
     double s = 0.0;
     for (int pass = (x ? 0 : 1); pass < 2; ++pass) /* 0: accumulate, 1: harvest (or diagonal) */
     {
-      int32_t p[2] = {qt_ptr[i], qt2_ptr[i]};
-      const int32_t end[2] = {qt_ptr[i + 1], qt2_ptr[i + 1]};
+      int32_t p[2] = {qt_ptr[i - first], qt2_ptr[i]};
+      const int32_t end[2] = {qt_ptr[i - first + 1], qt2_ptr[i + 1]};
       while (p[0] < end[0] || p[1] < end[1])
       {
         int which = 0;
@@ -182,13 +222,18 @@ void dem_gram_abs_rowsums(int64_t n_out, const int32_t *restrict qt_ptr,
           which = 1;
         const dem_row_set *set = &sets[which];
         const int32_t k = set->qt_rows[p[which]];
-        const double a = set->qt_vals[p[which]];
         ++p[which];
         if (!x)
+        {
+          const double a = row_entry(set, k, i);
           s += a * a;
+        }
         else if (pass == 0)
+        {
+          const double a = row_entry(set, k, i);
           for (int32_t q = set->rowptr[k]; q < set->rowptr[k + 1]; ++q)
             acc[set->cols[q]] += a * set->vals[q];
+        }
         else
           for (int32_t q = set->rowptr[k]; q < set->rowptr[k + 1]; ++q)
           {

@@ -187,7 +187,7 @@ class MEMM:
         and the energy rows y^0 = Q u^0 by a true product. On prescribed bodies u^0 = U(t0) and
         v^0 is their velocity (``impose``), whatever u0 and v0 hold there."""
         self.t0, self.n = float(t0), 0
-        f = self.problem.create_vector()
+        f = self._state.impulse  # free until the first step: no vector of the mesh's size more
         for contact in self.problem.contacts:
             contact.prepare(u0)
         u0, v0 = u0.copy(), v0.copy()

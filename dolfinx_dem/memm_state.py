@@ -45,7 +45,8 @@ class StepState:
         self.u = K.create_vector()
         self.v_prev = K.create_vector()  # v^{n-1/2}
         self.v_next = K.create_vector()  # v^{n+1/2}: the pass over Q reads it at the ghost dofs
-        self._x = K.create_vector()  # the pass's input when refreshing: rel(u)
+        # the pass's input when refreshing, rel(u): u itself when no body is free
+        self._x = K.create_vector() if len(problem.free_bodies[1]) else None
         self._z = [K.create_vector(), K.create_vector()]  # Q^T y^n, and Q^T y^{n+1} accumulated
         self._ghosts = [K.local_array(z)[K.n_owned:] for z in self._z]  # zeroed before accumulating
         self.y = np.zeros(K.n_rows)
@@ -78,7 +79,7 @@ class StepState:
         velocities = (self.v_prev, self.v_next)
         self._pass = {(id(x), id(z)): K.bind(x, self.y, z, self.sums,
                                              *((self._slot, self._means) if x in velocities else ()))
-                      for x in (self.u, self.v_prev, self.v_next, self._x) for z in self._z}
+                      for x in (self.u, self.v_prev, self.v_next, self._x) if x is not None for z in self._z}
         self._p = {id(v): pointer(v.array) for v in (self.u, self.v_prev, self.v_next, *self._z, self.impulse)}
         self._p[id(None)] = ffi.NULL  # no impulse
         self._p_mass, self._p_minv, self._p_sums = pointer(self._mass), pointer(self._minv), pointer(self.sums)

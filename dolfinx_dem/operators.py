@@ -20,6 +20,7 @@ demand from the reconstruction (``DEMDiscretisation.gradient``).
 from __future__ import annotations
 
 import dataclasses
+import itertools
 
 import numpy as np
 import scipy.sparse
@@ -80,80 +81,122 @@ def facet_gradient(geom: MeshGeometry, cells: np.ndarray) -> scipy.sparse.csr_ma
                                    shape=(len(cells) * d * d, geom.num_facets * d))
 
 
+#: Rows of Q formed at a time (``compute_energy_rows``): bounds the set-up's intermediate products.
+BLOCK_ROWS = 2**18
+
+
+def _stack_rows(blocks: list, n_cols: int) -> scipy.sparse.csr_matrix:
+    """The CSR blocks stacked (vstack), int32 indices. The list is emptied while the blocks are
+    copied, each block freed once copied: with the result's arrays filled as they are touched,
+    the blocks and the result never both exist in full."""
+    n_rows, nnz = sum(b.shape[0] for b in blocks), sum(b.nnz for b in blocks)
+    if nnz >= 2**31:
+        raise ValueError(f"{nnz} entries in the rows of one process: more than int32 indices address")
+    indptr = np.empty(n_rows + 1, dtype=np.int32)
+    indices, data = np.empty(nnz, dtype=np.int32), np.empty(nnz)
+    indptr[0] = row = at = 0
+    while blocks:
+        b = blocks.pop(0)
+        indptr[row + 1 : row + 1 + b.shape[0]] = b.indptr[1:] + at
+        indices[at : at + b.nnz], data[at : at + b.nnz] = b.indices, b.data
+        row, at = row + b.shape[0], at + b.nnz
+        del b
+    return scipy.sparse.csr_matrix((data, indices, indptr), shape=(n_rows, n_cols))
+
+
 def compute_energy_rows(
     geom: MeshGeometry, materials: CellMaterials, rec: Reconstruction, num_cells: int, jump_facets: np.ndarray,
     num_own_jumps: int,
 ) -> EnergyRows:
     """S for the first ``num_cells`` cells, then J for ``jump_facets`` (in that row order), as in
     the module docstring; the rows of S and of the first ``num_own_jumps`` jump facets are
-    ``owned``. Q is formed by one sparse product (below), so that no second copy of Q is made."""
+    ``owned``. Q is formed in blocks of ``BLOCK_ROWS`` rows by two sparse products each (below)
+    and the blocks copied into it: no second copy of Q and no intermediate product of its size.
+    Each row of a product depends on the same row of its left factor only, so the rows do not
+    depend on the blocks."""
     d, N, F = geom.d, geom.num_cells, geom.num_facets
     m = d * (d + 1) // 2
     # Only the cells whose gradients the rows read: the owned ones (S) and both cells of each jump facet.
-    c1, c2 = geom.facet_cells[jump_facets, 0], geom.facet_cells[jump_facets, 1]
-    cells = np.unique(np.concatenate([np.arange(num_cells), c1, c2]))
-    Gf = facet_gradient(geom, cells)  # rows of cell cells[k]: k d d + ...
-
-    # sqrt|c| L_c^T P of each owned cell, (num_cells, m, d*d): one Cholesky factor per material
-    blocks = np.stack([np.linalg.cholesky(mandel_stiffness(mat, d)).T @ mandel(d) for mat in materials.materials])
-    # the owned cells are the first ones of ``cells``: row i of cell k reads columns k d d + (0..d d - 1)
-    W = scipy.sparse.csr_matrix(
-        ((np.sqrt(geom.cell_volumes[:num_cells])[:, None, None] * blocks[materials.index[:num_cells]]).ravel(),
-         np.repeat(np.arange(num_cells * d * d, dtype=np.int32).reshape(num_cells, 1, d * d), m, axis=1).ravel(),
-         np.arange(0, num_cells * m * d * d + 1, d * d, dtype=np.int32)),
-        shape=(num_cells * m, num_cells * d * d))
-    W.eliminate_zeros()
-
-    # Jump of the P1 reconstructions (10) at x_f, eq. (12): direct part + gradient part.
-    n = len(jump_facets)
-    k1, k2 = np.searchsorted(cells, c1), np.searchsorted(cells, c2)
-    xf = geom.facet_centres[jump_facets]
-    r1, r2 = xf - geom.cell_centres[c1], xf - geom.cell_centres[c2]
-    weight = materials.facet_stabilisation(c1, c2) * geom.facet_areas[jump_facets] / geom.facet_diameters[jump_facets]
-    sqrt_w = np.repeat(np.sqrt(weight), d)
-    f, i, j = np.meshgrid(np.arange(n), np.arange(d), np.arange(d), indexing="ij")
-    X = scipy.sparse.coo_matrix(
-        (
-            np.concatenate([(sqrt_w.reshape(n, d)[f, i] * r1[f, j]).ravel(),
-                            (-sqrt_w.reshape(n, d)[f, i] * r2[f, j]).ravel()]),
-            (np.tile((f * d + i).ravel(), 2),
-             np.concatenate([(k1[f] * d * d + i * d + j).ravel(), (k2[f] * d * d + i * d + j).ravel()])),
-        ),
-        shape=(n * d, len(cells) * d * d),
-    ).tocsr()
-    # the direct part of the jump, sqrt(w) (u_c1 - u_c2), in the columns after the gradients'
-    fi, ii = np.meshgrid(np.arange(n), np.arange(d), indexing="ij")
-    delta = scipy.sparse.coo_matrix(
-        (np.concatenate([sqrt_w, -sqrt_w]),
-         (np.tile((fi * d + ii).ravel(), 2),
-          len(cells) * d * d + np.concatenate([(c1[fi] * d + ii).ravel(), (c2[fi] * d + ii).ravel()]))),
-        shape=(n * d, len(cells) * d * d + N * d),
-    ).tocsr()
-    del f, i, j, fi, ii, r1, r2, xf, k1, k2, c1, c2
-    X.resize(n * d, len(cells) * d * d + N * d)
-    W.resize(num_cells * m, len(cells) * d * d + N * d)
+    cells = np.unique(np.concatenate([np.arange(num_cells), geom.facet_cells[jump_facets].ravel()]))
+    width = len(cells) * d * d + N * d  # columns of M (below): the gradients of ``cells``, then u_C
     # a = M [G; u_C], [G; u_C] = blockdiag(Gf, I) [u_F; u_C], [u_F; u_C] = [R; I] u_C (+ [D; 0] g):
-    # QF_ext = M blockdiag(Gf, I), then Q = QF_ext [R; I], each one product; CSR stacks only
-    # (conversions through COO would double the memory of the operands).
-    M = scipy.sparse.vstack([W, X + delta], format="csr")
-    del W, X, delta
+    # QF_ext = M blockdiag(Gf, I), then Q = QF_ext [R; I], for each block of rows of M; CSR
+    # stacks only (conversions through COO would double the memory of the operands).
+    Gf = facet_gradient(geom, cells)  # rows of cell cells[k]: k d d + ...
     Gf.resize(Gf.shape[0], F * d + N * d)
     identity = scipy.sparse.csr_matrix((np.ones(N * d), np.arange(F * d, F * d + N * d, dtype=np.int32),
                                         np.arange(N * d + 1, dtype=np.int32)), shape=(N * d, F * d + N * d))
-    QF_ext = (M @ scipy.sparse.vstack([Gf, identity], format="csr")).tocsr()
-    del M, Gf, identity
+    GI = scipy.sparse.vstack([Gf, identity], format="csr")
+    del Gf, identity
     R_ext = scipy.sparse.vstack([rec.R, scipy.sparse.identity(N * d)], format="csr")
-    Q = (QF_ext @ R_ext).tocsr()
-    del R_ext
-    Q_dirichlet = (QF_ext @ scipy.sparse.vstack([rec.D, scipy.sparse.csr_matrix((N * d, rec.D.shape[1]))])).tocsr()
-    # QF: the boundary-facet columns only (QF_ext's memory is reused)
-    interior = np.ones(F * d + N * d, dtype=bool)
-    interior[(np.flatnonzero(geom.facet_cells[:, 1] == -1)[:, None] * d + np.arange(d)).ravel()] = False
-    QF_ext.data[interior[QF_ext.indices]] = 0.0
-    QF_ext.eliminate_zeros()
-    QF_ext.resize(QF_ext.shape[0], F * d)
+    D_ext = scipy.sparse.vstack([rec.D, scipy.sparse.csr_matrix((N * d, rec.D.shape[1]))], format="csr")
+    # QF keeps the boundary-facet columns only
+    boundary = np.zeros(F * d + N * d, dtype=bool)
+    boundary[(np.flatnonzero(geom.facet_cells[:, 1] == -1)[:, None] * d + np.arange(d)).ravel()] = True
+
+    # sqrt|c| L_c^T P of each owned cell, (num_cells, m, d*d): one Cholesky factor per material
+    factors = np.stack([np.linalg.cholesky(mandel_stiffness(mat, d)).T @ mandel(d) for mat in materials.materials])
+
+    def elastic(a: int, b: int) -> scipy.sparse.csr_matrix:
+        """The rows of M of S for the owned cells a .. b-1 (the first ones of ``cells``): row i of
+        cell k reads columns k d d + (0..d d - 1)."""
+        n = b - a
+        W = scipy.sparse.csr_matrix(
+            ((np.sqrt(geom.cell_volumes[a:b])[:, None, None] * factors[materials.index[a:b]]).ravel(),
+             np.repeat(np.arange(a * d * d, b * d * d, dtype=np.int32).reshape(n, 1, d * d), m, axis=1).ravel(),
+             np.arange(0, n * m * d * d + 1, d * d, dtype=np.int32)),
+            shape=(n * m, width))
+        W.eliminate_zeros()
+        return W
+
+    def jump(facets: np.ndarray) -> scipy.sparse.csr_matrix:
+        """The rows of M of J for ``facets``: the jump of the P1 reconstructions (10) at x_f,
+        eq. (12), its gradient part and its direct part sqrt(w) (u_c1 - u_c2)."""
+        n = len(facets)
+        c1, c2 = geom.facet_cells[facets, 0], geom.facet_cells[facets, 1]
+        k1, k2 = np.searchsorted(cells, c1), np.searchsorted(cells, c2)
+        xf = geom.facet_centres[facets]
+        r1, r2 = xf - geom.cell_centres[c1], xf - geom.cell_centres[c2]
+        weight = materials.facet_stabilisation(c1, c2) * geom.facet_areas[facets] / geom.facet_diameters[facets]
+        sqrt_w = np.repeat(np.sqrt(weight), d)
+        f, i, j = np.meshgrid(np.arange(n), np.arange(d), np.arange(d), indexing="ij")
+        X = scipy.sparse.coo_matrix(
+            (
+                np.concatenate([(sqrt_w.reshape(n, d)[f, i] * r1[f, j]).ravel(),
+                                (-sqrt_w.reshape(n, d)[f, i] * r2[f, j]).ravel()]),
+                (np.tile((f * d + i).ravel(), 2),
+                 np.concatenate([(k1[f] * d * d + i * d + j).ravel(), (k2[f] * d * d + i * d + j).ravel()])),
+            ),
+            shape=(n * d, width),
+        ).tocsr()
+        fi, ii = np.meshgrid(np.arange(n), np.arange(d), indexing="ij")
+        delta = scipy.sparse.coo_matrix(
+            (np.concatenate([sqrt_w, -sqrt_w]),
+             (np.tile((fi * d + ii).ravel(), 2),
+              len(cells) * d * d + np.concatenate([(c1[fi] * d + ii).ravel(), (c2[fi] * d + ii).ravel()]))),
+            shape=(n * d, width),
+        ).tocsr()
+        return X + delta
+
+    Q, Q_dirichlet, QF = [], [], []
+    cell_block, facet_block = max(1, BLOCK_ROWS // m), max(1, BLOCK_ROWS // d)
+    M_blocks = itertools.chain(
+        (elastic(a, min(a + cell_block, num_cells)) for a in range(0, num_cells, cell_block)),
+        (jump(jump_facets[a : a + facet_block]) for a in range(0, len(jump_facets), facet_block)))
+    for M in M_blocks:
+        QF_ext = (M @ GI).tocsr()
+        del M
+        Q.append((QF_ext @ R_ext).tocsr())
+        Q_dirichlet.append((QF_ext @ D_ext).tocsr())
+        QF_ext.data[~boundary[QF_ext.indices]] = 0.0
+        QF_ext.eliminate_zeros()
+        QF_ext.resize(QF_ext.shape[0], F * d)
+        QF.append(QF_ext)
+        del QF_ext
+    del GI, R_ext, D_ext
+    Q, Q_dirichlet, QF = _stack_rows(Q, N * d), _stack_rows(Q_dirichlet, rec.D.shape[1]), _stack_rows(QF, F * d)
     S_rows = num_cells * m
     own = np.zeros(Q.shape[0], dtype=bool)
     own[: S_rows + num_own_jumps * d] = True
-    return EnergyRows(Q=Q, Q_dirichlet=Q_dirichlet, QF=QF_ext, owned=own,
+    return EnergyRows(Q=Q, Q_dirichlet=Q_dirichlet, QF=QF, owned=own,
                       elastic=np.arange(Q.shape[0]) < S_rows, jump_facets=np.asarray(jump_facets))

@@ -68,7 +68,9 @@ class Reconstruction:
     scheme_a_facets: np.ndarray  # the Neumann facets reconstructed by scheme A (eq. (20))
     scheme: str
     multi_neumann_cells: np.ndarray  # cells where scheme A fell to scheme B (rule above)
-    stencils: InteriorStencils
+    # interior facets with no containing simplex (``compute_interior_stencils``); the stencils
+    # themselves are the interior rows of R (not kept twice)
+    extrapolated_facets: np.ndarray
 
 
 def _barycentric(points: np.ndarray, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -408,7 +410,7 @@ def compute_reconstruction(
         scheme_a_facets=a_facets,
         scheme=scheme,
         multi_neumann_cells=multi if scheme == "A" else np.empty(0, dtype=np.int64),
-        stencils=stencils,
+        extrapolated_facets=stencils.extrapolated,
     )
 
 

@@ -26,7 +26,6 @@ itself on a 1D bar and 1.1-1.4 lambda_max on the 2D and 3D scenes, so the bound'
 from __future__ import annotations
 
 import numpy as np
-import scipy.sparse
 from mpi4py import MPI
 from petsc4py import PETSc
 
@@ -53,7 +52,9 @@ def _rows_of_other_processes(factored: FactoredStiffness, row_keys: np.ndarray, 
     and their CSR with global column numbers, rows in increasing key."""
     comm, n_od = factored.comm, factored.n_owned
     rowptr, cols, vals = factored.rowptr, factored.cols, factored.vals
-    positions = np.flatnonzero(cols[: rowptr[-1]] >= n_od)
+    block = 2**22  # entries scanned at a time (no mask of the size of Q)
+    positions = np.concatenate([np.flatnonzero(cols[a : min(a + block, rowptr[-1])] >= n_od) + a
+                                for a in range(0, int(rowptr[-1]), block)] + [np.empty(0, dtype=np.int64)])
     rows = np.searchsorted(rowptr, positions, side="right") - 1
     pairs = np.unique(rows.astype(np.int64) * comm.size + ghost_owners[cols[positions] - n_od])
     rows, destinations = pairs // comm.size, pairs % comm.size
@@ -71,6 +72,35 @@ def _rows_of_other_processes(factored: FactoredStiffness, row_keys: np.ndarray, 
     return headers[order, 0].copy(), ptr, payload[take, 0].astype(np.int64), payload[take, 1].copy()
 
 
+#: Entries of the transposed pattern of the local rows held at a time (``_transposed_blocks``).
+PATTERN_BLOCK = 2**24
+
+
+def _transposed_blocks(factored: FactoredStiffness):
+    """A function returning, on each call, an iterable of (first dof, ptr, rows): the transposed
+    pattern of the local rows of Q (``kernels.dem_transpose_pattern``) for consecutive blocks of
+    owned dofs of about ``PATTERN_BLOCK`` entries each (4 bytes per entry, a block at a time: a
+    larger pattern is built again on each pass, a scan of the rows per block)."""
+    n, n_rows = factored.n_owned, factored.n_rows
+    args = (n_rows, pointer(factored.rowptr), pointer(factored.cols))
+    counts = np.empty(n + 1, dtype=np.int32)
+    lib.dem_transpose_pattern(*args, 0, n, pointer(counts), ffi.NULL)  # entries before each owned dof
+    cuts = np.searchsorted(counts, np.arange(PATTERN_BLOCK, int(counts[-1]), PATTERN_BLOCK), side="right") - 1
+    edges = np.unique(np.concatenate([[0], cuts, [n]]))  # block k: owned dofs edges[k] .. edges[k + 1] - 1
+
+    def block(first: int, last: int):
+        ptr = np.empty(last - first + 1, dtype=np.int32)
+        lib.dem_transpose_pattern(*args, first, last - first, pointer(ptr), ffi.NULL)
+        rows = np.empty(int(ptr[-1]), dtype=np.int32)
+        lib.dem_transpose_pattern(*args, first, last - first, pointer(ptr), pointer(rows))
+        return int(first), ptr, rows
+
+    if len(edges) <= 2:  # one block (or none): built once
+        once = [block(edges[0], edges[-1])] if n else []
+        return lambda: once
+    return lambda: (block(a, b) for a, b in zip(edges[:-1], edges[1:]))
+
+
 def largest_eigenvalue_bound(factored: FactoredStiffness, row_keys: np.ndarray, ghost_owners: np.ndarray,
                              inverse_mass: PETSc.Vec, iterations: int = 3) -> float:
     """An upper bound on lambda_max(M^-1 Q^T Q) (rad^2/s^2): the smallest of ``iterations``
@@ -81,29 +111,24 @@ def largest_eigenvalue_bound(factored: FactoredStiffness, row_keys: np.ndarray, 
     local row, increasing along them, that orders the rows of all processes independently of the
     partition; ghost_owners : the rank owning each ghost dof of ``factored``; inverse_mass : M^-1
     with the layout of the dofs. Costs ``iterations`` passes over the rows of Q through each owned
-    dof, a transpose of the local rows (the size of Q, freed on return) and fetching the rows of
-    other processes that reach owned dofs once (from the neighbours only).
+    dof, the pattern of the transposed local rows (4 bytes per entry of Q, freed on return) and
+    fetching the rows of other processes that reach owned dofs once (from the neighbours only).
     """
     if iterations < 1:
         raise ValueError(f"iterations must be >= 1, got {iterations}")
     comm, n = factored.comm, factored.n_owned
-    if len(row_keys) != factored.n_rows or np.any(np.diff(row_keys) <= 0):
+    if len(row_keys) != factored.n_rows or np.any(row_keys[1:] <= row_keys[:-1]):
         raise ValueError("row_keys must increase along the local rows of Q")
     start, stop = inverse_mass.getOwnershipRange()
-    # Q^T on the owned dofs: for each, this process's rows through it (in row order, so in key
-    # order), and the rows of other processes through it.
-    nnz = int(factored.rowptr[-1])
-    own = scipy.sparse.csr_matrix((factored.vals[:nnz], factored.cols[:nnz], factored.rowptr),
-                                  shape=(factored.n_rows, n + len(factored.ghosts)))
-    qt = own.tocsc()
-    del own
+    # The pattern of Q^T on the owned dofs: for each, this process's rows through it (in row
+    # order, so in key order; ``_transposed_blocks``), and the rows of other processes through it.
     keys2, ptr2, global2, vals2 = _rows_of_other_processes(factored, row_keys, ghost_owners, start)
     mine2 = (global2 >= start) & (global2 < stop)
     rows2 = np.repeat(np.arange(len(keys2), dtype=np.int32), np.diff(ptr2))
     order = np.argsort(global2[mine2], kind="stable")  # by owned dof, rows in key order
     dof2 = global2[mine2][order] - start
     qt2_ptr = np.concatenate([[0], np.cumsum(np.bincount(dof2, minlength=n))]).astype(np.int32)
-    qt2_rows, qt2_vals = np.ascontiguousarray(rows2[mine2][order]), np.ascontiguousarray(vals2[mine2][order])
+    qt2_rows = np.ascontiguousarray(rows2[mine2][order])
     # the dofs the rows read: the held ones (owned, then ghosts), then any others
     ghosts = factored.ghosts
     by_value = np.argsort(ghosts)
@@ -124,28 +149,34 @@ def largest_eigenvalue_bound(factored: FactoredStiffness, row_keys: np.ndarray, 
     x = inverse_mass.duplicate()
     x_reach = PETSc.Vec().createSeq(len(reach), comm=self_comm)
     scatter = PETSc.Scatter().create(x, PETSc.IS().createGeneral(reach, comm=self_comm), x_reach, None)
-    arrays = (pointer(qt.indptr), pointer(qt.indices), pointer(qt.data), pointer(factored.rowptr),
-              pointer(factored.cols), pointer(factored.vals), pointer(np.ascontiguousarray(row_keys)),
-              pointer(qt2_ptr), pointer(qt2_rows), pointer(qt2_vals), pointer(ptr2), pointer(cols2),
-              pointer(vals2), pointer(keys2))
-    keep = (row_keys, qt2_ptr, qt2_rows, qt2_vals, ptr2, cols2, vals2, keys2)  # noqa: F841 (alive for the pointers)
+    row_keys = np.ascontiguousarray(row_keys)
+    arrays = (pointer(factored.rowptr), pointer(factored.cols), pointer(factored.vals), pointer(row_keys),
+              pointer(qt2_ptr), pointer(qt2_rows), pointer(ptr2), pointer(cols2), pointer(vals2), pointer(keys2))
+    keep = (row_keys, qt2_ptr, qt2_rows, ptr2, cols2, vals2, keys2)  # noqa: F841 (alive for the pointers)
     s = np.sqrt(inverse_mass.array_r)
     acc = np.zeros(len(reach))  # the kernel's workspace, left zero
     r = np.empty(n)
+    blocks = _transposed_blocks(factored)
+
+    def rowsums(x):
+        for first, qt_ptr, qt_rows in blocks():
+            lib.dem_gram_abs_rowsums(first, len(qt_ptr) - 1, pointer(qt_ptr), pointer(qt_rows), *arrays, x,
+                                     pointer(r), pointer(acc))
+
     # start from the diagonal of Kt (cheaper than w = 1 for the same bound: 2 passes, not 3)
-    lib.dem_gram_abs_rowsums(n, *arrays, ffi.NULL, pointer(r), pointer(acc))
+    rowsums(ffi.NULL)
     w = s**2 * r
     w = np.maximum(w / comm.allreduce(w.max() if n else 0.0, op=MPI.MAX), np.finfo(float).tiny)
     bound = np.inf
     for _ in range(iterations):
-        x.array[:] = s * w
+        np.multiply(s, w, out=x.array)
         scatter.scatter(x, x_reach, PETSc.InsertMode.INSERT_VALUES, PETSc.ScatterMode.FORWARD)
-        lib.dem_gram_abs_rowsums(n, *arrays, pointer(x_reach.array), pointer(r), pointer(acc))
-        b = s * r  # (|Kt| w)_i
-        local = (b / w).max() if n else 0.0
+        rowsums(pointer(x_reach.array))
+        b = np.multiply(s, r, out=r)  # (|Kt| w)_i, in place (vectors of the mesh's size: memory)
+        local = np.divide(b, w, out=w).max() if n else 0.0  # w is replaced below
         bound = min(bound, comm.allreduce(local, op=MPI.MAX))
         top = comm.allreduce(b.max() if n else 0.0, op=MPI.MAX)
-        w = np.maximum(b / top, np.finfo(float).tiny)  # a dof without stiffness keeps a positive weight
+        w = np.maximum(np.divide(b, top, out=w), np.finfo(float).tiny, out=w)  # a dof without stiffness keeps a positive weight
     x.destroy()
     x_reach.destroy()
     scatter.destroy()

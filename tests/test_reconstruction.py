@@ -319,8 +319,8 @@ def test_separate_bodies_are_not_coupled(kind):
     body = geom.cell_bodies  # of the held cells (a process may hold cells of one body only)
     assert comm.allreduce(int(body.max()), op=MPI.MAX) == 1
     assert np.array_equal(body, (geom.cell_centres[:, 0] > 0.2).astype(int))
-    st = dem.reconstruction.stencils
-    assert np.all(body[st.cells] == body[geom.facet_cells[st.facets, 0], None])
+    R = dem.reconstruction.R.tocoo()  # facet dof f*2 + i reads cell dofs c*2 + i of its stencil
+    assert len(R.row) and np.all(body[R.col // 2] == body[geom.facet_cells[R.row // 2, 0]])
     # No stiffness entry couples the bodies (rows: the owned dofs of K; the bodies of the
     # column dofs come from their owners by a scatter).
     K = dem.K
