@@ -1248,7 +1248,6 @@ class _Pairs:
         return _CSR(self.Q)
 
 
-
 class _At:
     """The contact state of a ``PairContact`` at one displacement (patch values ``up``), each part
     computed on first use: the free facet displacements ``uc``; the listed pairs ``closed`` whose
