@@ -548,10 +548,10 @@ class PairContact:
             vp = None if v is None else self.patch_values(v)
             if moving:
                 uc, step = self.free_displacements(up), dt * (self._R @ vp).reshape(-1, self.d)
-                moved = np.einsum("ni,ni->n", uc + step - self._reference, uc + step - self._reference)
-                k = int(np.argmax(moved / self._half_skin2)) if len(moved) else 0
-                worst = (float(moved[k] / self._half_skin2[k]), float(np.linalg.norm(step[k])),
-                         float(2.0 * np.sqrt(self._half_skin2[k]))) if len(moved) else (0.0, 0.0, 0.0)
+                ratios = self._motion_ratios(uc + step)
+                k = int(np.argmax(ratios)) if len(ratios) else 0
+                worst = (float(ratios[k]), float(np.linalg.norm(step[k])),
+                         float(2.0 * np.sqrt(self._half_skin2[k]))) if len(ratios) else (0.0, 0.0, 0.0)
                 ratio, motion, skin = self.comm.allreduce(worst, op=MPI.MAX)  # the worst facet's
                 if ratio > 1.0:
                     raise RuntimeError(
@@ -577,8 +577,13 @@ class PairContact:
     def _moved(self, uc: np.ndarray) -> bool:
         """Whether a facet known here (local or ghost) with free displacements ``uc`` has moved
         more than half its skin since the last list build (a pair not listed might then touch)."""
+        return bool((self._motion_ratios(uc) > 1.0).any())
+
+    def _motion_ratios(self, uc: np.ndarray) -> np.ndarray:
+        """(|motion since the last list build| / (half the skin))^2 of each known facet at free
+        displacements ``uc``."""
         moved = uc - self._reference
-        return bool((np.einsum("ni,ni->n", moved, moved) > self._half_skin2).any())
+        return np.einsum("ni,ni->n", moved, moved) / self._half_skin2
 
     def motion_ratio(self, dp: np.ndarray) -> float:
         """The largest motion of a candidate facet's free reconstruction for the patch values
