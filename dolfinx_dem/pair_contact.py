@@ -212,6 +212,7 @@ class PairContact:
         numbers[cell[order][: self.num_own], j[order][: self.num_own]] = first + np.arange(self.num_own)
         numbers = dem.halo_exchange(numbers[: dem.n_owned])[cell[order], j[order]]
         self._facets = self._local_records(order, f, cell, numbers)
+        self._own_records = self._facets.take(np.arange(self.num_own)).records()  # what a list round sends
         self.num_facets = self.comm.allreduce(self.num_own, op=MPI.SUM)
         self._facet_vector = PETSc.Vec().createMPI((self.num_own * d, PETSc.DECIDE), comm=self.comm)
         dofs = (self.facets[:, None] * d + np.arange(d)).ravel()
@@ -262,7 +263,7 @@ class PairContact:
         self.scatter = None  # the patch scatter, made by each list build
         self._last = None  # the _At of the last displacement evaluated (a step's end is the next one's start)
         self._flight = None  # (up, vp, dt, free facet velocities) of the flight ``prepare`` checked last
-        self._build(zero)
+        self._build(self._facets.lift.copy())  # the free facet displacements at u = 0: R 0 + lift
         up = self.patch_values(zero)
         g, w = self._state(np.arange(len(self.listed)), *self._pair_displacements(up))[:2]
         deep = (g < -self.tolerance) & (w > 0)
@@ -312,8 +313,9 @@ class PairContact:
         )
 
     # -- broad phase ---------------------------------------------------------------------------
-    def _build(self, u: PETSc.Vec, stale: bool = True):
-        """A round of the Verlet lists at displacements ``u`` (collective): every process sends
+    def _build(self, uc: np.ndarray, stale: bool = True):
+        """A round of the Verlet lists at displacements u, the local facets' free displacements
+        there ``uc`` (n_local, d) (collective): every process sends
         the records of its own candidate facets to the processes whose local facets may come
         near them; then a process rebuilds its list (the facing pairs with a local facet whose
         displaced centres are closer than their radius) if it is ``stale`` or received a facet
@@ -330,11 +332,6 @@ class PairContact:
         comm, d = self.comm, self.d
         local = self._facets
         nl = len(local)
-        # Free displacements of the local facets at u: from the previous patch, which holds their
-        # dofs, or (first build) through a scatter of those dofs only.
-        scatter = self.scatter if self.scatter is not None else \
-            PatchScatter(self._template, np.unique(local.R_dofs[local.R_dofs >= 0]))
-        uc = _free(local, scatter.dofs, scatter.gather(u))
         # the places of the local facets: here, and at their references if this process may keep
         # its list
         places = [uc] if stale else [uc, self._reference[:nl]]
@@ -349,7 +346,7 @@ class PairContact:
         meets = np.all(boxes[:, 2 * d : 3 * d] - r <= box_own[d:], axis=1) & \
             np.all(box_own[:d] <= boxes[:, 3 * d :] + r, axis=1)
         meets[comm.rank] = False
-        floats, ints = local.take(np.arange(self.num_own)).records()
+        floats, ints = self._own_records
         floats = np.concatenate([floats, uc[own]], axis=1)  # with the sender's displacements
         # to each process whose local facets' box, widened by r, meets the own facets: those
         # own facets inside it at either place (the only ones that can pair with its local facets)
@@ -407,24 +404,33 @@ class PairContact:
         t = _tangents(n)
         e_i, e_j = self._directions(F, i, j, n)
 
-        # z_p restricted to the own rows: the local facets' entries only.
+        # z_p restricted to the own rows: the local facets' entries only. Z^T = E^T QF^T, E the
+        # facet dofs' directions (local facet dofs, P); one sparse product, its rows sorted.
         P = len(i)
-        cols, rows_, vals = [], [], []
+        pairs, dofs, vals = [], [], []
         for side, e in ((i, e_i), (j, e_j)):
             mine = side < nl
-            rows_.append((side[mine, None] * d + np.arange(d)).ravel())
-            cols.append(np.repeat(np.flatnonzero(mine), d))
+            dofs.append((side[mine, None] * d + np.arange(d)).ravel())
+            pairs.append(np.repeat(np.flatnonzero(mine), d))
             vals.append((e[mine] / F.length[side[mine], None]).ravel())
-        N = scipy.sparse.csr_matrix((np.concatenate(vals), (np.concatenate(rows_), np.concatenate(cols))),
-                                    shape=(nl * d, P))
-        Z = (self._QF @ N).tocsr()  # (own rows touched, P)
+        ET = scipy.sparse.csr_matrix((np.concatenate(vals), (np.concatenate(pairs), np.concatenate(dofs))),
+                                     shape=(P, nl * d))
+        ZT = ET @ self._QF.T  # (P, own rows touched)
+        ZT.sort_indices()
 
         # The patch: the own rows' held dofs and the reconstruction dofs of every known facet
         # (the ghosts' too: their motion decides when the list is stale).
-        patch = np.union1d(self._row_dofs, F.R_dofs[F.R_dofs >= 0])
+        # Often (scheme B: R_f u = u_c) the rows' dofs hold every facet's: the patch is the rows'
+        # dofs and Q's columns are their fixed numbers; else the few other dofs are merged in.
+        rd = F.R_dofs[F.R_dofs >= 0]
+        extra = rd[np.append(self._row_dofs, -1)[np.searchsorted(self._row_dofs, rd)] != rd]  # (-1: none past the end)
+        if len(extra):
+            patch = np.union1d(self._row_dofs, extra)
+            columns = np.searchsorted(patch, self._row_dofs).astype(np.int32)[self._Q_entry_dof]
+        else:
+            patch, columns = self._row_dofs, self._Q_entry_dof
         self.scatter = PatchScatter(self._template, patch)
-        Qp = scipy.sparse.csr_matrix((self._Q.data, np.searchsorted(patch, self._row_dofs)[self._Q_entry_dof],
-                                      self._Q.indptr), shape=(self._Q.shape[0], len(patch)))
+        Qp = scipy.sparse.csr_matrix((self._Q.data, columns, self._Q.indptr), shape=(self._Q.shape[0], len(patch)))
         self.facets_all = F
         self._R = _reconstruction_matrix(F, patch)  # (n_facets d, patch)
         self._RT = self._R.T.tocsr()
@@ -438,7 +444,7 @@ class PairContact:
             i=i, j=j, n=n, t=t, e_i=e_i, e_j=e_j,
             d0=np.einsum("pi,pi->p", F.centre[j] - F.centre[i], n),
             si=_Simplices.of(project(i)), sj=_Simplices.of(project(j)),
-            Z=Z, Q=Qp,
+            ZT=ZT, Q=Qp,
         )
         self._reference = ucF.copy()
         self._half_skin2 = 0.25 * skins**2  # of the known facets
@@ -537,7 +543,7 @@ class PairContact:
             stale = stale or self._moved(uc + step)
         if self.comm.allreduce(stale, op=MPI.LOR):
             touching = self._touching_keys(up, uc)
-            self._build(u, stale)
+            self._build(uc[: len(self.facets)], stale)  # the local facets are the first known ones
             up = self.patch_values(u)
             dropped = np.setdiff1d(touching, self.pair_keys())
             if self.comm.allreduce(len(dropped), op=MPI.SUM):
@@ -1201,11 +1207,6 @@ def _adjugate_times(A: np.ndarray, x: np.ndarray) -> tuple[np.ndarray, np.ndarra
     return np.einsum("nij,nj->ni", rows, x), np.einsum("ni,ni->n", c0, rows[:, 0])
 
 
-def _free(F: _Facets, patch: np.ndarray, up: np.ndarray) -> np.ndarray:
-    """Free facet displacements R_f u + lift of the facets ``F`` from values ``up`` at ``patch``."""
-    return (_reconstruction_matrix(F, patch) @ up).reshape(-1, F.lift.shape[1]) + F.lift
-
-
 def _reconstruction_matrix(F: _Facets, patch: np.ndarray) -> scipy.sparse.csr_matrix:
     """R of the facets ``F`` on the patch dofs ``patch`` (sorted global dofs), (n d, len(patch))."""
     n, d, width = F.R_dofs.shape
@@ -1221,9 +1222,9 @@ class _Pairs:
     """Facet pairs (f_i, f_j) of the Verlet list (indices into ``PairContact.facets_all``),
     vectorised: the common normal n and an orthonormal basis t (P, d-1, d) of its plane, the
     correction directions e_i, e_j (``PairContact._directions``), the reference gap d0, the
-    facets projected on the plane, si, sj (``_Simplices``, origin at f_i's barycentre); Z = the
-    z_p on the own rows touched (rows, P) and the own rows Q on the patch dofs. Their transposes
-    and N = Z^T Z are made on first use (a step needs Z^T only; statics the others): N alone
+    facets projected on the plane, si, sj (``_Simplices``, origin at f_i's barycentre); Z^T = the
+    z_p on the own rows touched (P, rows) and the own rows Q on the patch dofs. Z, Q^T and
+    N = Z^T Z are made on first use (a step needs Z^T and Q only; statics the others): N alone
     cost 40 % of a list build on ``cradle``."""
 
     i: np.ndarray
@@ -1235,15 +1236,15 @@ class _Pairs:
     d0: np.ndarray
     si: _Simplices
     sj: _Simplices
-    Z: scipy.sparse.csr_matrix
+    ZT: scipy.sparse.csr_matrix
     Q: scipy.sparse.csr_matrix
 
     def __len__(self) -> int:
         return len(self.i)
 
     @functools.cached_property
-    def ZT(self) -> scipy.sparse.csr_matrix:
-        return self.Z.T.tocsr()
+    def Z(self) -> scipy.sparse.csr_matrix:
+        return self.ZT.T.tocsr()
 
     @functools.cached_property
     def N(self) -> scipy.sparse.csr_matrix:
