@@ -42,6 +42,8 @@ ffibuilder.cdef(
     void dem_csr_rows_apply_transpose(int64_t n_sel, const int64_t *sel, const int32_t *indptr,
                                       const int32_t *indices, const double *data, int32_t m, const double *X,
                                       double *Y);
+    void dem_csr_rows_gram_apply(int64_t n_sel, const int64_t *sel, const int32_t *indptr, const int32_t *indices,
+                                 const double *data, int32_t m, const double *X, double *work, double *Y);
     int64_t dem_components(int64_t n_sel, const int64_t *sel, const int32_t *indptr, const int32_t *indices,
                            int64_t *first, int64_t *parent, int64_t *label);
     void dem_csr_rows_pattern(int64_t n_sel, const int64_t *sel, const int32_t *indptr, const int32_t *indices,

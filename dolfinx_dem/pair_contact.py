@@ -763,7 +763,7 @@ class PairContact:
             # Rows' term -Q^T Z int c dtau; pairs' term -int (z_p . (a + delta_a)) dc_p/du dtau
             # (z_p of the touching pairs only; N c = Z^T (Z c), c = 0 off them).
             result -= L.q.rows_apply_transpose(rows, L.z.rows_apply_transpose(touching, (weights * c).sum(axis=1))[rows])
-            mu = za[:, :1] + nodes * za[:, 1:] + L.z.rows_apply(touching, L.z.rows_apply_transpose(touching, c))
+            mu = za[:, :1] + nodes * za[:, 1:] + L.z.rows_gram_apply(touching, c)
             mu = np.where(g < 0, mu.ravel(), 0.0) * weights.ravel()
             result += self._facet_force(e, mu, g, w, dw)
             pieces = int((length > 0).sum(axis=1).max())
@@ -1341,6 +1341,7 @@ class _CSR:
         self.indices = np.ascontiguousarray(A.indices, dtype=np.int32)
         self.data = np.ascontiguousarray(A.data, dtype=np.float64)
         self._pointers = (pointer(self.indptr), pointer(self.indices), pointer(self.data))
+        self._work = np.zeros(0)  # rows_gram_apply's, zero between calls
 
     def rows_apply(self, sel: np.ndarray, X: np.ndarray) -> np.ndarray:
         """A[sel] @ X, X (n_cols,) or (n_cols, m)."""
@@ -1356,6 +1357,18 @@ class _CSR:
         Y = np.zeros((self.shape[1],) + X.shape[1:])
         lib.dem_csr_rows_apply_transpose(len(sel), pointer(sel), *self._pointers, X.size // max(len(X), 1),
                                          pointer(X), pointer(Y))
+        return Y
+
+    def rows_gram_apply(self, sel: np.ndarray, X: np.ndarray) -> np.ndarray:
+        """A[sel] @ (A[sel]^T @ X), X (len(sel),) or (len(sel), m): the two products above in
+        one kernel, through a work array of the columns kept zero between calls."""
+        X = np.ascontiguousarray(X, dtype=np.float64)
+        m = X.size // max(len(X), 1)
+        if self._work.size < self.shape[1] * m:
+            self._work = np.zeros(self.shape[1] * m)
+        Y = np.empty(X.shape)
+        lib.dem_csr_rows_gram_apply(len(sel), pointer(sel), *self._pointers, m, pointer(X), pointer(self._work),
+                                    pointer(Y))
         return Y
 
     def pattern(self, sel: np.ndarray) -> np.ndarray:

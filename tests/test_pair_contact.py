@@ -739,6 +739,9 @@ def test_selected_rows_products_and_components():
     assert np.allclose(M.rows_apply(sel, X), A[sel] @ X, rtol=0, atol=1e-14)
     assert np.allclose(M.rows_apply(sel, X[:, 0]), A[sel] @ X[:, 0], rtol=0, atol=1e-14)
     assert np.allclose(M.rows_apply_transpose(sel, Y), A[sel].T @ Y, rtol=0, atol=1e-14)
+    for Yk in (Y, Y[:, 0], Y[:, :1]):  # the same bits as the two products, the work array left zero
+        assert np.array_equal(M.rows_gram_apply(sel, Yk), M.rows_apply(sel, M.rows_apply_transpose(sel, Yk)))
+        assert not M._work.any()
     assert np.array_equal(M.pattern(sel), np.unique(A[sel].indices))
     count, label = M.components(sel)
     B = A[sel].astype(bool).astype(np.int64)
