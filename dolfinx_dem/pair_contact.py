@@ -235,7 +235,7 @@ class PairContact:
         if skin is not None and not skin > 0:
             raise ValueError(f"the Verlet skin must be > 0, got {skin}")
         self._uniform_skin = None if skin is None else float(skin)
-        reach = _reach(self._facets)
+        self._local_reach = reach = _reach(self._facets)
         skins = self._skins(reach)
         # the mean diameter of the candidate facets (about their barycentres): the scale of the
         # penetration the reconstructions may leave (``penetration``)
@@ -346,8 +346,9 @@ class PairContact:
         meets = np.all(boxes[:, 2 * d : 3 * d] - r <= box_own[d:], axis=1) & \
             np.all(box_own[:d] <= boxes[:, 3 * d :] + r, axis=1)
         meets[comm.rank] = False
-        floats, ints = self._own_records
-        floats = np.concatenate([floats, uc[own]], axis=1)  # with the sender's displacements
+        if meets.any():
+            floats, ints = self._own_records
+            floats = np.concatenate([floats, uc[own]], axis=1)  # with the sender's displacements
         # to each process whose local facets' box, widened by r, meets the own facets: those
         # own facets inside it at either place (the only ones that can pair with its local facets)
         send = [None] * comm.size
@@ -375,26 +376,26 @@ class PairContact:
         ucF = np.concatenate([uc, uc_ghosts])
 
         x = F.centre + ucF
-        reach = _reach(F)
+        reach = np.concatenate([self._local_reach, _reach(ghosts)])
         skins = self._skins(reach)
         tree = scipy.spatial.cKDTree(x)
         pairs = tree.query_pairs(r, output_type="ndarray")
         i, j = pairs[:, 0], pairs[:, 1]
-        keep = (i < nl) | (j < nl)  # with a local facet
+        # The tests keep the same pairs in any order: the cheap and selective ones first (within
+        # the largest radius, most pairs are neighbours on one body's boundary).
+        if not self.self_contact:
+            i, j = _where(F.body[i] != F.body[j], i, j)
+        # with a local facet; not two imposed motions
+        i, j = _where(((i < nl) | (j < nl)) & ~(self._rigid[F.body[i]] & self._rigid[F.body[j]]), i, j)
+        i, j = _where(np.einsum("pi,pi->p", F.normal[i], F.normal[j]) < 0, i, j)  # facing facets only
         # a pair's own radius: its facets' reaches plus their mean skin. Until a facet moves
         # more than half its skin (``_moved``) an unlisted pair's centres stay farther apart
         # than its reaches: the facets cannot touch.
         dx = x[j] - x[i]
-        keep &= np.einsum("pi,pi->p", dx, dx) < (reach[i] + reach[j] + 0.5 * (skins[i] + skins[j]))**2
-        keep &= np.einsum("pi,pi->p", F.normal[i], F.normal[j]) < 0  # facing facets only
-        same = F.body[i] == F.body[j]
-        if self.self_contact:
+        i, j = _where(np.einsum("pi,pi->p", dx, dx) < (reach[i] + reach[j] + 0.5 * (skins[i] + skins[j]))**2, i, j)
+        if self.self_contact:  # never two facets of one body that share a vertex
             shared = (F.vertex_ids[i][:, :, None] == F.vertex_ids[j][:, None]).any(axis=(1, 2))
-            keep &= ~(same & shared)
-        else:
-            keep &= ~same
-        keep &= ~(self._rigid[F.body[i]] & self._rigid[F.body[j]])  # two imposed motions: no contact
-        i, j = i[keep], j[keep]
+            i, j = _where(~((F.body[i] == F.body[j]) & shared), i, j)
         swap = F.key[i] > F.key[j]  # the facet with the smaller global number first: one order
         i, j = np.where(swap, j, i), np.where(swap, i, j)  # on every process
         o = np.lexsort((F.key[j], F.key[i]))
@@ -1094,6 +1095,11 @@ class PairContact:
             self._scheme_b_rule = np.asarray(state["scheme_b_rule"], dtype=np.int64)
             self.rebuilds, self.evaluations = (int(x) for x in state["counters"])
             self.seconds = float(state["seconds"][0])
+
+
+def _where(keep: np.ndarray, *arrays: np.ndarray) -> tuple[np.ndarray, ...]:
+    """The entries ``keep`` of each array."""
+    return tuple(a[keep] for a in arrays)
 
 
 def _reach(F: _Facets) -> np.ndarray:
