@@ -57,6 +57,9 @@ ffibuilder.cdef(
                          int32_t n_gauss, const double *xi, const double *XA, const double *mA, const double *nuA,
                          const double *sizeA, const double *XB, const double *mB, const double *nuB,
                          const double *sizeB, double *start, double *length, double *w, double *dw);
+    void dem_pair_facet_corrections(int64_t n, int32_t d, const int64_t *p, const int64_t *i, const int64_t *j,
+                                    const double *e_i, const double *e_j, const double *c, const double *length,
+                                    int64_t n_facets, double *work, double *out);
     void dem_pair_facet_forces(int64_t n_entries, int32_t d, const int64_t *p, const int64_t *i, const int64_t *j,
                                const double *normal, const double *mu, const double *g, const double *w,
                                const double *dw, double *out);

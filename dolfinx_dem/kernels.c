@@ -790,6 +790,29 @@ void dem_pair_events(int64_t n, int32_t d, const int64_t *restrict p, const int6
   }
 }
 
+/* The facet corrections of pair_contact.PairContact.facet_corrections (eq. (31)): for the pairs
+ * p[k] of facets (i, j) with c_k = w g^-, out[f] = sum over the pairs with i = f of (c_k / |f|)
+ * e_i plus sum over those with j = f of (c_k / |f|) e_j, each sum in the order of the pairs and
+ * the two added last (the bits of two bincounts). out and work: n_facets x d, zero on entry. */
+void dem_pair_facet_corrections(int64_t n, int32_t d, const int64_t *restrict p, const int64_t *restrict i,
+                                const int64_t *restrict j, const double *restrict e_i, const double *restrict e_j,
+                                const double *restrict c, const double *restrict length, int64_t n_facets,
+                                double *restrict work, double *restrict out)
+{
+  for (int64_t k = 0; k < n; ++k)
+  {
+    const int64_t q = p[k];
+    const double a = c[k] / length[i[q]], b = c[k] / length[j[q]];
+    for (int32_t x = 0; x < d; ++x)
+    {
+      out[i[q] * d + x] += a * e_i[q * d + x];
+      work[j[q] * d + x] += b * e_j[q * d + x];
+    }
+  }
+  for (int64_t f = 0; f < n_facets * d; ++f)
+    out[f] += work[f];
+}
+
 /* The facet forces of pair_contact.PairContact._facet_force: for the entries k (pairs p[k] of
  * facets (i, j), normals n), dc = mu_k (w_k n + g_k dw_k) (d components) is added to facet i's
  * row of out and subtracted from facet j's (out: n_facets x d, accumulated into, in the order of

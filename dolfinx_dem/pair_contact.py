@@ -816,9 +816,10 @@ class PairContact:
         """u_f - u_f^free of the local facets (eq. (31), directions of ``_directions``), (n_local, d):
         complete for the own facets (every pair of an own facet is listed here)."""
         L, F, at = self.listed, self.facets_all, self._at(up)
-        i, j, c, n = L.i[at.closed], L.j[at.closed], at.c, len(F)  # c = 0 off the closed pairs
-        delta = scatter_sum(i, (c / F.length[i])[:, None] * L.e_i[at.closed], n) + \
-            scatter_sum(j, (c / F.length[j])[:, None] * L.e_j[at.closed], n)
+        delta, work = np.zeros((len(F), self.d)), np.zeros((len(F), self.d))  # c = 0 off the closed pairs
+        P = L.pointers
+        lib.dem_pair_facet_corrections(len(at.closed), self.d, pointer(at.closed), P["i"], P["j"], P["e_i"], P["e_j"],
+                                       pointer(at.c), pointer(F.length), len(F), pointer(work), pointer(delta))
         return delta[: len(self.facets)]
 
     def gradient_correction(self, up: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -942,7 +943,7 @@ class PairContact:
                 mu = (L.ZT @ (L.Q @ up + self._q + L.Z @ c))[on]
             force_i = mu[:, None] * (w[on, None] * L.n[p[on]] + g[on, None] * dw[on])
             sign = np.where(body_i[on] < body_j[on], 1.0, -1.0)  # the force on the lower-numbered body
-            np.add.at(out, self._body_pair_index[body_i[on], body_j[on]], sign[:, None] * force_i)
+            out = scatter_sum(self._body_pair_index[body_i[on], body_j[on]], sign[:, None] * force_i, len(out))
         return out
 
     # -- statics (statics.minimise_energy) ---------------------------------------------------
@@ -1262,8 +1263,8 @@ class _Pairs:
 
     @functools.cached_property
     def pointers(self) -> dict:
-        """C pointers to i, j, n, t, d0 for the kernels (made once)."""
-        return {name: pointer(getattr(self, name)) for name in ("i", "j", "n", "t", "d0")}
+        """C pointers to i, j, n, t, d0, e_i, e_j for the kernels (made once)."""
+        return {name: pointer(getattr(self, name)) for name in ("i", "j", "n", "t", "d0", "e_i", "e_j")}
 
     @functools.cached_property
     def z(self) -> _CSR:
