@@ -34,6 +34,8 @@ ffibuilder.cdef(
     void dem_pair_screen(int64_t n_pairs, int32_t d, const int64_t *i, const int64_t *j, const double *n,
                          const double *t, const double *d0, const double *XA, const double *XB,
                          const double *uc, const double *vc, double dt, int8_t *out);
+    void dem_piecewise_midpoints(int64_t n_times, const int64_t *rows, const double *times, int64_t n, int64_t k,
+                                 double dt, int64_t *counts, double *points, double *mid, double *length);
     void dem_interpolate_own(int64_t n_rows, int32_t n_own, int32_t n_nodes, int32_t n_gauss, int32_t width,
                              const double *start, const double *length, const double *nodes, const double *xi,
                              const double *w_own, const double *dw_own, double *w, double *dw);

@@ -544,6 +544,44 @@ void dem_pair_screen(int64_t n_pairs, int32_t d, const int64_t *restrict i, cons
   }
 }
 
+/* patch.piecewise_midpoints: the times (n_times, each in (0, dt)) of rows ``rows`` (0 <= row < n)
+ * cut each row's [0, dt] into pieces; points (n x (k + 2), k the largest count per row): 0, the
+ * row's times sorted, then dt; mid and length (n x (k + 1)) of the pieces between them (empty
+ * ones at the end). counts: each row's number of times (consumed: zero on return). */
+void dem_piecewise_midpoints(int64_t n_times, const int64_t *restrict rows, const double *restrict times, int64_t n,
+                             int64_t k, double dt, int64_t *restrict counts, double *restrict points,
+                             double *restrict mid, double *restrict length)
+{
+  const int64_t width = k + 2;
+  for (int64_t r = 0; r < n; ++r)
+  {
+    points[r * width] = 0.0;
+    for (int64_t a = 1; a < width; ++a)
+      points[r * width + a] = dt;
+  }
+  for (int64_t e = 0; e < n_times; ++e)
+  {
+    /* a row's times fill its slots count, count - 1, ..., 1, kept sorted: each new one moves up
+     * past the smaller ones placed before it (the dt that follow them are not smaller) */
+    double *row = points + rows[e] * width;
+    int64_t b = counts[rows[e]]--;
+    row[b] = times[e];
+    for (; b + 1 < width && row[b + 1] < row[b]; ++b)
+    {
+      const double y = row[b + 1];
+      row[b + 1] = row[b];
+      row[b] = y;
+    }
+  }
+  for (int64_t r = 0; r < n; ++r)
+    for (int64_t a = 0; a + 1 < width; ++a)
+    {
+      const double p0 = points[r * width + a], p1 = points[r * width + a + 1];
+      mid[r * (k + 1) + a] = 0.5 * (p0 + p1);
+      length[r * (k + 1) + a] = p1 - p0;
+    }
+}
+
 /* Lagrange interpolation of pair_contact._overlap_on_own_pieces, for n_rows pairs: each has
  * n_own pieces (start, length; empty ones of length 0) with values w_own (n_gauss per piece, at
  * the nodes xi of [0, 1] scaled to the piece) and gradients dw_own (width components each), and

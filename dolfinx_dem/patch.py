@@ -15,6 +15,8 @@ from __future__ import annotations
 import numpy as np
 from petsc4py import PETSc
 
+from dolfinx_dem.kernels import lib, pointer
+
 
 def scatter_sum(index: np.ndarray, values: np.ndarray, n: int) -> np.ndarray:
     """out[index[k]] += values[k] for values of shape (k,) or (k, m), into zeros of n rows: the
@@ -66,13 +68,13 @@ def negative_part_integral(g0: np.ndarray, slope: np.ndarray, dt: float) -> np.n
 def piecewise_midpoints(rows: np.ndarray, times: np.ndarray, n: int, dt: float) -> tuple[np.ndarray, np.ndarray]:
     """Break times ``times`` in (0, dt) of rows ``rows`` (0 <= rows < n, any order and count per
     row): the midpoints and lengths of the pieces of [0, dt] they cut each row into, as (n, K)
-    arrays; rows with fewer breaks are padded with pieces of zero length."""
-    order = np.lexsort((times, rows))
-    rows, times = rows[order], times[order]
+    arrays; rows with fewer breaks are padded with pieces of zero length (the compiled kernel
+    ``dem_piecewise_midpoints``: each row's times sorted by insertion)."""
+    rows = np.ascontiguousarray(rows, dtype=np.int64)
+    times = np.ascontiguousarray(times, dtype=np.float64)
     counts = np.bincount(rows, minlength=n)
     k = int(counts.max(initial=0))
-    points = np.full((n, k + 2), float(dt))
-    points[:, 0] = 0.0
-    rank = np.arange(len(rows)) - np.repeat(np.cumsum(counts) - counts, counts)
-    points[rows, 1 + rank] = times
-    return 0.5 * (points[:, :-1] + points[:, 1:]), np.diff(points, axis=1)
+    points, mid, length = np.empty((n, k + 2)), np.empty((n, k + 1)), np.empty((n, k + 1))
+    lib.dem_piecewise_midpoints(len(rows), pointer(rows), pointer(times), n, k, float(dt), pointer(counts),
+                                pointer(points), pointer(mid), pointer(length))
+    return mid, length
