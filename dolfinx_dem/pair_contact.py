@@ -260,7 +260,8 @@ class PairContact:
         self._scheme_b_rule = np.empty(0, dtype=np.int64)  # keys of pairs under the B rule (own ones)
         self.seconds = 0.0  # processor time of the contact work in force integrals and energies
         self._template = zero = dem.create_vector()  # the layout of the scatters' source vectors
-        self.scatter = None  # the patch scatter, made by each list build
+        self.scatter = None  # the patch scatter, made by the list rounds (``_remake_scatters``)
+        self._facet_values = None  # the scatter of the facet corrections (outputs), made on first use
         self._last = None  # the _At of the last displacement evaluated (a step's end is the next one's start)
         self._flight = None  # (up, vp, dt, free facet velocities) of the flight ``prepare`` checked last
         self._build(self._facets.lift.copy())  # the free facet displacements at u = 0: R 0 + lift
@@ -367,10 +368,8 @@ class PairContact:
         else:
             ghosts, uc_ghosts = local.take(np.empty(0, dtype=np.int64)), np.zeros((0, d))
         if not stale and np.isin(ghosts.key, self.facets_all.key[nl:]).all():
-            # nothing new near this process: its list stands (the scatters are remade with the
-            # same dofs, as every process makes them after a round: their creation is collective)
-            self.scatter = PatchScatter(self._template, self.scatter.dofs)
-            self._facet_values = None
+            # nothing new near this process: its list stands, and so do its scatters' dofs
+            self._remake_scatters(self.scatter.dofs, self.facets_all)
             return
         F = _Facets.concatenate([local, ghosts])
         ucF = np.concatenate([uc, uc_ghosts])
@@ -430,13 +429,11 @@ class PairContact:
             columns = np.searchsorted(patch, self._row_dofs).astype(np.int32)[self._Q_entry_dof]
         else:
             patch, columns = self._row_dofs, self._Q_entry_dof
-        self.scatter = PatchScatter(self._template, patch)
+        self._remake_scatters(patch, F)
         Qp = scipy.sparse.csr_matrix((self._Q.data, columns, self._Q.indptr), shape=(self._Q.shape[0], len(patch)))
         self.facets_all = F
         self._R = _reconstruction_matrix(F, patch)  # (n_facets d, patch)
         self._RT = self._R.T.tocsr()
-        # The facet corrections of the known facets, from their owners (outputs).
-        self._facet_values = None  # made on first use after a build (outputs): _corrections_everywhere
         self._lift = F.lift
         # the facets projected on the plane normal to n, origin at f_i's barycentre; n . n_f >
         # |f| / (|f| + |f'|) for facing facets, so no projection degenerates
@@ -450,6 +447,23 @@ class PairContact:
         self._reference = ucF.copy()
         self._half_skin2 = 0.25 * skins**2  # of the known facets
         self.rebuilds += 1
+
+    def _remake_scatters(self, patch: np.ndarray, F: _Facets) -> None:
+        """After a round of the lists (every process calls it): the patch scatter of the dofs
+        ``patch``, and the scatter of the facet corrections of the known facets ``F`` from their
+        owners (outputs; made on first use, ``_corrections_everywhere``). Making a scatter is
+        collective and, in parallel, costs as much as the rest of a list build: each is kept
+        when no process's dofs changed (one reduction), as a round with slow bodies mostly
+        leaves them."""
+        facet_dofs = (F.index[:, None] * self.d + np.arange(self.d)).ravel()
+        keep = np.array([self.scatter is not None and np.array_equal(self.scatter.dofs, patch),
+                         self._facet_values is not None and np.array_equal(self._facet_values.dofs, facet_dofs)],
+                        dtype=np.int32)
+        self.comm.Allreduce(MPI.IN_PLACE, keep, op=MPI.MIN)
+        if not keep[0]:
+            self.scatter = PatchScatter(self._template, patch)
+        if not keep[1]:
+            self._facet_values = None
 
     def _directions(self, F: _Facets, i: np.ndarray, j: np.ndarray, n: np.ndarray):
         """The contact corrections of a pair are u_f += (w/|f|) g^- e_f, u_f' += (w/|f'|) g^- e_f'.
@@ -856,7 +870,7 @@ class PairContact:
     def _corrections_everywhere(self, up: np.ndarray) -> np.ndarray:
         """Facet corrections of every known facet (local and ghost), each from its owner (a
         scatter of the candidates' vector; collective)."""
-        if self._facet_values is None:
+        if self._facet_values is None:  # (re)made after a round that changed the known facets somewhere
             F, d = self.facets_all, self.d
             self._facet_values = PatchScatter(self._facet_vector, (F.index[:, None] * d + np.arange(d)).ravel())
         self._facet_vector.array[:] = self.facet_corrections(up)[: self.num_own].ravel()
