@@ -373,6 +373,20 @@ class PairContact:
             return
         F = _Facets.concatenate([local, ghosts])
         ucF = np.concatenate([uc, uc_ghosts])
+        # The patch: the own rows' held dofs and the reconstruction dofs of every known facet
+        # (the ghosts' too: their motion decides when the list is stale), and its scatters, first:
+        # every process reaches this collective soon after the exchange, and the list's work
+        # below, however unequal between processes, is waited for once (at the next gather).
+        # Often (scheme B: R_f u = u_c) the rows' dofs hold every facet's: the patch is the rows'
+        # dofs and Q's columns are their fixed numbers; else the few other dofs are merged in.
+        rd = F.R_dofs[F.R_dofs >= 0]
+        extra = rd[np.append(self._row_dofs, -1)[np.searchsorted(self._row_dofs, rd)] != rd]  # (-1: none past the end)
+        if len(extra):
+            patch = np.union1d(self._row_dofs, extra)
+            columns = np.searchsorted(patch, self._row_dofs).astype(np.int32)[self._Q_entry_dof]
+        else:
+            patch, columns = self._row_dofs, self._Q_entry_dof
+        self._remake_scatters(patch, F)
 
         x = F.centre + ucF
         reach = np.concatenate([self._local_reach, _reach(ghosts)])
@@ -418,18 +432,6 @@ class PairContact:
         ZT = ET @ self._QF.T  # (P, own rows touched)
         ZT.sort_indices()
 
-        # The patch: the own rows' held dofs and the reconstruction dofs of every known facet
-        # (the ghosts' too: their motion decides when the list is stale).
-        # Often (scheme B: R_f u = u_c) the rows' dofs hold every facet's: the patch is the rows'
-        # dofs and Q's columns are their fixed numbers; else the few other dofs are merged in.
-        rd = F.R_dofs[F.R_dofs >= 0]
-        extra = rd[np.append(self._row_dofs, -1)[np.searchsorted(self._row_dofs, rd)] != rd]  # (-1: none past the end)
-        if len(extra):
-            patch = np.union1d(self._row_dofs, extra)
-            columns = np.searchsorted(patch, self._row_dofs).astype(np.int32)[self._Q_entry_dof]
-        else:
-            patch, columns = self._row_dofs, self._Q_entry_dof
-        self._remake_scatters(patch, F)
         Qp = scipy.sparse.csr_matrix((self._Q.data, columns, self._Q.indptr), shape=(self._Q.shape[0], len(patch)))
         self.facets_all = F
         self._R = _reconstruction_matrix(F, patch)  # (n_facets d, patch)
