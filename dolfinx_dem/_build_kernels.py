@@ -21,8 +21,10 @@ ffibuilder.cdef(
                          const double *minv, double *u, const double *v_next, double *v_prev,
                          const double *f, int32_t advance, const int32_t *body, double *momentum,
                          double *sums);
-    void dem_transpose_pattern(int64_t n_rows, const int32_t *rowptr, const int32_t *cols, int32_t first,
-                               int32_t n_cols, int32_t *ptr, int32_t *rows);
+    void dem_row_column_range(int64_t n_rows, const int32_t *rowptr, const int32_t *cols, int32_t n_cols,
+                              int32_t *lo, int32_t *hi);
+    void dem_transpose_pattern(const int64_t *ranges, int32_t n_ranges, const int32_t *rowptr, const int32_t *cols,
+                               int32_t first, int32_t n_cols, int32_t *ptr, int32_t *rows);
     void dem_gram_abs_rowsums(int64_t first, int64_t n_out, const int32_t *qt_ptr, const int32_t *qt_rows,
                               const int32_t *rowptr, const int32_t *cols, const double *vals,
                               const int64_t *key, const int32_t *qt2_ptr, const int32_t *qt2_rows,

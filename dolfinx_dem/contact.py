@@ -212,17 +212,17 @@ class RigidContact:
         rows = dem.rows
         e_cols = scipy.sparse.csr_matrix((e.ravel(), (np.arange(nc * d), np.repeat(np.arange(nc), d))),
                                          shape=(nc * d, nc))
-        Y = (rows.QF[:, dofs] @ e_cols).tocsr()
-        touched = np.unique(Y.tocoo().row)
-        Y, Q = Y[touched], rows.Q[touched]
+        Y = (rows.QF[:, dofs] @ e_cols).tocsc()
+        touched = np.unique(Y.indices)
+        Y, Q = Y[touched].tocsr(), rows.Q[touched]
         # The patch: the held dofs these rows and the gaps read.
         patch = np.unique(np.concatenate([Q.indices, R_free.indices]))
         self.scatter = PatchScatter(dem.create_vector(), dem.columns[patch])
         Q, R_free = Q[:, patch], R_free[:, patch]
         Rn = normal_rows @ R_free
-        own_rows = rows.owned[touched]
+        own_rows = touched < rows.num_owned
         self._q = dem.row_lift(touched)
-        self._is_elastic_row = rows.elastic[touched]
+        self._is_elastic_row = touched < rows.num_elastic
         self._own_rows = own_rows
         self._Q, self._Y, self._Rn = _compact(Q), _compact(Y), _compact(Rn)
         Y_own = Y[:, : self.num_own]

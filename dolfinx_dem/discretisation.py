@@ -243,7 +243,7 @@ class DEMDiscretisation:
         order = np.lexsort((g[:, 1], g[:, 0]))
         order = np.concatenate([order[owned_jumps[order]], order[touches[order] & ~owned_jumps[order]]])
         mine, jump_facets = interior[owned_jumps], interior[order]
-        self._jump_cells_global = g[order[: len(mine)]]  # (own jump rows' facets, 2), row keys
+        self._jump_cells = c[order[: len(mine)]]  # (own jump rows' facets, 2) int32 local cells: row keys
         rec = self.reconstruction
         #: owned cells whose Neumann facets use scheme B under scheme A (reconstruction.py)
         self.multi_neumann_cells = rec.multi_neumann_cells[rec.multi_neumann_cells < self.n_owned]
@@ -263,14 +263,15 @@ class DEMDiscretisation:
         self.rows: EnergyRows = compute_energy_rows(geom, materials, rec, self.n_owned, jump_facets, n_own_jumps)
         _sort_rows_globally(self.rows.Q, self.columns)
         self._n_elastic_rows = self.n_owned * d * (d + 1) // 2  # local rows of Q that belong to S
-        self._n_own_rows = int(self.rows.owned.sum())
+        self._n_own_rows = self.rows.num_owned
         Q_dirichlet = self.rows.Q_dirichlet[: self._n_own_rows]
-        Q_traction = (self.rows.QF[: self._n_own_rows] @ rec.N).tocsr()  # the traction lift's rows
+        Q_traction = (self.rows.QF[: self._n_own_rows] @ rec.N).tocsc()  # the traction lift's rows
         # the own rows that the data reach (a boundary layer), and their rows of Q_D and Q_N only
-        self._lift_rows = np.flatnonzero(np.diff(Q_dirichlet.indptr) + np.diff(Q_traction.indptr)).astype(np.int32)
-        self._Q_dirichlet, self._Q_traction = Q_dirichlet[self._lift_rows], Q_traction[self._lift_rows]
+        self._lift_rows = np.unique(np.concatenate([Q_dirichlet.indices, Q_traction.indices])).astype(np.int32)
+        self._Q_dirichlet = Q_dirichlet[self._lift_rows].tocsr()
+        self._Q_traction = Q_traction[self._lift_rows].tocsr()
         del Q_dirichlet, Q_traction
-        self._q = np.zeros(self._n_own_rows)  # q(t) on the own rows, zero off ``_lift_rows``
+        self._q = np.zeros(len(self._lift_rows))  # q(t) on ``_lift_rows`` (zero on the other own rows)
         self._dirichlet_condition = condition[is_dirichlet]  # of each Dirichlet facet
         self.factored = FactoredStiffness(self.comm, self.rows.Q, self._n_own_rows, self._n_elastic_rows,
                                           self.n_owned * d, self.columns[self.n_owned * d:])
@@ -553,7 +554,7 @@ class DEMDiscretisation:
         d, m = self.d, self.d * (self.d + 1) // 2
         n_global = self.geometry.num_cells_global
         S = (self.geometry.cell_global[: self.n_owned, None] * m + np.arange(m)).ravel()
-        g = self._jump_cells_global.astype(np.int64)
+        g = np.sort(self.geometry.cell_global[self._jump_cells], axis=1)  # global numbers, smaller first
         J = 2**62 + ((g[:, 0] * n_global + g[:, 1])[:, None] * d + np.arange(d)).ravel()
         return np.concatenate([S, J]).astype(np.int64)
 
@@ -622,7 +623,7 @@ class DEMDiscretisation:
             return
         g, tr = self.dirichlet_values(t).ravel(), self.traction_values(t).ravel()
         self._g, self._t = g, tr
-        self._q[self._lift_rows] = self._Q_dirichlet @ g + self._Q_traction @ tr
+        self._q = self._Q_dirichlet @ g + self._Q_traction @ tr  # a new array: ``lift`` hands it out
         self.body_force.copy(self.external_force)
         self._traction_constant = 0.0
         if self._traction_force is not None:
@@ -632,7 +633,7 @@ class DEMDiscretisation:
             self.factored.local_array(self._traction_force)[:] = self._P_traction @ tw
             self._traction_force.ghostUpdate(PETSc.InsertMode.ADD_VALUES, PETSc.ScatterMode.REVERSE)
             self.external_force.array[:] += self._traction_force.array_r
-        self.factored.residual(None, self._q, self._rhs)
+        self.factored.residual(None, (self._lift_rows, self._q), self._rhs)
         self._rhs.aypx(-1.0, self.external_force)
         self._lift_time = t
 
@@ -677,7 +678,7 @@ class DEMDiscretisation:
         rows that Dirichlet values or traction lifts reach: (local row indices (int32), values); q
         is zero elsewhere."""
         self._update_data(t)
-        return self._lift_rows, self._q[self._lift_rows]
+        return self._lift_rows, self._q
 
     # -- forces and energies -----------------------------------------------------------------
     def force(self, u: PETSc.Vec, t: float, out: PETSc.Vec, contact: bool = True) -> PETSc.Vec:
@@ -692,7 +693,7 @@ class DEMDiscretisation:
         (``factored``); a MEMM step does not call this: it keeps the rows from step to step.
         """
         self._update_data(t)
-        self.factored.residual(self.relative_displacement(u), self._q, out)
+        self.factored.residual(self.relative_displacement(u), (self._lift_rows, self._q), out)
         out.aypx(-1.0, self.external_force)
         if contact:
             for c in self.contacts:
@@ -704,7 +705,7 @@ class DEMDiscretisation:
         global sums, and ``potential``, their total: the potential whose exact gradient ``force``
         computes."""
         self._update_data(t)
-        squares = self.factored.residual(self.relative_displacement(u), self._q, self._work_vector())
+        squares = self.factored.residual(self.relative_displacement(u), (self._lift_rows, self._q), self._work_vector())
         local = np.array([0.5 * squares[0], 0.5 * squares[1], -self.external_potential(u, t)])
         for c in self.contacts:  # this process's part of the contact energy changes
             local[:2] += c.energy_correction(c.patch_values(u))
@@ -757,10 +758,9 @@ class DEMDiscretisation:
         self._update_data(t)
         if not hasattr(self, "_reaction_rows"):
             fixed = np.diff(self._Q_dirichlet.indptr) > 0  # of the lift rows
-            rows = self._lift_rows[fixed]
-            self._reaction_rows = rows, self.rows.Q[rows], self._Q_dirichlet[fixed].T.tocsr()
-        rows, Q, QD_T = self._reaction_rows
-        dVdg = QD_T @ (Q @ self._held_values(u) + self._q[rows])
+            self._reaction_rows = fixed, self.rows.Q[self._lift_rows[fixed]], self._Q_dirichlet[fixed].T.tocsr()
+        fixed, Q, QD_T = self._reaction_rows
+        dVdg = QD_T @ (Q @ self._held_values(u) + self._q[fixed])
         if self._traction_force is not None:
             tw = self._traction_weights * self._t.reshape(-1, self.d)[self._own_tractions].ravel()
             dVdg -= self._DN_traction[0].T @ tw

@@ -96,11 +96,12 @@ class FactoredStiffness:
 
         return apply
 
-    def residual(self, w: PETSc.Vec | None, q: np.ndarray, out: PETSc.Vec) -> np.ndarray:
+    def residual(self, w: PETSc.Vec | None, q: tuple[np.ndarray, np.ndarray], out: PETSc.Vec) -> np.ndarray:
         """a = Q w + q and out = Q^T a (owned dofs, summed over processes), for the occasional
         product outside time stepping (``DEMDiscretisation.force``, ``energies``, ``load``);
-        w (owned dofs; None: zero) and out are vectors of the dof layout. Returns the squares of
-        a summed over this process's elastic and stabilisation rows. Collective."""
+        w (owned dofs; None: zero) and out are vectors of the dof layout, q = (rows, values) is
+        zero off ``rows``. Returns the squares of a summed over this process's elastic and
+        stabilisation rows. Collective."""
         if self._work is None:
             self._work = (self.create_vector(), self.create_vector(), np.zeros(2))
         x, z, sums = self._work
@@ -112,7 +113,8 @@ class FactoredStiffness:
             x_local[: self.n_owned] = w.array_r
             x.ghostUpdate(PETSc.InsertMode.INSERT_VALUES, PETSc.ScatterMode.FORWARD)
         self.local_array(z)[:] = 0.0
-        a[:] = q
+        a[:] = 0.0
+        a[q[0]] = q[1]
         sums[:] = 0.0
         self.bind(x, a, z, sums)(1.0, 1.0 if w is not None else 0.0)
         z.ghostUpdate(PETSc.InsertMode.ADD_VALUES, PETSc.ScatterMode.REVERSE)

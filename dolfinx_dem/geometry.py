@@ -48,11 +48,11 @@ class MeshGeometry:
     d: int
     num_owned: int
     cell_global: np.ndarray  # (n,) global cell number (global DG0 dof index)
-    cell_owner: np.ndarray  # (n,) rank owning the cell
+    cell_owner: np.ndarray  # (n,) int32: rank owning the cell
     cell_layer: np.ndarray  # (n,) int8: 0 owned, k in the k-th halo layer
     cell_vertices: np.ndarray  # (n, d+1, d) vertex coordinates
     cell_vertex_ids: np.ndarray  # (n, d+1) global vertex numbers (the mesh topology's), same order
-    cell_bodies: np.ndarray  # (n,) body of each cell (``compute_bodies``)
+    cell_bodies: np.ndarray  # (n,) int32: body of each cell (``compute_bodies``)
     cell_facets: np.ndarray  # (n, d+1) int32: local facet index of facet j
     cell_centres: np.ndarray  # (n, d) barycentres x_c
     cell_volumes: np.ndarray  # (n,) |c|
@@ -61,7 +61,7 @@ class MeshGeometry:
     facet_centres: np.ndarray  # (F, d) barycentres x_f
     facet_areas: np.ndarray  # (F,) |f| (1 for the points of a 1D mesh)
     facet_diameters: np.ndarray  # (F,) h_f of eq. (13)
-    facet_cells: np.ndarray  # (F, 2) adjacent cells; second -1 on the boundary, OUTSIDE if not held
+    facet_cells: np.ndarray  # (F, 2) int32: adjacent cells; second -1 on the boundary, OUTSIDE if not held
     facet_local: np.ndarray  # (F, 2) int8: local index of the facet in each adjacent cell
     num_cells_global: int
     num_bodies: int
@@ -208,7 +208,7 @@ def geometry_from_arrays(
     if np.any(counts > 2):
         raise ValueError("inconsistent mesh: every facet must belong to one or two cells")
     first = np.concatenate([[0], np.cumsum(counts)[:-1]])
-    facet_cells = np.full((num_facets, 2), -1, dtype=np.int64)
+    facet_cells = np.full((num_facets, 2), -1, dtype=np.int32)  # local numbers (int32: memory)
     facet_local = np.full((num_facets, 2), -1, dtype=np.int8)  # 0 .. d
     facet_cells[:, 0], facet_local[:, 0] = np.divmod(order[first], nv)
     two = counts == 2
@@ -243,11 +243,11 @@ def geometry_from_arrays(
         d=d,
         num_owned=int(num_owned),
         cell_global=np.asarray(cell_global, dtype=np.int64),
-        cell_owner=np.asarray(cell_owner, dtype=np.int64),
+        cell_owner=np.asarray(cell_owner, dtype=np.int32),
         cell_layer=np.asarray(cell_layer, dtype=np.int8),
         cell_vertices=vertices,
         cell_vertex_ids=np.asarray(vertex_ids, dtype=np.int64),
-        cell_bodies=bodies,
+        cell_bodies=bodies.astype(np.int32),
         num_bodies=num_bodies,
         cell_facets=cell_facets,
         cell_centres=centres,

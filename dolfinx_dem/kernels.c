@@ -137,12 +137,32 @@ void dem_memm_update(int64_t n_blocks, int32_t bs, double dt, double c, double *
   sums[2] += external;
 }
 
-/* The pattern of the columns first <= j < first + n_cols of a CSR (rowptr, cols) of n_rows rows:
- * the rows with an entry in column j, increasing, are rows[ptr[j - first] .. ptr[j - first + 1]).
- * With rows NULL only ptr (n_cols + 1 entries) is computed; then, with rows of ptr[n_cols]
- * entries, the rows (ptr is used as the cursor and restored). A transpose without values: 4 bytes
- * per entry. */
-void dem_transpose_pattern(int64_t n_rows, const int32_t *restrict rowptr,
+/* The smallest and largest column below n_cols of each row of a CSR (rowptr, cols) of n_rows
+ * rows: lo[i] = n_cols and hi[i] = -1 for a row without such a column. */
+void dem_row_column_range(int64_t n_rows, const int32_t *restrict rowptr, const int32_t *restrict cols,
+                          int32_t n_cols, int32_t *restrict lo, int32_t *restrict hi)
+{
+  for (int64_t i = 0; i < n_rows; ++i)
+  {
+    int32_t a = n_cols, b = -1;
+    for (int32_t q = rowptr[i]; q < rowptr[i + 1]; ++q)
+      if (cols[q] < n_cols)
+      {
+        a = cols[q] < a ? cols[q] : a;
+        b = cols[q] > b ? cols[q] : b;
+      }
+    lo[i] = a;
+    hi[i] = b;
+  }
+}
+
+/* The pattern of the columns first <= j < first + n_cols of a CSR (rowptr, cols), scanning the
+ * rows of the n_ranges increasing ranges [ranges[2k], ranges[2k + 1]) (they must hold every row
+ * with an entry in those columns): the rows with an entry in column j, increasing, are
+ * rows[ptr[j - first] .. ptr[j - first + 1]). With rows NULL only ptr (n_cols + 1 entries) is
+ * computed; then, with rows of ptr[n_cols] entries, the rows (ptr is used as the cursor and
+ * restored). A transpose without values: 4 bytes per entry. */
+void dem_transpose_pattern(const int64_t *restrict ranges, int32_t n_ranges, const int32_t *restrict rowptr,
                            const int32_t *restrict cols, int32_t first, int32_t n_cols,
                            int32_t *restrict ptr, int32_t *restrict rows)
 {
@@ -150,18 +170,20 @@ void dem_transpose_pattern(int64_t n_rows, const int32_t *restrict rowptr,
   {
     for (int32_t j = 0; j <= n_cols; ++j)
       ptr[j] = 0;
-    for (int64_t i = 0; i < n_rows; ++i)
-      for (int32_t q = rowptr[i]; q < rowptr[i + 1]; ++q)
-        if (cols[q] >= first && cols[q] - first < n_cols)
-          ++ptr[cols[q] - first + 1];
+    for (int32_t k = 0; k < n_ranges; ++k)
+      for (int64_t i = ranges[2 * k]; i < ranges[2 * k + 1]; ++i)
+        for (int32_t q = rowptr[i]; q < rowptr[i + 1]; ++q)
+          if (cols[q] >= first && cols[q] - first < n_cols)
+            ++ptr[cols[q] - first + 1];
     for (int32_t j = 0; j < n_cols; ++j)
       ptr[j + 1] += ptr[j];
     return;
   }
-  for (int64_t i = 0; i < n_rows; ++i)
-    for (int32_t q = rowptr[i]; q < rowptr[i + 1]; ++q)
-      if (cols[q] >= first && cols[q] - first < n_cols)
-        rows[ptr[cols[q] - first]++] = (int32_t)i;
+  for (int32_t k = 0; k < n_ranges; ++k)
+    for (int64_t i = ranges[2 * k]; i < ranges[2 * k + 1]; ++i)
+      for (int32_t q = rowptr[i]; q < rowptr[i + 1]; ++q)
+        if (cols[q] >= first && cols[q] - first < n_cols)
+          rows[ptr[cols[q] - first]++] = (int32_t)i;
   for (int32_t j = n_cols; j > 0; --j) /* ptr[j] is now the old ptr[j + 1]: shift back */
     ptr[j] = ptr[j - 1];
   ptr[0] = 0;

@@ -53,17 +53,16 @@ def mandel_stiffness(material: ElasticMaterial, d: int) -> np.ndarray:
 @dataclasses.dataclass(frozen=True)
 class EnergyRows:
     """The energy rows a = Q u + Q_dirichlet g a process holds (``DEMDiscretisation.rows``): the
-    elastic rows of its owned cells, then the jump rows of ``jump_facets`` (every interior facet
-    of its owned cells, its own ones first). Columns of Q: the held cells' dofs; ``QF`` gives the
+    elastic rows of its owned cells, then the jump rows of every interior facet of its owned
+    cells, its own ones first. Columns of Q: the held cells' dofs; ``QF`` gives the
     rows' dependence on the values u_F of the boundary facets (the only facets whose
     reconstruction contact changes; its interior-facet columns are empty)."""
 
     Q: scipy.sparse.csr_matrix  # (rows, n_cells d)
-    Q_dirichlet: scipy.sparse.csr_matrix  # (rows, n_D d)
-    QF: scipy.sparse.csr_matrix  # (rows, n_facets d), boundary facet columns only
-    owned: np.ndarray  # (rows,) bool: the rows of this process's part of Q
-    elastic: np.ndarray  # (rows,) bool: an S row (else a J row)
-    jump_facets: np.ndarray  # (Fi,) interior facets, in the row order of J
+    Q_dirichlet: scipy.sparse.csc_matrix  # (rows, n_D d); CSC: few entries, no pointer per row
+    QF: scipy.sparse.csc_matrix  # (rows, n_facets d), boundary facet columns only; CSC as Q_dirichlet
+    num_owned: int  # rows [0, num_owned): this process's part of Q
+    num_elastic: int  # rows [0, num_elastic): S rows (the others J rows)
 
 
 def facet_gradient(geom: MeshGeometry, cells: np.ndarray) -> scipy.sparse.csr_matrix:
@@ -104,56 +103,58 @@ def _stack_rows(blocks: list, n_cols: int) -> scipy.sparse.csr_matrix:
     return scipy.sparse.csr_matrix((data, indices, indptr), shape=(n_rows, n_cols))
 
 
+def _stack_columns(blocks: list, n_cols: int) -> scipy.sparse.csc_matrix:
+    """The CSR blocks stacked (vstack) as CSC: for the operators with few entries (QF, Q_dirichlet),
+    whose row pointers would outweigh their entries."""
+    first = np.cumsum([0] + [b.shape[0] for b in blocks])
+    coo = [b.tocoo() for b in blocks]
+    rows = np.concatenate([c.row + a for c, a in zip(coo, first)] + [np.empty(0, dtype=np.int32)])
+    cols = np.concatenate([c.col for c in coo] + [np.empty(0, dtype=np.int32)])
+    data = np.concatenate([c.data for c in coo] + [np.empty(0)])
+    return scipy.sparse.csc_matrix((data, (rows, cols)), shape=(int(first[-1]), n_cols))
+
+
 def compute_energy_rows(
     geom: MeshGeometry, materials: CellMaterials, rec: Reconstruction, num_cells: int, jump_facets: np.ndarray,
     num_own_jumps: int,
 ) -> EnergyRows:
     """S for the first ``num_cells`` cells, then J for ``jump_facets`` (in that row order), as in
     the module docstring; the rows of S and of the first ``num_own_jumps`` jump facets are
-    ``owned``. Q is formed in blocks of ``BLOCK_ROWS`` rows by two sparse products each (below)
+    this process's. Q is formed in blocks of ``BLOCK_ROWS`` rows by sparse products (below)
     and the blocks copied into it: no second copy of Q and no intermediate product of its size.
     Each row of a product depends on the same row of its left factor only, so the rows do not
     depend on the blocks."""
     d, N, F = geom.d, geom.num_cells, geom.num_facets
     m = d * (d + 1) // 2
-    # Only the cells whose gradients the rows read: the owned ones (S) and both cells of each jump facet.
-    cells = np.unique(np.concatenate([np.arange(num_cells), geom.facet_cells[jump_facets].ravel()]))
-    width = len(cells) * d * d + N * d  # columns of M (below): the gradients of ``cells``, then u_C
-    # a = M [G; u_C], [G; u_C] = blockdiag(Gf, I) [u_F; u_C], [u_F; u_C] = [R; I] u_C (+ [D; 0] g):
-    # QF_ext = M blockdiag(Gf, I), then Q = QF_ext [R; I], for each block of rows of M; CSR
-    # stacks only (conversions through COO would double the memory of the operands).
-    Gf = facet_gradient(geom, cells)  # rows of cell cells[k]: k d d + ...
-    Gf.resize(Gf.shape[0], F * d + N * d)
-    identity = scipy.sparse.csr_matrix((np.ones(N * d), np.arange(F * d, F * d + N * d, dtype=np.int32),
-                                        np.arange(N * d + 1, dtype=np.int32)), shape=(N * d, F * d + N * d))
-    GI = scipy.sparse.vstack([Gf, identity], format="csr")
-    del Gf, identity
-    R_ext = scipy.sparse.vstack([rec.R, scipy.sparse.identity(N * d)], format="csr")
-    D_ext = scipy.sparse.vstack([rec.D, scipy.sparse.csr_matrix((N * d, rec.D.shape[1]))], format="csr")
-    # QF keeps the boundary-facet columns only
-    boundary = np.zeros(F * d + N * d, dtype=bool)
+    # a = M_G G + M_C u_C with G = Gf u_F and u_F = R u_C + D g: for each block of rows of M,
+    # QF = M_G Gf (the rows' dependence on the facet values), Q = QF R + M_C, Q_dirichlet = QF D,
+    # with Gf formed for the block's cells only: no operator of the size of the mesh besides R
+    # and the result (CSR products only: conversions through COO would double the operands).
+    boundary = np.zeros(F * d, dtype=bool)  # QF keeps the boundary-facet columns only
     boundary[(np.flatnonzero(geom.facet_cells[:, 1] == -1)[:, None] * d + np.arange(d)).ravel()] = True
 
     # sqrt|c| L_c^T P of each owned cell, (num_cells, m, d*d): one Cholesky factor per material
     factors = np.stack([np.linalg.cholesky(mandel_stiffness(mat, d)).T @ mandel(d) for mat in materials.materials])
 
-    def elastic(a: int, b: int) -> scipy.sparse.csr_matrix:
-        """The rows of M of S for the owned cells a .. b-1 (the first ones of ``cells``): row i of
-        cell k reads columns k d d + (0..d d - 1)."""
+    def elastic(a: int, b: int):
+        """(M_G, its cells, M_C) of the rows of S for the owned cells a .. b-1: row i of cell a + k
+        reads the gradient entries k d d + (0..d d - 1); no direct part."""
         n = b - a
         W = scipy.sparse.csr_matrix(
             ((np.sqrt(geom.cell_volumes[a:b])[:, None, None] * factors[materials.index[a:b]]).ravel(),
-             np.repeat(np.arange(a * d * d, b * d * d, dtype=np.int32).reshape(n, 1, d * d), m, axis=1).ravel(),
+             np.repeat(np.arange(n * d * d, dtype=np.int32).reshape(n, 1, d * d), m, axis=1).ravel(),
              np.arange(0, n * m * d * d + 1, d * d, dtype=np.int32)),
-            shape=(n * m, width))
+            shape=(n * m, n * d * d))
         W.eliminate_zeros()
-        return W
+        return W, np.arange(a, b), None
 
-    def jump(facets: np.ndarray) -> scipy.sparse.csr_matrix:
-        """The rows of M of J for ``facets``: the jump of the P1 reconstructions (10) at x_f,
-        eq. (12), its gradient part and its direct part sqrt(w) (u_c1 - u_c2)."""
+    def jump(facets: np.ndarray):
+        """(M_G, its cells, M_C) of the rows of J for ``facets``: the jump of the P1
+        reconstructions (10) at x_f, eq. (12): its gradient part (M_G) and its direct part
+        sqrt(w) (u_c1 - u_c2) (M_C)."""
         n = len(facets)
         c1, c2 = geom.facet_cells[facets, 0], geom.facet_cells[facets, 1]
+        cells = np.unique(np.concatenate([c1, c2]))
         k1, k2 = np.searchsorted(cells, c1), np.searchsorted(cells, c2)
         xf = geom.facet_centres[facets]
         r1, r2 = xf - geom.cell_centres[c1], xf - geom.cell_centres[c2]
@@ -167,36 +168,34 @@ def compute_energy_rows(
                 (np.tile((f * d + i).ravel(), 2),
                  np.concatenate([(k1[f] * d * d + i * d + j).ravel(), (k2[f] * d * d + i * d + j).ravel()])),
             ),
-            shape=(n * d, width),
+            shape=(n * d, len(cells) * d * d),
         ).tocsr()
         fi, ii = np.meshgrid(np.arange(n), np.arange(d), indexing="ij")
         delta = scipy.sparse.coo_matrix(
             (np.concatenate([sqrt_w, -sqrt_w]),
              (np.tile((fi * d + ii).ravel(), 2),
-              len(cells) * d * d + np.concatenate([(c1[fi] * d + ii).ravel(), (c2[fi] * d + ii).ravel()]))),
-            shape=(n * d, width),
+              np.concatenate([(c1[fi] * d + ii).ravel(), (c2[fi] * d + ii).ravel()]))),
+            shape=(n * d, N * d),
         ).tocsr()
-        return X + delta
+        return X, cells, delta
 
     Q, Q_dirichlet, QF = [], [], []
     cell_block, facet_block = max(1, BLOCK_ROWS // m), max(1, BLOCK_ROWS // d)
     M_blocks = itertools.chain(
         (elastic(a, min(a + cell_block, num_cells)) for a in range(0, num_cells, cell_block)),
         (jump(jump_facets[a : a + facet_block]) for a in range(0, len(jump_facets), facet_block)))
-    for M in M_blocks:
-        QF_ext = (M @ GI).tocsr()
-        del M
-        Q.append((QF_ext @ R_ext).tocsr())
-        Q_dirichlet.append((QF_ext @ D_ext).tocsr())
-        QF_ext.data[~boundary[QF_ext.indices]] = 0.0
-        QF_ext.eliminate_zeros()
-        QF_ext.resize(QF_ext.shape[0], F * d)
-        QF.append(QF_ext)
-        del QF_ext
-    del GI, R_ext, D_ext
-    Q, Q_dirichlet, QF = _stack_rows(Q, N * d), _stack_rows(Q_dirichlet, rec.D.shape[1]), _stack_rows(QF, F * d)
+    for M_G, cells, M_C in M_blocks:
+        QF_block = (M_G @ facet_gradient(geom, cells)).tocsr()
+        del M_G
+        Q_block = (QF_block @ rec.R).tocsr()
+        Q.append(Q_block if M_C is None else (Q_block + M_C).tocsr())
+        del Q_block, M_C
+        Q_dirichlet.append((QF_block @ rec.D).tocsr())
+        QF_block.data[~boundary[QF_block.indices]] = 0.0
+        QF_block.eliminate_zeros()
+        QF.append(QF_block)
+        del QF_block
+    Q = _stack_rows(Q, N * d)
     S_rows = num_cells * m
-    own = np.zeros(Q.shape[0], dtype=bool)
-    own[: S_rows + num_own_jumps * d] = True
-    return EnergyRows(Q=Q, Q_dirichlet=Q_dirichlet, QF=QF, owned=own,
-                      elastic=np.arange(Q.shape[0]) < S_rows, jump_facets=np.asarray(jump_facets))
+    return EnergyRows(Q=Q, Q_dirichlet=_stack_columns(Q_dirichlet, rec.D.shape[1]), QF=_stack_columns(QF, F * d),
+                      num_owned=S_rows + num_own_jumps * d, num_elastic=S_rows)

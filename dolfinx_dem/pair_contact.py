@@ -198,7 +198,7 @@ class PairContact:
         # the own ones, then the first-layer ones that touch an own row.
         rows = dem.rows
         dofs = (f[:, None] * d + np.arange(d)).ravel()
-        QF = rows.QF[rows.owned][:, dofs].tocsc()
+        QF = rows.QF[: rows.num_owned][:, dofs]  # CSC
         touches = np.diff(QF.indptr).reshape(-1, d).sum(axis=1) > 0
         keep = owned | touches
         order = np.lexsort((geom.facet_global[f], ~owned))
@@ -216,17 +216,16 @@ class PairContact:
         self.num_facets = self.comm.allreduce(self.num_own, op=MPI.SUM)
         self._facet_vector = PETSc.Vec().createMPI((self.num_own * d, PETSc.DECIDE), comm=self.comm)
         dofs = (self.facets[:, None] * d + np.arange(d)).ravel()
-        own_rows = np.flatnonzero(rows.owned)
-        QF = rows.QF[own_rows][:, dofs].tocsr()
-        touched = np.unique(QF.tocoo().row)
-        self._QF = QF[touched].tocsc()  # (own rows touched, local facet dofs)
-        self._Q = rows.Q[own_rows[touched]]  # held-dof columns
+        QF = rows.QF[: rows.num_owned][:, dofs]  # CSC
+        touched = np.unique(QF.indices)  # the own rows touched
+        self._QF = QF[touched]  # (own rows touched, local facet dofs), CSC
+        self._Q = rows.Q[touched]  # held-dof columns
         # the global dofs these rows read, and each entry's index among them (once: a rebuild
         # then places them in the patch by a gather, not a search over every entry)
         self._row_dofs, entry_dof = np.unique(dem.columns[self._Q.indices], return_inverse=True)
         self._Q_entry_dof = entry_dof.astype(np.int32)
-        self._q = dem.row_lift(own_rows[touched])
-        self._is_elastic_row = rows.elastic[own_rows[touched]]
+        self._q = dem.row_lift(touched)
+        self._is_elastic_row = touched < rows.num_elastic
         an = geom.facet_area_normals[self.cells, geom.facet_local[self.facets, 0]]
         self._grad_weights = an / geom.cell_volumes[self.cells, None]
         # Verlet skins: each facet's own diameter about its barycentre (the length in 2D) unless

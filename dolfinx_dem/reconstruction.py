@@ -59,8 +59,8 @@ class Reconstruction:
     (F d, n_T d)."""
 
     R: scipy.sparse.csr_matrix
-    D: scipy.sparse.csr_matrix
-    N: scipy.sparse.csr_matrix  # traction lift of scheme A, nonzero on scheme A traction facets only
+    D: scipy.sparse.csc_matrix  # CSC: entries on the Dirichlet facets' neighbourhood only, no pointer per row
+    N: scipy.sparse.csc_matrix  # traction lift of scheme A, nonzero on scheme A traction facets only; CSC as D
     dirichlet_facets: np.ndarray  # (n_D,) global facet indices, the order of g
     fixed: np.ndarray  # (n_D, d) bool: the components each Dirichlet facet fixes
     traction_facets: np.ndarray  # (n_T,) the order of t
@@ -401,8 +401,8 @@ def compute_reconstruction(
         neumann, a_facets = np.intersect1d(neumann, requested), np.intersect1d(a_facets, requested)
     return Reconstruction(
         R=R.tocsr(),
-        D=D.tocsr(),
-        N=lift,
+        D=D.tocsc(),
+        N=lift.tocsc(),
         dirichlet_facets=dirichlet_facets,
         fixed=fixed,
         traction_facets=traction_facets,

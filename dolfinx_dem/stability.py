@@ -73,32 +73,49 @@ def _rows_of_other_processes(factored: FactoredStiffness, row_keys: np.ndarray, 
 
 
 #: Entries of the transposed pattern of the local rows held at a time (``_transposed_blocks``).
-PATTERN_BLOCK = 2**24
+PATTERN_BLOCK = 2**21
 
 
 def _transposed_blocks(factored: FactoredStiffness):
     """A function returning, on each call, an iterable of (first dof, ptr, rows): the transposed
     pattern of the local rows of Q (``kernels.dem_transpose_pattern``) for consecutive blocks of
     owned dofs of about ``PATTERN_BLOCK`` entries each (4 bytes per entry, a block at a time: a
-    larger pattern is built again on each pass, a scan of the rows per block)."""
+    larger pattern is built again on each pass). A block scans only the rows that can reach it:
+    the elastic rows and the jump rows are each in the order of their cells, so the rows through
+    a block of dofs lie in one range of each (found once from each row's smallest and largest
+    owned column); the cells' numbering keeps neighbours close, so the ranges are short."""
     n, n_rows = factored.n_owned, factored.n_rows
-    args = (n_rows, pointer(factored.rowptr), pointer(factored.cols))
+    rowptr, cols = pointer(factored.rowptr), pointer(factored.cols)
+    every_row = np.array([0, n_rows], dtype=np.int64)
     counts = np.empty(n + 1, dtype=np.int32)
-    lib.dem_transpose_pattern(*args, 0, n, pointer(counts), ffi.NULL)  # entries before each owned dof
+    lib.dem_transpose_pattern(pointer(every_row), 1, rowptr, cols, 0, n, pointer(counts), ffi.NULL)  # entries before each owned dof
     cuts = np.searchsorted(counts, np.arange(PATTERN_BLOCK, int(counts[-1]), PATTERN_BLOCK), side="right") - 1
     edges = np.unique(np.concatenate([[0], cuts, [n]]))  # block k: owned dofs edges[k] .. edges[k + 1] - 1
+    del counts
+    lo, hi = np.empty(n_rows, dtype=np.int32), np.empty(n_rows, dtype=np.int32)
+    lib.dem_row_column_range(n_rows, rowptr, cols, n, pointer(lo), pointer(hi))
+    ranges = []
+    for a, b in zip(edges[:-1], edges[1:]):
+        r = []
+        for s0, s1 in ((0, factored.n_elastic), (factored.n_elastic, n_rows)):  # elastic rows, then jump rows
+            through = np.flatnonzero((lo[s0:s1] < b) & (hi[s0:s1] >= a))
+            if len(through):
+                r += [s0 + through[0], s0 + through[-1] + 1]
+        ranges.append(np.array(r, dtype=np.int64))
+    del lo, hi
 
-    def block(first: int, last: int):
+    def block(first: int, last: int, rows_range: np.ndarray):
+        args = (pointer(rows_range), len(rows_range) // 2, rowptr, cols, first, last - first)
         ptr = np.empty(last - first + 1, dtype=np.int32)
-        lib.dem_transpose_pattern(*args, first, last - first, pointer(ptr), ffi.NULL)
+        lib.dem_transpose_pattern(*args, pointer(ptr), ffi.NULL)
         rows = np.empty(int(ptr[-1]), dtype=np.int32)
-        lib.dem_transpose_pattern(*args, first, last - first, pointer(ptr), pointer(rows))
+        lib.dem_transpose_pattern(*args, pointer(ptr), pointer(rows))
         return int(first), ptr, rows
 
     if len(edges) <= 2:  # one block (or none): built once
-        once = [block(edges[0], edges[-1])] if n else []
+        once = [block(edges[0], edges[-1], ranges[0])] if n else []
         return lambda: once
-    return lambda: (block(a, b) for a, b in zip(edges[:-1], edges[1:]))
+    return lambda: (block(a, b, r) for a, b, r in zip(edges[:-1], edges[1:], ranges))
 
 
 def largest_eigenvalue_bound(factored: FactoredStiffness, row_keys: np.ndarray, ghost_owners: np.ndarray,

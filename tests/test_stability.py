@@ -52,6 +52,17 @@ def test_bound_is_the_same_on_any_number_of_processes():
 
 
 @pytest.mark.mpi
+def test_bound_does_not_depend_on_the_blocks_of_the_transposed_pattern(monkeypatch):
+    """Blocks of a few dofs, each scanning only the row ranges that reach it, give the bits of
+    one block."""
+    dem = clamped_strip(MPI.COMM_WORLD, 24)
+    one = dem.stable_time_step()
+    monkeypatch.setattr(stability, "PATTERN_BLOCK", 64)
+    dem._stable_dt.clear()
+    assert dem.stable_time_step() == one
+
+
+@pytest.mark.mpi
 def test_memm_is_stable_at_the_bound():
     """cfl = 1 of the bound's step is below the true limit: the monitor stays quiet."""
     dem = clamped_strip(MPI.COMM_WORLD)
