@@ -695,38 +695,16 @@ void dem_csr_rows_apply_transpose(int64_t n_sel, const int64_t *restrict sel, co
   }
 }
 
-/* Both at once: Y = A[sel] (A[sel]^T X), the sums in the orders of the two kernels above (so the
- * same bits), through work (n_cols x m), zero on entry and left zero: only the columns the
+/* Both: Y = A[sel] (A[sel]^T X) by the two kernels above (the same bits as calling them in turn),
+ * through work (n_cols x m), zero on entry and left zero: only the columns the
  * selected rows touch are written, so no array of all the columns is cleared or read.
  * pair_contact's N c = Z^T (Z c) over the touching pairs. */
 void dem_csr_rows_gram_apply(int64_t n_sel, const int64_t *restrict sel, const int32_t *restrict indptr,
                              const int32_t *restrict indices, const double *restrict data, int32_t m,
                              const double *restrict X, double *restrict work, double *restrict Y)
 {
-  for (int64_t k = 0; k < n_sel; ++k)
-  {
-    const double *x = X + k * m;
-    for (int32_t e = indptr[sel[k]]; e < indptr[sel[k] + 1]; ++e)
-    {
-      const double a = data[e];
-      double *y = work + (int64_t)indices[e] * m;
-      for (int32_t c = 0; c < m; ++c)
-        y[c] += a * x[c];
-    }
-  }
-  for (int64_t k = 0; k < n_sel; ++k)
-  {
-    double *y = Y + k * m;
-    for (int32_t c = 0; c < m; ++c)
-      y[c] = 0.0;
-    for (int32_t e = indptr[sel[k]]; e < indptr[sel[k] + 1]; ++e)
-    {
-      const double a = data[e];
-      const double *x = work + (int64_t)indices[e] * m;
-      for (int32_t c = 0; c < m; ++c)
-        y[c] += a * x[c];
-    }
-  }
+  dem_csr_rows_apply_transpose(n_sel, sel, indptr, indices, data, m, X, work);
+  dem_csr_rows_apply(n_sel, sel, indptr, indices, data, m, work, Y);
   for (int64_t k = 0; k < n_sel; ++k)
     for (int32_t e = indptr[sel[k]]; e < indptr[sel[k] + 1]; ++e)
       for (int32_t c = 0; c < m; ++c)
