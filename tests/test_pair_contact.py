@@ -626,6 +626,22 @@ def test_a_run_reports_the_pairs_that_use_the_scheme_b_rule(tmp_path, capsys):
         capsys.readouterr().out
 
 
+def test_force_integral_refuses_patch_values_prepare_did_not_return():
+    """The integral reads the flight ``prepare`` checked for this step: other patch values, or
+    another dt, raise instead of being integrated over an unchecked flight."""
+    dem, facets = two_discs(h=0.03)
+    dem.set_contact_boundary(facets)
+    c = dem.pair_contact
+    u = cell_vector(dem, lambda x: approach(x, 0.05))
+    v = cell_vector(dem, approach)
+    up, vp = c.prepare(u, v, 1e-3)
+    out = dem.create_vector()
+    for args in ((up.copy(), vp, 1e-3), (up, vp.copy(), 1e-3), (up, vp, 2e-3)):
+        with pytest.raises(RuntimeError, match="needs the patch values that prepare"):
+            c.force_integral(*args, out)
+    c.force_integral(up, vp, 1e-3, out)
+
+
 def test_a_step_longer_than_the_skin_is_an_error():
     """A facet that moves more than skin/2 in one step cannot be covered by any pair list."""
     dem, facets = two_discs(h=0.03)
