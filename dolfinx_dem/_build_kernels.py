@@ -64,6 +64,10 @@ ffibuilder.cdef(
     void dem_pair_facet_corrections(int64_t n, int32_t d, const int64_t *p, const int64_t *i, const int64_t *j,
                                     const double *e_i, const double *e_j, const double *c, const double *length,
                                     int64_t n_facets, double *work, double *out);
+    int64_t dem_pair_rows(int64_t n_pairs, int32_t d, const int64_t *i, const int64_t *j, int64_t n_local,
+                          const double *e_i, const double *e_j, const double *length, const int32_t *qf_ptr,
+                          const int32_t *qf_rows, const double *qf_vals, double *sums, int32_t *mark,
+                          int32_t *touched, int32_t *indptr, int32_t *indices, double *data);
     void dem_pair_facet_forces(int64_t n_entries, int32_t d, const int64_t *p, const int64_t *i, const int64_t *j,
                                const double *normal, const double *mu, const double *g, const double *w,
                                const double *dw, double *out);

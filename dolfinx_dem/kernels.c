@@ -873,3 +873,88 @@ void dem_pair_facet_forces(int64_t n_entries, int32_t d, const int64_t *restrict
     }
   }
 }
+
+/* Insertion sort of a[0..n) (nearly sorted runs: few moves). */
+static void sort_small(int32_t *a, int32_t n)
+{
+  for (int32_t k = 1; k < n; ++k)
+  {
+    const int32_t r = a[k];
+    int32_t b = k - 1;
+    while (b >= 0 && a[b] > r)
+    {
+      a[b + 1] = a[b];
+      --b;
+    }
+    a[b + 1] = r;
+  }
+}
+
+/* Z^T of a pair list build (pair_contact.PairContact._build): row k, for the pair (i[k], j[k]),
+ * is sum over its local facets f (f < n_local; in increasing f) and their components x of
+ * (e_f[x] / |f|) times column f d + x of QF (CSC: qf_ptr, qf_rows, qf_vals), the columns' entries
+ * accumulated in their order; exact zeros are dropped and each row's columns sorted: the bits
+ * and the pattern of scipy's (E^T @ QF^T).sort_indices(), E the facet dofs' directions, without
+ * forming E^T. sums (n_cols) must be zero and mark (n_cols) -1 on entry, and are left so;
+ * touched: 2 n_cols. indices and data must hold the sum over the rows of their columns' entries.
+ * Returns the number of entries. */
+int64_t dem_pair_rows(int64_t n_pairs, int32_t d, const int64_t *restrict i, const int64_t *restrict j,
+                      int64_t n_local, const double *restrict e_i, const double *restrict e_j,
+                      const double *restrict length, const int32_t *restrict qf_ptr,
+                      const int32_t *restrict qf_rows, const double *restrict qf_vals, double *restrict sums,
+                      int32_t *restrict mark, int32_t *restrict touched, int32_t *restrict indptr,
+                      int32_t *restrict indices, double *restrict data)
+{
+  int64_t nnz = 0;
+  indptr[0] = 0;
+  for (int64_t k = 0; k < n_pairs; ++k)
+  {
+    /* the rows each facet touches first, each facet's sorted (its d columns share most rows) */
+    int32_t n_side[2] = {0, 0}, n_touched = 0;
+    const int64_t first = i[k] < j[k] ? i[k] : j[k];
+    for (int32_t side = 0; side < 2; ++side)
+    {
+      const int64_t f = side == 0 ? first : (first == i[k] ? j[k] : i[k]);
+      if (f < n_local)
+      {
+        const double *e = (f == i[k] ? e_i : e_j) + k * d;
+        for (int32_t x = 0; x < d; ++x)
+        {
+          const double v = e[x] / length[f];
+          const int64_t col = f * d + x;
+          for (int32_t q = qf_ptr[col]; q < qf_ptr[col + 1]; ++q)
+          {
+            const int32_t r = qf_rows[q];
+            sums[r] += v * qf_vals[q];
+            if (mark[r] < 0)
+            {
+              mark[r] = 1;
+              touched[n_touched++] = r;
+            }
+          }
+        }
+      }
+      n_side[side] = n_touched - (side == 0 ? 0 : n_side[0]);
+      sort_small(touched + (side == 0 ? 0 : n_side[0]), n_side[side]);
+    }
+    /* merge the two sorted runs into the row, dropping exact zeros */
+    int32_t *merged = touched + n_touched;
+    int32_t a = 0, b = n_side[0], m = 0;
+    while (a < n_side[0] || b < n_touched)
+      merged[m++] = (b >= n_touched || (a < n_side[0] && touched[a] < touched[b])) ? touched[a++] : touched[b++];
+    for (int32_t c = 0; c < m; ++c)
+    {
+      const int32_t r = merged[c];
+      if (sums[r] != 0.0)
+      {
+        indices[nnz] = r;
+        data[nnz] = sums[r];
+        ++nnz;
+      }
+      sums[r] = 0.0;
+      mark[r] = -1;
+    }
+    indptr[k + 1] = (int32_t)nnz;
+  }
+  return nnz;
+}

@@ -213,15 +213,16 @@ class PairContact:
         numbers = dem.halo_exchange(numbers[: dem.n_owned])[cell[order], j[order]]
         self._facets = self._local_records(order, f, cell, numbers)
         self._own_records = self._facets.take(np.arange(self.num_own)).records()  # what a list round sends
+        self._local_keys = np.sort(self._facets.key)
         self.num_facets = self.comm.allreduce(self.num_own, op=MPI.SUM)
         self._facet_vector = PETSc.Vec().createMPI((self.num_own * d, PETSc.DECIDE), comm=self.comm)
         dofs = (self.facets[:, None] * d + np.arange(d)).ravel()
         QF = rows.QF[: rows.num_owned][:, dofs]  # CSC
         touched = np.unique(QF.indices)  # the own rows touched
-        self._QF = QF[touched]  # (own rows touched, local facet dofs), CSC
+        self._QF = _CSC(QF[touched], d)  # (own rows touched, local facet dofs)
         self._Q = rows.Q[touched]  # held-dof columns
-        # the global dofs these rows read, and each entry's index among them (once: a rebuild
-        # then places them in the patch by a gather, not a search over every entry)
+        # the global dofs these rows read (sorted), the patch's first dofs whatever the list, and
+        # Q on them (``_build`` widens it to the patch)
         self._row_dofs, entry_dof = np.unique(dem.columns[self._Q.indices], return_inverse=True)
         self._Q_entry_dof = entry_dof.astype(np.int32)
         self._q = dem.row_lift(touched)
@@ -361,7 +362,7 @@ class PairContact:
         if received:
             rf = np.concatenate([m[0] for m in received])
             ri = np.concatenate([m[1] for m in received])
-            new = ~np.isin(ri[:, 0], local.key)
+            new = ~_in_sorted(self._local_keys, ri[:, 0])
             ghosts = local.from_records(rf[new, :-d], ri[new])
             uc_ghosts = rf[new, -d:]
         else:
@@ -376,15 +377,11 @@ class PairContact:
         # (the ghosts' too: their motion decides when the list is stale), and its scatters, first:
         # every process reaches this collective soon after the exchange, and the list's work
         # below, however unequal between processes, is waited for once (at the next gather).
-        # Often (scheme B: R_f u = u_c) the rows' dofs hold every facet's: the patch is the rows'
-        # dofs and Q's columns are their fixed numbers; else the few other dofs are merged in.
+        # The patch is the rows' dofs, then the facets' other reconstruction dofs (sorted; often
+        # none: scheme B, R_f u = u_c): Q's columns are the rows' dofs' fixed numbers.
         rd = F.R_dofs[F.R_dofs >= 0]
-        extra = rd[np.append(self._row_dofs, -1)[np.searchsorted(self._row_dofs, rd)] != rd]  # (-1: none past the end)
-        if len(extra):
-            patch = np.union1d(self._row_dofs, extra)
-            columns = np.searchsorted(patch, self._row_dofs).astype(np.int32)[self._Q_entry_dof]
-        else:
-            patch, columns = self._row_dofs, self._Q_entry_dof
+        extra = np.unique(rd[~_in_sorted(self._row_dofs, rd)])
+        patch = np.concatenate([self._row_dofs, extra]) if len(extra) else self._row_dofs
         self._remake_scatters(patch, F)
 
         x = F.centre + ucF
@@ -417,24 +414,14 @@ class PairContact:
         t = _tangents(n)
         e_i, e_j = self._directions(F, i, j, n)
 
-        # z_p restricted to the own rows: the local facets' entries only. Z^T = E^T QF^T, E the
-        # facet dofs' directions (local facet dofs, P); one sparse product, its rows sorted.
-        P = len(i)
-        pairs, dofs, vals = [], [], []
-        for side, e in ((i, e_i), (j, e_j)):
-            mine = side < nl
-            dofs.append((side[mine, None] * d + np.arange(d)).ravel())
-            pairs.append(np.repeat(np.flatnonzero(mine), d))
-            vals.append((e[mine] / F.length[side[mine], None]).ravel())
-        ET = scipy.sparse.csr_matrix((np.concatenate(vals), (np.concatenate(pairs), np.concatenate(dofs))),
-                                     shape=(P, nl * d))
-        ZT = ET @ self._QF.T  # (P, own rows touched)
-        ZT.sort_indices()
-
-        Qp = scipy.sparse.csr_matrix((self._Q.data, columns, self._Q.indptr), shape=(self._Q.shape[0], len(patch)))
+        # z_p restricted to the own rows: the local facets' entries only, Z^T = E^T QF^T with E
+        # the facet dofs' directions (``dem_pair_rows``).
+        ZT = self._QF.pair_rows(i, j, e_i, e_j, F.length)  # (P, own rows touched)
+        Qp = scipy.sparse.csr_matrix((self._Q.data, self._Q_entry_dof, self._Q.indptr),
+                                     shape=(self._Q.shape[0], len(patch)))
         self.facets_all = F
-        self._R = _reconstruction_matrix(F, patch)  # (n_facets d, patch)
-        self._RT = self._R.T.tocsr()
+        self._R = _reconstruction_matrix(F, self._row_dofs, extra)  # (n_facets d, patch)
+        self._RT = self._R.T  # CSC: its products sum in the order of R^T as CSR, without the copy
         self._lift = F.lift
         # the facets projected on the plane normal to n, origin at f_i's barycentre; n . n_f >
         # |f| / (|f| + |f'|) for facing facets, so no projection degenerates
@@ -594,8 +581,8 @@ class PairContact:
         if the list is stale there: the keys a rebuild must list again)."""
         if self._moved(uc):
             return np.empty(0, dtype=np.int64)
-        g, w, _ = self._state(np.arange(len(self.listed)), *self._pair_displacements(up), closed=True)
-        return self.pair_keys()[(g < 0) & (w > 0)]
+        at = self._at(up)  # the state the last step's energy left (its screen holds every touching pair)
+        return self.pair_keys()[at.closed[(at.g < 0) & (at.w > 0)]]
 
     def _skins(self, reach: np.ndarray) -> np.ndarray:
         """The Verlet skins of facets of reaches ``reach``: the uniform skin if one was given,
@@ -1118,6 +1105,11 @@ def _where(keep: np.ndarray, *arrays: np.ndarray) -> tuple[np.ndarray, ...]:
     return tuple(a[keep] for a in arrays)
 
 
+def _in_sorted(a: np.ndarray, x: np.ndarray) -> np.ndarray:
+    """Whether each entry of ``x`` is in the sorted array ``a`` (np.isin without sorting ``a``)."""
+    return np.append(a, -1)[np.searchsorted(a, x)] == x  # (-1, no entry: past the end of a)
+
+
 def _reach(F: _Facets) -> np.ndarray:
     """The largest distance from each facet's barycentre to its vertices (half the length in 2D)."""
     return np.linalg.norm(F.ends - F.centre[:, None], axis=2).max(axis=1, initial=0.0)
@@ -1229,14 +1221,23 @@ def _adjugate_times(A: np.ndarray, x: np.ndarray) -> tuple[np.ndarray, np.ndarra
     return np.einsum("nij,nj->ni", rows, x), np.einsum("ni,ni->n", c0, rows[:, 0])
 
 
-def _reconstruction_matrix(F: _Facets, patch: np.ndarray) -> scipy.sparse.csr_matrix:
-    """R of the facets ``F`` on the patch dofs ``patch`` (sorted global dofs), (n d, len(patch))."""
+def _reconstruction_matrix(F: _Facets, first: np.ndarray, extra: np.ndarray) -> scipy.sparse.csr_matrix:
+    """R of the facets ``F`` on the patch dofs ``first`` then ``extra`` (each sorted, global
+    dofs; ``extra`` holds those of F's that ``first`` does not), (n d, len(patch)), each row's
+    columns sorted."""
     n, d, width = F.R_dofs.shape
-    rows = np.repeat(np.arange(n * d), width)
     dofs = F.R_dofs.reshape(-1)
     keep = dofs >= 0
-    return scipy.sparse.csr_matrix((F.R_values.reshape(-1)[keep], (rows[keep], np.searchsorted(patch, dofs[keep]))),
-                                   shape=(n * d, len(patch)))
+    dofs = dofs[keep]
+    column = np.searchsorted(first, dofs)
+    other = ~_in_sorted(first, dofs)
+    column[other] = len(first) + np.searchsorted(extra, dofs[other])
+    indptr = np.zeros(n * d + 1, dtype=np.int32)
+    np.cumsum(keep.reshape(n * d, width).sum(axis=1), out=indptr[1:])
+    R = scipy.sparse.csr_matrix((F.R_values.reshape(-1)[keep], column.astype(np.int32), indptr),
+                                shape=(n * d, len(first) + len(extra)))
+    R.sort_indices()
+    return R
 
 
 @dataclasses.dataclass(frozen=True)
@@ -1350,6 +1351,38 @@ class _At:
     @functools.cached_property
     def mu(self) -> np.ndarray:
         return self.listed.z.rows_apply(self.closed, self.a + self.delta)
+
+
+class _CSC:
+    """A CSC matrix's arrays for the compiled kernel ``dem_pair_rows`` (QF: the own rows touched
+    by the local facets' dofs), with its work arrays."""
+
+    def __init__(self, A: scipy.sparse.csc_matrix, d: int):
+        self.shape, self.d = A.shape, d
+        self.indptr = np.ascontiguousarray(A.indptr, dtype=np.int32)
+        self.indices = np.ascontiguousarray(A.indices, dtype=np.int32)
+        self.data = np.ascontiguousarray(A.data, dtype=np.float64)
+        self._facet_counts = np.diff(self.indptr).reshape(-1, d).sum(axis=1)  # the entries of each facet's d columns
+        self._sums = np.zeros(self.shape[0])  # zero between calls
+        self._mark = np.full(self.shape[0], -1, dtype=np.int32)  # -1 between calls
+        self._touched = np.empty(2 * self.shape[0], dtype=np.int32)
+
+    def pair_rows(self, i, j, e_i, e_j, length) -> scipy.sparse.csr_matrix:
+        """Z^T = E^T A^T for the pairs (i, j) of facets (the local ones: those with columns
+        here, d each): row p = sum over its local facets f of A's columns of f's dofs times
+        e_f / |f| (sorted, no explicit zeros)."""
+        P, d, n_local = len(i), self.d, len(self._facet_counts)
+        i, j = np.ascontiguousarray(i, dtype=np.int64), np.ascontiguousarray(j, dtype=np.int64)
+        e_i, e_j = np.ascontiguousarray(e_i, dtype=np.float64), np.ascontiguousarray(e_j, dtype=np.float64)
+        length = np.ascontiguousarray(length, dtype=np.float64)
+        counts = self._facet_counts
+        bound = int(counts[i[i < n_local]].sum() + counts[j[j < n_local]].sum())
+        indptr, indices, data = np.empty(P + 1, dtype=np.int32), np.empty(bound, dtype=np.int32), np.empty(bound)
+        nnz = lib.dem_pair_rows(P, d, pointer(i), pointer(j), n_local, pointer(e_i), pointer(e_j), pointer(length),
+                                pointer(self.indptr), pointer(self.indices), pointer(self.data), pointer(self._sums),
+                                pointer(self._mark), pointer(self._touched), pointer(indptr), pointer(indices),
+                                pointer(data))
+        return scipy.sparse.csr_matrix((data[:nnz], indices[:nnz], indptr), shape=(P, self.shape[0]))
 
 
 class _CSR:

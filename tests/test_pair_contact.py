@@ -741,6 +741,50 @@ def test_overlap_of_triangles_and_its_gradient(B, s, kind):
         assert w[0] == 0.0 and not dw.any()
 
 
+def test_pair_rows_are_the_product_of_the_directions_and_the_facet_columns():
+    """Z^T of a list build, row p = sum over the pair's local facets f of QF's columns of f's dofs
+    times e_f / |f| (the kernel ``dem_pair_rows``), has the bits and the pattern of scipy's
+    E^T @ QF^T with sorted indices: the exact zeros of cancelling entries dropped, pairs with a
+    ghost facet (no columns here) taking their local facet's columns only."""
+    import scipy.sparse
+    from dolfinx_dem.pair_contact import _CSC
+
+    rng = np.random.default_rng(3)
+    d, n_local, n_known, rows = 2, 60, 80, 150
+    QF = scipy.sparse.random(rows, n_local * d, density=0.04, format="csc", random_state=rng)
+    QF.data = np.round(QF.data * 4) / 4  # exact cancellations below
+    P = 200
+    i, j = rng.integers(0, n_known, P), rng.integers(0, n_known, P)
+    j = np.where(j == i, (j + 1) % n_known, j)
+    e_i, e_j = rng.standard_normal((P, d)), rng.standard_normal((P, d))
+    length = rng.uniform(0.5, 2.0, n_known)
+    # two pairs whose columns cancel exactly: one facet twice with opposite directions is not a
+    # pair, so take two facets with equal columns and opposite e / |f|
+    QF = QF.tolil()
+    QF[:, 2 * d: 3 * d] = QF[:, 1 * d: 2 * d]
+    QF = QF.tocsc()
+    length[1] = length[2] = 1.0
+    i[:2], j[:2] = [1, 2], [2, 1]
+    e_i[:2], e_j[:2] = [[1.0, 0.5], [1.0, 0.5]], [[-1.0, -0.5], [-1.0, -0.5]]
+
+    ZT = _CSC(QF, d).pair_rows(i, j, e_i, e_j, length)
+    pairs, dofs, vals = [], [], []
+    for side, e in ((i, e_i), (j, e_j)):
+        mine = side < n_local
+        dofs.append((side[mine, None] * d + np.arange(d)).ravel())
+        pairs.append(np.repeat(np.flatnonzero(mine), d))
+        vals.append((e[mine] / length[side[mine], None]).ravel())
+    ET = scipy.sparse.csr_matrix((np.concatenate(vals), (np.concatenate(pairs), np.concatenate(dofs))),
+                                 shape=(P, n_local * d))
+    expected = ET @ QF.T
+    expected.sort_indices()
+    assert ZT.has_sorted_indices and (ZT.data != 0).all()
+    assert np.array_equal(ZT.indptr, expected.indptr) and np.array_equal(ZT.indices, expected.indices)
+    assert np.array_equal(ZT.data, expected.data)
+    assert ZT.indptr[1] == 0 and ZT.indptr[2] == 0  # the cancelling pairs: empty rows
+    assert (np.diff(ZT.indptr)[2:] > 0).sum() > 50  # and many rows that are not empty
+
+
 def test_selected_rows_products_and_components():
     """The compiled products over selected rows of a sparse matrix (the touching pairs' rows of
     Z^T and Q), their columns and the components of rows sharing a column, against scipy."""
