@@ -38,7 +38,7 @@ ffibuilder.cdef(
                          const double *uc, const double *vc, double dt, int8_t *out);
     void dem_piecewise_midpoints(int64_t n_times, const int64_t *rows, const double *times, int64_t n, int64_t k,
                                  double dt, int64_t *counts, double *points, double *mid, double *length);
-    void dem_interpolate_own(int64_t n_rows, int32_t n_own, int32_t n_nodes, int32_t n_gauss, int32_t width,
+    void dem_interpolate_own(int64_t n_rows, int32_t n_own, const int64_t *offsets, int32_t n_gauss, int32_t width,
                              const double *start, const double *length, const double *nodes, const double *xi,
                              const double *w_own, const double *dw_own, double *w, double *dw);
     void dem_csr_rows_apply(int64_t n_sel, const int64_t *sel, const int32_t *indptr, const int32_t *indices,
@@ -47,7 +47,8 @@ ffibuilder.cdef(
                                       const int32_t *indices, const double *data, int32_t m, const double *X,
                                       double *Y);
     void dem_csr_rows_gram_apply(int64_t n_sel, const int64_t *sel, const int32_t *indptr, const int32_t *indices,
-                                 const double *data, int32_t m, const double *X, double *work, double *Y);
+                                 const double *data, const int64_t *offsets, int32_t stride, const double *X,
+                                 double *work, double *Y);
     int64_t dem_components(int64_t n_sel, const int64_t *sel, const int32_t *indptr, const int32_t *indices,
                            int64_t *first, int64_t *parent, int64_t *label);
     void dem_csr_rows_pattern(int64_t n_sel, const int64_t *sel, const int32_t *indptr, const int32_t *indices,

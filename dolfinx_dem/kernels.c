@@ -607,11 +607,12 @@ void dem_piecewise_midpoints(int64_t n_times, const int64_t *restrict rows, cons
 /* Lagrange interpolation of pair_contact._overlap_on_own_pieces, for n_rows pairs: each has
  * n_own pieces (start, length; empty ones of length 0) with values w_own (n_gauss per piece, at
  * the nodes xi of [0, 1] scaled to the piece) and gradients dw_own (width components each), and
- * n_nodes times ``nodes``. At each time x: the last non-empty piece starting at or before it (the
- * first piece if none), and the Lagrange interpolation of its values, summed in the order of
- * the nodes. w (n_rows n_nodes) and dw (n_rows n_nodes width) are overwritten. */
-void dem_interpolate_own(int64_t n_rows, int32_t n_own, int32_t n_nodes, int32_t n_gauss, int32_t width,
-                         const double *restrict start, const double *restrict length,
+ * the times nodes[offsets[r] .. offsets[r + 1]). At each time x: the last non-empty piece
+ * starting at or before it (the first piece if none), and the Lagrange interpolation of its
+ * values, summed in the order of the nodes. w (offsets[n_rows]) and dw (offsets[n_rows] width)
+ * are overwritten. */
+void dem_interpolate_own(int64_t n_rows, int32_t n_own, const int64_t *restrict offsets, int32_t n_gauss,
+                         int32_t width, const double *restrict start, const double *restrict length,
                          const double *restrict nodes, const double *restrict xi,
                          const double *restrict w_own, const double *restrict dw_own,
                          double *restrict w, double *restrict dw)
@@ -619,9 +620,8 @@ void dem_interpolate_own(int64_t n_rows, int32_t n_own, int32_t n_nodes, int32_t
   for (int64_t r = 0; r < n_rows; ++r)
   {
     const double *s = start + r * n_own, *len = length + r * n_own;
-    for (int32_t k = 0; k < n_nodes; ++k)
+    for (int64_t out = offsets[r]; out < offsets[r + 1]; ++out)
     {
-      const int64_t out = r * n_nodes + k;
       const double t = nodes[out];
       int32_t piece = 0;
       for (int32_t j = 0; j < n_own; ++j)
@@ -695,20 +695,51 @@ void dem_csr_rows_apply_transpose(int64_t n_sel, const int64_t *restrict sel, co
   }
 }
 
-/* Both: Y = A[sel] (A[sel]^T X) by the two kernels above (the same bits as calling them in turn),
- * through work (n_cols x m), zero on entry and left zero: only the columns the
- * selected rows touch are written, so no array of all the columns is cleared or read.
- * pair_contact's N c = Z^T (Z c) over the touching pairs. */
+/* Y = A[sel] (A[sel]^T X) for ragged X: the selected row k has the m_k = offsets[k + 1] -
+ * offsets[k] values X[offsets[k] ..] and gets as many in Y; rows that share a column must have
+ * the same m (pair_contact: the pairs of a component of N share their nodes). Summed as
+ * dem_csr_rows_apply_transpose then dem_csr_rows_apply would (in the order of sel and of each
+ * row's entries), through work (n_cols x stride, stride >= every m_k), zero on entry and left
+ * zero: only the columns the selected rows touch are written, so no array of all the columns is
+ * cleared or read. pair_contact's N c = Z^T (Z c) over the touching pairs at their nodes. */
 void dem_csr_rows_gram_apply(int64_t n_sel, const int64_t *restrict sel, const int32_t *restrict indptr,
-                             const int32_t *restrict indices, const double *restrict data, int32_t m,
-                             const double *restrict X, double *restrict work, double *restrict Y)
+                             const int32_t *restrict indices, const double *restrict data,
+                             const int64_t *restrict offsets, int32_t stride, const double *restrict X,
+                             double *restrict work, double *restrict Y)
 {
-  dem_csr_rows_apply_transpose(n_sel, sel, indptr, indices, data, m, X, work);
-  dem_csr_rows_apply(n_sel, sel, indptr, indices, data, m, work, Y);
   for (int64_t k = 0; k < n_sel; ++k)
+  {
+    const int64_t m = offsets[k + 1] - offsets[k];
+    const double *x = X + offsets[k];
     for (int32_t e = indptr[sel[k]]; e < indptr[sel[k] + 1]; ++e)
-      for (int32_t c = 0; c < m; ++c)
-        work[(int64_t)indices[e] * m + c] = 0.0;
+    {
+      const double a = data[e];
+      double *y = work + (int64_t)indices[e] * stride;
+      for (int64_t c = 0; c < m; ++c)
+        y[c] += a * x[c];
+    }
+  }
+  for (int64_t k = 0; k < n_sel; ++k)
+  {
+    const int64_t m = offsets[k + 1] - offsets[k];
+    double *y = Y + offsets[k];
+    for (int64_t c = 0; c < m; ++c)
+      y[c] = 0.0;
+    for (int32_t e = indptr[sel[k]]; e < indptr[sel[k] + 1]; ++e)
+    {
+      const double a = data[e];
+      const double *x = work + (int64_t)indices[e] * stride;
+      for (int64_t c = 0; c < m; ++c)
+        y[c] += a * x[c];
+    }
+  }
+  for (int64_t k = 0; k < n_sel; ++k)
+  {
+    const int64_t m = offsets[k + 1] - offsets[k];
+    for (int32_t e = indptr[sel[k]]; e < indptr[sel[k] + 1]; ++e)
+      for (int64_t c = 0; c < m; ++c)
+        work[(int64_t)indices[e] * stride + c] = 0.0;
+  }
 }
 
 static int64_t find_root(int64_t *parent, int64_t k)

@@ -755,19 +755,22 @@ class PairContact:
             finite = np.isfinite(tau.ravel())
             mid, length = piecewise_midpoints(np.repeat(component, tau.shape[1])[finite], tau.ravel()[finite],
                                               count, dt)
-            nodes, weights = _gauss_points(mid[component], length[component], self._gauss)  # (pairs, K)
-            K = nodes.shape[1]
-            e = np.repeat(touching, K)
+            # each pair's nodes, those of its component's pieces (flat, pair after pair: a pair
+            # in a component of one piece has d nodes, however many another one has)
+            nodes, weights, offsets = _gauss_points(mid, length, component, self._gauss)
+            per = np.diff(offsets)
+            e = np.repeat(touching, per)
             # the gap, affine along the flight: at tau = 0 plus tau times its rate
             rate = np.einsum("pi,pi->p", vj - vi, L.n[touching])
-            g = (self._gap(touching, ui0, uj0)[:, None] + nodes * rate[:, None]).ravel()
-            w, dw = self._overlap_on_own_pieces(touching, tau, nodes, uc, vc, dt)
-            c = (w * np.minimum(g, 0.0)).reshape(-1, K)
+            g = np.repeat(self._gap(touching, ui0, uj0), per) + nodes * np.repeat(rate, per)
+            w, dw = self._overlap_on_own_pieces(touching, tau, nodes, offsets, uc, vc, dt)
+            c = w * np.minimum(g, 0.0)
             # Rows' term -Q^T Z int c dtau; pairs' term -int (z_p . (a + delta_a)) dc_p/du dtau
             # (z_p of the touching pairs only; N c = Z^T (Z c), c = 0 off them).
-            result -= L.q.rows_apply_transpose(rows, L.z.rows_apply_transpose(touching, (weights * c).sum(axis=1))[rows])
-            mu = za[:, :1] + nodes * za[:, 1:] + L.z.rows_gram_apply(touching, c)
-            mu = np.where(g < 0, mu.ravel(), 0.0) * weights.ravel()
+            c_integral = np.add.reduceat(weights * c, offsets[:-1])
+            result -= L.q.rows_apply_transpose(rows, L.z.rows_apply_transpose(touching, c_integral)[rows])
+            mu = np.repeat(za[:, 0], per) + nodes * np.repeat(za[:, 1], per) + L.z.rows_gram_apply(touching, c, offsets)
+            mu = np.where(g < 0, mu, 0.0) * weights
             result += self._facet_force(e, mu, g, w, dw)
             pieces = int((length > 0).sum(axis=1).max())
         self.scatter.add(result, out)
@@ -775,9 +778,9 @@ class PairContact:
         self.evaluations += len(self._gauss[0]) * pieces
         return len(self._gauss[0]) * pieces
 
-    def _overlap_on_own_pieces(self, p, tau, nodes, uc, vc, dt):
+    def _overlap_on_own_pieces(self, p, tau, nodes, offsets, uc, vc, dt):
         """w and dw/du_j of the pairs ``p`` along the flight uc + tau vc of the free facet
-        displacements, at the times ``nodes`` (len(p), K), flat. Between its own events ``tau`` a
+        displacements, at the times ``nodes`` (pair k's: nodes[offsets[k]:offsets[k + 1]]). Between its own events ``tau`` a
         pair's w is a polynomial of degree d - 1 and dw one of degree d - 2: each is evaluated at
         the d Gauss-Legendre nodes of the pair's own pieces only (``dem_overlap_own``: the
         overlap of ``_overlap``) and interpolated from them (Lagrange, ``dem_interpolate_own``),
@@ -794,7 +797,7 @@ class PairContact:
         # the own piece of each node (the last non-empty one starting at or before it: padding
         # and repeated events make empty pieces) and the interpolation: ``dem_interpolate_own``
         w, dw = np.empty(nodes.size), np.empty((nodes.size, d))
-        lib.dem_interpolate_own(len(p), n_own, nodes.shape[1], len(xi), d, pointer(start), pointer(length),
+        lib.dem_interpolate_own(len(p), n_own, pointer(offsets), len(xi), d, pointer(start), pointer(length),
                                 pointer(nodes), pointer(xi), pointer(w_own), pointer(dw_own), pointer(w), pointer(dw))
         return w, dw
 
@@ -1123,13 +1126,23 @@ def _gauss_legendre(d: int) -> tuple[np.ndarray, np.ndarray]:
     return 0.5 + 0.5 * x, 0.5 * weights
 
 
-def _gauss_points(mid: np.ndarray, length: np.ndarray, rule: tuple[np.ndarray, np.ndarray]):
-    """Nodes and weights of the quadrature ``rule`` (on [0, 1]) on the pieces (mid, length),
-    (n, len(rule nodes) K) each."""
-    x, weights = rule
-    start = mid - 0.5 * length
-    nodes = (start[..., None] + x * length[..., None]).reshape(len(mid), -1)
-    return nodes, (weights * length[..., None]).reshape(len(mid), -1)
+def _gauss_points(mid: np.ndarray, length: np.ndarray, component: np.ndarray, rule: tuple[np.ndarray, np.ndarray]):
+    """Nodes and weights of the quadrature ``rule`` (on [0, 1]) on the non-empty pieces (mid,
+    length) (n_components, K) of each row's component ``component``: flat, row after row, and
+    each row's offsets (n_rows + 1) into them."""
+    x, w = rule
+    keep = length > 0
+    count = keep.sum(axis=1)  # pieces of each component (padding and repeated events are empty)
+    size = length[keep]
+    start = mid[keep] - 0.5 * size
+    first = np.cumsum(count) - count  # each component's first piece among the kept ones
+    n = count[component]
+    piece = np.repeat(first[component] - (np.cumsum(n) - n), n) + np.arange(n.sum())
+    nodes = (start[piece, None] + x * size[piece, None]).ravel()
+    weights = (w * size[piece, None]).ravel()
+    offsets = np.zeros(len(component) + 1, dtype=np.int64)
+    np.cumsum(n * len(x), out=offsets[1:])
+    return nodes, weights, offsets
 
 
 def _tangents(n: np.ndarray) -> np.ndarray:
@@ -1414,16 +1427,18 @@ class _CSR:
                                          pointer(X), pointer(Y))
         return Y
 
-    def rows_gram_apply(self, sel: np.ndarray, X: np.ndarray) -> np.ndarray:
-        """A[sel] @ (A[sel]^T @ X), X (len(sel),) or (len(sel), m): the two products above in
-        one kernel, through a work array of the columns kept zero between calls."""
+    def rows_gram_apply(self, sel: np.ndarray, X: np.ndarray, offsets: np.ndarray) -> np.ndarray:
+        """A[sel] @ (A[sel]^T @ X) for ragged X: row k's values X[offsets[k]:offsets[k + 1]] (rows
+        sharing a column have as many), through a work array of the columns kept zero between
+        calls (``dem_csr_rows_gram_apply``)."""
         X = np.ascontiguousarray(X, dtype=np.float64)
-        m = X.size // max(len(X), 1)
-        if self._work.size < self.shape[1] * m:
-            self._work = np.zeros(self.shape[1] * m)
+        offsets = np.ascontiguousarray(offsets, dtype=np.int64)
+        stride = int(np.diff(offsets).max(initial=0))
+        if self._work.size < self.shape[1] * stride:
+            self._work = np.zeros(self.shape[1] * stride)
         Y = np.empty(X.shape)
-        lib.dem_csr_rows_gram_apply(len(sel), pointer(sel), *self._pointers, m, pointer(X), pointer(self._work),
-                                    pointer(Y))
+        lib.dem_csr_rows_gram_apply(len(sel), pointer(sel), *self._pointers, pointer(offsets), stride, pointer(X),
+                                    pointer(self._work), pointer(Y))
         return Y
 
     def pattern(self, sel: np.ndarray) -> np.ndarray:

@@ -800,8 +800,23 @@ def test_selected_rows_products_and_components():
     assert np.allclose(M.rows_apply(sel, X[:, 0]), A[sel] @ X[:, 0], rtol=0, atol=1e-14)
     assert np.allclose(M.rows_apply_transpose(sel, Y), A[sel].T @ Y, rtol=0, atol=1e-14)
     for Yk in (Y, Y[:, 0], Y[:, :1]):  # the same bits as the two products, the work array left zero
-        assert np.array_equal(M.rows_gram_apply(sel, Yk), M.rows_apply(sel, M.rows_apply_transpose(sel, Yk)))
+        m = Yk.size // len(Yk)
+        offsets = np.arange(len(sel) + 1, dtype=np.int64) * m
+        assert np.array_equal(M.rows_gram_apply(sel, Yk.ravel(), offsets),
+                              M.rows_apply(sel, M.rows_apply_transpose(sel, Yk)).ravel())
         assert not M._work.any()
+    # ragged: rows sharing a column have as many values; each component as its own dense product
+    count, label = M.components(sel)
+    m = 1 + label % 3
+    offsets = np.concatenate([[0], np.cumsum(m)]).astype(np.int64)
+    X = rng.standard_normal(offsets[-1])
+    out = M.rows_gram_apply(sel, X, offsets)
+    for c in range(count):
+        k = np.flatnonzero(label == c)
+        Xc = np.stack([X[offsets[r]:offsets[r + 1]] for r in k])
+        expected = M.rows_apply(sel[k], M.rows_apply_transpose(sel[k], Xc))
+        assert np.array_equal(np.stack([out[offsets[r]:offsets[r + 1]] for r in k]), expected)
+    assert not M._work.any()
     assert np.array_equal(M.pattern(sel), np.unique(A[sel].indices))
     count, label = M.components(sel)
     B = A[sel].astype(bool).astype(np.int64)
