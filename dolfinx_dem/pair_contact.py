@@ -362,7 +362,7 @@ class PairContact:
         if received:
             rf = np.concatenate([m[0] for m in received])
             ri = np.concatenate([m[1] for m in received])
-            new = ~_in_sorted(self._local_keys, ri[:, 0])
+            new = ~_find_sorted(self._local_keys, ri[:, 0])[1]
             ghosts = local.from_records(rf[new, :-d], ri[new])
             uc_ghosts = rf[new, -d:]
         else:
@@ -379,8 +379,7 @@ class PairContact:
         # below, however unequal between processes, is waited for once (at the next gather).
         # The patch is the rows' dofs, then the facets' other reconstruction dofs (sorted; often
         # none: scheme B, R_f u = u_c): Q's columns are the rows' dofs' fixed numbers.
-        rd = F.R_dofs[F.R_dofs >= 0]
-        extra = np.unique(rd[~_in_sorted(self._row_dofs, rd)])
+        R, extra = _reconstruction_matrix(F, self._row_dofs)  # (n_facets d, patch)
         patch = np.concatenate([self._row_dofs, extra]) if len(extra) else self._row_dofs
         self._remake_scatters(patch, F)
 
@@ -420,7 +419,7 @@ class PairContact:
         Qp = scipy.sparse.csr_matrix((self._Q.data, self._Q_entry_dof, self._Q.indptr),
                                      shape=(self._Q.shape[0], len(patch)))
         self.facets_all = F
-        self._R = _reconstruction_matrix(F, self._row_dofs, extra)  # (n_facets d, patch)
+        self._R = R
         self._RT = self._R.T  # CSC: its products sum in the order of R^T as CSR, without the copy
         self._lift = F.lift
         # the facets projected on the plane normal to n, origin at f_i's barycentre; n . n_f >
@@ -1108,9 +1107,11 @@ def _where(keep: np.ndarray, *arrays: np.ndarray) -> tuple[np.ndarray, ...]:
     return tuple(a[keep] for a in arrays)
 
 
-def _in_sorted(a: np.ndarray, x: np.ndarray) -> np.ndarray:
-    """Whether each entry of ``x`` is in the sorted array ``a`` (np.isin without sorting ``a``)."""
-    return np.append(a, -1)[np.searchsorted(a, x)] == x  # (-1, no entry: past the end of a)
+def _find_sorted(a: np.ndarray, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Each entry of ``x`` in the sorted array ``a`` of non-negative numbers: its position there
+    (np.searchsorted) and whether it is there (np.isin without sorting ``a``)."""
+    index = np.searchsorted(a, x)
+    return index, np.append(a, -1)[index] == x  # (-1, no entry: past the end of a)
 
 
 def _reach(F: _Facets) -> np.ndarray:
@@ -1234,23 +1235,23 @@ def _adjugate_times(A: np.ndarray, x: np.ndarray) -> tuple[np.ndarray, np.ndarra
     return np.einsum("nij,nj->ni", rows, x), np.einsum("ni,ni->n", c0, rows[:, 0])
 
 
-def _reconstruction_matrix(F: _Facets, first: np.ndarray, extra: np.ndarray) -> scipy.sparse.csr_matrix:
-    """R of the facets ``F`` on the patch dofs ``first`` then ``extra`` (each sorted, global
-    dofs; ``extra`` holds those of F's that ``first`` does not), (n d, len(patch)), each row's
-    columns sorted."""
+def _reconstruction_matrix(F: _Facets, first: np.ndarray) -> tuple[scipy.sparse.csr_matrix, np.ndarray]:
+    """R of the facets ``F`` on the patch dofs ``first`` (sorted global dofs) then ``extra``, the
+    other dofs F's reconstructions read (sorted): (R, (n d, len(first) + len(extra)), each row's
+    columns sorted; extra)."""
     n, d, width = F.R_dofs.shape
     dofs = F.R_dofs.reshape(-1)
     keep = dofs >= 0
     dofs = dofs[keep]
-    column = np.searchsorted(first, dofs)
-    other = ~_in_sorted(first, dofs)
-    column[other] = len(first) + np.searchsorted(extra, dofs[other])
+    column, found = _find_sorted(first, dofs)
+    extra, at = np.unique(dofs[~found], return_inverse=True)
+    column[~found] = len(first) + at
     indptr = np.zeros(n * d + 1, dtype=np.int32)
     np.cumsum(keep.reshape(n * d, width).sum(axis=1), out=indptr[1:])
     R = scipy.sparse.csr_matrix((F.R_values.reshape(-1)[keep], column.astype(np.int32), indptr),
                                 shape=(n * d, len(first) + len(extra)))
     R.sort_indices()
-    return R
+    return R, extra
 
 
 @dataclasses.dataclass(frozen=True)
