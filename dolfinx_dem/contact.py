@@ -69,10 +69,11 @@ class ContactModel(Protocol):
     cells: np.ndarray  # local cells of the candidate facets (own first), (n_facets,)
     num_own: int  # candidate facets of owned cells
 
-    def prepare(self, u: PETSc.Vec, v: PETSc.Vec | None = None,
-                dt: float = 0.0) -> tuple[np.ndarray, np.ndarray | None]:
+    def prepare(self, u: PETSc.Vec, v: PETSc.Vec | None = None, dt: float = 0.0,
+                up: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray | None]:
         """Make the model valid for the states u + tau v, 0 <= tau <= dt (MEMM: every step);
-        returns the patch values of u and of v (None without v)."""
+        returns the patch values of u and of v (None without v). ``up``: the patch values of u
+        if the caller has them (gathered by the current ``scatter``), else they are gathered."""
 
     def patch_values(self, vec: PETSc.Vec) -> np.ndarray:
         """The values of ``vec`` at this process's patch dofs."""
@@ -239,11 +240,11 @@ class RigidContact:
         self.evaluations = 0
 
     # -- patch data ----------------------------------------------------------------------------
-    def prepare(self, u: PETSc.Vec, v: PETSc.Vec | None = None,
-                dt: float = 0.0) -> tuple[np.ndarray, np.ndarray | None]:
+    def prepare(self, u: PETSc.Vec, v: PETSc.Vec | None = None, dt: float = 0.0,
+                up: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray | None]:
         """Nothing to prepare (every candidate facet is tested at every evaluation): the patch
-        values of u and v (collective)."""
-        return self.patch_values(u), None if v is None else self.patch_values(v)
+        values of u (``up`` if given) and v (collective)."""
+        return self.patch_values(u) if up is None else up, None if v is None else self.patch_values(v)
 
     def patch_values(self, vec: PETSc.Vec) -> np.ndarray:
         """The values of ``vec`` at the patch dofs (collective)."""

@@ -177,7 +177,7 @@ class DynamicRun:
     def _record(self, diag, force_fields: bool):
         dem, stepper = self.dem, self.stepper
         tic = time.process_time()
-        contact = model.contact_values(dem, stepper.u)
+        contact = model.contact_values(dem, stepper.u, stepper.contact_patch_values())
         if dem.pair_contact is not None:
             contact += list(model.momentum(dem, stepper))
             self.pair_stats.record(diag.t, stepper, dict(zip(model.contact_columns(dem), contact)))

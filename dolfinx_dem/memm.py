@@ -154,6 +154,7 @@ class MEMM:
         self.work = 0.0  # W^n, see the module docstring
         self._data_potential = 0.0  # phi(u^n, t_n), global
         self._load_power = 0.0  # this process's v^{n+1/2} . int L dt of the step
+        self._patches: list = []  # (scatter, patch values of u^n) of each contact model, see contact_patch_values
 
         self._state = StepState(problem, self.dt)
 
@@ -187,6 +188,7 @@ class MEMM:
         and the energy rows y^0 = Q u^0 by a true product. On prescribed bodies u^0 = U(t0) and
         v^0 is their velocity (``impose``), whatever u0 and v0 hold there."""
         self.t0, self.n = float(t0), 0
+        self._patches = []
         f = self._state.impulse  # free until the first step: no vector of the mesh's size more
         for contact in self.problem.contacts:
             contact.prepare(u0)
@@ -218,6 +220,7 @@ class MEMM:
             self.u.axpy(self.dt, self.v_next)  # (35a) here: y^{n+1} from u^{n+1} by a true product
         self._state.advance_rows(refresh)
         self._state.update(impulse, advance=not refresh)  # (35a), (35b)
+        self._patches = []  # u^{n+1}: gathered again
         self.n += 1
         diag = self._diagnostics()
         self.check_stability(diag)
@@ -236,7 +239,8 @@ class MEMM:
         pair list), whatever the rule.
         """
         contacts = self.problem.contacts
-        patch = [contact.prepare(self.u, self.v_next, self.dt) for contact in contacts]
+        patch = [contact.prepare(self.u, self.v_next, self.dt, up)
+                 for contact, up in zip(contacts, self.contact_patch_values())]
         split = bool(contacts) and self.quadrature == "midpoint"
         evaluations = len(self.nodes)
         load = self._state.load
@@ -268,8 +272,8 @@ class MEMM:
         """Diagnostics at t_n from the sums of the step's kernels and of the contact models'
         energy changes (each process's part), reduced together by one Allreduce."""
         sums = self._state.sums
-        for c in self.problem.contacts:
-            de, ds = c.energy_correction(c.patch_values(self.u))
+        for c, up in zip(self.problem.contacts, self.contact_patch_values()):
+            de, ds = c.energy_correction(up)
             sums[CONTACT_S] += de
             sums[CONTACT_J] += ds
         if self.problem.time_dependent:
@@ -285,6 +289,18 @@ class MEMM:
         return Diagnostics(step=self.n, t=self.t, kinetic=s[KINETIC], elastic=elastic, stabilisation=stabilisation,
                            external=external, pseudo_kinetic=s[PSEUDO],
                            pseudo_energy=s[PSEUDO] + elastic + stabilisation + external, work=self.work)
+
+    def contact_patch_values(self) -> list[np.ndarray]:
+        """The patch values of u^n of each contact model (``problem.contacts``), gathered once
+        per step: the energy at the step's end, the outputs there and the next step's
+        ``prepare`` read the same values (u changes only in ``step``, ``initialise`` and
+        ``restore``). A model whose list round made a new patch scatter since is gathered again
+        (collective: a round makes it on every process)."""
+        contacts = self.problem.contacts
+        kept = self._patches if len(self._patches) == len(contacts) else [(None, None)] * len(contacts)
+        self._patches = [(s, up) if c.scatter is s else (c.scatter, c.patch_values(self.u))
+                         for c, (s, up) in zip(contacts, kept)]
+        return [up for _, up in self._patches]
 
     def energy_rows(self) -> np.ndarray:
         """The homogeneous energy rows Q u^n (free bodies' mean translations removed) that the
@@ -371,6 +387,7 @@ class MEMM:
         rows are recomputed from u^n by a true product (as at a refresh: a difference in the last
         bits)."""
         self.u.array[:], self.v_prev.array[:], self.v_next.array[:] = u, v_prev, v_next
+        self._patches = []
         self.t0, self.n, self.budget = float(t0), int(n), float(budget)
         self.work, self._data_potential = float(work), data_potential
         self.force_evaluations, self.max_step_evaluations = int(force_evaluations), int(max_step_evaluations)

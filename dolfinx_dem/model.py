@@ -193,12 +193,15 @@ def contact_columns(dem: DEMDiscretisation) -> tuple[str, ...]:
     return columns
 
 
-def contact_values(dem: DEMDiscretisation, u) -> list[float]:
+def contact_values(dem: DEMDiscretisation, u, patches: list[np.ndarray] | None = None) -> list[float]:
     """The values of ``contact_columns`` but the momenta, for the displacement ``u``
-    (collective: the contact forces of all models are summed by one reduction)."""
+    (collective: the contact forces of all models are summed by one reduction); ``patches``: the
+    patch values of u of ``dem.contacts`` if the caller has them (``MEMM.contact_patch_values``)."""
     rigid, pair = dem.contact, dem.pair_contact
-    up_rigid = None if rigid is None else rigid.patch_values(u)
-    up_pair = None if pair is None else pair.patch_values(u)
+    if patches is None:
+        patches = [c.patch_values(u) for c in dem.contacts]
+    up = {id(c): values for c, values in zip(dem.contacts, patches)}
+    up_rigid, up_pair = up.get(id(rigid)), up.get(id(pair))
     local = [rigid.force_sums(up_rigid)] if rigid is not None else []
     local += [pair.pair_forces(up_pair).ravel()] if pair is not None else []
     sums = dem.comm.allreduce(np.concatenate(local), op=MPI.SUM) if local else None

@@ -522,8 +522,8 @@ class PairContact:
         because eq. (23)-(24) are not well posed for them (see ``_directions``); collective."""
         return self.comm.allreduce(len(self._scheme_b_rule), op=MPI.SUM)
 
-    def prepare(self, u: PETSc.Vec, v: PETSc.Vec | None = None,
-                dt: float = 0.0) -> tuple[np.ndarray, np.ndarray | None]:
+    def prepare(self, u: PETSc.Vec, v: PETSc.Vec | None = None, dt: float = 0.0,
+                up: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray | None]:
         """Make the Verlet list valid for the states u + tau v, 0 <= tau <= dt (u alone without
         v): if a candidate facet known to some process would move more than half its skin from
         where it was at that process's last build, a round of the lists at u (``_build``), which
@@ -531,10 +531,16 @@ class PairContact:
         tau, so checking both ends covers the whole flight. ``MEMM`` calls this before every
         step's force integral, whatever the quadrature, and at ``initialise``; call it before
         evaluating forces or energies at displacements of your own. Collective (one logical
-        reduction, and the round's exchanges). Returns the patch values of u and v (None without v), gathered after any
+        reduction, and the round's exchanges). ``up``: the patch values of u if the caller has them
+        (gathered by the current ``scatter``: MEMM keeps those of the step's end), else they are
+        gathered. Returns the patch values of u and v (None without v), gathered again after any
         rebuild: arrays of patch values gathered before a rebuild are invalid after it."""
         start = time.process_time()
-        up = self.patch_values(u)
+        if up is None:
+            up = self.patch_values(u)
+        elif len(up) != len(self.scatter):
+            raise ValueError(f"prepare: {len(up)} patch values of u given for a patch of {len(self.scatter)} dofs "
+                             "(gathered before a list round?)")
         vp = None if v is None else self.patch_values(v)
         uc = self._at(up).uc
         stale = self._moved(uc)
