@@ -349,7 +349,8 @@ class PairContact:
         meets[comm.rank] = False
         if meets.any():
             floats, ints = self._own_records
-            floats = np.concatenate([floats, uc[own]], axis=1)  # with the sender's displacements
+            # with the sender's displacements, and its places (here and its reference if kept)
+            floats = np.concatenate([floats, uc[own], x[0][own], x[-1][own]], axis=1)
         # to each process whose local facets' box, widened by r, meets the own facets: those
         # own facets inside it at either place (the only ones that can pair with its local facets)
         send = [None] * comm.size
@@ -362,9 +363,14 @@ class PairContact:
         if received:
             rf = np.concatenate([m[0] for m in received])
             ri = np.concatenate([m[1] for m in received])
+            # the facets new here that come within r of a local facet at one of the places: a
+            # box is coarse (with a graph partition, most of another part's boundary may lie in
+            # it), and every ghost kept costs at each step (its motion, its dofs in the patch)
             new = ~_find_sorted(self._local_keys, ri[:, 0])[1]
-            ghosts = local.from_records(rf[new, :-d], ri[new])
-            uc_ghosts = rf[new, -d:]
+            there = rf[new, -2 * d :].reshape(-1, 2, d)  # the sender's places
+            new[new] = _near(np.concatenate(x), [there[:, 0], there[:, 1]], r)
+            ghosts = local.from_records(rf[new, : -3 * d], ri[new])
+            uc_ghosts = rf[new, -3 * d : -2 * d]
         else:
             ghosts, uc_ghosts = local.take(np.empty(0, dtype=np.int64)), np.zeros((0, d))
         if not stale and np.isin(ghosts.key, self.facets_all.key[nl:]).all():
@@ -1118,6 +1124,13 @@ def _find_sorted(a: np.ndarray, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     (np.searchsorted) and whether it is there (np.isin without sorting ``a``)."""
     index = np.searchsorted(a, x)
     return index, np.append(a, -1)[index] == x  # (-1, no entry: past the end of a)
+
+
+def _near(x: np.ndarray, places: list[np.ndarray], r: float) -> np.ndarray:
+    """Whether each point is within r of a point of ``x`` at one of its ``places`` (one array
+    of points per place, rows alike)."""
+    tree = scipy.spatial.cKDTree(x)
+    return np.logical_or.reduce([tree.query(y, distance_upper_bound=2.0 * r)[0] <= r for y in places])
 
 
 def _reach(F: _Facets) -> np.ndarray:
