@@ -68,6 +68,7 @@ class ContactModel(Protocol):
 
     cells: np.ndarray  # local cells of the candidate facets (own first), (n_facets,)
     num_own: int  # candidate facets of owned cells
+    scatter: PatchScatter  # of the patch dofs (``PairContact``'s list rounds make new ones)
 
     def prepare(self, u: PETSc.Vec, v: PETSc.Vec | None = None, dt: float = 0.0,
                 up: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray | None]:

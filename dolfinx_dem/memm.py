@@ -111,6 +111,11 @@ class Diagnostics:
         return self.kinetic + self.elastic + self.stabilisation
 
 
+def _read_only(a: np.ndarray) -> np.ndarray:
+    a.setflags(write=False)
+    return a
+
+
 class MEMM:
     """The MEMM stepper for a ``DEMDiscretisation`` (``force``, ``energies``, ``factored``,
     ``load``, ``lift``, ``mass``, ``contacts``, and for prescribed bodies ``prescribed``,
@@ -295,10 +300,10 @@ class MEMM:
         per step: the energy at the step's end, the outputs there and the next step's
         ``prepare`` read the same values (u changes only in ``step``, ``initialise`` and
         ``restore``). A model whose list round made a new patch scatter since is gathered again
-        (collective: a round makes it on every process)."""
+        (collective: a round makes it on every process). The arrays are shared: read only."""
         contacts = self.problem.contacts
         kept = self._patches if len(self._patches) == len(contacts) else [(None, None)] * len(contacts)
-        self._patches = [(s, up) if c.scatter is s else (c.scatter, c.patch_values(self.u))
+        self._patches = [(s, up) if c.scatter is s else (c.scatter, _read_only(c.patch_values(self.u)))
                          for c, (s, up) in zip(contacts, kept)]
         return [up for _, up in self._patches]
 

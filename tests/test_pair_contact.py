@@ -1047,3 +1047,44 @@ def test_a_list_round_rebuilds_only_the_lists_near_moving_facets():
     scale = np.abs(u_serial).max()
     assert scale > 1e-3  # the moving discs moved
     assert np.abs(stepper.u.array_r.reshape(-1, 2) - u_serial[found]).max(initial=0.0) < 1e-12 * scale
+
+
+@pytest.mark.mpi
+def test_a_process_knows_only_the_facets_of_other_processes_near_its_own():
+    """Eight discs on a ring, 0.58 m apart (far beyond any pair radius): a list round keeps the
+    facets received from other processes that lie within the pair list radius of a local facet,
+    not all those in the box of its local facets (on 2 and 3 processes that box spans a half or
+    a third of the ring and holds discs of other processes). Bodies at rest: each facet is at
+    its reference place."""
+    angles = np.arange(8) * np.pi / 4
+    discs = [((np.cos(a), np.sin(a)), 0.1) for a in angles]
+    mesh = meshes.create_discs(MPI.COMM_WORLD, discs, 0.03)[0]
+    dem = DEMDiscretisation(mesh, SOFT, "B")
+    dem.set_contact_boundary(_compat.exterior_facets(mesh))
+    c = dem.pair_contact
+    F, nl = c.facets_all, len(c.facets)
+    import scipy.spatial
+
+    distance = scipy.spatial.cKDTree(F.centre[:nl]).query(F.centre[nl:])[0] if nl else np.full(len(F) - nl, np.inf)
+    far = MPI.COMM_WORLD.allreduce(int((distance > c.radius).sum()), op=MPI.SUM)  # on every process
+    assert far == 0
+    assert c.num_pairs == 0  # no facing facets of two discs are near each other
+
+
+def test_memm_gathers_the_patch_values_once_per_step():
+    """MEMM's patch values of u^n are those of a fresh gather, shared read only by the step's
+    end, the outputs and the next step's ``prepare``, gathered again after a step; ``prepare``
+    refuses patch values of another patch."""
+    dem, facets = two_discs(h=0.03)
+    dem.set_contact_boundary(facets)
+    c = dem.pair_contact
+    stepper = MEMM(dem, 0.2 * dem.stable_time_step())
+    stepper.initialise(dem.create_vector(), cell_vector(dem, approach))
+    for _ in range(3):
+        up = stepper.contact_patch_values()[0]
+        assert stepper.contact_patch_values()[0] is up and not up.flags.writeable
+        assert np.array_equal(up, c.patch_values(stepper.u))
+        stepper.step()
+        assert stepper.contact_patch_values()[0] is not up
+    with pytest.raises(ValueError, match="patch values of u given for a patch of"):
+        c.prepare(stepper.u, up=np.zeros(len(c.scatter) + 1))
