@@ -1129,8 +1129,9 @@ def _find_sorted(a: np.ndarray, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 def _near(x: np.ndarray, places: list[np.ndarray], r: float) -> np.ndarray:
     """Whether each point is within r of a point of ``x`` at one of its ``places`` (one array
     of points per place, rows alike)."""
-    tree = scipy.spatial.cKDTree(x)
-    return np.logical_or.reduce([tree.query(y, distance_upper_bound=2.0 * r)[0] <= r for y in places])
+    tree = scipy.spatial.cKDTree(x, balanced_tree=False, compact_nodes=False)  # built once, queried once
+    bound = np.nextafter(r, np.inf)  # the query keeps distances < bound
+    return np.logical_or.reduce([np.isfinite(tree.query(y, distance_upper_bound=bound)[0]) for y in places])
 
 
 def _reach(F: _Facets) -> np.ndarray:
