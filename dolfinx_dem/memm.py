@@ -25,7 +25,8 @@ by a true product instead. All other terms of the integral, the loads f - Q^T q(
 quadrature nodes and the contact corrections, are the step's ``impulse``. One compiled kernel
 then updates u and v and sums the kinetic, pseudo-kinetic and external terms, and a single
 Allreduce reduces them with the energies: a step synchronises three times (the ghost updates of
-v^{n+1/2} and of Q^T y, and the reduction); contact adds the gathers of its patch values. The
+v^{n+1/2} and of Q^T y, and the reduction); contact adds the gathers of its patch values (u^n
+once per step, ``contact_patch_values``, and v^{n+1/2}) and the sum of its forces. The
 kernel also sums the momentum of each free body: the pass over Q subtracts its mean velocity
 from v^{n+1/2} at the next step (for rounding, as ``relative_displacement`` does for u).
 

@@ -57,7 +57,9 @@ by default its own diameter 2 rho (or one uniform skin given by the user): the l
 local facet size, so a contact zone refined far below the rest of the boundary lists few pairs.
 Each process sends the records of its own candidate facets to the processes whose bounding box
 of local facets (grown by the largest r_p) meets the box of its own facets; the boxes are
-gathered (one box per process). A process's list is stale when a facet it knows (local or ghost)
+gathered (one box per process). The receiver keeps those within the largest r_p of one of its
+local facets (a box is coarse: with a graph partition it may hold much of another part's
+boundary, and every facet known costs at each step). A process's list is stale when a facet it knows (local or ghost)
 has moved more than half its skin since it built the list: an unlisted pair's centres are then
 still farther apart than rho_f + rho_f', so its facets cannot touch. When a process is stale
 (one logical reduction per step in ``prepare``), a round of the lists exchanges the records
