@@ -327,9 +327,10 @@ class PairContact:
 
         Why a kept list stays valid: each process checks its known facets against the places
         they had at its last rebuild (``_moved``), so its own pairs are safe; a facet it does
-        not know was sent by no one, i.e. lies (at its owner's reference place and here) farther
-        than the largest pair radius from the box of this process's local facets (at their
-        references and here, whichever a rebuild in this round leaves as the reference): it
+        not know was sent by no one or not kept, i.e. lies (at its owner's reference place and
+        here) farther than the largest pair radius from the box of this process's local facets,
+        or from each of them (at their references and here, whichever a rebuild in this round
+        leaves as the reference): it
         cannot reach one of them before one of the two moves more than half its skin, which
         starts a new round."""
         comm, d = self.comm, self.d
