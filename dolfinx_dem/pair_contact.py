@@ -59,12 +59,13 @@ Each process sends the records of its own candidate facets to the processes whos
 of local facets (grown by the largest r_p) meets the box of its own facets; the boxes are
 gathered (one box per process). The receiver keeps those within the largest r_p of one of its
 local facets (a box is coarse: with a graph partition it may hold much of another part's
-boundary, and every facet known costs at each step). A process's list is stale when a facet it knows (local or ghost)
-has moved more than half its skin since it built the list: an unlisted pair's centres are then
-still farther apart than rho_f + rho_f', so its facets cannot touch. When a process is stale
-(one logical reduction per step in ``prepare``), a round of the lists exchanges the records
-(``_build``); the stale processes and those that receive a facet new to them rebuild, the others
-keep their lists: a fast facet does not rebuild the lists far from it. ``prepare`` checks both
+boundary, and every facet known costs at each step). A process's list is stale when a facet it
+knows (local or ghost) has moved more than half its skin since it built the list: an unlisted
+pair's centres are then still farther apart than rho_f + rho_f', so its facets cannot touch.
+When a process is stale (one logical reduction per step in ``prepare``), a round of the lists
+exchanges the records (``_build``); the stale processes and those that receive a facet new to
+them rebuild, the others keep their lists: a fast facet does not rebuild the lists far from it.
+``prepare`` checks both
 ends of the coming step (the flight is affine); every evaluation checks that the list is valid
 for its displacements and raises otherwise (never a silently incomplete list); so does a step
 that moves a facet by more than half its skin.
@@ -330,9 +331,8 @@ class PairContact:
         not know was sent by no one or not kept, i.e. lies (at its owner's reference place and
         here) farther than the largest pair radius from the box of this process's local facets,
         or from each of them (at their references and here, whichever a rebuild in this round
-        leaves as the reference): it
-        cannot reach one of them before one of the two moves more than half its skin, which
-        starts a new round."""
+        leaves as the reference): it cannot reach one of them before one of the two moves more
+        than half its skin, which starts a new round."""
         comm, d = self.comm, self.d
         local = self._facets
         nl = len(local)
