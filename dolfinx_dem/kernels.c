@@ -652,27 +652,47 @@ void dem_interpolate_own(int64_t n_rows, int32_t n_own, const int64_t *restrict 
   }
 }
 
-/* Selected rows of a CSR matrix A (indptr, indices int32) applied to m columns X (row-major,
- * n_cols x m): Y[k, c] = sum over row sel[k] of A[sel[k], j] X[j, c] (Y: n_sel x m, overwritten),
- * summed in the order of the row's entries. pair_contact's z_p . a for the touching pairs only:
- * no sliced copy of the matrix. */
+/* One row of a CSR matrix A (indptr, indices int32) applied to m columns X (row-major, column j
+ * at X + j ldx): y[c] = sum over the row of A[row, j] X[j, c], in the order of its entries. */
+static inline void csr_row_apply(const int32_t *restrict indptr, const int32_t *restrict indices,
+                                 const double *restrict data, int64_t row, int64_t m, const double *restrict X,
+                                 int64_t ldx, double *restrict y)
+{
+  for (int64_t c = 0; c < m; ++c)
+    y[c] = 0.0;
+  for (int32_t e = indptr[row]; e < indptr[row + 1]; ++e)
+  {
+    const double a = data[e];
+    const double *x = X + (int64_t)indices[e] * ldx;
+    for (int64_t c = 0; c < m; ++c)
+      y[c] += a * x[c];
+  }
+}
+
+/* Its transpose: Y[j, c] += A[row, j] x[c] over the row's entries (column j at Y + j ldy). */
+static inline void csr_row_apply_transpose(const int32_t *restrict indptr, const int32_t *restrict indices,
+                                           const double *restrict data, int64_t row, int64_t m,
+                                           const double *restrict x, double *restrict Y, int64_t ldy)
+{
+  for (int32_t e = indptr[row]; e < indptr[row + 1]; ++e)
+  {
+    const double a = data[e];
+    double *y = Y + (int64_t)indices[e] * ldy;
+    for (int64_t c = 0; c < m; ++c)
+      y[c] += a * x[c];
+  }
+}
+
+/* Selected rows of a CSR matrix A applied to m columns X (row-major, n_cols x m): Y[k, c] = sum
+ * over row sel[k] of A[sel[k], j] X[j, c] (Y: n_sel x m, overwritten), summed in the order of
+ * the row's entries. pair_contact's z_p . a for the touching pairs only: no sliced copy of the
+ * matrix. */
 void dem_csr_rows_apply(int64_t n_sel, const int64_t *restrict sel, const int32_t *restrict indptr,
                         const int32_t *restrict indices, const double *restrict data, int32_t m,
                         const double *restrict X, double *restrict Y)
 {
   for (int64_t k = 0; k < n_sel; ++k)
-  {
-    double *y = Y + k * m;
-    for (int32_t c = 0; c < m; ++c)
-      y[c] = 0.0;
-    for (int32_t e = indptr[sel[k]]; e < indptr[sel[k] + 1]; ++e)
-    {
-      const double a = data[e];
-      const double *x = X + (int64_t)indices[e] * m;
-      for (int32_t c = 0; c < m; ++c)
-        y[c] += a * x[c];
-    }
-  }
+    csr_row_apply(indptr, indices, data, sel[k], m, X, m, Y + k * m);
 }
 
 /* The transpose: Y[j, c] += A[sel[k], j] X[k, c] over the selected rows, in the order of sel
@@ -683,16 +703,7 @@ void dem_csr_rows_apply_transpose(int64_t n_sel, const int64_t *restrict sel, co
                                   const double *restrict X, double *restrict Y)
 {
   for (int64_t k = 0; k < n_sel; ++k)
-  {
-    const double *x = X + k * m;
-    for (int32_t e = indptr[sel[k]]; e < indptr[sel[k] + 1]; ++e)
-    {
-      const double a = data[e];
-      double *y = Y + (int64_t)indices[e] * m;
-      for (int32_t c = 0; c < m; ++c)
-        y[c] += a * x[c];
-    }
-  }
+    csr_row_apply_transpose(indptr, indices, data, sel[k], m, X + k * m, Y, m);
 }
 
 /* Y = A[sel] (A[sel]^T X) for ragged X: the selected row k has the m_k = offsets[k + 1] -
@@ -708,31 +719,10 @@ void dem_csr_rows_gram_apply(int64_t n_sel, const int64_t *restrict sel, const i
                              double *restrict work, double *restrict Y)
 {
   for (int64_t k = 0; k < n_sel; ++k)
-  {
-    const int64_t m = offsets[k + 1] - offsets[k];
-    const double *x = X + offsets[k];
-    for (int32_t e = indptr[sel[k]]; e < indptr[sel[k] + 1]; ++e)
-    {
-      const double a = data[e];
-      double *y = work + (int64_t)indices[e] * stride;
-      for (int64_t c = 0; c < m; ++c)
-        y[c] += a * x[c];
-    }
-  }
+    csr_row_apply_transpose(indptr, indices, data, sel[k], offsets[k + 1] - offsets[k], X + offsets[k], work,
+                            stride);
   for (int64_t k = 0; k < n_sel; ++k)
-  {
-    const int64_t m = offsets[k + 1] - offsets[k];
-    double *y = Y + offsets[k];
-    for (int64_t c = 0; c < m; ++c)
-      y[c] = 0.0;
-    for (int32_t e = indptr[sel[k]]; e < indptr[sel[k] + 1]; ++e)
-    {
-      const double a = data[e];
-      const double *x = work + (int64_t)indices[e] * stride;
-      for (int64_t c = 0; c < m; ++c)
-        y[c] += a * x[c];
-    }
-  }
+    csr_row_apply(indptr, indices, data, sel[k], offsets[k + 1] - offsets[k], work, stride, Y + offsets[k]);
   for (int64_t k = 0; k < n_sel; ++k)
   {
     const int64_t m = offsets[k + 1] - offsets[k];
