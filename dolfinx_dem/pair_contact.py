@@ -65,10 +65,9 @@ pair's centres are then still farther apart than rho_f + rho_f', so its facets c
 When a process is stale (one logical reduction per step in ``prepare``), a round of the lists
 exchanges the records (``_build``); the stale processes and those that receive a facet new to
 them rebuild, the others keep their lists: a fast facet does not rebuild the lists far from it.
-``prepare`` checks both
-ends of the coming step (the flight is affine); every evaluation checks that the list is valid
-for its displacements and raises otherwise (never a silently incomplete list); so does a step
-that moves a facet by more than half its skin.
+``prepare`` checks both ends of the coming step (the flight is affine); every evaluation checks
+that the list is valid for its displacements and raises otherwise (never a silently incomplete
+list); so does a step that moves a facet by more than half its skin.
 """
 
 from __future__ import annotations
