@@ -38,30 +38,6 @@ ffibuilder.cdef(
                          const double *uc, const double *vc, double dt, int8_t *out);
     void dem_piecewise_midpoints(int64_t n_times, const int64_t *rows, const double *times, int64_t n, int64_t k,
                                  double dt, int64_t *counts, double *points, double *mid, double *length);
-    void dem_interpolate_own(int64_t n_rows, int32_t n_own, const int64_t *offsets, int32_t n_gauss, int32_t width,
-                             const double *start, const double *length, const double *nodes, const double *xi,
-                             const double *w_own, const double *dw_own, double *w, double *dw);
-    void dem_csr_rows_apply(int64_t n_sel, const int64_t *sel, const int32_t *indptr, const int32_t *indices,
-                            const double *data, int32_t m, const double *X, double *Y);
-    void dem_csr_rows_apply_transpose(int64_t n_sel, const int64_t *sel, const int32_t *indptr,
-                                      const int32_t *indices, const double *data, int32_t m, const double *X,
-                                      double *Y);
-    void dem_csr_rows_gram_apply(int64_t n_sel, const int64_t *sel, const int32_t *indptr, const int32_t *indices,
-                                 const double *data, const int64_t *offsets, int32_t stride, const double *X,
-                                 double *work, double *Y);
-    int64_t dem_components(int64_t n_sel, const int64_t *sel, const int32_t *indptr, const int32_t *indices,
-                           int64_t *first, int64_t *parent, int64_t *label);
-    void dem_csr_rows_pattern(int64_t n_sel, const int64_t *sel, const int32_t *indptr, const int32_t *indices,
-                              int8_t *mark);
-    void dem_pair_events(int64_t n, int32_t d, const int64_t *p, const int64_t *i, const int64_t *j,
-                         const double *normal, const double *t, const double *d0, const double *XA,
-                         const double *mA, const double *XB, const double *mB, const double *uc,
-                         const double *vc, double dt, double *tau);
-    void dem_overlap_own(int64_t n, int32_t d, const int64_t *p, const int64_t *i, const int64_t *j, const double *t,
-                         const double *uc, const double *vc, int32_t n_tau, const double *tau, double dt,
-                         int32_t n_gauss, const double *xi, const double *XA, const double *mA, const double *nuA,
-                         const double *sizeA, const double *XB, const double *mB, const double *nuB,
-                         const double *sizeB, double *start, double *length, double *w, double *dw);
     void dem_pair_facet_corrections(int64_t n, int32_t d, const int64_t *p, const int64_t *i, const int64_t *j,
                                     const double *e_i, const double *e_j, const double *c, const double *length,
                                     int64_t n_facets, double *work, double *out);
@@ -72,6 +48,23 @@ ffibuilder.cdef(
     void dem_pair_facet_forces(int64_t n_entries, int32_t d, const int64_t *p, const int64_t *i, const int64_t *j,
                                const double *normal, const double *mu, const double *g, const double *w,
                                const double *dw, double *out);
+    int64_t dem_pair_force_integral(int64_t n, int32_t d, const int64_t *p, const int64_t *i, const int64_t *j,
+                                    const double *normal, const double *t, const double *d0, const double *XA,
+                                    const double *mA, const double *nuA, const double *sizeA, const double *XB,
+                                    const double *mB, const double *nuB, const double *sizeB, const double *uc,
+                                    const double *vc, double dt, int32_t n_gauss, const double *xi, const double *wq,
+                                    const int32_t *z_ptr, const int32_t *z_idx, const double *z_val,
+                                    const int32_t *q_ptr, const int32_t *q_idx, const double *q_val, const double *q,
+                                    const double *up, const double *vp, int32_t *slot, double *facet_force,
+                                    double *result);
+    int64_t dem_pair_state(int64_t n_pairs, int32_t d, const int64_t *i, const int64_t *j, const double *normal,
+                           const double *t, const double *d0, const double *XA, const double *mA, const double *nuA,
+                           const double *sizeA, const double *XB, const double *mB, const double *nuB,
+                           const double *sizeB, const double *uc, const int32_t *z_ptr, const int32_t *z_idx,
+                           const double *z_val, const int32_t *q_ptr, const int32_t *q_idx, const double *q_val,
+                           const double *q, const double *up, const int8_t *elastic, int32_t *slot,
+                           int64_t *closed, double *g, double *w, double *dw, double *c, double *mu,
+                           double *energy);
     """
 )
 # -O3, no -march=native: the module must run on any x86-64 the package is installed for.

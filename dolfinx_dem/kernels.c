@@ -6,6 +6,7 @@
  */
 #include <math.h>
 #include <stdint.h>
+#include <stdlib.h>
 
 /* (Q x)_i for the CSR row [a, b): two accumulators break the dependency chain of the sum. */
 static inline double row_dot(int32_t a, int32_t b, const int32_t *restrict cols,
@@ -402,21 +403,21 @@ void dem_overlap(int64_t n, int32_t dim, const int64_t *restrict p, const double
     overlap_one(dim, p[i], XA, mA, nuA, sizeA, XB, mB, nuB, sizeB, s + i * dim, w + i, dw + i * dim);
 }
 
-/* pair_contact.PairContact._overlap_on_own_pieces before its interpolation: for the pairs p[e]
- * of facets (i, j) moving along uc + tau vc (n_facets x d), with their events tau (n_tau per
- * pair, INFINITY: none; in (0, dt)), the own pieces of [0, dt] cut at the sorted events (padded
- * with empty pieces up to n_tau + 1: start, length, as patch.piecewise_midpoints and
- * _gauss_points compute them), and at the n_gauss nodes xi of each non-empty piece w and
+/* A pair's overlap on its own pieces (dem_pair_force_integral, before interpolate_own): for the
+ * pairs p[e] of facets (i, j) moving along uc + tau vc (n_facets x d), with their events tau
+ * (n_tau per pair, INFINITY: none; in (0, dt)), the own pieces of [0, dt] cut at the sorted
+ * events (padded with empty pieces up to n_tau + 1: start, length, as dem_piecewise_midpoints
+ * and dem_pair_force_integral's nodes compute them), and at the n_gauss nodes xi of each non-empty piece w and
  * dw/du_j = t^T dw/ds (d components) at the tangential offset s = t (u_j - u_i)
  * (overlap_one); 0 on empty pieces. t: the pairs' tangent bases (d - 1 rows of d). */
-void dem_overlap_own(int64_t n, int32_t d, const int64_t *restrict p, const int64_t *restrict i,
-                     const int64_t *restrict j, const double *restrict t, const double *restrict uc,
-                     const double *restrict vc, int32_t n_tau, const double *restrict tau, double dt,
-                     int32_t n_gauss, const double *restrict xi, const double *restrict XA,
-                     const double *restrict mA, const double *restrict nuA, const double *restrict sizeA,
-                     const double *restrict XB, const double *restrict mB, const double *restrict nuB,
-                     const double *restrict sizeB, double *restrict start, double *restrict length,
-                     double *restrict w, double *restrict dw)
+static void overlap_own(int64_t n, int32_t d, const int64_t *restrict p, const int64_t *restrict i,
+                        const int64_t *restrict j, const double *restrict t, const double *restrict uc,
+                        const double *restrict vc, int32_t n_tau, const double *restrict tau, double dt,
+                        int32_t n_gauss, const double *restrict xi, const double *restrict XA,
+                        const double *restrict mA, const double *restrict nuA, const double *restrict sizeA,
+                        const double *restrict XB, const double *restrict mB, const double *restrict nuB,
+                        const double *restrict sizeB, double *restrict start, double *restrict length,
+                        double *restrict w, double *restrict dw)
 {
   const int32_t dim = d - 1, n_own = n_tau + 1;
   for (int64_t e = 0; e < n; ++e)
@@ -604,18 +605,18 @@ void dem_piecewise_midpoints(int64_t n_times, const int64_t *restrict rows, cons
     }
 }
 
-/* Lagrange interpolation of pair_contact._overlap_on_own_pieces, for n_rows pairs: each has
+/* Lagrange interpolation of overlap_own's values (dem_pair_force_integral), for n_rows pairs: each has
  * n_own pieces (start, length; empty ones of length 0) with values w_own (n_gauss per piece, at
  * the nodes xi of [0, 1] scaled to the piece) and gradients dw_own (width components each), and
  * the times nodes[offsets[r] .. offsets[r + 1]). At each time x: the last non-empty piece
  * starting at or before it (the first piece if none), and the Lagrange interpolation of its
  * values, summed in the order of the nodes. w (offsets[n_rows]) and dw (offsets[n_rows] width)
  * are overwritten. */
-void dem_interpolate_own(int64_t n_rows, int32_t n_own, const int64_t *restrict offsets, int32_t n_gauss,
-                         int32_t width, const double *restrict start, const double *restrict length,
-                         const double *restrict nodes, const double *restrict xi,
-                         const double *restrict w_own, const double *restrict dw_own,
-                         double *restrict w, double *restrict dw)
+static void interpolate_own(int64_t n_rows, int32_t n_own, const int64_t *restrict offsets, int32_t n_gauss,
+                            int32_t width, const double *restrict start, const double *restrict length,
+                            const double *restrict nodes, const double *restrict xi,
+                            const double *restrict w_own, const double *restrict dw_own,
+                            double *restrict w, double *restrict dw)
 {
   for (int64_t r = 0; r < n_rows; ++r)
   {
@@ -652,86 +653,6 @@ void dem_interpolate_own(int64_t n_rows, int32_t n_own, const int64_t *restrict 
   }
 }
 
-/* One row of a CSR matrix A (indptr, indices int32) applied to m columns X (row-major, column j
- * at X + j ldx): y[c] = sum over the row of A[row, j] X[j, c], in the order of its entries. */
-static inline void csr_row_apply(const int32_t *restrict indptr, const int32_t *restrict indices,
-                                 const double *restrict data, int64_t row, int64_t m, const double *restrict X,
-                                 int64_t ldx, double *restrict y)
-{
-  for (int64_t c = 0; c < m; ++c)
-    y[c] = 0.0;
-  for (int32_t e = indptr[row]; e < indptr[row + 1]; ++e)
-  {
-    const double a = data[e];
-    const double *x = X + (int64_t)indices[e] * ldx;
-    for (int64_t c = 0; c < m; ++c)
-      y[c] += a * x[c];
-  }
-}
-
-/* Its transpose: Y[j, c] += A[row, j] x[c] over the row's entries (column j at Y + j ldy). */
-static inline void csr_row_apply_transpose(const int32_t *restrict indptr, const int32_t *restrict indices,
-                                           const double *restrict data, int64_t row, int64_t m,
-                                           const double *restrict x, double *restrict Y, int64_t ldy)
-{
-  for (int32_t e = indptr[row]; e < indptr[row + 1]; ++e)
-  {
-    const double a = data[e];
-    double *y = Y + (int64_t)indices[e] * ldy;
-    for (int64_t c = 0; c < m; ++c)
-      y[c] += a * x[c];
-  }
-}
-
-/* Selected rows of a CSR matrix A applied to m columns X (row-major, n_cols x m): Y[k, c] = sum
- * over row sel[k] of A[sel[k], j] X[j, c] (Y: n_sel x m, overwritten), summed in the order of
- * the row's entries. pair_contact's z_p . a for the touching pairs only: no sliced copy of the
- * matrix. */
-void dem_csr_rows_apply(int64_t n_sel, const int64_t *restrict sel, const int32_t *restrict indptr,
-                        const int32_t *restrict indices, const double *restrict data, int32_t m,
-                        const double *restrict X, double *restrict Y)
-{
-  for (int64_t k = 0; k < n_sel; ++k)
-    csr_row_apply(indptr, indices, data, sel[k], m, X, m, Y + k * m);
-}
-
-/* The transpose: Y[j, c] += A[sel[k], j] X[k, c] over the selected rows, in the order of sel
- * and of each row's entries (Y: n_cols x m, accumulated into). Z c = (Z^T)^T c for the pairs
- * sel with c nonzero. */
-void dem_csr_rows_apply_transpose(int64_t n_sel, const int64_t *restrict sel, const int32_t *restrict indptr,
-                                  const int32_t *restrict indices, const double *restrict data, int32_t m,
-                                  const double *restrict X, double *restrict Y)
-{
-  for (int64_t k = 0; k < n_sel; ++k)
-    csr_row_apply_transpose(indptr, indices, data, sel[k], m, X + k * m, Y, m);
-}
-
-/* Y = A[sel] (A[sel]^T X) for ragged X: the selected row k has the m_k = offsets[k + 1] -
- * offsets[k] values X[offsets[k] ..] and gets as many in Y; rows that share a column must have
- * the same m (pair_contact: the pairs of a component of N share their nodes). Summed as
- * dem_csr_rows_apply_transpose then dem_csr_rows_apply would (in the order of sel and of each
- * row's entries), through work (n_cols x stride, stride >= every m_k), zero on entry and left
- * zero: only the columns the selected rows touch are written, so no array of all the columns is
- * cleared or read. pair_contact's N c = Z^T (Z c) over the touching pairs at their nodes. */
-void dem_csr_rows_gram_apply(int64_t n_sel, const int64_t *restrict sel, const int32_t *restrict indptr,
-                             const int32_t *restrict indices, const double *restrict data,
-                             const int64_t *restrict offsets, int32_t stride, const double *restrict X,
-                             double *restrict work, double *restrict Y)
-{
-  for (int64_t k = 0; k < n_sel; ++k)
-    csr_row_apply_transpose(indptr, indices, data, sel[k], offsets[k + 1] - offsets[k], X + offsets[k], work,
-                            stride);
-  for (int64_t k = 0; k < n_sel; ++k)
-    csr_row_apply(indptr, indices, data, sel[k], offsets[k + 1] - offsets[k], work, stride, Y + offsets[k]);
-  for (int64_t k = 0; k < n_sel; ++k)
-  {
-    const int64_t m = offsets[k + 1] - offsets[k];
-    for (int32_t e = indptr[sel[k]]; e < indptr[sel[k] + 1]; ++e)
-      for (int64_t c = 0; c < m; ++c)
-        work[(int64_t)indices[e] * stride + c] = 0.0;
-  }
-}
-
 static int64_t find_root(int64_t *parent, int64_t k)
 {
   while (parent[k] != k)
@@ -742,61 +663,18 @@ static int64_t find_root(int64_t *parent, int64_t k)
   return k;
 }
 
-/* Connected components of the selected rows sel of a CSR pattern (indptr, indices) when two rows
- * are linked by a common column (for Z^T: the pairs sharing an own row). label[k] (n_sel): the
- * component of sel[k], numbered 0, 1, ... by first appearance in sel; returns their count.
- * first: n_cols, set by the caller to -1 (work space: the first selected row met in each column);
- * parent: work space of n_sel. */
-int64_t dem_components(int64_t n_sel, const int64_t *restrict sel, const int32_t *restrict indptr,
-                       const int32_t *restrict indices, int64_t *restrict first,
-                       int64_t *restrict parent, int64_t *restrict label)
-{
-  for (int64_t k = 0; k < n_sel; ++k)
-    parent[k] = k;
-  for (int64_t k = 0; k < n_sel; ++k)
-    for (int32_t e = indptr[sel[k]]; e < indptr[sel[k] + 1]; ++e)
-    {
-      const int32_t col = indices[e];
-      if (first[col] < 0)
-      {
-        first[col] = k;
-        continue;
-      }
-      const int64_t a = find_root(parent, k), b = find_root(parent, first[col]);
-      if (a != b)
-        parent[a > b ? a : b] = a < b ? a : b; /* the smaller index is the root */
-    }
-  int64_t count = 0;
-  for (int64_t k = 0; k < n_sel; ++k)
-  {
-    const int64_t root = find_root(parent, k);
-    label[k] = root == k ? count++ : label[root]; /* a root is its component's first row */
-  }
-  return count;
-}
-
-/* The columns met by the selected rows of a CSR pattern: mark[indices[e]] = 1 (mark: n_cols,
- * set by the caller to 0). The own rows the touching pairs' z_p touch. */
-void dem_csr_rows_pattern(int64_t n_sel, const int64_t *restrict sel, const int32_t *restrict indptr,
-                          const int32_t *restrict indices, int8_t *restrict mark)
-{
-  for (int64_t k = 0; k < n_sel; ++k)
-    for (int32_t e = indptr[sel[k]]; e < indptr[sel[k] + 1]; ++e)
-      mark[indices[e]] = 1;
-}
-
-/* Events of pair_contact.PairContact._events for the pairs p[e] of facets (i, j) (n, t, d0 per
+/* The events of dem_pair_force_integral for the pairs p[e] of facets (i, j) (n, t, d0 per
  * pair; XA, mA, XB, mB the projected simplices, d vertices of dim = d - 1 coordinates and their
  * faces' normals m) along the flight uc + tau vc (n_facets x d): the times in (0, dt) where the
  * gap, or the side m_k . (x - X_k) of a vertex x of one simplex to the line of face k of the
  * other (B moved by the tangential offset s0 + tau s1), changes sign; INFINITY where none.
  * tau: n x (1 + 2 d^2), columns [gap, (vertex a of A, face k of B) at 1 + a d + k, (vertex a of
  * B, face k of A) at 1 + d^2 + a d + k]. */
-void dem_pair_events(int64_t n, int32_t d, const int64_t *restrict p, const int64_t *restrict i,
-                     const int64_t *restrict j, const double *restrict normal, const double *restrict t,
-                     const double *restrict d0, const double *restrict XA, const double *restrict mA,
-                     const double *restrict XB, const double *restrict mB, const double *restrict uc,
-                     const double *restrict vc, double dt, double *restrict tau)
+static void pair_events(int64_t n, int32_t d, const int64_t *restrict p, const int64_t *restrict i,
+                        const int64_t *restrict j, const double *restrict normal, const double *restrict t,
+                        const double *restrict d0, const double *restrict XA, const double *restrict mA,
+                        const double *restrict XB, const double *restrict mB, const double *restrict uc,
+                        const double *restrict vc, double dt, double *restrict tau)
 {
   const int32_t dim = d - 1, stride = d * dim, width = 1 + 2 * d * d;
   for (int64_t e = 0; e < n; ++e)
@@ -978,4 +856,362 @@ int64_t dem_pair_rows(int64_t n_pairs, int32_t d, const int64_t *restrict i, con
     indptr[k + 1] = (int32_t)nnz;
   }
   return nnz;
+}
+
+static int compare_int32(const void *a, const void *b)
+{
+  const int32_t x = *(const int32_t *)a, y = *(const int32_t *)b;
+  return (x > y) - (x < y);
+}
+
+/* malloc of n items of the given size (at least one byte: NULL means out of memory). */
+static void *alloc(int64_t n, size_t size)
+{
+  return malloc(n > 0 ? (size_t)n * size : 1);
+}
+
+/* pair_contact.PairContact.force_integral after its screen, in one call: for the n touching
+ * pairs p (facets (i, j), normal, tangents t, reference gap d0, projected simplices XA.. and
+ * XB..) along the flight uc + tau vc of the free facet displacements (n_facets x d), 0 <= tau
+ * <= dt, the integrals of the contact force corrections (eq. (34), paper §4):
+ *   result -= Q^T Z int c dtau            (the rows' term; result: patch values, accumulated),
+ *   facet_force += int -mu dc/du_f dtau   (the pairs' term at the facets, n_facets x d; the
+ *                                          caller applies R^T),
+ * with c_p = w_p g_p^-, mu_p = z_p . (a + Z c) and a = Q u + q + tau Q v on the own rows the
+ * z_p touch (Z^T: z_ptr, z_idx, z_val, one row per listed pair, columns the own rows; Q: q_ptr,
+ * q_idx, q_val, own rows x patch dofs; up, vp: the patch values of u and v).
+ *
+ * The pairs sharing an own row form connected components (two pairs are linked by a common
+ * column of their Z^T rows). Each component's [0, dt] is cut at all its pairs' events
+ * (pair_events: gap sign changes and clipped-polygon topology changes), every c_p is a
+ * polynomial of degree d on each piece and each force term one of degree 2 d - 1: the n_gauss
+ * = d point rule (xi, wq on [0, 1]) integrates them exactly. A pair's w and dw are clipped at
+ * the nodes of its own pieces only (overlap_own) and interpolated at its component's nodes
+ * (interpolate_own). The sums run in the order of the pairs, of each CSR row's entries and of
+ * the nodes; result and facet_force must be zero on entry for the bits of the separate numpy
+ * steps this replaces.
+ *
+ * slot: one entry per own row, -1 on entry and left so (the touched rows are numbered through
+ * it). Returns the largest number of non-empty pieces of a component, or -1 if memory ran out. */
+int64_t dem_pair_force_integral(int64_t n, int32_t d, const int64_t *restrict p, const int64_t *restrict i,
+                                const int64_t *restrict j, const double *restrict normal, const double *restrict t,
+                                const double *restrict d0, const double *restrict XA, const double *restrict mA,
+                                const double *restrict nuA, const double *restrict sizeA, const double *restrict XB,
+                                const double *restrict mB, const double *restrict nuB, const double *restrict sizeB,
+                                const double *restrict uc, const double *restrict vc, double dt, int32_t n_gauss,
+                                const double *restrict xi, const double *restrict wq, const int32_t *restrict z_ptr,
+                                const int32_t *restrict z_idx, const double *restrict z_val,
+                                const int32_t *restrict q_ptr, const int32_t *restrict q_idx,
+                                const double *restrict q_val, const double *restrict q, const double *restrict up,
+                                const double *restrict vp, int32_t *restrict slot, double *restrict facet_force,
+                                double *restrict result)
+{
+  const int32_t n_tau = 1 + 2 * d * d, n_own = n_tau + 1;
+  int64_t bound = 0, n_rows = 0, n_comp = 0, n_times = 0, k_max = 0, pieces = 0, stride = 0;
+  for (int64_t k = 0; k < n; ++k)
+    bound += z_ptr[p[k] + 1] - z_ptr[p[k]];
+  int32_t *rows = alloc(bound, sizeof *rows), *sorted = alloc(bound, sizeof *sorted);
+  int64_t *first = alloc(bound, sizeof *first), *parent = alloc(n, sizeof *parent);
+  int64_t *label = alloc(n, sizeof *label), *offsets = alloc(n + 1, sizeof *offsets);
+  double *a = alloc(2 * bound, sizeof *a), *za = alloc(2 * n, sizeof *za), *tau = alloc(n * n_tau, sizeof *tau);
+  double *zc = calloc(bound > 0 ? bound : 1, sizeof *zc);
+  int64_t *time_rows = alloc(n * n_tau, sizeof *time_rows), *counts = NULL, *n_pieces = NULL;
+  double *times = alloc(n * n_tau, sizeof *times), *points = NULL, *mid = NULL, *length = NULL;
+  double *nodes = NULL, *weights = NULL, *g = NULL, *w = NULL, *dw = NULL, *c = NULL, *mu = NULL, *work = NULL;
+  double *start_own = alloc(n * n_own, sizeof *start_own), *length_own = alloc(n * n_own, sizeof *length_own);
+  double *w_own = alloc(n * n_own * n_gauss, sizeof *w_own), *dw_own = alloc(n * n_own * n_gauss * d, sizeof *dw_own);
+  int64_t *entry = NULL;
+  int64_t status = -1;
+  if (!rows || !sorted || !first || !parent || !label || !offsets || !a || !za || !tau || !zc || !time_rows ||
+      !times || !start_own || !length_own || !w_own || !dw_own)
+    goto done;
+
+  /* the own rows the pairs touch (slot: their numbers, by first appearance) and the components
+   * of pairs sharing one (union-find, the smaller index the root; numbered by first appearance) */
+  for (int64_t k = 0; k < n; ++k)
+    parent[k] = k;
+  for (int64_t k = 0; k < n; ++k)
+    for (int32_t e = z_ptr[p[k]]; e < z_ptr[p[k] + 1]; ++e)
+    {
+      const int32_t r = z_idx[e];
+      if (slot[r] < 0)
+      {
+        slot[r] = (int32_t)n_rows;
+        rows[n_rows] = r;
+        first[n_rows++] = k;
+        continue;
+      }
+      const int64_t x = find_root(parent, k), y = find_root(parent, first[slot[r]]);
+      if (x != y)
+        parent[x > y ? x : y] = x < y ? x : y;
+    }
+  for (int64_t k = 0; k < n; ++k)
+  {
+    const int64_t root = find_root(parent, k);
+    label[k] = root == k ? n_comp++ : label[root];
+  }
+
+  /* a = (Q u + q, Q v) on the touched rows, and z_p . a of each pair */
+  for (int64_t s = 0; s < n_rows; ++s)
+  {
+    double y[2] = {0.0, 0.0};
+    for (int32_t e = q_ptr[rows[s]]; e < q_ptr[rows[s] + 1]; ++e)
+    {
+      y[0] += q_val[e] * up[q_idx[e]];
+      y[1] += q_val[e] * vp[q_idx[e]];
+    }
+    a[2 * s] = y[0] + q[rows[s]];
+    a[2 * s + 1] = y[1];
+  }
+  for (int64_t k = 0; k < n; ++k)
+  {
+    double y[2] = {0.0, 0.0};
+    for (int32_t e = z_ptr[p[k]]; e < z_ptr[p[k] + 1]; ++e)
+    {
+      y[0] += z_val[e] * a[2 * slot[z_idx[e]]];
+      y[1] += z_val[e] * a[2 * slot[z_idx[e]] + 1];
+    }
+    za[2 * k] = y[0];
+    za[2 * k + 1] = y[1];
+  }
+
+  /* each pair's events; each component's pieces (dem_piecewise_midpoints) and their nodes */
+  pair_events(n, d, p, i, j, normal, t, d0, XA, mA, XB, mB, uc, vc, dt, tau);
+  counts = calloc(n_comp > 0 ? n_comp : 1, sizeof *counts);
+  n_pieces = calloc(n_comp > 0 ? n_comp : 1, sizeof *n_pieces);
+  if (!counts || !n_pieces)
+    goto done;
+  for (int64_t k = 0; k < n; ++k)
+    for (int32_t m = 0; m < n_tau; ++m)
+      if (isfinite(tau[k * n_tau + m]))
+      {
+        time_rows[n_times] = label[k];
+        times[n_times++] = tau[k * n_tau + m];
+        k_max = ++counts[label[k]] > k_max ? counts[label[k]] : k_max;
+      }
+  points = alloc(n_comp * (k_max + 2), sizeof *points);
+  mid = alloc(n_comp * (k_max + 1), sizeof *mid);
+  length = alloc(n_comp * (k_max + 1), sizeof *length);
+  if (!points || !mid || !length)
+    goto done;
+  dem_piecewise_midpoints(n_times, time_rows, times, n_comp, k_max, dt, counts, points, mid, length);
+  for (int64_t comp = 0; comp < n_comp; ++comp)
+  {
+    for (int64_t piece = 0; piece <= k_max; ++piece)
+      n_pieces[comp] += length[comp * (k_max + 1) + piece] > 0;
+    pieces = n_pieces[comp] > pieces ? n_pieces[comp] : pieces;
+  }
+  offsets[0] = 0;
+  for (int64_t k = 0; k < n; ++k)
+  {
+    offsets[k + 1] = offsets[k] + n_pieces[label[k]] * n_gauss;
+    stride = offsets[k + 1] - offsets[k] > stride ? offsets[k + 1] - offsets[k] : stride;
+  }
+  const int64_t n_nodes = offsets[n];
+  nodes = alloc(n_nodes, sizeof *nodes);
+  weights = alloc(n_nodes, sizeof *weights);
+  g = alloc(n_nodes, sizeof *g);
+  w = alloc(n_nodes, sizeof *w);
+  dw = alloc(n_nodes * d, sizeof *dw);
+  c = alloc(n_nodes, sizeof *c);
+  mu = alloc(n_nodes, sizeof *mu);
+  entry = alloc(n_nodes, sizeof *entry);
+  work = calloc(n_rows * stride > 0 ? n_rows * stride : 1, sizeof *work);
+  if (!nodes || !weights || !g || !w || !dw || !c || !mu || !entry || !work)
+    goto done;
+  for (int64_t k = 0; k < n; ++k)
+  {
+    int64_t node = offsets[k];
+    const double *piece_mid = mid + label[k] * (k_max + 1), *piece_length = length + label[k] * (k_max + 1);
+    for (int64_t piece = 0; piece <= k_max; ++piece)
+    {
+      const double size = piece_length[piece];
+      if (!(size > 0))
+        continue;
+      const double from = piece_mid[piece] - 0.5 * size;
+      for (int32_t x = 0; x < n_gauss; ++x, ++node)
+      {
+        nodes[node] = from + xi[x] * size;
+        weights[node] = wq[x] * size;
+      }
+    }
+    /* the gap, affine along the flight */
+    const int64_t pk = p[k];
+    double g0 = 0.0, rate = 0.0;
+    for (int32_t x = 0; x < d; ++x)
+    {
+      g0 += (uc[j[pk] * d + x] - uc[i[pk] * d + x]) * normal[pk * d + x];
+      rate += (vc[j[pk] * d + x] - vc[i[pk] * d + x]) * normal[pk * d + x];
+    }
+    g0 = d0[pk] + g0;
+    for (int64_t e = offsets[k]; e < offsets[k + 1]; ++e)
+    {
+      g[e] = g0 + nodes[e] * rate;
+      entry[e] = pk;
+    }
+  }
+
+  /* w and dw at the nodes: clipped on the pairs' own pieces, interpolated */
+  overlap_own(n, d, p, i, j, t, uc, vc, n_tau, tau, dt, n_gauss, xi, XA, mA, nuA, sizeA, XB, mB, nuB, sizeB,
+              start_own, length_own, w_own, dw_own);
+  interpolate_own(n, n_own, offsets, n_gauss, d, start_own, length_own, nodes, xi, w_own, dw_own, w, dw);
+  for (int64_t e = 0; e < n_nodes; ++e)
+    c[e] = w[e] * (g[e] < 0.0 ? g[e] : 0.0);
+
+  /* the rows' term: result -= Q^T (Z int c dtau), over the touched rows in increasing order */
+  for (int64_t k = 0; k < n; ++k)
+  {
+    double integral = 0.0;
+    for (int64_t e = offsets[k]; e < offsets[k + 1]; ++e)
+      integral = e == offsets[k] ? weights[e] * c[e] : integral + weights[e] * c[e];
+    for (int32_t e = z_ptr[p[k]]; e < z_ptr[p[k] + 1]; ++e)
+      zc[slot[z_idx[e]]] += z_val[e] * integral;
+  }
+  for (int64_t s = 0; s < n_rows; ++s)
+    sorted[s] = rows[s];
+  qsort(sorted, (size_t)n_rows, sizeof *sorted, compare_int32);
+  for (int64_t s = 0; s < n_rows; ++s)
+  {
+    const double x = zc[slot[sorted[s]]];
+    for (int32_t e = q_ptr[sorted[s]]; e < q_ptr[sorted[s] + 1]; ++e)
+      result[q_idx[e]] -= q_val[e] * x;
+  }
+
+  /* the pairs' term: mu = z_p . a(tau) + z_p . (Z c)(tau) at the nodes (the pairs of a component
+   * share their nodes), where g < 0, times the weights; then the facet forces */
+  for (int64_t k = 0; k < n; ++k)
+    for (int32_t e = z_ptr[p[k]]; e < z_ptr[p[k] + 1]; ++e)
+      for (int64_t x = 0; x < offsets[k + 1] - offsets[k]; ++x)
+        work[slot[z_idx[e]] * stride + x] += z_val[e] * c[offsets[k] + x];
+  for (int64_t k = 0; k < n; ++k)
+  {
+    const int64_t m = offsets[k + 1] - offsets[k];
+    for (int64_t x = 0; x < m; ++x)
+      mu[offsets[k] + x] = 0.0;
+    for (int32_t e = z_ptr[p[k]]; e < z_ptr[p[k] + 1]; ++e)
+      for (int64_t x = 0; x < m; ++x)
+        mu[offsets[k] + x] += z_val[e] * work[slot[z_idx[e]] * stride + x];
+    for (int64_t x = 0; x < m; ++x)
+    {
+      const int64_t node = offsets[k] + x;
+      const double value = (za[2 * k] + nodes[node] * za[2 * k + 1]) + mu[node];
+      mu[node] = (g[node] < 0 ? value : 0.0) * weights[node];
+    }
+  }
+  dem_pair_facet_forces(n_nodes, d, entry, i, j, normal, mu, g, w, dw, facet_force);
+  status = pieces;
+
+done:
+  for (int64_t s = 0; s < n_rows; ++s)
+    slot[rows[s]] = -1;
+  free(rows), free(sorted), free(first), free(parent), free(label), free(offsets), free(a), free(za), free(tau);
+  free(zc), free(time_rows), free(counts), free(n_pieces), free(times), free(points), free(mid), free(length);
+  free(nodes), free(weights), free(g), free(w), free(dw), free(c), free(mu), free(entry), free(work);
+  free(start_own), free(length_own), free(w_own), free(dw_own);
+  return status;
+}
+
+/* pair_contact._At, the contact state at one displacement, in one call: the listed pairs
+ * (facets (i, j), normal, tangents t, reference gap d0, projected simplices XA.., XB..) whose
+ * c_p = w_p g_p^- may not vanish at the free facet displacements uc (n_facets x d), in order
+ * (closed: dem_pair_screen without a flight), their gap g, overlap w, dw/du_j (d per pair; see
+ * dem_overlap), c = w g^-, and, over the own rows their z_p touch (Z^T: z_ptr, z_idx, z_val),
+ * a = Q u + q (Q: q_ptr, q_idx, q_val on the patch values up), delta = Z c and mu_p = z_p . (a +
+ * delta); energy[0], energy[1] += the sums of a delta + delta^2 / 2 over the touched elastic rows
+ * (elastic[row] != 0) and the others, in increasing row order. closed, g, w, c, mu: n_pairs,
+ * dw: n_pairs d (the first n_closed written); slot as in dem_pair_force_integral. Returns
+ * n_closed, or -1 if memory ran out. */
+int64_t dem_pair_state(int64_t n_pairs, int32_t d, const int64_t *restrict i, const int64_t *restrict j,
+                       const double *restrict normal, const double *restrict t, const double *restrict d0,
+                       const double *restrict XA, const double *restrict mA, const double *restrict nuA,
+                       const double *restrict sizeA, const double *restrict XB, const double *restrict mB,
+                       const double *restrict nuB, const double *restrict sizeB, const double *restrict uc,
+                       const int32_t *restrict z_ptr, const int32_t *restrict z_idx, const double *restrict z_val,
+                       const int32_t *restrict q_ptr, const int32_t *restrict q_idx, const double *restrict q_val,
+                       const double *restrict q, const double *restrict up, const int8_t *restrict elastic,
+                       int32_t *restrict slot, int64_t *restrict closed, double *restrict g, double *restrict w,
+                       double *restrict dw, double *restrict c, double *restrict mu, double *restrict energy)
+{
+  const int32_t dim = d - 1;
+  int64_t n = 0, bound = 0, n_rows = 0, status = -1;
+  int8_t *screen = alloc(n_pairs, sizeof *screen);
+  int32_t *rows = NULL;
+  double *a = NULL, *delta = NULL;
+  if (!screen)
+    goto done;
+  dem_pair_screen(n_pairs, d, i, j, normal, t, d0, XA, XB, uc, NULL, 0.0, screen);
+  for (int64_t p = 0; p < n_pairs; ++p)
+    if (screen[p])
+    {
+      closed[n++] = p;
+      bound += z_ptr[p + 1] - z_ptr[p];
+    }
+  rows = alloc(bound, sizeof *rows);
+  a = alloc(bound, sizeof *a);
+  delta = calloc(bound > 0 ? bound : 1, sizeof *delta);
+  if (!rows || !a || !delta)
+    goto done;
+  for (int64_t k = 0; k < n; ++k)
+  {
+    const int64_t p = closed[k];
+    double du[3], s[2], dws[2];
+    double gap = 0.0;
+    for (int32_t x = 0; x < d; ++x)
+    {
+      du[x] = uc[j[p] * d + x] - uc[i[p] * d + x];
+      gap += du[x] * normal[p * d + x];
+    }
+    g[k] = d0[p] + gap;
+    for (int32_t r = 0; r < dim; ++r)
+    {
+      s[r] = 0.0;
+      for (int32_t x = 0; x < d; ++x)
+        s[r] += t[(p * dim + r) * d + x] * du[x];
+    }
+    overlap_one(dim, p, XA, mA, nuA, sizeA, XB, mB, nuB, sizeB, s, w + k, dws);
+    for (int32_t x = 0; x < d; ++x)
+    {
+      dw[k * d + x] = 0.0;
+      for (int32_t r = 0; r < dim; ++r)
+        dw[k * d + x] += dws[r] * t[(p * dim + r) * d + x];
+    }
+    c[k] = w[k] * (g[k] < 0.0 ? g[k] : 0.0);
+    for (int32_t e = z_ptr[p]; e < z_ptr[p + 1]; ++e)
+      if (slot[z_idx[e]] < 0)
+      {
+        slot[z_idx[e]] = (int32_t)n_rows;
+        rows[n_rows++] = z_idx[e];
+      }
+  }
+  /* a and delta = Z c on the touched rows; mu; the energy change in increasing row order */
+  for (int64_t s = 0; s < n_rows; ++s)
+  {
+    double y = 0.0;
+    for (int32_t e = q_ptr[rows[s]]; e < q_ptr[rows[s] + 1]; ++e)
+      y += q_val[e] * up[q_idx[e]];
+    a[s] = y + q[rows[s]];
+  }
+  for (int64_t k = 0; k < n; ++k)
+    for (int32_t e = z_ptr[closed[k]]; e < z_ptr[closed[k] + 1]; ++e)
+      delta[slot[z_idx[e]]] += z_val[e] * c[k];
+  for (int64_t k = 0; k < n; ++k)
+  {
+    double y = 0.0;
+    for (int32_t e = z_ptr[closed[k]]; e < z_ptr[closed[k] + 1]; ++e)
+      y += z_val[e] * (a[slot[z_idx[e]]] + delta[slot[z_idx[e]]]);
+    mu[k] = y;
+  }
+  qsort(rows, (size_t)n_rows, sizeof *rows, compare_int32);
+  for (int64_t s = 0; s < n_rows; ++s)
+  {
+    const int32_t k = slot[rows[s]];
+    energy[elastic[rows[s]] ? 0 : 1] += a[k] * delta[k] + 0.5 * delta[k] * delta[k];
+  }
+  status = n;
+
+done:
+  for (int64_t s = 0; s < n_rows; ++s)
+    slot[rows[s]] = -1;
+  free(screen), free(rows), free(a), free(delta);
+  return status;
 }

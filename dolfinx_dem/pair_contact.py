@@ -85,7 +85,7 @@ from petsc4py import PETSc
 
 from dolfinx_dem.halo import owned_facet_marks
 from dolfinx_dem.kernels import lib, pointer
-from dolfinx_dem.patch import PatchScatter, piecewise_midpoints, scatter_sum
+from dolfinx_dem.patch import PatchScatter, scatter_sum
 
 
 
@@ -228,7 +228,8 @@ class PairContact:
         self._row_dofs, entry_dof = np.unique(dem.columns[self._Q.indices], return_inverse=True)
         self._Q_entry_dof = entry_dof.astype(np.int32)
         self._q = dem.row_lift(touched)
-        self._is_elastic_row = touched < rows.num_elastic
+        self._is_elastic_row = (touched < rows.num_elastic).astype(np.int8)
+        self._elastic_row_pointer = pointer(self._is_elastic_row)
         an = geom.facet_area_normals[self.cells, geom.facet_local[self.facets, 0]]
         self._grad_weights = an / geom.cell_volumes[self.cells, None]
         # Verlet skins: each facet's own diameter about its barycentre (the length in 2D) unless
@@ -687,12 +688,7 @@ class PairContact:
     def energy_correction(self, up: np.ndarray) -> tuple[float, float]:
         """(elastic, stabilisation) energy changes of this process's own rows (not reduced)."""
         start = time.process_time()
-        at = self._at(up)
-        elastic = stabilisation = 0.0
-        if at.closed.size:  # delta = 0 off at.rows
-            delta, elastic_row = at.delta[at.rows], self._is_elastic_row[at.rows]
-            change = at.a[at.rows] * delta + 0.5 * delta**2
-            elastic, stabilisation = float(change[elastic_row].sum()), float(change[~elastic_row].sum())
+        elastic, stabilisation = self._at(up).energy
         self.seconds += time.process_time() - start
         return elastic, stabilisation
 
@@ -750,84 +746,29 @@ class PairContact:
         result = np.zeros_like(up)
         pieces = 0
         if touching.size:
-            ui0, uj0, vi, vj = uc[L.i[touching]], uc[L.j[touching]], vc[L.i[touching]], vc[L.j[touching]]
-            # Events of each touching pair: its gap's and its overlap's kinks.
-            tau = self._events(touching, uc, vc, dt)  # (len(touching), 1 + 2 d^2), inf if none
-            # the energy rows a = a0 + tau a1 on the own rows the touching pairs' z_p touch (the
-            # others are not read), and z_p . a0, z_p . a1 (compiled: no sliced Q or Z)
-            rows = L.z.pattern(touching)
-            a = np.zeros((L.Q.shape[0], 2))
-            a[rows] = L.q.rows_apply(rows, np.stack([up, vp], axis=1))
-            a[rows, 0] += self._q[rows]
-            za = L.z.rows_apply(touching, a)
-            # Pairs sharing an own row (N_pp' != 0) are integrated on common pieces: those cut by
-            # the events of their connected component of that relation (an impact in another
-            # component does not split them). There every c_p is a polynomial of degree d, each
-            # pair's force term one of degree 2 d - 1: the d-point rule is exact.
-            count, component = L.z.components(touching)
-            finite = np.isfinite(tau.ravel())
-            mid, length = piecewise_midpoints(np.repeat(component, tau.shape[1])[finite], tau.ravel()[finite],
-                                              count, dt)
-            # each pair's nodes, those of its component's pieces (flat, pair after pair: a pair
-            # in a component of one piece has d nodes, however many another one has)
-            nodes, weights, offsets = _gauss_points(mid, length, component, self._gauss)
-            per = np.diff(offsets)
-            e = np.repeat(touching, per)
-            # the gap, affine along the flight: at tau = 0 plus tau times its rate
-            rate = np.einsum("pi,pi->p", vj - vi, L.n[touching])
-            g = np.repeat(self._gap(touching, ui0, uj0), per) + nodes * np.repeat(rate, per)
-            w, dw = self._overlap_on_own_pieces(touching, tau, nodes, offsets, uc, vc, dt)
-            c = w * np.minimum(g, 0.0)
-            # Rows' term -Q^T Z int c dtau; pairs' term -int (z_p . (a + delta_a)) dc_p/du dtau
-            # (z_p of the touching pairs only; N c = Z^T (Z c), c = 0 off them).
-            c_integral = np.add.reduceat(weights * c, offsets[:-1])
-            result -= L.q.rows_apply_transpose(rows, L.z.rows_apply_transpose(touching, c_integral)[rows])
-            mu = np.repeat(za[:, 0], per) + nodes * np.repeat(za[:, 1], per) + L.z.rows_gram_apply(touching, c, offsets)
-            mu = np.where(g < 0, mu, 0.0) * weights
-            result += self._facet_force(e, mu, g, w, dw)
-            pieces = int((length > 0).sum(axis=1).max())
+            # The rest in one compiled call (``dem_pair_force_integral``): each touching pair's
+            # events (its gap's and its overlap's kinks); the pairs sharing an own row (N_pp' != 0)
+            # integrated on common pieces, those cut by the events of their connected component of
+            # that relation (an impact in another component does not split them), where every c_p
+            # is a polynomial of degree d and each pair's force term one of degree 2 d - 1: the
+            # d-point rule is exact; a pair's overlap clipped at the nodes of its own pieces only and
+            # interpolated at its component's; the rows' term -Q^T Z int c dtau on the own rows the
+            # touching pairs' z_p touch (a = Q u + q + tau Q v there: no sliced Q or Z) and the
+            # pairs' term -int (z_p . (a + delta_a)) dc_p/du dtau at the facets.
+            xi, wq = self._gauss
+            P, facet_force = L.pointers, np.zeros(len(self.facets_all) * self.d)
+            pieces = lib.dem_pair_force_integral(
+                len(touching), self.d, pointer(touching), P["i"], P["j"], P["n"], P["t"], P["d0"], *L.si.pointers,
+                *L.sj.pointers, pointer(uc), pointer(vc), float(dt), len(xi), pointer(xi), pointer(wq),
+                *L.z.pointers, *L.q.pointers, pointer(self._q), pointer(up), pointer(vp), pointer(L.slot),
+                pointer(facet_force), pointer(result))
+            if pieces < 0:
+                raise MemoryError("contact between bodies: out of memory in the force integral of a step")
+            result += self._RT @ facet_force
         self.scatter.add(result, out)
         self.seconds += time.process_time() - start
         self.evaluations += len(self._gauss[0]) * pieces
         return len(self._gauss[0]) * pieces
-
-    def _overlap_on_own_pieces(self, p, tau, nodes, offsets, uc, vc, dt):
-        """w and dw/du_j of the pairs ``p`` along the flight uc + tau vc of the free facet
-        displacements, at the times ``nodes`` (pair k's: nodes[offsets[k]:offsets[k + 1]]). Between its own events ``tau`` a
-        pair's w is a polynomial of degree d - 1 and dw one of degree d - 2: each is evaluated at
-        the d Gauss-Legendre nodes of the pair's own pieces only (``dem_overlap_own``: the
-        overlap of ``_overlap``) and interpolated from them (Lagrange, ``dem_interpolate_own``),
-        exact to rounding, rather than evaluated at every node of the component's pieces."""
-        L, d = self.listed, self.d
-        xi = self._gauss[0]
-        n_own = tau.shape[1] + 1
-        start, length = np.empty((len(p), n_own)), np.empty((len(p), n_own))
-        w_own, dw_own = np.empty((len(p), n_own * len(xi))), np.empty((len(p), n_own * len(xi), d))
-        P = L.pointers
-        lib.dem_overlap_own(len(p), d, pointer(p), P["i"], P["j"], P["t"], pointer(uc), pointer(vc), tau.shape[1],
-                            pointer(tau), float(dt), len(xi), pointer(xi), *L.si.pointers, *L.sj.pointers,
-                            pointer(start), pointer(length), pointer(w_own), pointer(dw_own))
-        # the own piece of each node (the last non-empty one starting at or before it: padding
-        # and repeated events make empty pieces) and the interpolation: ``dem_interpolate_own``
-        w, dw = np.empty(nodes.size), np.empty((nodes.size, d))
-        lib.dem_interpolate_own(len(p), n_own, pointer(offsets), len(xi), d, pointer(start), pointer(length),
-                                pointer(nodes), pointer(xi), pointer(w_own), pointer(dw_own), pointer(w), pointer(dw))
-        return w, dw
-
-    def _events(self, p: np.ndarray, uc: np.ndarray, vc: np.ndarray, dt: float) -> np.ndarray:
-        """Times in (0, dt) where, for the pairs ``p`` along the flight uc + tau vc of the free
-        facet displacements (known facets' rows), the gap or the side of a vertex of one
-        projected facet with respect to (the line of) a face of the other changes sign,
-        (len(p), 1 + 2 d^2), inf where there is none (the compiled kernel ``dem_pair_events``).
-        The facets translate, so all are affine in tau; between them the clipped boundary of
-        ``_overlap`` keeps its topology, w is a polynomial of degree d - 1."""
-        L, d = self.listed, self.d
-        tau = np.empty((len(p), 1 + 2 * d * d))
-        P = L.pointers
-        lib.dem_pair_events(len(p), d, pointer(p), P["i"], P["j"], P["n"], P["t"], P["d0"], L.si.pointers[0],
-                            L.si.pointers[1], L.sj.pointers[0], L.sj.pointers[1], pointer(uc), pointer(vc), float(dt),
-                            pointer(tau))
-        return tau
 
     # -- outputs -------------------------------------------------------------------------------
     def facet_corrections(self, up: np.ndarray) -> np.ndarray:
@@ -1149,25 +1090,6 @@ def _gauss_legendre(d: int) -> tuple[np.ndarray, np.ndarray]:
     return 0.5 + 0.5 * x, 0.5 * weights
 
 
-def _gauss_points(mid: np.ndarray, length: np.ndarray, component: np.ndarray, rule: tuple[np.ndarray, np.ndarray]):
-    """Nodes and weights of the quadrature ``rule`` (on [0, 1]) on the non-empty pieces (mid,
-    length) (n_components, K) of each row's component ``component``: flat, row after row, and
-    each row's offsets (n_rows + 1) into them."""
-    x, w = rule
-    keep = length > 0
-    count = keep.sum(axis=1)  # pieces of each component (padding and repeated events are empty)
-    size = length[keep]
-    start = mid[keep] - 0.5 * size
-    first = np.cumsum(count) - count  # each component's first piece among the kept ones
-    n = count[component]
-    piece = np.repeat(first[component] - (np.cumsum(n) - n), n) + np.arange(n.sum())
-    nodes = (start[piece, None] + x * size[piece, None]).ravel()
-    weights = (w * size[piece, None]).ravel()
-    offsets = np.zeros(len(component) + 1, dtype=np.int64)
-    np.cumsum(n * len(x), out=offsets[1:])
-    return nodes, weights, offsets
-
-
 def _tangents(n: np.ndarray) -> np.ndarray:
     """An orthonormal basis (P, d - 1, d) of the plane normal to each unit vector n (P, d)."""
     if n.shape[1] == 2:
@@ -1328,65 +1250,50 @@ class _Pairs:
         """Q (own rows, patch dofs), for products on the touching pairs' rows only."""
         return _CSR(self.Q)
 
+    @functools.cached_property
+    def slot(self) -> np.ndarray:
+        """One int32 per own row, -1 between the calls of ``dem_pair_force_integral`` (which numbers
+        the rows the touching pairs touch through it)."""
+        return np.full(self.Q.shape[0], -1, dtype=np.int32)
+
 
 class _At:
-    """The contact state of a ``PairContact`` at one displacement (patch values ``up``), each part
-    computed on first use: the free facet displacements ``uc``; the listed pairs ``closed`` whose
-    c_p = w_p g_p^- may not vanish (``PairContact._screen``: g_p < 0, projections not apart; the
-    list checked valid there), their g, w, dw/du_j and c = w g^-; the energy rows a = Q u + q of
-    the own rows, their change delta = Z c and mu_p = z_p . (a + delta) of the closed pairs (own
-    rows' part). The energy of a step's end, the outputs there and the next step's flight share
-    it (``PairContact._at``)."""
+    """The contact state of a ``PairContact`` at one displacement (patch values ``up``): the free
+    facet displacements ``uc``, and on first use, in one compiled call (``dem_pair_state``), the
+    listed pairs ``closed`` whose c_p = w_p g_p^- may not vanish (the screen of
+    ``PairContact._screen``: g_p < 0, projections not apart; the list checked valid there), their
+    g, w, dw/du_j, c = w g^- and mu_p = z_p . (a + delta) (own rows' part), with a = Q u + q and
+    delta = Z c on the own rows, and the energy change of those rows (``energy``: elastic,
+    stabilisation). The energy of a step's end, the outputs there and the next step's flight
+    share it (``PairContact._at``)."""
 
     def __init__(self, contact: PairContact, up: np.ndarray):
         self.contact, self.listed, self.up = contact, contact.listed, up.copy()
         self.uc = contact.free_displacements(self.up)
 
     @functools.cached_property
-    def closed(self) -> np.ndarray:
-        self.contact._check_listed(self.uc)
-        return self.contact._screen(self.uc)
+    def _state(self) -> tuple:
+        contact, L = self.contact, self.listed
+        contact._check_listed(self.uc)
+        n, d = len(L), contact.d
+        closed, g, w, c, mu = np.empty(n, dtype=np.int64), np.empty(n), np.empty(n), np.empty(n), np.empty(n)
+        dw, energy = np.empty((n, d)), np.zeros(2)
+        P = L.pointers
+        k = lib.dem_pair_state(n, d, P["i"], P["j"], P["n"], P["t"], P["d0"], *L.si.pointers, *L.sj.pointers,
+                               pointer(self.uc), *L.z.pointers, *L.q.pointers, pointer(contact._q), pointer(self.up),
+                               contact._elastic_row_pointer, pointer(L.slot), pointer(closed), pointer(g), pointer(w),
+                               pointer(dw), pointer(c), pointer(mu), pointer(energy))
+        if k < 0:
+            raise MemoryError("contact between bodies: out of memory in the contact state")
+        return closed[:k], g[:k], w[:k], dw[:k], c[:k], mu[:k], (float(energy[0]), float(energy[1]))
 
-    @functools.cached_property
-    def state(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        L, p = self.listed, self.closed
-        return self.contact._state(p, self.uc[L.i[p]], self.uc[L.j[p]])
-
-    @property
-    def g(self) -> np.ndarray:
-        return self.state[0]
-
-    @property
-    def w(self) -> np.ndarray:
-        return self.state[1]
-
-    @property
-    def dw(self) -> np.ndarray:
-        return self.state[2]
-
-    @functools.cached_property
-    def c(self) -> np.ndarray:
-        return self.w * np.minimum(self.g, 0.0)
-
-    @functools.cached_property
-    def rows(self) -> np.ndarray:
-        """The own rows the closed pairs' z_p touch: the only rows their c_p change or read."""
-        return self.listed.z.pattern(self.closed)
-
-    @functools.cached_property
-    def a(self) -> np.ndarray:
-        """a = Q u + q on ``rows`` (0 on the others, which nothing here reads)."""
-        a = np.zeros(self.listed.Q.shape[0])
-        a[self.rows] = self.listed.q.rows_apply(self.rows, self.up) + self.contact._q[self.rows]
-        return a
-
-    @functools.cached_property
-    def delta(self) -> np.ndarray:
-        return self.listed.z.rows_apply_transpose(self.closed, self.c)  # Z c: c = 0 off the closed pairs
-
-    @functools.cached_property
-    def mu(self) -> np.ndarray:
-        return self.listed.z.rows_apply(self.closed, self.a + self.delta)
+    closed = property(lambda self: self._state[0])
+    g = property(lambda self: self._state[1])
+    w = property(lambda self: self._state[2])
+    dw = property(lambda self: self._state[3])
+    c = property(lambda self: self._state[4])
+    mu = property(lambda self: self._state[5])
+    energy = property(lambda self: self._state[6])
 
 
 class _CSC:
@@ -1422,63 +1329,16 @@ class _CSC:
 
 
 class _CSR:
-    """A CSR matrix's arrays for the compiled kernels ``dem_csr_rows_*`` and ``dem_components``:
-    products, patterns and graphs over a few selected rows (the touching pairs' of a list of
-    thousands) without slicing the matrix."""
+    """A CSR matrix's arrays and their C ``pointers``, for the compiled kernels ``dem_pair_state``
+    and ``dem_pair_force_integral`` (products over a few selected rows, the touching pairs' of a
+    list of thousands, without slicing the matrix)."""
 
     def __init__(self, A: scipy.sparse.csr_matrix):
         self.shape = A.shape
         self.indptr = np.ascontiguousarray(A.indptr, dtype=np.int32)
         self.indices = np.ascontiguousarray(A.indices, dtype=np.int32)
         self.data = np.ascontiguousarray(A.data, dtype=np.float64)
-        self._pointers = (pointer(self.indptr), pointer(self.indices), pointer(self.data))
-        self._work = np.zeros(0)  # rows_gram_apply's, zero between calls
-
-    def rows_apply(self, sel: np.ndarray, X: np.ndarray) -> np.ndarray:
-        """A[sel] @ X, X (n_cols,) or (n_cols, m)."""
-        X = np.ascontiguousarray(X, dtype=np.float64)
-        Y = np.empty((len(sel),) + X.shape[1:])
-        lib.dem_csr_rows_apply(len(sel), pointer(sel), *self._pointers, X.size // max(len(X), 1), pointer(X),
-                               pointer(Y))
-        return Y
-
-    def rows_apply_transpose(self, sel: np.ndarray, X: np.ndarray) -> np.ndarray:
-        """A[sel]^T @ X, X (len(sel),) or (len(sel), m)."""
-        X = np.ascontiguousarray(X, dtype=np.float64)
-        Y = np.zeros((self.shape[1],) + X.shape[1:])
-        lib.dem_csr_rows_apply_transpose(len(sel), pointer(sel), *self._pointers, X.size // max(len(X), 1),
-                                         pointer(X), pointer(Y))
-        return Y
-
-    def rows_gram_apply(self, sel: np.ndarray, X: np.ndarray, offsets: np.ndarray) -> np.ndarray:
-        """A[sel] @ (A[sel]^T @ X) for ragged X: row k's values X[offsets[k]:offsets[k + 1]] (rows
-        sharing a column have as many), through a work array of the columns kept zero between
-        calls (``dem_csr_rows_gram_apply``)."""
-        X = np.ascontiguousarray(X, dtype=np.float64)
-        offsets = np.ascontiguousarray(offsets, dtype=np.int64)
-        stride = int(np.diff(offsets).max(initial=0))
-        if self._work.size < self.shape[1] * stride:
-            self._work = np.zeros(self.shape[1] * stride)
-        Y = np.empty(X.shape)
-        lib.dem_csr_rows_gram_apply(len(sel), pointer(sel), *self._pointers, pointer(offsets), stride, pointer(X),
-                                    pointer(self._work), pointer(Y))
-        return Y
-
-    def pattern(self, sel: np.ndarray) -> np.ndarray:
-        """The columns (sorted) of the entries of the rows ``sel``."""
-        mark = np.zeros(self.shape[1], dtype=np.int8)
-        lib.dem_csr_rows_pattern(len(sel), pointer(sel), *self._pointers[:2], pointer(mark))
-        return np.flatnonzero(mark)
-
-    def components(self, sel: np.ndarray) -> tuple[int, np.ndarray]:
-        """The connected components of the rows ``sel`` when two rows are linked by a common column
-        (for Z^T: pairs sharing an own row, N_pp' != 0): their count and each row's component,
-        numbered by first appearance."""
-        first = np.full(self.shape[1], -1, dtype=np.int64)
-        parent, label = np.empty(len(sel), dtype=np.int64), np.empty(len(sel), dtype=np.int64)
-        count = lib.dem_components(len(sel), pointer(sel), *self._pointers[:2], pointer(first), pointer(parent),
-                                   pointer(label))
-        return int(count), label
+        self.pointers = (pointer(self.indptr), pointer(self.indices), pointer(self.data))
 
 
 def _check_bodies_do_not_overlap(dem):

@@ -785,49 +785,6 @@ def test_pair_rows_are_the_product_of_the_directions_and_the_facet_columns():
     assert (np.diff(ZT.indptr)[2:] > 0).sum() > 50  # and many rows that are not empty
 
 
-def test_selected_rows_products_and_components():
-    """The compiled products over selected rows of a sparse matrix (the touching pairs' rows of
-    Z^T and Q), their columns and the components of rows sharing a column, against scipy."""
-    import scipy.sparse
-    import scipy.sparse.csgraph
-    from dolfinx_dem.pair_contact import _CSR
-
-    rng = np.random.default_rng(1)
-    A = scipy.sparse.random(300, 200, density=0.01, format="csr", random_state=rng)
-    sel = np.sort(rng.choice(300, 40, replace=False)).astype(np.int64)
-    M, X, Y = _CSR(A), rng.standard_normal((200, 3)), rng.standard_normal((40, 2))
-    assert np.allclose(M.rows_apply(sel, X), A[sel] @ X, rtol=0, atol=1e-14)
-    assert np.allclose(M.rows_apply(sel, X[:, 0]), A[sel] @ X[:, 0], rtol=0, atol=1e-14)
-    assert np.allclose(M.rows_apply_transpose(sel, Y), A[sel].T @ Y, rtol=0, atol=1e-14)
-    for Yk in (Y, Y[:, 0], Y[:, :1]):  # the same bits as the two products, the work array left zero
-        m = Yk.size // len(Yk)
-        offsets = np.arange(len(sel) + 1, dtype=np.int64) * m
-        assert np.array_equal(M.rows_gram_apply(sel, Yk.ravel(), offsets),
-                              M.rows_apply(sel, M.rows_apply_transpose(sel, Yk)).ravel())
-        assert not M._work.any()
-    # ragged: rows sharing a column have as many values; each component as its own dense product
-    count, label = M.components(sel)
-    m = 1 + label % 3
-    offsets = np.concatenate([[0], np.cumsum(m)]).astype(np.int64)
-    X = rng.standard_normal(offsets[-1])
-    out = M.rows_gram_apply(sel, X, offsets)
-    for c in range(count):
-        k = np.flatnonzero(label == c)
-        Xc = np.stack([X[offsets[r]:offsets[r + 1]] for r in k])
-        expected = M.rows_apply(sel[k], M.rows_apply_transpose(sel[k], Xc))
-        assert np.array_equal(np.stack([out[offsets[r]:offsets[r + 1]] for r in k]), expected)
-    assert not M._work.any()
-    assert np.array_equal(M.pattern(sel), np.unique(A[sel].indices))
-    count, label = M.components(sel)
-    B = A[sel].astype(bool).astype(np.int64)
-    expected_count, expected = scipy.sparse.csgraph.connected_components(B @ B.T, directed=False)
-    assert count == expected_count and 1 < count < len(sel)
-    # the same partition, numbered 0, 1, ... by first appearance
-    first = np.unique(label, return_index=True)[1]
-    assert len(first) == count and np.all(np.diff(first) > 0)
-    assert len({(a, b) for a, b in zip(label, expected)}) == count
-
-
 def test_piecewise_midpoints_cut_each_row_at_its_sorted_times():
     """The compiled cutting of [0, dt] at each row's break times (any order and count per row;
     rows without any keep one piece), against sorting them row by row."""
@@ -948,6 +905,72 @@ def _cubes_impact(comm, steps):
     p, p_left = momenta()
     force = comm.allreduce(c.pair_forces(c.patch_values(stepper.u)), op=MPI.SUM)[0]
     return drift, np.abs(p - p0).max(), p_left, force, comm.allreduce(stepper.max_step_evaluations, op=MPI.MAX)
+
+
+def test_the_compiled_contact_state_is_its_definition_by_sparse_products():
+    """``_At``, the contact state in one compiled call (``dem_pair_state``), against its definition
+    by numpy and scipy: its closed pairs hold every touching pair (g < 0, w > 0), and there g, w,
+    dw/du_j (``_state``), c = w g^-, mu_p = z_p . (Q u + q + Z c) and the energy change
+    sum (a delta + delta^2 / 2) of the own rows, elastic and stabilisation rows apart."""
+    dem = two_boxes(MPI.COMM_SELF)
+    c = dem.pair_contact
+    u = cell_vector(dem, lambda x: oblique(x, 0.01))  # the cubes 0.01 m into each other
+    up, _ = c.prepare(u)
+    at, L = c._at(up), c.listed
+    p, uc = at.closed, c.free_displacements(up)
+    g, w, dw = c._state(p, uc[L.i[p]], uc[L.j[p]])
+    g_all, w_all = c.pair_states(up)
+    touching = np.flatnonzero((g_all < 0) & (w_all > 0))
+    assert len(touching) > 20 and np.isin(touching, p).all()
+    assert np.array_equal(at.g, g)
+    assert np.abs(at.w - w).max() <= 1e-14 * w.max() and np.abs(at.dw - dw).max() <= 1e-14 * np.abs(dw).max()
+    assert np.array_equal(at.c, at.w * np.minimum(at.g, 0.0))
+    full = np.zeros(len(L))
+    full[p] = at.c
+    a, delta = L.Q @ up + c._q, L.Z @ full
+    mu = (L.ZT @ (a + delta))[p]
+    assert np.abs(at.mu - mu).max() <= 1e-12 * np.abs(mu).max()
+    change, elastic = a * delta + 0.5 * delta**2, c._is_elastic_row.astype(bool)
+    expected = np.array([change[elastic].sum(), change[~elastic].sum()])
+    assert np.abs(np.array(at.energy) - expected).max() <= 1e-12 * np.abs(expected).max()
+    assert expected[0] > 0 and expected[1] > 0
+
+
+def test_the_force_integral_over_a_flight_with_events_is_exact():
+    """``dem_pair_force_integral`` over a flight of sliding cubes whose gaps close and whose
+    overlaps change topology inside it: the integral over [0, dt] is the sum of those over
+    [0, t1] and [t1, dt] to rounding (a piece missed or misplaced breaks this at the size of the
+    quadrature error), and agrees with a composite 3-point Gauss rule of 200 pieces of the
+    force correction (whose error comes from the kinks inside its pieces)."""
+    dem = two_boxes(MPI.COMM_SELF)
+    c = dem.pair_contact
+    u, v = cell_vector(dem, lambda x: oblique(x, 0.01)), cell_vector(dem, oblique)
+    dt, t1 = 0.02, 0.0073
+
+    def at(tau):
+        x = u.copy()
+        x.axpy(tau, v)
+        return x
+
+    def integral(start, length):
+        out = dem.create_vector()
+        up, vp = c.prepare(at(start), v, length)
+        return out, c.force_integral(up, vp, length, out)
+
+    whole, evaluations = integral(0.0, dt)
+    assert evaluations >= 9  # events: some component cut into three pieces at least
+    first, second = integral(0.0, t1)[0], integral(t1, dt - t1)[0]
+    scale = np.abs(whole.array).max()
+    assert scale > 0 and np.abs(whole.array - first.array - second.array).max() < 1e-12 * scale  # measured 3.6e-15
+    reference = dem.create_vector()
+    x, weights = np.polynomial.legendre.leggauss(3)
+    pieces = 200
+    c.prepare(u, v, dt)
+    for k in range(pieces):
+        for xk, wk in zip(x, weights):
+            tau = (k + 0.5 + 0.5 * xk) * dt / pieces
+            c.add(c.force_correction(c.patch_values(at(tau))), reference, scale=0.5 * wk * dt / pieces)
+    assert np.abs(whole.array - reference.array).max() < 1e-6 * scale  # measured 3.5e-8
 
 
 @pytest.mark.mpi
