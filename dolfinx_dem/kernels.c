@@ -409,15 +409,16 @@ void dem_overlap(int64_t n, int32_t dim, const int64_t *restrict p, const double
  * events (padded with empty pieces up to n_tau + 1: start, length, as dem_piecewise_midpoints
  * and dem_pair_force_integral's nodes compute them), and at the n_gauss nodes xi of each non-empty piece w and
  * dw/du_j = t^T dw/ds (d components) at the tangential offset s = t (u_j - u_i)
- * (overlap_one); 0 on empty pieces. t: the pairs' tangent bases (d - 1 rows of d). */
+ * (overlap_one); 0 on empty pieces and on those where the gap g0 + tau rate is not negative
+ * (not clipped: nothing reads w there). t: the pairs' tangent bases (d - 1 rows of d). */
 static void overlap_own(int64_t n, int32_t d, const int64_t *restrict p, const int64_t *restrict i,
                         const int64_t *restrict j, const double *restrict t, const double *restrict uc,
                         const double *restrict vc, int32_t n_tau, const double *restrict tau, double dt,
                         int32_t n_gauss, const double *restrict xi, const double *restrict XA,
                         const double *restrict mA, const double *restrict nuA, const double *restrict sizeA,
                         const double *restrict XB, const double *restrict mB, const double *restrict nuB,
-                        const double *restrict sizeB, double *restrict start, double *restrict length,
-                        double *restrict w, double *restrict dw)
+                        const double *restrict sizeB, const double *restrict g0, const double *restrict rate,
+                        double *restrict start, double *restrict length, double *restrict w, double *restrict dw)
 {
   const int32_t dim = d - 1, n_own = n_tau + 1;
   for (int64_t e = 0; e < n; ++e)
@@ -449,10 +450,13 @@ static void overlap_own(int64_t n, int32_t d, const int64_t *restrict p, const i
       const int64_t row = e * n_own + piece;
       start[row] = first;
       length[row] = len;
+      /* the gap is affine and its root an event: its sign on the piece is that at the middle,
+       * and where it is not negative c = w g^- and the force term vanish whatever w is */
+      const int32_t open = !(g0[e] + mid * rate[e] < 0.0);
       for (int32_t g = 0; g < n_gauss; ++g)
       {
         const int64_t node = row * n_gauss + g;
-        if (!(len > 0))
+        if (!(len > 0) || open)
         {
           w[node] = 0.0;
           for (int32_t c = 0; c < d; ++c)
@@ -608,8 +612,8 @@ void dem_piecewise_midpoints(int64_t n_times, const int64_t *restrict rows, cons
 /* Lagrange interpolation of overlap_own's values (dem_pair_force_integral), for n_rows pairs: each has
  * n_own pieces (start, length; empty ones of length 0) with values w_own (n_gauss per piece, at
  * the nodes xi of [0, 1] scaled to the piece) and gradients dw_own (width components each), and
- * the times nodes[offsets[r] .. offsets[r + 1]). At each time x: the last non-empty piece
- * starting at or before it (the first piece if none), and the Lagrange interpolation of its
+ * the times nodes[offsets[r] .. offsets[r + 1]) (increasing). At each time x: the last non-empty
+ * piece starting at or before it (the first piece if none), and the Lagrange interpolation of its
  * values, summed in the order of the nodes. w (offsets[n_rows]) and dw (offsets[n_rows] width)
  * are overwritten. */
 static void interpolate_own(int64_t n_rows, int32_t n_own, const int64_t *restrict offsets, int32_t n_gauss,
@@ -621,12 +625,12 @@ static void interpolate_own(int64_t n_rows, int32_t n_own, const int64_t *restri
   for (int64_t r = 0; r < n_rows; ++r)
   {
     const double *s = start + r * n_own, *len = length + r * n_own;
+    int32_t piece = 0; /* the row's times increase: its piece only moves forward */
     for (int64_t out = offsets[r]; out < offsets[r + 1]; ++out)
     {
       const double t = nodes[out];
-      int32_t piece = 0;
-      for (int32_t j = 0; j < n_own; ++j)
-        if (s[j] <= t && len[j] > 0)
+      for (int32_t j = piece + 1; j < n_own && s[j] <= t; ++j)
+        if (len[j] > 0)
           piece = j;
       const double x = (t - s[piece]) / len[piece];
       const int64_t at = (r * n_own + piece) * n_gauss;
@@ -858,12 +862,6 @@ int64_t dem_pair_rows(int64_t n_pairs, int32_t d, const int64_t *restrict i, con
   return nnz;
 }
 
-static int compare_int32(const void *a, const void *b)
-{
-  const int32_t x = *(const int32_t *)a, y = *(const int32_t *)b;
-  return (x > y) - (x < y);
-}
-
 /* malloc of n items of the given size (at least one byte: NULL means out of memory). */
 static void *alloc(int64_t n, size_t size)
 {
@@ -888,8 +886,7 @@ static void *alloc(int64_t n, size_t size)
  * = d point rule (xi, wq on [0, 1]) integrates them exactly. A pair's w and dw are clipped at
  * the nodes of its own pieces only (overlap_own) and interpolated at its component's nodes
  * (interpolate_own). The sums run in the order of the pairs, of each CSR row's entries and of
- * the nodes; result and facet_force must be zero on entry for the bits of the separate numpy
- * steps this replaces.
+ * the nodes (the rows in the order the pairs first touch them).
  *
  * slot: one entry per own row, -1 on entry and left so (the touched rows are numbered through
  * it). Returns the largest number of non-empty pieces of a component, or -1 if memory ran out. */
@@ -910,20 +907,21 @@ int64_t dem_pair_force_integral(int64_t n, int32_t d, const int64_t *restrict p,
   int64_t bound = 0, n_rows = 0, n_comp = 0, n_times = 0, k_max = 0, pieces = 0, stride = 0;
   for (int64_t k = 0; k < n; ++k)
     bound += z_ptr[p[k] + 1] - z_ptr[p[k]];
-  int32_t *rows = alloc(bound, sizeof *rows), *sorted = alloc(bound, sizeof *sorted);
+  int32_t *rows = alloc(bound, sizeof *rows);
   int64_t *first = alloc(bound, sizeof *first), *parent = alloc(n, sizeof *parent);
   int64_t *label = alloc(n, sizeof *label), *offsets = alloc(n + 1, sizeof *offsets);
   double *a = alloc(2 * bound, sizeof *a), *za = alloc(2 * n, sizeof *za), *tau = alloc(n * n_tau, sizeof *tau);
   double *zc = calloc(bound > 0 ? bound : 1, sizeof *zc);
   int64_t *time_rows = alloc(n * n_tau, sizeof *time_rows), *counts = NULL, *n_pieces = NULL;
   double *times = alloc(n * n_tau, sizeof *times), *points = NULL, *mid = NULL, *length = NULL;
+  double *g0 = calloc(n > 0 ? n : 1, sizeof *g0), *rate = calloc(n > 0 ? n : 1, sizeof *rate);
   double *nodes = NULL, *weights = NULL, *g = NULL, *w = NULL, *dw = NULL, *c = NULL, *mu = NULL, *work = NULL;
   double *start_own = alloc(n * n_own, sizeof *start_own), *length_own = alloc(n * n_own, sizeof *length_own);
   double *w_own = alloc(n * n_own * n_gauss, sizeof *w_own), *dw_own = alloc(n * n_own * n_gauss * d, sizeof *dw_own);
   int64_t *entry = NULL;
   int64_t status = -1;
-  if (!rows || !sorted || !first || !parent || !label || !offsets || !a || !za || !tau || !zc || !time_rows ||
-      !times || !start_own || !length_own || !w_own || !dw_own)
+  if (!rows || !first || !parent || !label || !offsets || !a || !za || !tau || !zc || !time_rows ||
+      !times || !start_own || !length_own || !w_own || !dw_own || !g0 || !rate)
     goto done;
 
   /* the own rows the pairs touch (slot: their numbers, by first appearance) and the components
@@ -1037,28 +1035,29 @@ int64_t dem_pair_force_integral(int64_t n, int32_t d, const int64_t *restrict p,
     }
     /* the gap, affine along the flight */
     const int64_t pk = p[k];
-    double g0 = 0.0, rate = 0.0;
+    double gap = 0.0, speed = 0.0;
     for (int32_t x = 0; x < d; ++x)
     {
-      g0 += (uc[j[pk] * d + x] - uc[i[pk] * d + x]) * normal[pk * d + x];
-      rate += (vc[j[pk] * d + x] - vc[i[pk] * d + x]) * normal[pk * d + x];
+      gap += (uc[j[pk] * d + x] - uc[i[pk] * d + x]) * normal[pk * d + x];
+      speed += (vc[j[pk] * d + x] - vc[i[pk] * d + x]) * normal[pk * d + x];
     }
-    g0 = d0[pk] + g0;
+    g0[k] = d0[pk] + gap;
+    rate[k] = speed;
     for (int64_t e = offsets[k]; e < offsets[k + 1]; ++e)
     {
-      g[e] = g0 + nodes[e] * rate;
+      g[e] = g0[k] + nodes[e] * rate[k];
       entry[e] = pk;
     }
   }
 
   /* w and dw at the nodes: clipped on the pairs' own pieces, interpolated */
-  overlap_own(n, d, p, i, j, t, uc, vc, n_tau, tau, dt, n_gauss, xi, XA, mA, nuA, sizeA, XB, mB, nuB, sizeB,
-              start_own, length_own, w_own, dw_own);
+  overlap_own(n, d, p, i, j, t, uc, vc, n_tau, tau, dt, n_gauss, xi, XA, mA, nuA, sizeA, XB, mB, nuB, sizeB, g0,
+              rate, start_own, length_own, w_own, dw_own);
   interpolate_own(n, n_own, offsets, n_gauss, d, start_own, length_own, nodes, xi, w_own, dw_own, w, dw);
   for (int64_t e = 0; e < n_nodes; ++e)
     c[e] = w[e] * (g[e] < 0.0 ? g[e] : 0.0);
 
-  /* the rows' term: result -= Q^T (Z int c dtau), over the touched rows in increasing order */
+  /* the rows' term: result -= Q^T (Z int c dtau), over the touched rows */
   for (int64_t k = 0; k < n; ++k)
   {
     double integral = 0.0;
@@ -1068,14 +1067,8 @@ int64_t dem_pair_force_integral(int64_t n, int32_t d, const int64_t *restrict p,
       zc[slot[z_idx[e]]] += z_val[e] * integral;
   }
   for (int64_t s = 0; s < n_rows; ++s)
-    sorted[s] = rows[s];
-  qsort(sorted, (size_t)n_rows, sizeof *sorted, compare_int32);
-  for (int64_t s = 0; s < n_rows; ++s)
-  {
-    const double x = zc[slot[sorted[s]]];
-    for (int32_t e = q_ptr[sorted[s]]; e < q_ptr[sorted[s] + 1]; ++e)
-      result[q_idx[e]] -= q_val[e] * x;
-  }
+    for (int32_t e = q_ptr[rows[s]]; e < q_ptr[rows[s] + 1]; ++e)
+      result[q_idx[e]] -= q_val[e] * zc[s];
 
   /* the pairs' term: mu = z_p . a(tau) + z_p . (Z c)(tau) at the nodes (the pairs of a component
    * share their nodes), where g < 0, times the weights; then the facet forces */
@@ -1104,10 +1097,10 @@ int64_t dem_pair_force_integral(int64_t n, int32_t d, const int64_t *restrict p,
 done:
   for (int64_t s = 0; s < n_rows; ++s)
     slot[rows[s]] = -1;
-  free(rows), free(sorted), free(first), free(parent), free(label), free(offsets), free(a), free(za), free(tau);
+  free(rows), free(first), free(parent), free(label), free(offsets), free(a), free(za), free(tau);
   free(zc), free(time_rows), free(counts), free(n_pieces), free(times), free(points), free(mid), free(length);
   free(nodes), free(weights), free(g), free(w), free(dw), free(c), free(mu), free(entry), free(work);
-  free(start_own), free(length_own), free(w_own), free(dw_own);
+  free(start_own), free(length_own), free(w_own), free(dw_own), free(g0), free(rate);
   return status;
 }
 
@@ -1118,7 +1111,7 @@ done:
  * dem_overlap), c = w g^-, and, over the own rows their z_p touch (Z^T: z_ptr, z_idx, z_val),
  * a = Q u + q (Q: q_ptr, q_idx, q_val on the patch values up), delta = Z c and mu_p = z_p . (a +
  * delta); energy[0], energy[1] += the sums of a delta + delta^2 / 2 over the touched elastic rows
- * (elastic[row] != 0) and the others, in increasing row order. closed, g, w, c, mu: n_pairs,
+ * (elastic[row] != 0) and the others, in the order the pairs first touch them. closed, g, w, c, mu: n_pairs,
  * dw: n_pairs d (the first n_closed written); slot as in dem_pair_force_integral. Returns
  * n_closed, or -1 if memory ran out. */
 int64_t dem_pair_state(int64_t n_pairs, int32_t d, const int64_t *restrict i, const int64_t *restrict j,
@@ -1183,7 +1176,7 @@ int64_t dem_pair_state(int64_t n_pairs, int32_t d, const int64_t *restrict i, co
         rows[n_rows++] = z_idx[e];
       }
   }
-  /* a and delta = Z c on the touched rows; mu; the energy change in increasing row order */
+  /* a and delta = Z c on the touched rows; mu; the energy change */
   for (int64_t s = 0; s < n_rows; ++s)
   {
     double y = 0.0;
@@ -1201,12 +1194,8 @@ int64_t dem_pair_state(int64_t n_pairs, int32_t d, const int64_t *restrict i, co
       y += z_val[e] * (a[slot[z_idx[e]]] + delta[slot[z_idx[e]]]);
     mu[k] = y;
   }
-  qsort(rows, (size_t)n_rows, sizeof *rows, compare_int32);
   for (int64_t s = 0; s < n_rows; ++s)
-  {
-    const int32_t k = slot[rows[s]];
-    energy[elastic[rows[s]] ? 0 : 1] += a[k] * delta[k] + 0.5 * delta[k] * delta[k];
-  }
+    energy[elastic[rows[s]] ? 0 : 1] += a[s] * delta[s] + 0.5 * delta[s] * delta[s];
   status = n;
 
 done:
@@ -1214,4 +1203,58 @@ done:
     slot[rows[s]] = -1;
   free(screen), free(rows), free(a), free(delta);
   return status;
+}
+
+/* The forces between bodies of pair_contact.PairContact.pair_forces: for the entries k (pairs
+ * p[k] of facets (i, j), normals) with c[k] != 0 whose facets lie on different bodies bi =
+ * body[i], bj = body[j], the force mu_k (w_k n + g_k dw_k) on bi (d components; dw = dw/du_j),
+ * added to out[index[bi n_bodies + bj]] with the sign of the force on the lower-numbered body,
+ * in the order of the entries (out: body pairs x d, accumulated into). */
+void dem_pair_body_forces(int64_t n, int32_t d, const int64_t *restrict p, const int64_t *restrict i,
+                          const int64_t *restrict j, const double *restrict normal, const int64_t *restrict body,
+                          int64_t n_bodies, const int64_t *restrict index, const double *restrict mu,
+                          const double *restrict g, const double *restrict w, const double *restrict dw,
+                          const double *restrict c, double *restrict out)
+{
+  for (int64_t k = 0; k < n; ++k)
+  {
+    const int64_t q = p[k], bi = body[i[q]], bj = body[j[q]];
+    if (c[k] == 0.0 || bi == bj)
+      continue;
+    const double sign = bi < bj ? 1.0 : -1.0;
+    double *f = out + index[bi * n_bodies + bj] * d;
+    for (int32_t x = 0; x < d; ++x)
+      f[x] += sign * (mu[k] * (w[k] * normal[q * d + x] + g[k] * dw[k * d + x]));
+  }
+}
+
+/* pair_contact.PairContact.penetration after the scatter of the facet corrections: for the
+ * entries k (pairs p[k] of facets (i, j), normals) with w[k] > 0, the reconstructed gap
+ * (x_j + u_j - x_i - u_i) . n (centre: the facets' barycentres x, uf: their reconstructions u,
+ * n_facets x d), and for each of the first n_own facets touched the overlap-weighted mean of its
+ * pairs' gaps; returns the largest of their negatives, or 0. weight and mean: n_facets, zero
+ * on entry (work). */
+double dem_pair_penetration(int64_t n, int32_t d, const int64_t *restrict p, const int64_t *restrict i,
+                            const int64_t *restrict j, const double *restrict normal, const double *restrict centre,
+                            const double *restrict uf, const double *restrict w, int64_t n_own,
+                            double *restrict weight, double *restrict mean)
+{
+  for (int64_t k = 0; k < n; ++k)
+  {
+    if (!(w[k] > 0))
+      continue;
+    const int64_t q = p[k];
+    double gap = 0.0;
+    for (int32_t x = 0; x < d; ++x)
+      gap += ((centre[j[q] * d + x] + uf[j[q] * d + x]) - centre[i[q] * d + x] - uf[i[q] * d + x]) * normal[q * d + x];
+    weight[i[q]] += w[k];
+    weight[j[q]] += w[k];
+    mean[i[q]] += w[k] * gap;
+    mean[j[q]] += w[k] * gap;
+  }
+  double worst = 0.0;
+  for (int64_t f = 0; f < n_own; ++f)
+    if (weight[f] > 0 && -mean[f] / weight[f] > worst)
+      worst = -mean[f] / weight[f];
+  return worst;
 }

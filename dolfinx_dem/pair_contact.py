@@ -85,7 +85,7 @@ from petsc4py import PETSc
 
 from dolfinx_dem.halo import owned_facet_marks
 from dolfinx_dem.kernels import lib, pointer
-from dolfinx_dem.patch import PatchScatter, scatter_sum
+from dolfinx_dem.patch import PatchScatter
 
 
 
@@ -551,15 +551,15 @@ class PairContact:
             raise ValueError(f"prepare: {len(up)} patch values of u given for a patch of {len(self.scatter)} dofs "
                              "(gathered before a list round?)")
         vp = None if v is None else self.patch_values(v)
-        uc = self._at(up).uc
-        stale = self._moved(uc)
+        at = self._at(up)
+        uc, stale = at.uc, at.moved
         moving = v is not None and dt != 0.0
         if moving:
             vc = (self._R @ vp).reshape(-1, self.d)
             step = dt * vc
             stale = stale or self._moved(uc + step)
         if self.comm.allreduce(stale, op=MPI.LOR):
-            touching = self._touching_keys(up, uc)
+            touching = self._touching_keys(at)
             self._build(uc[: len(self.facets)], stale)  # the local facets are the first known ones
             up = self.patch_values(u)
             dropped = np.setdiff1d(touching, self.pair_keys())
@@ -590,12 +590,12 @@ class PairContact:
         self.seconds += time.process_time() - start
         return up, vp
 
-    def _touching_keys(self, up: np.ndarray, uc: np.ndarray) -> np.ndarray:
-        """Keys of the listed pairs in contact (g < 0, w > 0) at free displacements ``uc`` (none
-        if the list is stale there: the keys a rebuild must list again)."""
-        if self._moved(uc):
+    def _touching_keys(self, at: _At) -> np.ndarray:
+        """Keys of the listed pairs in contact (g < 0, w > 0) in the state ``at`` (none if the list
+        is stale there: the keys a rebuild must list again). The state the last step's energy
+        left: its screen holds every touching pair."""
+        if at.moved:
             return np.empty(0, dtype=np.int64)
-        at = self._at(up)  # the state the last step's energy left (its screen holds every touching pair)
         return self.pair_keys()[at.closed[(at.g < 0) & (at.w > 0)]]
 
     def _skins(self, reach: np.ndarray) -> np.ndarray:
@@ -636,9 +636,10 @@ class PairContact:
     def _at(self, up: np.ndarray) -> _At:
         """The contact state at patch values ``up`` (``_At``), kept for the next call: the energy
         at the end of a step, the per-step outputs and the next step's flight start at the same
-        displacement. Reused only for the same list and bit-identical values."""
+        displacement. Reused only for the same list and the same (read-only) array or bit-identical
+        values."""
         last = self._last
-        if last is None or last.listed is not self.listed or not np.array_equal(last.up, up):
+        if last is None or last.listed is not self.listed or not (last.up is up or np.array_equal(last.up, up)):
             last = self._last = _At(self, up)
         return last
 
@@ -795,21 +796,10 @@ class PairContact:
         corrections of the partners come from their owners (a scatter over the candidates)."""
         L, F, at = self.listed, self.facets_all, self._at(up)
         uf = at.uc + self._corrections_everywhere(up)
-        worst = 0.0
-        touch = at.w > 0  # of the closed pairs (g < 0): the touching pairs; the others correct nothing
-        pairs = at.closed[touch]
-        if len(pairs):
-            i, j = L.i[pairs], L.j[pairs]
-            gap = np.einsum("pi,pi->p", F.centre[j] + uf[j] - F.centre[i] - uf[i], L.n[pairs])
-            nf = len(F)
-            ww = at.w[touch]
-            weight = np.bincount(i, ww, nf) + np.bincount(j, ww, nf)
-            mean = np.bincount(i, ww * gap, nf) + np.bincount(j, ww * gap, nf)
-            own = np.zeros(nf, dtype=bool)
-            own[: self.num_own] = True
-            touched = (weight > 0) & own
-            if touched.any():
-                worst = float(max(0.0, -(mean[touched] / weight[touched]).min()))
+        weight, mean, P = np.zeros(len(F)), np.zeros(len(F)), L.pointers
+        worst = lib.dem_pair_penetration(len(at.closed), self.d, pointer(at.closed), P["i"], P["j"], P["n"],
+                                         pointer(F.centre), pointer(uf), pointer(at.w), self.num_own, pointer(weight),
+                                         pointer(mean))  # compiled: ``dem_pair_penetration``
         return self.comm.allreduce(worst, op=MPI.MAX)
 
     def _corrections_everywhere(self, up: np.ndarray) -> np.ndarray:
@@ -885,24 +875,18 @@ class PairContact:
         own rows, as in ``force_correction``; ``active`` imposes the piece as there (statics: a
         pair held on its switch g = 0 carries its multiplier, ``kink_forces``, instead)."""
         L, F = self.listed, self.facets_all
-        out = np.zeros((len(self.body_pairs), self.d))
         if active is None:  # the natural piece: the closed pairs of the step's state
             at = self._at(up)
-            p, g, w, dw, c = at.closed, at.g, at.w, at.dw, at.c
+            p, g, w, dw, c, mu = at.closed, at.g, at.w, at.dw, at.c, at.mu
         else:
             p = np.arange(len(L))
             g, w, dw = self._state(p, *self._pair_displacements(up))
             c = np.where(np.isin(self.pair_keys(), active), w * g, 0.0)
-        body_i, body_j = F.body[L.i[p]], F.body[L.j[p]]
-        on = (c != 0) & (body_i != body_j)
-        if on.any():
-            if active is None:
-                mu = at.mu[on]
-            else:
-                mu = (L.ZT @ (L.Q @ up + self._q + L.Z @ c))[on]
-            force_i = mu[:, None] * (w[on, None] * L.n[p[on]] + g[on, None] * dw[on])
-            sign = np.where(body_i[on] < body_j[on], 1.0, -1.0)  # the force on the lower-numbered body
-            out = scatter_sum(self._body_pair_index[body_i[on], body_j[on]], sign[:, None] * force_i, len(out))
+            mu = L.ZT @ (L.Q @ up + self._q + L.Z @ c)
+        out, body, P = np.zeros((len(self.body_pairs), self.d)), np.ascontiguousarray(F.body, dtype=np.int64), L.pointers
+        lib.dem_pair_body_forces(len(p), self.d, pointer(p), P["i"], P["j"], P["n"], pointer(body),
+                                 len(self._body_pair_index), pointer(self._body_pair_index), pointer(mu), pointer(g),
+                                 pointer(w), pointer(dw), pointer(c), pointer(out))  # compiled: ``dem_pair_body_forces``
         return out
 
     # -- statics (statics.minimise_energy) ---------------------------------------------------
@@ -1268,13 +1252,22 @@ class _At:
     share it (``PairContact._at``)."""
 
     def __init__(self, contact: PairContact, up: np.ndarray):
-        self.contact, self.listed, self.up = contact, contact.listed, up.copy()
+        # a read-only array (MEMM's shared patch values) is kept as it is: ``PairContact._at`` then
+        # knows it by identity; another is copied, since its caller may change it
+        self.contact, self.listed = contact, contact.listed
+        self.up = up if not up.flags.writeable else up.copy()
         self.uc = contact.free_displacements(self.up)
+
+    @functools.cached_property
+    def moved(self) -> bool:
+        """Whether the list is stale here (``PairContact._moved``)."""
+        return self.contact._moved(self.uc)
 
     @functools.cached_property
     def _state(self) -> tuple:
         contact, L = self.contact, self.listed
-        contact._check_listed(self.uc)
+        if self.moved:
+            contact._check_listed(self.uc)  # raises
         n, d = len(L), contact.d
         closed, g, w, c, mu = np.empty(n, dtype=np.int64), np.empty(n), np.empty(n), np.empty(n), np.empty(n)
         dw, energy = np.empty((n, d)), np.zeros(2)
