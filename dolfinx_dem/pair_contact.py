@@ -668,12 +668,11 @@ class PairContact:
         dw[e] = np.einsum("ek,eki->ei", dw_t, t)
         return g, w, dw
 
-    def _screen(self, uc: np.ndarray, vc: np.ndarray | None = None, dt: float = 0.0) -> np.ndarray:
+    def _screen(self, uc: np.ndarray, vc: np.ndarray, dt: float) -> np.ndarray:
         """The listed pairs whose c_p = w_p g_p^- may not vanish for the free facet displacements
         ``uc`` + tau ``vc``, 0 <= tau <= dt (known facets' rows): their gap negative at an end
-        and their projections' bounding boxes overlapping at some tau; without ``vc``, those
-        with g_p < 0 whose boxes are not apart at ``uc`` (the compiled kernel
-        ``dem_pair_screen``: one pass over the list)."""
+        and their projections' bounding boxes overlapping at some tau (the compiled kernel
+        ``dem_pair_screen``: one pass over the list; ``dem_pair_state`` screens a state with it)."""
         L = self.listed
         out = np.empty(len(L), dtype=np.int8)
         P = L.pointers
@@ -1236,8 +1235,8 @@ class _Pairs:
 
     @functools.cached_property
     def slot(self) -> np.ndarray:
-        """One int32 per own row, -1 between the calls of ``dem_pair_force_integral`` (which numbers
-        the rows the touching pairs touch through it)."""
+        """One int32 per own row, -1 between the calls of ``dem_pair_force_integral`` and
+        ``dem_pair_state`` (which number the rows their pairs touch through it)."""
         return np.full(self.Q.shape[0], -1, dtype=np.int32)
 
 
@@ -1264,7 +1263,7 @@ class _At:
         return self.contact._moved(self.uc)
 
     @functools.cached_property
-    def _state(self) -> tuple:
+    def _values(self) -> tuple:
         contact, L = self.contact, self.listed
         if self.moved:
             contact._check_listed(self.uc)  # raises
@@ -1280,13 +1279,13 @@ class _At:
             raise MemoryError("contact between bodies: out of memory in the contact state")
         return closed[:k], g[:k], w[:k], dw[:k], c[:k], mu[:k], (float(energy[0]), float(energy[1]))
 
-    closed = property(lambda self: self._state[0])
-    g = property(lambda self: self._state[1])
-    w = property(lambda self: self._state[2])
-    dw = property(lambda self: self._state[3])
-    c = property(lambda self: self._state[4])
-    mu = property(lambda self: self._state[5])
-    energy = property(lambda self: self._state[6])
+    closed = property(lambda self: self._values[0])
+    g = property(lambda self: self._values[1])
+    w = property(lambda self: self._values[2])
+    dw = property(lambda self: self._values[3])
+    c = property(lambda self: self._values[4])
+    mu = property(lambda self: self._values[5])
+    energy = property(lambda self: self._values[6])
 
 
 class _CSC:
@@ -1327,7 +1326,6 @@ class _CSR:
     list of thousands, without slicing the matrix)."""
 
     def __init__(self, A: scipy.sparse.csr_matrix):
-        self.shape = A.shape
         self.indptr = np.ascontiguousarray(A.indptr, dtype=np.int32)
         self.indices = np.ascontiguousarray(A.indices, dtype=np.int32)
         self.data = np.ascontiguousarray(A.data, dtype=np.float64)
