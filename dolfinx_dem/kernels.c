@@ -403,6 +403,30 @@ void dem_overlap(int64_t n, int32_t dim, const int64_t *restrict p, const double
     overlap_one(dim, p[i], XA, mA, nuA, sizeA, XB, mB, nuB, sizeB, s + i * dim, w + i, dw + i * dim);
 }
 
+/* w and dw/du_j = t^T dw/ds (d components) of the simplex pair q (see dem_overlap) at the
+ * relative displacement du = u_j - u_i (d components) of its facets: overlap_one at the
+ * tangential offset s = t du (t: the pair's d - 1 tangent rows of d). */
+static void pair_overlap(int32_t d, int64_t q, const double *t, const double *du, const double *XA,
+                         const double *mA, const double *nuA, const double *sizeA, const double *XB,
+                         const double *mB, const double *nuB, const double *sizeB, double *w, double *dw)
+{
+  const int32_t dim = d - 1;
+  double s[2], dws[2];
+  for (int32_t r = 0; r < dim; ++r)
+  {
+    s[r] = 0.0;
+    for (int32_t c = 0; c < d; ++c)
+      s[r] += t[(q * dim + r) * d + c] * du[c];
+  }
+  overlap_one(dim, q, XA, mA, nuA, sizeA, XB, mB, nuB, sizeB, s, w, dws);
+  for (int32_t c = 0; c < d; ++c)
+  {
+    dw[c] = 0.0;
+    for (int32_t r = 0; r < dim; ++r)
+      dw[c] += dws[r] * t[(q * dim + r) * d + c];
+  }
+}
+
 /* A pair's overlap on its own pieces (dem_pair_force_integral, before interpolate_own): for the
  * pairs p[e] of facets (i, j) moving along uc + tau vc (n_facets x d), with their events tau
  * (n_tau per pair, INFINITY: none; in (0, dt)), the own pieces of [0, dt] cut at the sorted
@@ -420,7 +444,7 @@ static void overlap_own(int64_t n, int32_t d, const int64_t *restrict p, const i
                         const double *restrict sizeB, const double *restrict g0, const double *restrict rate,
                         double *restrict start, double *restrict length, double *restrict w, double *restrict dw)
 {
-  const int32_t dim = d - 1, n_own = n_tau + 1;
+  const int32_t n_own = n_tau + 1;
   for (int64_t e = 0; e < n; ++e)
   {
     const int64_t q = p[e];
@@ -464,22 +488,10 @@ static void overlap_own(int64_t n, int32_t d, const int64_t *restrict p, const i
           continue;
         }
         const double time = first + xi[g] * len;
-        double du[3], s[2], dws[2];
+        double du[3];
         for (int32_t c = 0; c < d; ++c)
           du[c] = (uc[j[q] * d + c] + time * vc[j[q] * d + c]) - (uc[i[q] * d + c] + time * vc[i[q] * d + c]);
-        for (int32_t r = 0; r < dim; ++r)
-        {
-          s[r] = 0.0;
-          for (int32_t c = 0; c < d; ++c)
-            s[r] += t[(q * dim + r) * d + c] * du[c];
-        }
-        overlap_one(dim, q, XA, mA, nuA, sizeA, XB, mB, nuB, sizeB, s, w + node, dws);
-        for (int32_t c = 0; c < d; ++c)
-        {
-          dw[node * d + c] = 0.0;
-          for (int32_t r = 0; r < dim; ++r)
-            dw[node * d + c] += dws[r] * t[(q * dim + r) * d + c];
-        }
+        pair_overlap(d, q, t, du, XA, mA, nuA, sizeA, XB, mB, nuB, sizeB, w + node, dw + node * d);
       }
     }
   }
@@ -1125,7 +1137,6 @@ int64_t dem_pair_state(int64_t n_pairs, int32_t d, const int64_t *restrict i, co
                        int32_t *restrict slot, int64_t *restrict closed, double *restrict g, double *restrict w,
                        double *restrict dw, double *restrict c, double *restrict mu, double *restrict energy)
 {
-  const int32_t dim = d - 1;
   int64_t n = 0, bound = 0, n_rows = 0, status = -1;
   int8_t *screen = alloc(n_pairs, sizeof *screen);
   int32_t *rows = NULL;
@@ -1147,27 +1158,14 @@ int64_t dem_pair_state(int64_t n_pairs, int32_t d, const int64_t *restrict i, co
   for (int64_t k = 0; k < n; ++k)
   {
     const int64_t p = closed[k];
-    double du[3], s[2], dws[2];
-    double gap = 0.0;
+    double du[3], gap = 0.0;
     for (int32_t x = 0; x < d; ++x)
     {
       du[x] = uc[j[p] * d + x] - uc[i[p] * d + x];
       gap += du[x] * normal[p * d + x];
     }
     g[k] = d0[p] + gap;
-    for (int32_t r = 0; r < dim; ++r)
-    {
-      s[r] = 0.0;
-      for (int32_t x = 0; x < d; ++x)
-        s[r] += t[(p * dim + r) * d + x] * du[x];
-    }
-    overlap_one(dim, p, XA, mA, nuA, sizeA, XB, mB, nuB, sizeB, s, w + k, dws);
-    for (int32_t x = 0; x < d; ++x)
-    {
-      dw[k * d + x] = 0.0;
-      for (int32_t r = 0; r < dim; ++r)
-        dw[k * d + x] += dws[r] * t[(p * dim + r) * d + x];
-    }
+    pair_overlap(d, p, t, du, XA, mA, nuA, sizeA, XB, mB, nuB, sizeB, w + k, dw + k * d);
     c[k] = w[k] * (g[k] < 0.0 ? g[k] : 0.0);
     for (int32_t e = z_ptr[p]; e < z_ptr[p + 1]; ++e)
       if (slot[z_idx[e]] < 0)
