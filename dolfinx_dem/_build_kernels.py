@@ -65,7 +65,7 @@ ffibuilder.cdef(
                            const double *q, const double *up, const int8_t *elastic, int32_t *slot,
                            int64_t *closed, double *g, double *w, double *dw, double *c, double *mu,
                            double *energy);
-    void dem_pair_body_forces(int64_t n, int32_t d, const int64_t *p, const int64_t *i, const int64_t *j,
+    int64_t dem_pair_body_forces(int64_t n, int32_t d, const int64_t *p, const int64_t *i, const int64_t *j,
                               const double *normal, const int64_t *body, int64_t n_bodies, const int64_t *index,
                               const double *mu, const double *g, const double *w, const double *dw, const double *c,
                               double *out);

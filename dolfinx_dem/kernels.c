@@ -1207,23 +1207,31 @@ done:
  * p[k] of facets (i, j), normals) with c[k] != 0 whose facets lie on different bodies bi =
  * body[i], bj = body[j], the force mu_k (w_k n + g_k dw_k) on bi (d components; dw = dw/du_j),
  * added to out[index[bi n_bodies + bj]] with the sign of the force on the lower-numbered body,
- * in the order of the entries (out: body pairs x d, accumulated into). */
-void dem_pair_body_forces(int64_t n, int32_t d, const int64_t *restrict p, const int64_t *restrict i,
-                          const int64_t *restrict j, const double *restrict normal, const int64_t *restrict body,
-                          int64_t n_bodies, const int64_t *restrict index, const double *restrict mu,
-                          const double *restrict g, const double *restrict w, const double *restrict dw,
-                          const double *restrict c, double *restrict out)
+ * in the order of the entries (out: body pairs x d, accumulated into). Returns the number of
+ * such entries whose body pair has no index (< 0: none is added; the caller raises). */
+int64_t dem_pair_body_forces(int64_t n, int32_t d, const int64_t *restrict p, const int64_t *restrict i,
+                             const int64_t *restrict j, const double *restrict normal, const int64_t *restrict body,
+                             int64_t n_bodies, const int64_t *restrict index, const double *restrict mu,
+                             const double *restrict g, const double *restrict w, const double *restrict dw,
+                             const double *restrict c, double *restrict out)
 {
+  int64_t missing = 0;
   for (int64_t k = 0; k < n; ++k)
   {
     const int64_t q = p[k], bi = body[i[q]], bj = body[j[q]];
     if (c[k] == 0.0 || bi == bj)
       continue;
+    const int64_t at = index[bi * n_bodies + bj];
+    if (at < 0)
+    {
+      ++missing;
+      continue;
+    }
     const double sign = bi < bj ? 1.0 : -1.0;
-    double *f = out + index[bi * n_bodies + bj] * d;
     for (int32_t x = 0; x < d; ++x)
-      f[x] += sign * (mu[k] * (w[k] * normal[q * d + x] + g[k] * dw[k * d + x]));
+      out[at * d + x] += sign * (mu[k] * (w[k] * normal[q * d + x] + g[k] * dw[k * d + x]));
   }
+  return missing;
 }
 
 /* pair_contact.PairContact.penetration after the scatter of the facet corrections: for the
@@ -1244,7 +1252,8 @@ double dem_pair_penetration(int64_t n, int32_t d, const int64_t *restrict p, con
     const int64_t q = p[k];
     double gap = 0.0;
     for (int32_t x = 0; x < d; ++x)
-      gap += ((centre[j[q] * d + x] + uf[j[q] * d + x]) - centre[i[q] * d + x] - uf[i[q] * d + x]) * normal[q * d + x];
+      gap += ((centre[j[q] * d + x] + uf[j[q] * d + x]) - centre[i[q] * d + x] - uf[i[q] * d + x]) *
+             normal[q * d + x];
     weight[i[q]] += w[k];
     weight[j[q]] += w[k];
     mean[i[q]] += w[k] * gap;

@@ -882,10 +882,13 @@ class PairContact:
             g, w, dw = self._state(p, *self._pair_displacements(up))
             c = np.where(np.isin(self.pair_keys(), active), w * g, 0.0)
             mu = L.ZT @ (L.Q @ up + self._q + L.Z @ c)
-        out, body, P = np.zeros((len(self.body_pairs), self.d)), np.ascontiguousarray(F.body, dtype=np.int64), L.pointers
-        lib.dem_pair_body_forces(len(p), self.d, pointer(p), P["i"], P["j"], P["n"], pointer(body),
-                                 len(self._body_pair_index), pointer(self._body_pair_index), pointer(mu), pointer(g),
-                                 pointer(w), pointer(dw), pointer(c), pointer(out))  # compiled: ``dem_pair_body_forces``
+        out, body, P = np.zeros((len(self.body_pairs), self.d)), np.ascontiguousarray(F.body, np.int64), L.pointers
+        missing = lib.dem_pair_body_forces(len(p), self.d, pointer(p), P["i"], P["j"], P["n"], pointer(body),
+                                           len(self._body_pair_index), pointer(self._body_pair_index), pointer(mu),
+                                           pointer(g), pointer(w), pointer(dw), pointer(c), pointer(out))
+        if missing:  # every body with a candidate facet is in ``body_pairs``: a broken invariant
+            raise RuntimeError(f"contact between bodies: {missing} touching pairs join bodies that have no body pair "
+                               "(bodies without candidate facets?)")
         return out
 
     # -- statics (statics.minimise_energy) ---------------------------------------------------

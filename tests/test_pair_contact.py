@@ -182,6 +182,20 @@ def test_pair_force_is_the_sum_of_the_contact_forces_on_a_body(scheme):
     assert np.abs(pair + on_right).max() < 1e-12 * np.abs(pair).max()
 
 
+def test_a_touching_pair_between_bodies_without_a_body_pair_is_an_error():
+    """``pair_forces`` sums each touching pair's force into its bodies' pair (compiled): a pair
+    whose bodies have no body pair (an invariant: every body with a candidate facet has them)
+    raises instead of being dropped, or written out of bounds."""
+    dem, facets = two_discs(h=0.03, comm=MPI.COMM_SELF)
+    dem.set_contact_boundary(facets)
+    c = dem.pair_contact
+    u = cell_vector(dem, lambda x: approach(x, 0.015))  # the discs 0.01 m into each other
+    up, _ = c.prepare(u)
+    assert np.abs(c.pair_forces(up)).max() > 0
+    c._body_pair_index[:] = -1
+    with pytest.raises(RuntimeError, match="join bodies that have no body pair"):
+        c.pair_forces(up)
+
 @pytest.mark.mpi
 @pytest.mark.parametrize("scheme", ["A", "B"])
 @pytest.mark.parametrize("stretch", [0.0, 0.2])
