@@ -880,6 +880,38 @@ static void *alloc(int64_t n, size_t size)
   return malloc(n > 0 ? (size_t)n * size : 1);
 }
 
+/* Numbers the columns of the rows p[0..n) of a CSR pattern (z_ptr, z_idx) by first appearance,
+ * from n_rows on: slot[column] (-1 for a column not numbered yet) = its number, rows[number] =
+ * the column. Returns the new count. The own rows the pairs' z_p touch, for the kernels below. */
+static int64_t number_columns(int64_t n, const int64_t *restrict p, const int32_t *restrict z_ptr,
+                              const int32_t *restrict z_idx, int32_t *restrict slot, int32_t *restrict rows,
+                              int64_t n_rows)
+{
+  for (int64_t k = 0; k < n; ++k)
+    for (int32_t e = z_ptr[p[k]]; e < z_ptr[p[k] + 1]; ++e)
+      if (slot[z_idx[e]] < 0)
+      {
+        slot[z_idx[e]] = (int32_t)n_rows;
+        rows[n_rows++] = z_idx[e];
+      }
+  return n_rows;
+}
+
+/* y[s] = sum over row rows[s] of the CSR matrix (q_ptr, q_idx, q_val) of its entries times x at
+ * their columns, in the order of the entries, plus shift[rows[s]] (shift may be NULL). */
+static void rows_apply(int64_t n_rows, const int32_t *restrict rows, const int32_t *restrict q_ptr,
+                       const int32_t *restrict q_idx, const double *restrict q_val, const double *restrict x,
+                       const double *restrict shift, double *restrict y)
+{
+  for (int64_t s = 0; s < n_rows; ++s)
+  {
+    double sum = 0.0;
+    for (int32_t e = q_ptr[rows[s]]; e < q_ptr[rows[s] + 1]; ++e)
+      sum += q_val[e] * x[q_idx[e]];
+    y[s] = shift ? sum + shift[rows[s]] : sum;
+  }
+}
+
 /* pair_contact.PairContact.force_integral after its screen, in one call: for the n touching
  * pairs p (facets (i, j), normal, tangents t, reference gap d0, projected simplices XA.. and
  * XB..) along the flight uc + tau vc of the free facet displacements (n_facets x d), 0 <= tau
@@ -938,20 +970,21 @@ int64_t dem_pair_force_integral(int64_t n, int32_t d, const int64_t *restrict p,
 
   /* the own rows the pairs touch (slot: their numbers, by first appearance) and the components
    * of pairs sharing one (union-find, the smaller index the root; numbered by first appearance) */
+  n_rows = number_columns(n, p, z_ptr, z_idx, slot, rows, 0);
+  for (int64_t s = 0; s < n_rows; ++s)
+    first[s] = -1; /* the first pair met in each row */
   for (int64_t k = 0; k < n; ++k)
     parent[k] = k;
   for (int64_t k = 0; k < n; ++k)
     for (int32_t e = z_ptr[p[k]]; e < z_ptr[p[k] + 1]; ++e)
     {
-      const int32_t r = z_idx[e];
-      if (slot[r] < 0)
+      const int32_t r = slot[z_idx[e]];
+      if (first[r] < 0)
       {
-        slot[r] = (int32_t)n_rows;
-        rows[n_rows] = r;
-        first[n_rows++] = k;
+        first[r] = k;
         continue;
       }
-      const int64_t x = find_root(parent, k), y = find_root(parent, first[slot[r]]);
+      const int64_t x = find_root(parent, k), y = find_root(parent, first[r]);
       if (x != y)
         parent[x > y ? x : y] = x < y ? x : y;
     }
@@ -962,24 +995,15 @@ int64_t dem_pair_force_integral(int64_t n, int32_t d, const int64_t *restrict p,
   }
 
   /* a = (Q u + q, Q v) on the touched rows, and z_p . a of each pair */
-  for (int64_t s = 0; s < n_rows; ++s)
-  {
-    double y[2] = {0.0, 0.0};
-    for (int32_t e = q_ptr[rows[s]]; e < q_ptr[rows[s] + 1]; ++e)
-    {
-      y[0] += q_val[e] * up[q_idx[e]];
-      y[1] += q_val[e] * vp[q_idx[e]];
-    }
-    a[2 * s] = y[0] + q[rows[s]];
-    a[2 * s + 1] = y[1];
-  }
+  rows_apply(n_rows, rows, q_ptr, q_idx, q_val, up, q, a);
+  rows_apply(n_rows, rows, q_ptr, q_idx, q_val, vp, NULL, a + n_rows);
   for (int64_t k = 0; k < n; ++k)
   {
     double y[2] = {0.0, 0.0};
     for (int32_t e = z_ptr[p[k]]; e < z_ptr[p[k] + 1]; ++e)
     {
-      y[0] += z_val[e] * a[2 * slot[z_idx[e]]];
-      y[1] += z_val[e] * a[2 * slot[z_idx[e]] + 1];
+      y[0] += z_val[e] * a[slot[z_idx[e]]];
+      y[1] += z_val[e] * a[n_rows + slot[z_idx[e]]];
     }
     za[2 * k] = y[0];
     za[2 * k + 1] = y[1];
@@ -1167,21 +1191,10 @@ int64_t dem_pair_state(int64_t n_pairs, int32_t d, const int64_t *restrict i, co
     g[k] = d0[p] + gap;
     pair_overlap(d, p, t, du, XA, mA, nuA, sizeA, XB, mB, nuB, sizeB, w + k, dw + k * d);
     c[k] = w[k] * (g[k] < 0.0 ? g[k] : 0.0);
-    for (int32_t e = z_ptr[p]; e < z_ptr[p + 1]; ++e)
-      if (slot[z_idx[e]] < 0)
-      {
-        slot[z_idx[e]] = (int32_t)n_rows;
-        rows[n_rows++] = z_idx[e];
-      }
   }
   /* a and delta = Z c on the touched rows; mu; the energy change */
-  for (int64_t s = 0; s < n_rows; ++s)
-  {
-    double y = 0.0;
-    for (int32_t e = q_ptr[rows[s]]; e < q_ptr[rows[s] + 1]; ++e)
-      y += q_val[e] * up[q_idx[e]];
-    a[s] = y + q[rows[s]];
-  }
+  n_rows = number_columns(n, closed, z_ptr, z_idx, slot, rows, 0);
+  rows_apply(n_rows, rows, q_ptr, q_idx, q_val, up, q, a);
   for (int64_t k = 0; k < n; ++k)
     for (int32_t e = z_ptr[closed[k]]; e < z_ptr[closed[k] + 1]; ++e)
       delta[slot[z_idx[e]]] += z_val[e] * c[k];
