@@ -428,6 +428,7 @@ class PairContact:
         Qp = scipy.sparse.csr_matrix((self._Q.data, self._Q_entry_dof, self._Q.indptr),
                                      shape=(self._Q.shape[0], len(patch)))
         self.facets_all = F
+        self._facet_bodies = np.ascontiguousarray(F.body, dtype=np.int64)  # for ``dem_pair_body_forces``
         self._R = R
         self._RT = self._R.T  # CSC: its products sum in the order of R^T as CSR, without the copy
         self._lift = F.lift
@@ -873,7 +874,7 @@ class PairContact:
         rate of change of its momentum. mu_p = z_p . (a + delta_a) summed over this process's
         own rows, as in ``force_correction``; ``active`` imposes the piece as there (statics: a
         pair held on its switch g = 0 carries its multiplier, ``kink_forces``, instead)."""
-        L, F = self.listed, self.facets_all
+        L = self.listed
         if active is None:  # the natural piece: the closed pairs of the step's state
             at = self._at(up)
             p, g, w, dw, c, mu = at.closed, at.g, at.w, at.dw, at.c, at.mu
@@ -882,10 +883,11 @@ class PairContact:
             g, w, dw = self._state(p, *self._pair_displacements(up))
             c = np.where(np.isin(self.pair_keys(), active), w * g, 0.0)
             mu = L.ZT @ (L.Q @ up + self._q + L.Z @ c)
-        out, body, P = np.zeros((len(self.body_pairs), self.d)), np.ascontiguousarray(F.body, np.int64), L.pointers
-        missing = lib.dem_pair_body_forces(len(p), self.d, pointer(p), P["i"], P["j"], P["n"], pointer(body),
-                                           len(self._body_pair_index), pointer(self._body_pair_index), pointer(mu),
-                                           pointer(g), pointer(w), pointer(dw), pointer(c), pointer(out))
+        out, P = np.zeros((len(self.body_pairs), self.d)), L.pointers
+        missing = lib.dem_pair_body_forces(len(p), self.d, pointer(p), P["i"], P["j"], P["n"],
+                                           pointer(self._facet_bodies), len(self._body_pair_index),
+                                           pointer(self._body_pair_index), pointer(mu), pointer(g), pointer(w),
+                                           pointer(dw), pointer(c), pointer(out))
         if missing:  # every body with a candidate facet is in ``body_pairs``: a broken invariant
             raise RuntimeError(f"contact between bodies: {missing} touching pairs join bodies that have no body pair "
                                "(bodies without candidate facets?)")
