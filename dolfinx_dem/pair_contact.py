@@ -216,6 +216,9 @@ class PairContact:
         self._facets = self._local_records(order, f, cell, numbers)
         self._own_records = self._facets.take(np.arange(self.num_own)).records()  # what a list round sends
         self._local_keys = np.sort(self._facets.key)
+        # a list round summarises the local facets' places by the boxes of at most _SUMMARY_BOXES
+        # groups of nearby facets (``_bisection`` of the reference barycentres, fixed)
+        self._groups = _bisection(self._facets.centre, _SUMMARY_BOXES)
         self.num_facets = self.comm.allreduce(self.num_own, op=MPI.SUM)
         self._facet_vector = PETSc.Vec().createMPI((self.num_own * d, PETSc.DECIDE), comm=self.comm)
         dofs = (self.facets[:, None] * d + np.arange(d)).ravel()
@@ -328,11 +331,11 @@ class PairContact:
 
         Why a kept list stays valid: each process checks its known facets against the places
         they had at its last rebuild (``_moved``), so its own pairs are safe; a facet it does
-        not know was sent by no one or not kept, i.e. lies (at its owner's reference place and
-        here) farther than the largest pair radius from the box of this process's local facets,
-        or from each of them (at their references and here, whichever a rebuild in this round
-        leaves as the reference): it cannot reach one of them before one of the two moves more
-        than half its skin, which starts a new round."""
+        not know was sent by no one or not kept (``_exchange``), i.e. lies (at its owner's
+        reference place and here) farther than the largest pair radius from each box of this
+        process's local facets, or from each of them (at their references and here, whichever a
+        rebuild in this round leaves as the reference): it cannot reach one of them before one of
+        the two moves more than half its skin, which starts a new round."""
         comm, d = self.comm, self.d
         local = self._facets
         nl = len(local)
@@ -340,42 +343,8 @@ class PairContact:
         # its list
         places = [uc] if stale else [uc, self._reference[:nl]]
         x = [local.centre + p for p in places]
-        own = slice(0, self.num_own)
-        empty = np.array([np.inf] * d + [-np.inf] * d)
-        box = lambda y: np.concatenate([y.min(axis=0), y.max(axis=0)]) if len(y) else empty  # noqa: E731
-        box_own = box(np.concatenate([y[own] for y in x]))
-        box_local = box(np.concatenate(x))
-        boxes = np.array(comm.allgather(np.concatenate([box_own, box_local])))
-        r = self.radius
-        meets = np.all(boxes[:, 2 * d : 3 * d] - r <= box_own[d:], axis=1) & \
-            np.all(box_own[:d] <= boxes[:, 3 * d :] + r, axis=1)
-        meets[comm.rank] = False
-        if meets.any():
-            floats, ints = self._own_records
-            # with the sender's displacements, and its places (here and its reference if kept)
-            floats = np.concatenate([floats, uc[own], x[0][own], x[-1][own]], axis=1)
-        # to each process whose local facets' box, widened by r, meets the own facets: those
-        # own facets inside it at either place (the only ones that can pair with its local facets)
-        send = [None] * comm.size
-        for q in np.flatnonzero(meets):
-            near = np.zeros(self.num_own, dtype=bool)
-            for y in x:
-                near |= np.all((y[own] >= boxes[q, 2 * d : 3 * d] - r) & (y[own] <= boxes[q, 3 * d :] + r), axis=1)
-            send[q] = (floats[near], ints[near])
-        received = [m for m in comm.alltoall(send) if m is not None]
-        if received:
-            rf = np.concatenate([m[0] for m in received])
-            ri = np.concatenate([m[1] for m in received])
-            # the facets new here that come within r of a local facet at one of the places: a
-            # box is coarse (with a graph partition, most of another part's boundary may lie in
-            # it), and every ghost kept costs at each step (its motion, its dofs in the patch)
-            new = ~_find_sorted(self._local_keys, ri[:, 0])[1]
-            there = rf[new, -2 * d :].reshape(-1, 2, d)  # the sender's places
-            new[new] = _near(np.concatenate(x), [there[:, 0], there[:, 1]], r)
-            ghosts = local.from_records(rf[new, : -3 * d], ri[new])
-            uc_ghosts = rf[new, -3 * d : -2 * d]
-        else:
-            ghosts, uc_ghosts = local.take(np.empty(0, dtype=np.int64)), np.zeros((0, d))
+        ghosts, uc_ghosts = self._exchange(uc, x) if comm.size > 1 else (local.take(np.empty(0, dtype=np.int64)),
+                                                                          np.zeros((0, d)))
         if not stale and np.isin(ghosts.key, self.facets_all.key[nl:]).all():
             # nothing new near this process: its list stands, and so do its scatters' dofs
             self._remake_scatters(self.scatter.dofs, self.facets_all)
@@ -396,7 +365,7 @@ class PairContact:
         reach = np.concatenate([self._local_reach, _reach(ghosts)])
         skins = self._skins(reach)
         tree = scipy.spatial.cKDTree(x)
-        pairs = tree.query_pairs(r, output_type="ndarray")
+        pairs = tree.query_pairs(self.radius, output_type="ndarray")
         i, j = pairs[:, 0], pairs[:, 1]
         # The tests keep the same pairs in any order: the cheap and selective ones first (within
         # the largest radius, most pairs are neighbours on one body's boundary).
@@ -444,6 +413,66 @@ class PairContact:
         self._reference = ucF.copy()
         self._half_skin2 = 0.25 * skins**2  # of the known facets
         self.rebuilds += 1
+
+    def _exchange(self, uc: np.ndarray, x: list[np.ndarray]) -> tuple[_Facets, np.ndarray]:
+        """The ghost facets of a list round (collective) and their free displacements: every
+        process summarises its local facets' places ``x`` (here, and at their references if it
+        may keep its list) by the boxes of its facet groups (``_groups``) and its own facets' box,
+        all gathered (a fixed size per process); it sends each other process the own facets
+        within the largest pair radius r of one of that process's boxes at one of its places,
+        and keeps of the facets it receives those new to it that come within r of one of its
+        local facets at one of the places. The boxes cut what is sent (one box per process
+        would hold most of another part's boundary with a graph partition), the last test what
+        is kept: every ghost costs at each step (its motion, its dofs in the patch)."""
+        comm, d, r, local = self.comm, self.d, self.radius, self._facets
+        own = slice(0, self.num_own)
+        summary = np.empty((1 + _SUMMARY_BOXES, 2 * d))
+        summary[:] = np.concatenate([np.full(d, np.inf), np.full(d, -np.inf)])  # empty boxes
+        summary[0] = _box([y[own] for y in x], d)
+        perm, starts = self._groups
+        if len(perm):
+            summary[1 : 1 + len(starts), :d] = np.min([np.minimum.reduceat(y[perm], starts) for y in x], axis=0)
+            summary[1 : 1 + len(starts), d:] = np.max([np.maximum.reduceat(y[perm], starts) for y in x], axis=0)
+        summaries = np.empty((comm.size,) + summary.shape)
+        comm.Allgather(summary, summaries)
+        lo, hi = summaries[:, 1:, :d] - r, summaries[:, 1:, d:] + r  # the other processes' boxes, widened
+        mine = summary[0]
+        meets = np.all((lo <= mine[d:]) & (mine[:d] <= hi), axis=2)  # (process, box) against the own box
+        meets[comm.rank] = False
+        send, sent = [None] * comm.size, np.zeros(self.num_own, dtype=bool)
+        for q in np.flatnonzero(meets.any(axis=1)):
+            b = np.flatnonzero(meets[q])
+            near = np.zeros(self.num_own, dtype=bool)
+            for y in x:
+                y = y[own]
+                # the own facets in the union of q's boxes, then those in one of them
+                k = np.flatnonzero(np.all((y >= lo[q, b].min(axis=0)) & (y <= hi[q, b].max(axis=0)), axis=1))
+                inside = np.all((y[k, None] >= lo[q, b]) & (y[k, None] <= hi[q, b]), axis=2).any(axis=1)
+                near[k[inside]] = True
+            send[q] = np.flatnonzero(near)
+            sent |= near
+        if sent.any():
+            floats, ints = self._own_records
+            k = np.flatnonzero(sent)
+            # with the sender's displacements, and its places (here and its reference if kept)
+            rows = np.full(self.num_own, -1, dtype=np.int64)
+            rows[k] = np.arange(len(k))
+            floats = np.concatenate([floats[k], uc[k], x[0][k], x[-1][k]], axis=1)
+            ints = ints[k]
+            send = [None if s is None else (floats[rows[s]], ints[rows[s]]) for s in send]
+        received = [m for m in comm.alltoall(send) if m is not None]
+        if not received:
+            return local.take(np.empty(0, dtype=np.int64)), np.zeros((0, d))
+        rf = np.concatenate([m[0] for m in received])
+        ri = np.concatenate([m[1] for m in received])
+        new = ~_find_sorted(self._local_keys, ri[:, 0])[1]
+        there = rf[new, -2 * d :].reshape(-1, 2, d)  # the sender's places
+        if len(there):
+            # the local facets near the new ones' box only: the rest are farther than r from all
+            X = np.concatenate(x)
+            X = X[np.all((X >= there.min(axis=(0, 1)) - r) & (X <= there.max(axis=(0, 1)) + r), axis=1)]
+            new[new] = _near(X, [there[:, 0], there[:, 1]], r) if len(X) else False
+        return local.from_records(rf[new, : -3 * d], ri[new]), rf[new, -3 * d : -2 * d]
 
     def _remake_scatters(self, patch: np.ndarray, F: _Facets) -> None:
         """After a round of the lists (every process calls it): the patch scatter of the dofs
@@ -1055,6 +1084,36 @@ def _find_sorted(a: np.ndarray, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     (np.searchsorted) and whether it is there (np.isin without sorting ``a``)."""
     index = np.searchsorted(a, x)
     return index, np.append(a, -1)[index] == x  # (-1, no entry: past the end of a)
+
+
+_SUMMARY_BOXES = 16  # boxes per process summarising its local facets in a list round (``PairContact._exchange``)
+
+
+def _bisection(x: np.ndarray, k: int) -> tuple[np.ndarray, np.ndarray]:
+    """At most k groups of nearby points of x (n, d): the largest group is halved at the median
+    of its longest side until there are k (or groups of one point). Returns a permutation of
+    the points, group by group, and each group's start in it (for ``ufunc.reduceat``)."""
+    groups = [np.arange(len(x))] if len(x) else []
+    while 0 < len(groups) < k:
+        big = int(np.argmax([len(g) for g in groups]))
+        g = groups[big]
+        if len(g) < 2:
+            break
+        y = x[g]
+        side = int(np.argmax(y.max(axis=0) - y.min(axis=0)))
+        part = np.argpartition(y[:, side], len(g) // 2)
+        groups[big : big + 1] = [g[part[: len(g) // 2]], g[part[len(g) // 2 :]]]
+    perm = np.concatenate(groups) if groups else np.empty(0, dtype=np.int64)
+    return perm, np.cumsum([0] + [len(g) for g in groups[:-1]]).astype(np.int64)
+
+
+def _box(places: list[np.ndarray], d: int) -> np.ndarray:
+    """The bounding box [min, max] (2 d) of the points of ``places`` (arrays (n, d)); empty
+    (inf, -inf) without points. Column by column: numpy 1.24 reduces an (n, d) array along its
+    first axis ten times slower."""
+    lo = [min((y[:, k].min(initial=np.inf) for y in places), default=np.inf) for k in range(d)]
+    hi = [max((y[:, k].max(initial=-np.inf) for y in places), default=-np.inf) for k in range(d)]
+    return np.array(lo + hi)
 
 
 def _near(x: np.ndarray, places: list[np.ndarray], r: float) -> np.ndarray:

@@ -1125,3 +1125,25 @@ def test_memm_gathers_the_patch_values_once_per_step():
         assert stepper.contact_patch_values()[0] is not up
     with pytest.raises(ValueError, match="patch values of u given for a patch of"):
         c.prepare(stepper.u, up=np.zeros(len(c.scatter) + 1))
+
+
+def test_bisection_groups_nearby_facets_for_the_list_round_summaries():
+    """``_bisection`` (the boxes a list round gathers from each process): a permutation into
+    at most k groups of equal size (to one point), each group's box much smaller than the
+    whole; ``_box`` bounds its points column by column, and is empty without points."""
+    from dolfinx_dem.pair_contact import _bisection, _box
+
+    angle = np.linspace(0.0, 2.0 * np.pi, 1001)[:-1]
+    x = np.column_stack([np.cos(angle), np.sin(angle)]) + 0.01 * np.random.default_rng(3).random((1000, 2))
+    perm, starts = _bisection(x, 16)
+    assert np.array_equal(np.sort(perm), np.arange(1000)) and len(starts) == 16 and starts[0] == 0
+    sizes = np.diff(np.append(starts, 1000))
+    assert sizes.min() >= 62 and sizes.max() <= 63
+    for group in np.split(perm, starts[1:]):
+        lo, hi = _box([x[group]], 2)[:2], _box([x[group]], 2)[2:]
+        assert np.all(x[group] >= lo) and np.all(x[group] <= hi)
+        assert np.linalg.norm(hi - lo) < 0.5  # an arc of about 1/16 of the circle (chord 0.39)
+    assert np.array_equal(_box([x[:10], x[500:510]], 2), np.concatenate([np.minimum(x[:10].min(0), x[500:510].min(0)),
+                                                                         np.maximum(x[:10].max(0), x[500:510].max(0))]))
+    assert np.array_equal(_box([np.zeros((0, 3))], 3), [np.inf] * 3 + [-np.inf] * 3)
+    assert len(_bisection(np.zeros((0, 2)), 16)[0]) == 0 and len(_bisection(x[:3], 16)[1]) == 3
