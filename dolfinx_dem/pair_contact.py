@@ -250,6 +250,13 @@ class PairContact:
         # reach of the broad phase's exchange between processes)
         self.skin = self.comm.allreduce(float(skins.min(initial=np.inf)), op=MPI.MIN)
         self.radius = self.comm.allreduce(float((2.0 * reach + skins).max(initial=0.0)), op=MPI.MAX)
+        # A list round exchanges facets between processes only when a local facet has moved more
+        # than a third of the exchange radius since the last exchange (``_drifted``), and then
+        # each process learns the other processes' facets within it of its local facets: until
+        # the next exchange those it does not know stay farther than the largest pair radius from
+        # them, and its rounds in between rebuild its list from the facets it knows, alone.
+        self.exchange_radius = 3.0 * self.radius
+        self._exchanged = None  # the local facets' free displacements at the last exchange
         self._gauss = _gauss_legendre(d)
 
         # The body pairs (i < j) whose force is an output: both bodies hold candidate facets.
@@ -320,37 +327,38 @@ class PairContact:
         )
 
     # -- broad phase ---------------------------------------------------------------------------
-    def _build(self, uc: np.ndarray, stale: bool = True):
-        """A round of the Verlet lists at displacements u, the local facets' free displacements
-        there ``uc`` (n_local, d) (collective): every process sends
-        the records of its own candidate facets to the processes whose local facets may come
-        near them; then a process rebuilds its list (the facing pairs with a local facet whose
-        displaced centres are closer than their radius) if it is ``stale`` or received a facet
-        it did not know, and the others keep theirs: a fast facet rebuilds the lists of the
-        processes near it only.
+    def _build(self, uc: np.ndarray, stale: bool = True, exchange: bool = True):
+        """A round of the Verlet lists at displacements u, the known facets' free displacements
+        there ``uc`` (n_known, d) (collective if ``exchange``, and then on every process): with
+        an ``exchange`` every process sends the records of its own candidate facets to the
+        processes whose local facets they come within ``exchange_radius`` of (``_exchange``);
+        then a process rebuilds its list (the facing pairs with a local facet whose displaced
+        centres are closer than their radius) if it is ``stale`` or received a facet it did not
+        know, and the others keep theirs: a fast facet rebuilds the lists of the processes near it
+        only. Without an exchange a stale process rebuilds its list from the facets it knows,
+        and its patch and scatters stand.
 
-        Why a kept list stays valid: each process checks its known facets against the places
-        they had at its last rebuild (``_moved``), so its own pairs are safe; a facet it does
-        not know was sent by no one or not kept (``_exchange``), i.e. lies (at its owner's
-        reference place and here) farther than the largest pair radius from each box of this
-        process's local facets, or from each of them (at their references and here, whichever a
-        rebuild in this round leaves as the reference): it cannot reach one of them before one of
-        the two moves more than half its skin, which starts a new round."""
+        Why a list stays valid: each process checks its known facets against the places they had
+        at its last rebuild (``_moved``), so its pairs of known facets are safe; a facet it does
+        not know was farther than ``exchange_radius`` = r + 2 r from each of its local facets at
+        the last exchange (r the largest pair radius), and each of the two has moved less than r
+        since (``_drifted``, checked at every step): they are farther apart than any pair radius."""
         comm, d = self.comm, self.d
         local = self._facets
         nl = len(local)
-        # the places of the local facets: here, and at their references if this process may keep
-        # its list
-        places = [uc] if stale else [uc, self._reference[:nl]]
-        x = [local.centre + p for p in places]
-        ghosts, uc_ghosts = self._exchange(uc, x) if comm.size > 1 else (local.take(np.empty(0, dtype=np.int64)),
+        if not exchange:
+            if stale:  # the same known facets, patch and reconstructions: the list only
+                self._list(self.facets_all, uc)
+            return
+        self._exchanged = uc[:nl].copy()
+        ghosts, uc_ghosts = self._exchange(uc[:nl]) if comm.size > 1 else (local.take(np.empty(0, dtype=np.int64)),
                                                                           np.zeros((0, d)))
         if not stale and np.isin(ghosts.key, self.facets_all.key[nl:]).all():
             # nothing new near this process: its list stands, and so do its scatters' dofs
             self._remake_scatters(self.scatter.dofs, self.facets_all)
             return
         F = _Facets.concatenate([local, ghosts])
-        ucF = np.concatenate([uc, uc_ghosts])
+        ucF = np.concatenate([uc[:nl], uc_ghosts])
         # The patch: the own rows' held dofs and the reconstruction dofs of every known facet
         # (the ghosts' too: their motion decides when the list is stale), and its scatters, first:
         # every process reaches this collective soon after the exchange, and the list's work
@@ -360,9 +368,19 @@ class PairContact:
         R, extra = _reconstruction_matrix(F, self._row_dofs)  # (n_facets d, patch)
         patch = np.concatenate([self._row_dofs, extra]) if len(extra) else self._row_dofs
         self._remake_scatters(patch, F)
+        self.facets_all = F
+        self._facet_bodies = np.ascontiguousarray(F.body, dtype=np.int64)  # for ``dem_pair_body_forces``
+        self._R = R
+        self._RT = self._R.T  # CSC: its products sum in the order of R^T as CSR, without the copy
+        self._lift = F.lift
+        self._known_reach = np.concatenate([self._local_reach, _reach(ghosts)])
+        self._list(F, ucF)
 
+    def _list(self, F: _Facets, ucF: np.ndarray) -> None:
+        """The Verlet list of the known facets ``F`` at free displacements ``ucF`` (``_build``)."""
+        d, nl = self.d, len(self._facets)
         x = F.centre + ucF
-        reach = np.concatenate([self._local_reach, _reach(ghosts)])
+        reach = self._known_reach
         skins = self._skins(reach)
         tree = scipy.spatial.cKDTree(x)
         pairs = tree.query_pairs(self.radius, output_type="ndarray")
@@ -395,12 +413,7 @@ class PairContact:
         # the facet dofs' directions (``dem_pair_rows``).
         ZT = self._QF.pair_rows(i, j, e_i, e_j, F.length)  # (P, own rows touched)
         Qp = scipy.sparse.csr_matrix((self._Q.data, self._Q_entry_dof, self._Q.indptr),
-                                     shape=(self._Q.shape[0], len(patch)))
-        self.facets_all = F
-        self._facet_bodies = np.ascontiguousarray(F.body, dtype=np.int64)  # for ``dem_pair_body_forces``
-        self._R = R
-        self._RT = self._R.T  # CSC: its products sum in the order of R^T as CSR, without the copy
-        self._lift = F.lift
+                                     shape=(self._Q.shape[0], len(self.scatter)))
         # the facets projected on the plane normal to n, origin at f_i's barycentre; n . n_f >
         # |f| / (|f| + |f'|) for facing facets, so no projection degenerates
         project = lambda f: np.einsum("pkx,pax->pka", F.ends[f] - F.centre[i][:, None], t)  # noqa: E731
@@ -414,25 +427,27 @@ class PairContact:
         self._half_skin2 = 0.25 * skins**2  # of the known facets
         self.rebuilds += 1
 
-    def _exchange(self, uc: np.ndarray, x: list[np.ndarray]) -> tuple[_Facets, np.ndarray]:
-        """The ghost facets of a list round (collective) and their free displacements: every
-        process summarises its local facets' places ``x`` (here, and at their references if it
-        may keep its list) by the boxes of its facet groups (``_groups``) and its own facets' box,
-        all gathered (a fixed size per process); it sends each other process the own facets
-        within the largest pair radius r of one of that process's boxes at one of its places,
-        and keeps of the facets it receives those new to it that come within r of one of its
-        local facets at one of the places. The boxes cut what is sent (one box per process
-        would hold most of another part's boundary with a graph partition), the last test what
-        is kept: every ghost costs at each step (its motion, its dofs in the patch)."""
-        comm, d, r, local = self.comm, self.d, self.radius, self._facets
-        own = slice(0, self.num_own)
+    def _exchange(self, uc: np.ndarray) -> tuple[_Facets, np.ndarray]:
+        """The ghost facets of an exchange (collective) and their free displacements, for the
+        local facets' free displacements ``uc``: every process summarises its local facets'
+        places by the boxes of its facet groups (``_groups``) and its own facets' box, all
+        gathered (a fixed size per process); it sends each other process the own facets within
+        the exchange radius R of one of that process's boxes, and keeps of the facets it
+        receives those new to it that come within R of one of its local facets. The boxes cut
+        what is sent (one box per process would hold most of another part's boundary with a
+        graph partition), the last test what is kept: every ghost costs at each step (its
+        motion, its dofs in the patch)."""
+        comm, d, r, local = self.comm, self.d, self.exchange_radius, self._facets
+        x = local.centre + uc
+        own = x[: self.num_own]
         summary = np.empty((1 + _SUMMARY_BOXES, 2 * d))
         summary[:] = np.concatenate([np.full(d, np.inf), np.full(d, -np.inf)])  # empty boxes
-        summary[0] = _box([y[own] for y in x], d)
+        summary[0] = _box([own], d)
         perm, starts = self._groups
         if len(perm):
-            summary[1 : 1 + len(starts), :d] = np.min([np.minimum.reduceat(y[perm], starts) for y in x], axis=0)
-            summary[1 : 1 + len(starts), d:] = np.max([np.maximum.reduceat(y[perm], starts) for y in x], axis=0)
+            y = x[perm]
+            summary[1 : 1 + len(starts), :d] = np.minimum.reduceat(y, starts)
+            summary[1 : 1 + len(starts), d:] = np.maximum.reduceat(y, starts)
         summaries = np.empty((comm.size,) + summary.shape)
         comm.Allgather(summary, summaries)
         lo, hi = summaries[:, 1:, :d] - r, summaries[:, 1:, d:] + r  # the other processes' boxes, widened
@@ -442,22 +457,17 @@ class PairContact:
         send, sent = [None] * comm.size, np.zeros(self.num_own, dtype=bool)
         for q in np.flatnonzero(meets.any(axis=1)):
             b = np.flatnonzero(meets[q])
-            near = np.zeros(self.num_own, dtype=bool)
-            for y in x:
-                y = y[own]
-                # the own facets in the union of q's boxes, then those in one of them
-                k = np.flatnonzero(np.all((y >= lo[q, b].min(axis=0)) & (y <= hi[q, b].max(axis=0)), axis=1))
-                inside = np.all((y[k, None] >= lo[q, b]) & (y[k, None] <= hi[q, b]), axis=2).any(axis=1)
-                near[k[inside]] = True
-            send[q] = np.flatnonzero(near)
-            sent |= near
+            # the own facets in the union of q's boxes, then those in one of them
+            k = np.flatnonzero(np.all((own >= lo[q, b].min(axis=0)) & (own <= hi[q, b].max(axis=0)), axis=1))
+            k = k[np.all((own[k, None] >= lo[q, b]) & (own[k, None] <= hi[q, b]), axis=2).any(axis=1)]
+            send[q] = k
+            sent[k] = True
         if sent.any():
             floats, ints = self._own_records
             k = np.flatnonzero(sent)
-            # with the sender's displacements, and its places (here and its reference if kept)
             rows = np.full(self.num_own, -1, dtype=np.int64)
             rows[k] = np.arange(len(k))
-            floats = np.concatenate([floats[k], uc[k], x[0][k], x[-1][k]], axis=1)
+            floats = np.concatenate([floats[k], uc[k]], axis=1)  # with the sender's displacements
             ints = ints[k]
             send = [None if s is None else (floats[rows[s]], ints[rows[s]]) for s in send]
         received = [m for m in comm.alltoall(send) if m is not None]
@@ -466,13 +476,14 @@ class PairContact:
         rf = np.concatenate([m[0] for m in received])
         ri = np.concatenate([m[1] for m in received])
         new = ~_find_sorted(self._local_keys, ri[:, 0])[1]
-        there = rf[new, -2 * d :].reshape(-1, 2, d)  # the sender's places
+        ghosts, uc_ghosts = local.from_records(rf[new, :-d], ri[new]), rf[new, -d:]
+        there = ghosts.centre + uc_ghosts
         if len(there):
-            # the local facets near the new ones' box only: the rest are farther than r from all
-            X = np.concatenate(x)
-            X = X[np.all((X >= there.min(axis=(0, 1)) - r) & (X <= there.max(axis=(0, 1)) + r), axis=1)]
-            new[new] = _near(X, [there[:, 0], there[:, 1]], r) if len(X) else False
-        return local.from_records(rf[new, : -3 * d], ri[new]), rf[new, -3 * d : -2 * d]
+            # the local facets near the new ones' box only: the rest are farther than R from all
+            X = x[np.all((x >= there.min(axis=0) - r) & (x <= there.max(axis=0) + r), axis=1)]
+            near = _near(X, [there], r) if len(X) else np.zeros(len(there), dtype=bool)
+            ghosts, uc_ghosts = ghosts.take(np.flatnonzero(near)), uc_ghosts[near]
+        return ghosts, uc_ghosts
 
     def _remake_scatters(self, patch: np.ndarray, F: _Facets) -> None:
         """After a round of the lists (every process calls it): the patch scatter of the dofs
@@ -566,8 +577,11 @@ class PairContact:
         """Make the Verlet list valid for the states u + tau v, 0 <= tau <= dt (u alone without
         v): if a candidate facet known to some process would move more than half its skin from
         where it was at that process's last build, a round of the lists at u (``_build``), which
-        rebuilds them on that process and on those that receive a facet new to them. The free facet displacements are affine in
-        tau, so checking both ends covers the whole flight. ``MEMM`` calls this before every
+        rebuilds the list of that process; if a local facet would drift more than a third of
+        the exchange radius since the last exchange (``_drifted``), the round exchanges facets
+        between the processes first, and those that receive a facet new to them rebuild too.
+        The free facet displacements are affine in tau, so checking both ends covers the whole
+        flight. ``MEMM`` calls this before every
         step's force integral, whatever the quadrature, and at ``initialise``; call it before
         evaluating forces or energies at displacements of your own. Collective (one logical
         reduction, and the round's exchanges). ``up``: the patch values of u if the caller has them
@@ -588,10 +602,16 @@ class PairContact:
             vc = (self._R @ vp).reshape(-1, self.d)
             step = dt * vc
             stale = stale or self._moved(uc + step)
-        if self.comm.allreduce(stale, op=MPI.LOR):
+        drifted = self.comm.size > 1 and (self._drifted(uc) or (moving and self._drifted(uc + step)))
+        flags = np.array([stale, drifted], dtype=np.int32)
+        self.comm.Allreduce(MPI.IN_PLACE, flags, op=MPI.MAX)
+        if flags.any():
             touching = self._touching_keys(at)
-            self._build(uc[: len(self.facets)], stale)  # the local facets are the first known ones
-            up = self.patch_values(u)
+            R, scatter = self._R, self.scatter
+            self._build(uc, stale, exchange=bool(flags[1]))
+            if self.scatter is not scatter:
+                up = self.patch_values(u)
+                vp = None if v is None else self.patch_values(v)
             dropped = np.setdiff1d(touching, self.pair_keys())
             if self.comm.allreduce(len(dropped), op=MPI.SUM):
                 raise RuntimeError(
@@ -600,10 +620,10 @@ class PairContact:
                     "list rebuild would "
                     "drop them and the energy would jump; the bodies are too soft for their load or speed (or pass a "
                     "larger skin)")
-            vp = None if v is None else self.patch_values(v)
             if moving:
-                uc, vc = self._at(up).uc, (self._R @ vp).reshape(-1, self.d)
-                step = dt * vc
+                if self._R is not R:
+                    uc, vc = self._at(up).uc, (self._R @ vp).reshape(-1, self.d)
+                    step = dt * vc
                 ratios = self._motion_ratios(uc + step)
                 k = int(np.argmax(ratios)) if len(ratios) else 0
                 worst = (float(ratios[k]), float(np.linalg.norm(step[k])),
@@ -637,6 +657,14 @@ class PairContact:
         """Whether a facet known here (local or ghost) with free displacements ``uc`` has moved
         more than half its skin since the last list build (a pair not listed might then touch)."""
         return bool((self._motion_ratios(uc) > 1.0).any())
+
+    def _drifted(self, uc: np.ndarray) -> bool:
+        """Whether a local facet with free displacements ``uc`` (those of the known facets) has
+        moved more than a third of the exchange radius since the last exchange (none yet: True)."""
+        if self._exchanged is None:
+            return True
+        moved = uc[: len(self._exchanged)] - self._exchanged
+        return bool((np.einsum("ni,ni->n", moved, moved) > (self.exchange_radius / 3.0) ** 2).any())
 
     def _motion_ratios(self, uc: np.ndarray) -> np.ndarray:
         """(|motion since the last list build| / (half the skin))^2 of each known facet at free
@@ -1068,6 +1096,7 @@ class PairContact:
         those of the same partition's ``checkpoint_state``, or start again (None: another
         partition)."""
         self._reference = np.full_like(self._reference, np.inf)
+        self._exchanged = None
         if state is not None:
             self._scheme_b_rule = np.asarray(state["scheme_b_rule"], dtype=np.int64)
             self.rebuilds, self.evaluations = (int(x) for x in state["counters"])

@@ -1088,11 +1088,11 @@ def test_a_list_round_rebuilds_only_the_lists_near_moving_facets():
 
 @pytest.mark.mpi
 def test_a_process_knows_only_the_facets_of_other_processes_near_its_own():
-    """Eight discs on a ring, 0.58 m apart (far beyond any pair radius): a list round keeps the
-    facets received from other processes that lie within the pair list radius of a local facet,
-    not all those in the box of its local facets (on 2 and 3 processes that box spans a half or
-    a third of the ring and holds discs of other processes). Bodies at rest: each facet is at
-    its reference place."""
+    """Eight discs on a ring, 0.56 m apart (far beyond the exchange radius): an exchange keeps
+    the facets received from other processes that lie within the exchange radius of a local
+    facet, not all those in the boxes of its local facets (on 2 and 3 processes the box of all
+    spans a half or a third of the ring and holds discs of other processes). Bodies at rest:
+    each facet is at its reference place."""
     angles = np.arange(8) * np.pi / 4
     discs = [((np.cos(a), np.sin(a)), 0.1) for a in angles]
     mesh = meshes.create_discs(MPI.COMM_WORLD, discs, 0.03)[0]
@@ -1103,7 +1103,8 @@ def test_a_process_knows_only_the_facets_of_other_processes_near_its_own():
     import scipy.spatial
 
     distance = scipy.spatial.cKDTree(F.centre[:nl]).query(F.centre[nl:])[0] if nl else np.full(len(F) - nl, np.inf)
-    far = MPI.COMM_WORLD.allreduce(int((distance > c.radius).sum()), op=MPI.SUM)  # on every process
+    assert c.exchange_radius < 0.5
+    far = MPI.COMM_WORLD.allreduce(int((distance > c.exchange_radius).sum()), op=MPI.SUM)  # on every process
     assert far == 0
     assert c.num_pairs == 0  # no facing facets of two discs are near each other
 
