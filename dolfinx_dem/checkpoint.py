@@ -44,7 +44,8 @@ from mpi4py import MPI
 
 from dolfinx_dem.io import call_on_root
 
-FORMAT = 3  # 2: per-process local files (the recurrence, contact states); no shared file; 3: MEMM work
+FORMAT = 4  # 2: per-process local files (the recurrence, contact states); no shared file; 3: MEMM work;
+# 4: the pair contact's exchange counter
 DIRECTORY = "checkpoint"
 HEADER = "checkpoint.json"
 VECTORS = ("u", "v_prev", "v_next")

@@ -55,16 +55,19 @@ centres) when its centres are closer than r_p = rho_f + rho_f' + (s_f + s_f')/2,
 distance from a facet's barycentre to its vertices (half the length in 2D) and s its Verlet skin,
 by default its own diameter 2 rho (or one uniform skin given by the user): the list follows the
 local facet size, so a contact zone refined far below the rest of the boundary lists few pairs.
-Each process sends the records of its own candidate facets to the processes whose bounding box
-of local facets (grown by the largest r_p) meets the box of its own facets; the boxes are
-gathered (one box per process). The receiver keeps those within the largest r_p of one of its
-local facets (a box is coarse: with a graph partition it may hold much of another part's
-boundary, and every facet known costs at each step). A process's list is stale when a facet it
-knows (local or ghost) has moved more than half its skin since it built the list: an unlisted
-pair's centres are then still farther apart than rho_f + rho_f', so its facets cannot touch.
-When a process is stale (one logical reduction per step in ``prepare``), a round of the lists
-exchanges the records (``_build``); the stale processes and those that receive a facet new to
-them rebuild, the others keep their lists: a fast facet does not rebuild the lists far from it.
+In an exchange each process sends the records of its own candidate facets to the processes
+they come within the exchange radius R = 3 max r_p of: those within R of one of the boxes that
+summarise the other process's local facets (at most 16 boxes of nearby facets per process, all
+gathered); the receiver keeps those within R of one of its local facets (every facet known
+costs at each step). A process's list is stale when a facet it knows (local or ghost) has moved
+more than half its skin since it built the list: an unlisted pair's centres are then still
+farther apart than rho_f + rho_f', so its facets cannot touch. When a process is stale (one
+logical reduction per step in ``prepare``), a round of the lists (``_build``) rebuilds its list
+from the facets it knows; the others keep theirs: a fast facet does not rebuild the lists far
+from it. The round exchanges facets first only when a local facet has drifted more than R/3
+= max r_p since the last exchange (the same reduction): until then a facet a process does not
+know stays farther than max r_p from its local facets. After an exchange the processes that
+receive a facet new to them rebuild too.
 ``prepare`` checks both ends of the coming step (the flight is affine); every evaluation checks
 that the list is valid for its displacements and raises otherwise (never a silently incomplete
 list); so does a step that moves a facet by more than half its skin.
@@ -269,7 +272,8 @@ class PairContact:
             self._body_pair_index[a, b] = self._body_pair_index[b, a] = k
 
         self.evaluations = 0
-        self.rebuilds = 0
+        self.rebuilds = 0  # list builds on this process
+        self.exchanges = 0  # exchanges of facets between processes (list rounds that make the ghosts)
         self._scheme_b_rule = np.empty(0, dtype=np.int64)  # keys of pairs under the B rule (own ones)
         self.seconds = 0.0  # processor time of the contact work in force integrals and energies
         self._template = zero = dem.create_vector()  # the layout of the scatters' source vectors
@@ -351,6 +355,7 @@ class PairContact:
                 self._list(self.facets_all, uc)
             return
         self._exchanged = uc[:nl].copy()
+        self.exchanges += comm.size > 1
         ghosts, uc_ghosts = self._exchange(uc[:nl]) if comm.size > 1 else (local.take(np.empty(0, dtype=np.int64)),
                                                                           np.zeros((0, d)))
         if not stale and np.isin(ghosts.key, self.facets_all.key[nl:]).all():
@@ -1088,7 +1093,7 @@ class PairContact:
         which changes the forces by nothing (pairs that are listed but do not touch add exact
         zeros, and the directions e_f depend on the reference geometry only)."""
         return {"scheme_b_rule": self._scheme_b_rule,
-                "counters": np.array([self.rebuilds, self.evaluations], dtype=np.int64),
+                "counters": np.array([self.rebuilds, self.evaluations, self.exchanges], dtype=np.int64),
                 "seconds": np.array([self.seconds])}
 
     def restore_state(self, state: Mapping[str, np.ndarray] | None) -> None:
@@ -1099,7 +1104,7 @@ class PairContact:
         self._exchanged = None
         if state is not None:
             self._scheme_b_rule = np.asarray(state["scheme_b_rule"], dtype=np.int64)
-            self.rebuilds, self.evaluations = (int(x) for x in state["counters"])
+            self.rebuilds, self.evaluations, self.exchanges = (int(x) for x in state["counters"])
             self.seconds = float(state["seconds"][0])
 
 

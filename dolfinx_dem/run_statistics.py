@@ -90,6 +90,7 @@ class PairContactStatistics:
             "contact_candidate_facets": c.num_facets,
             "contact_pairs_listed": c.num_pairs,
             "contact_list_rebuilds": comm.allreduce(c.rebuilds, op=MPI.MAX),  # the busiest process
+            "contact_exchanges": c.exchanges,  # the same on every process
             "contact_pairs_scheme_b_rule": c.scheme_b_pairs,
             "first_contact_time": self.first_contact,
             "max_penetration": self.penetration,

@@ -33,9 +33,10 @@ SCENES = {
     "bar-impact": ({"time.end": 0.6}, 240),  # contact from step 200
     "two-disks": ({"mesh.h": 0.03, "time": {"end": 0.15, "dt": 0.0025}}, 60),  # contact from step 14
 }
-#: summary keys that differ between an interrupted-and-resumed run and an uninterrupted one (costs)
+#: summary keys that differ between an interrupted-and-resumed run and an uninterrupted one (costs;
+#: a resumed run's contact model exchanges facets between processes at its first step)
 TIMINGS = {"wall_time_s", "setup_time_s", "peak_rss_mb", "resumes", "contact_seconds", "contact_output_seconds",
-           "contact_fraction"}
+           "contact_fraction", "contact_exchanges"}
 
 
 def stop(monkeypatch, at: int, first: int = 0, crash: bool = False):

@@ -1066,6 +1066,8 @@ def test_a_list_round_rebuilds_only_the_lists_near_moving_facets():
         moving = c.facets_all.centre[:, 1] > 1.67
         assert moving.any() or c.rebuilds == 1  # a process that knows no moving facet never rebuilt
         assert not moving.any() or c.rebuilds > 3
+        # rounds between exchanges rebuild the list from the facets known (here none drifts far)
+        assert c.exchanges == (comm.size > 1) and (not moving.any() or c.rebuilds > c.exchanges)
         x = dem.geometry.cell_centres[: dem.n_owned]
         return dem, stepper, c, x
 
@@ -1084,6 +1086,48 @@ def test_a_list_round_rebuilds_only_the_lists_near_moving_facets():
     scale = np.abs(u_serial).max()
     assert scale > 1e-3  # the moving discs moved
     assert np.abs(stepper.u.array_r.reshape(-1, 2) - u_serial[found]).max(initial=0.0) < 1e-12 * scale
+
+
+@pytest.mark.mpi
+def test_discs_that_travel_far_between_exchanges_move_as_on_one_process():
+    """Three discs crossing the partition at 0.4 m/s, the outer ones towards the middle
+    one, every boundary a candidate: their facets drift farther than a third of the exchange
+    radius, so the processes exchange facets again in mid-run (and rebuild their lists from
+    the facets they know in between); the displacements equal those of one process to rounding
+    through the impacts, so no exchange missed a facet that came near. (Without ``_drifted``
+    the first exchange would stand and the impacts would be missed.)"""
+    centres = [(0.14, 0.0), (0.6, 0.03), (1.06, 0.0)]  # gaps of 0.26 m, wider than the exchange radius
+
+    def run(comm):
+        mesh = meshes.create_discs(comm, [(c, 0.1) for c in centres], 0.04)[0]
+        dem = DEMDiscretisation(mesh, SOFT, "B")
+        dem.set_contact_boundary(_compat.exterior_facets(mesh))
+        stepper = MEMM(dem, 0.2 * dem.stable_time_step())
+        stepper.initialise(dem.create_vector(), cell_vector(
+            dem, lambda x: np.stack([np.where(x[:, 0] < 0.3, 0.4, np.where(x[:, 0] > 0.9, -0.4, 0.0)),
+                                     np.zeros(len(x))], axis=1)))
+        for _ in range(320):  # 0.89 s: contact from 0.65 s
+            stepper.step()
+        return dem, stepper
+
+    dem, stepper = run(MPI.COMM_WORLD)
+    c, comm = dem.pair_contact, dem.comm
+    serial_dem, serial = run(MPI.COMM_SELF)
+    assert serial_dem.pair_contact.exchanges == 0
+    if comm.size > 1:
+        assert c.exchanges >= 3 and comm.allreduce(c.rebuilds, op=MPI.MAX) > c.exchanges
+    assert c.exchange_radius < 0.25
+    touched = comm.allreduce(c.touching(c.patch_values(stepper.u)), op=MPI.LOR)
+    import scipy.spatial
+
+    x = dem.geometry.cell_centres[: dem.n_owned]
+    distance, found = scipy.spatial.cKDTree(serial_dem.geometry.cell_centres[: serial_dem.n_owned]).query(x)
+    assert distance.max(initial=0.0) < 1e-12
+    u_serial = serial.u.array_r.reshape(-1, 2)
+    scale = np.abs(u_serial).max()
+    assert scale > 0.15 and serial_dem.pair_contact.rebuilds > 10  # the discs travelled and met
+    assert np.abs(stepper.u.array_r.reshape(-1, 2) - u_serial[found]).max(initial=0.0) < 1e-12 * scale
+    assert touched
 
 
 @pytest.mark.mpi
