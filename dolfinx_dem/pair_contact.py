@@ -64,10 +64,11 @@ more than half its skin since it built the list: an unlisted pair's centres are 
 farther apart than rho_f + rho_f', so its facets cannot touch. When a process is stale (one
 logical reduction per step in ``prepare``), a round of the lists (``_build``) rebuilds its list
 from the facets it knows; the others keep theirs: a fast facet does not rebuild the lists far
-from it. The round exchanges facets first only when a local facet has drifted more than R/3
-= max r_p since the last exchange (the same reduction): until then a facet a process does not
-know stays farther than max r_p from its local facets. After an exchange the processes that
-receive a facet new to them rebuild too.
+from it. The round exchanges facets first only when a local facet has drifted more than
+max r_p - max s/2 since the last exchange (the same reduction): every list is then built where
+the drifts are below that, a valid list's facets stay within s/2 of where it was built, and a
+facet a process does not know stays farther than max r_p from its local facets. After an
+exchange the processes that receive a facet new to them rebuild too.
 ``prepare`` checks both ends of the coming step (the flight is affine); every evaluation checks
 that the list is valid for its displacements and raises otherwise (never a silently incomplete
 list); so does a step that moves a facet by more than half its skin.
@@ -253,12 +254,15 @@ class PairContact:
         # reach of the broad phase's exchange between processes)
         self.skin = self.comm.allreduce(float(skins.min(initial=np.inf)), op=MPI.MIN)
         self.radius = self.comm.allreduce(float((2.0 * reach + skins).max(initial=0.0)), op=MPI.MAX)
-        # A list round exchanges facets between processes only when a local facet has moved more
-        # than a third of the exchange radius since the last exchange (``_drifted``), and then
-        # each process learns the other processes' facets within it of its local facets: until
-        # the next exchange those it does not know stay farther than the largest pair radius from
-        # them, and its rounds in between rebuild its list from the facets it knows, alone.
+        # A list round exchanges facets between processes only when a local facet has drifted
+        # more than r - s/2 since the last exchange (r the largest pair radius, s the largest
+        # skin: ``_drifted``), and then each process learns the other processes' facets within
+        # the exchange radius 3 r of its local facets. Every list is built where the drifts are
+        # at most r - s/2, and a valid list's facets are within s/2 of where it was built, so
+        # the drifts stay below r and the facets a process does not know farther than r from
+        # its own; its rounds in between rebuild its list from the facets it knows, alone.
         self.exchange_radius = 3.0 * self.radius
+        self._exchange_drift = self.radius - 0.5 * self.comm.allreduce(float(skins.max(initial=0.0)), op=MPI.MAX)
         self._exchanged = None  # the local facets' free displacements at the last exchange
         self._gauss = _gauss_legendre(d)
 
@@ -345,8 +349,10 @@ class PairContact:
         Why a list stays valid: each process checks its known facets against the places they had
         at its last rebuild (``_moved``), so its pairs of known facets are safe; a facet it does
         not know was farther than ``exchange_radius`` = r + 2 r from each of its local facets at
-        the last exchange (r the largest pair radius), and each of the two has moved less than r
-        since (``_drifted``, checked at every step): they are farther apart than any pair radius."""
+        the last exchange (r the largest pair radius), and each of the two has drifted less than
+        r since (``prepare`` exchanges beyond r - s/2 at a list build, s the largest skin, and a
+        valid list's facets are within s/2 of where it was built): they are farther apart than
+        any pair radius."""
         comm, d = self.comm, self.d
         local = self._facets
         nl = len(local)
@@ -607,7 +613,7 @@ class PairContact:
             vc = (self._R @ vp).reshape(-1, self.d)
             step = dt * vc
             stale = stale or self._moved(uc + step)
-        drifted = self.comm.size > 1 and (self._drifted(uc) or (moving and self._drifted(uc + step)))
+        drifted = self._drifted(uc, self._exchange_drift) or (moving and self._drifted(uc + step, self._exchange_drift))
         flags = np.array([stale, drifted], dtype=np.int32)
         self.comm.Allreduce(MPI.IN_PLACE, flags, op=MPI.MAX)
         if flags.any():
@@ -663,13 +669,15 @@ class PairContact:
         more than half its skin since the last list build (a pair not listed might then touch)."""
         return bool((self._motion_ratios(uc) > 1.0).any())
 
-    def _drifted(self, uc: np.ndarray) -> bool:
+    def _drifted(self, uc: np.ndarray, limit: float) -> bool:
         """Whether a local facet with free displacements ``uc`` (those of the known facets) has
-        moved more than a third of the exchange radius since the last exchange (none yet: True)."""
+        moved more than ``limit`` since the last exchange (none yet: True); never on one process."""
+        if self.comm.size == 1:
+            return False
         if self._exchanged is None:
             return True
         moved = uc[: len(self._exchanged)] - self._exchanged
-        return bool((np.einsum("ni,ni->n", moved, moved) > (self.exchange_radius / 3.0) ** 2).any())
+        return bool((np.einsum("ni,ni->n", moved, moved) > limit**2).any())
 
     def _motion_ratios(self, uc: np.ndarray) -> np.ndarray:
         """(|motion since the last list build| / (half the skin))^2 of each known facet at free
