@@ -453,7 +453,7 @@ class PairContact:
         own = x[: self.num_own]
         summary = np.empty((1 + _SUMMARY_BOXES, 2 * d))
         summary[:] = np.concatenate([np.full(d, np.inf), np.full(d, -np.inf)])  # empty boxes
-        summary[0] = _box([own], d)
+        summary[0] = _box(own)
         perm, starts = self._groups
         if len(perm):
             y = x[perm]
@@ -492,7 +492,7 @@ class PairContact:
         if len(there):
             # the local facets near the new ones' box only: the rest are farther than R from all
             X = x[np.all((x >= there.min(axis=0) - r) & (x <= there.max(axis=0) + r), axis=1)]
-            near = _near(X, [there], r) if len(X) else np.zeros(len(there), dtype=bool)
+            near = _near(X, there, r) if len(X) else np.zeros(len(there), dtype=bool)
             ghosts, uc_ghosts = ghosts.take(np.flatnonzero(near)), uc_ghosts[near]
         return ghosts, uc_ghosts
 
@@ -588,9 +588,10 @@ class PairContact:
         """Make the Verlet list valid for the states u + tau v, 0 <= tau <= dt (u alone without
         v): if a candidate facet known to some process would move more than half its skin from
         where it was at that process's last build, a round of the lists at u (``_build``), which
-        rebuilds the list of that process; if a local facet would drift more than a third of
-        the exchange radius since the last exchange (``_drifted``), the round exchanges facets
-        between the processes first, and those that receive a facet new to them rebuild too.
+        rebuilds the list of that process; if a local facet would drift more than r - s/2 since
+        the last exchange (``_drifted``; r the largest pair radius, s the largest skin), the
+        round exchanges facets between the processes first, and those that receive a facet new
+        to them rebuild too.
         The free facet displacements are affine in tau, so checking both ends covers the whole
         flight. ``MEMM`` calls this before every
         step's force integral, whatever the quadrature, and at ``initialise``; call it before
@@ -1149,21 +1150,19 @@ def _bisection(x: np.ndarray, k: int) -> tuple[np.ndarray, np.ndarray]:
     return perm, np.cumsum([0] + [len(g) for g in groups[:-1]]).astype(np.int64)
 
 
-def _box(places: list[np.ndarray], d: int) -> np.ndarray:
-    """The bounding box [min, max] (2 d) of the points of ``places`` (arrays (n, d)); empty
-    (inf, -inf) without points. Column by column: numpy 1.24 reduces an (n, d) array along its
-    first axis ten times slower."""
-    lo = [min((y[:, k].min(initial=np.inf) for y in places), default=np.inf) for k in range(d)]
-    hi = [max((y[:, k].max(initial=-np.inf) for y in places), default=-np.inf) for k in range(d)]
-    return np.array(lo + hi)
+def _box(y: np.ndarray) -> np.ndarray:
+    """The bounding box [min, max] (2 d) of the points y (n, d); empty (inf, -inf) without
+    points. Column by column: numpy 1.24 reduces an (n, d) array along its first axis ten times
+    slower."""
+    return np.array([y[:, k].min(initial=np.inf) for k in range(y.shape[1])]
+                    + [y[:, k].max(initial=-np.inf) for k in range(y.shape[1])])
 
 
-def _near(x: np.ndarray, places: list[np.ndarray], r: float) -> np.ndarray:
-    """Whether each point is within r of a point of ``x`` at one of its ``places`` (one array
-    of points per place, rows alike)."""
+def _near(x: np.ndarray, y: np.ndarray, r: float) -> np.ndarray:
+    """Whether each point of y is within r of a point of x."""
     tree = scipy.spatial.cKDTree(x, balanced_tree=False, compact_nodes=False)  # built once, queried once
     bound = np.nextafter(r, np.inf)  # the query keeps distances < bound
-    return np.logical_or.reduce([np.isfinite(tree.query(y, distance_upper_bound=bound)[0]) for y in places])
+    return np.isfinite(tree.query(y, distance_upper_bound=bound)[0])
 
 
 def _reach(F: _Facets) -> np.ndarray:

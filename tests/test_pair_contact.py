@@ -1185,10 +1185,8 @@ def test_bisection_groups_nearby_facets_for_the_list_round_summaries():
     sizes = np.diff(np.append(starts, 1000))
     assert sizes.min() >= 62 and sizes.max() <= 63
     for group in np.split(perm, starts[1:]):
-        lo, hi = _box([x[group]], 2)[:2], _box([x[group]], 2)[2:]
-        assert np.all(x[group] >= lo) and np.all(x[group] <= hi)
-        assert np.linalg.norm(hi - lo) < 0.5  # an arc of about 1/16 of the circle (chord 0.39)
-    assert np.array_equal(_box([x[:10], x[500:510]], 2), np.concatenate([np.minimum(x[:10].min(0), x[500:510].min(0)),
-                                                                         np.maximum(x[:10].max(0), x[500:510].max(0))]))
-    assert np.array_equal(_box([np.zeros((0, 3))], 3), [np.inf] * 3 + [-np.inf] * 3)
+        box = _box(x[group])
+        assert np.array_equal(box, np.concatenate([x[group].min(axis=0), x[group].max(axis=0)]))
+        assert np.linalg.norm(box[2:] - box[:2]) < 0.5  # an arc of about 1/16 of the circle (chord 0.39)
+    assert np.array_equal(_box(np.zeros((0, 3))), [np.inf] * 3 + [-np.inf] * 3)
     assert len(_bisection(np.zeros((0, 2)), 16)[0]) == 0 and len(_bisection(x[:3], 16)[1]) == 3
