@@ -1108,9 +1108,10 @@ class PairContact:
     def restore_state(self, state: Mapping[str, np.ndarray] | None) -> None:
         """The list is rebuilt at the next ``prepare``; the counters and the scheme B pairs are
         those of the same partition's ``checkpoint_state``, or start again (None: another
-        partition)."""
+        partition). The facets known stay those of the last exchange, and so does its
+        reference: the next ``prepare`` exchanges again if the restored displacements are
+        farther from it than any step may drift (a resumed run's model exchanged at u = 0)."""
         self._reference = np.full_like(self._reference, np.inf)
-        self._exchanged = None
         if state is not None:
             self._scheme_b_rule = np.asarray(state["scheme_b_rule"], dtype=np.int64)
             self.rebuilds, self.evaluations, self.exchanges = (int(x) for x in state["counters"])
