@@ -1091,11 +1091,12 @@ def test_a_list_round_rebuilds_only_the_lists_near_moving_facets():
 @pytest.mark.mpi
 def test_discs_that_travel_far_between_exchanges_move_as_on_one_process():
     """Three discs crossing the partition at 0.4 m/s, the outer ones towards the middle
-    one, every boundary a candidate: their facets drift farther than a third of the exchange
-    radius, so the processes exchange facets again in mid-run (and rebuild their lists from
-    the facets they know in between); the displacements equal those of one process to rounding
-    through the impacts, so no exchange missed a facet that came near. (Without ``_drifted``
-    the first exchange would stand and the impacts would be missed.)"""
+    one, every boundary a candidate: their facets drift farther than r - s/2 (r the largest
+    pair radius, s the largest skin), so the processes exchange facets again in mid-run (and
+    rebuild their lists from the facets they know in between); the displacements equal those
+    of one process to rounding through the impacts, so no exchange missed a facet that came
+    near. (Without ``_drifted`` the first exchange would stand and the impacts would be
+    missed.)"""
     centres = [(0.14, 0.0), (0.6, 0.03), (1.06, 0.0)]  # gaps of 0.26 m, wider than the exchange radius
 
     def run(comm):
