@@ -263,7 +263,7 @@ class PairContact:
         # its own; its rounds in between rebuild its list from the facets it knows, alone.
         self.exchange_radius = 3.0 * self.radius
         self._exchange_drift = self.radius - 0.5 * self.comm.allreduce(float(skins.max(initial=0.0)), op=MPI.MAX)
-        self._exchanged = None  # the local facets' free displacements at the last exchange
+        self._exchanged = None  # the local facets' free displacements at the last exchange (``_build``)
         self._gauss = _gauss_legendre(d)
 
         # The body pairs (i < j) whose force is an output: both bodies hold candidate facets.
@@ -353,8 +353,7 @@ class PairContact:
         r since (``prepare`` exchanges beyond r - s/2 at a list build, s the largest skin, and a
         valid list's facets are within s/2 of where it was built): they are farther apart than
         any pair radius."""
-        comm, d = self.comm, self.d
-        local = self._facets
+        comm, local = self.comm, self._facets
         nl = len(local)
         if not exchange:
             if stale:  # the same known facets, patch and reconstructions: the list only
@@ -362,8 +361,7 @@ class PairContact:
             return
         self._exchanged = uc[:nl].copy()
         self.exchanges += comm.size > 1
-        ghosts, uc_ghosts = self._exchange(uc[:nl]) if comm.size > 1 else (local.take(np.empty(0, dtype=np.int64)),
-                                                                          np.zeros((0, d)))
+        ghosts, uc_ghosts = self._exchange(uc[:nl])  # none on one process
         if not stale and np.isin(ghosts.key, self.facets_all.key[nl:]).all():
             # nothing new near this process: its list stands, and so do its scatters' dofs
             self._remake_scatters(self.scatter.dofs, self.facets_all)
@@ -672,11 +670,9 @@ class PairContact:
 
     def _drifted(self, uc: np.ndarray, limit: float) -> bool:
         """Whether a local facet with free displacements ``uc`` (those of the known facets) has
-        moved more than ``limit`` since the last exchange (none yet: True); never on one process."""
+        moved more than ``limit`` since the last exchange; never on one process."""
         if self.comm.size == 1:
             return False
-        if self._exchanged is None:
-            return True
         moved = uc[: len(self._exchanged)] - self._exchanged
         return bool((np.einsum("ni,ni->n", moved, moved) > limit**2).any())
 
