@@ -33,8 +33,14 @@ ffibuilder.cdef(
     void dem_overlap(int64_t n, int32_t dim, const int64_t *p, const double *XA, const double *mA,
                      const double *nuA, const double *sizeA, const double *XB, const double *mB,
                      const double *nuB, const double *sizeB, const double *s, double *w, double *dw);
+    void dem_csr_apply(int64_t n_rows, const int32_t *ptr, const int32_t *idx, const double *val, const double *x,
+                       const double *lift, double *out);
+    int64_t dem_pair_worst_motion(int64_t n, int32_t d, const double *uc, const double *vc, double tau,
+                                  const double *reference, const double *half_skin2, double *ratio);
+    void dem_pair_separations(int64_t n, int32_t d, const double *XA, const double *mA, const double *XB,
+                              const double *mB, double margin, double *out);
     void dem_pair_screen(int64_t n_pairs, int32_t d, const int64_t *i, const int64_t *j, const double *n,
-                         const double *t, const double *d0, const double *XA, const double *XB,
+                         const double *t, const double *d0, const double *sep, const double *mA, const double *mB,
                          const double *uc, const double *vc, double dt, int8_t *out);
     void dem_piecewise_midpoints(int64_t n_times, const int64_t *rows, const double *times, int64_t n, int64_t k,
                                  double dt, int64_t *counts, double *points, double *mid, double *length);
@@ -58,7 +64,7 @@ ffibuilder.cdef(
                                     const double *up, const double *vp, int32_t *slot, double *facet_force,
                                     double *result);
     int64_t dem_pair_state(int64_t n_pairs, int32_t d, const int64_t *i, const int64_t *j, const double *normal,
-                           const double *t, const double *d0, const double *XA, const double *mA, const double *nuA,
+                           const double *t, const double *d0, const double *sep, const double *XA, const double *mA, const double *nuA,
                            const double *sizeA, const double *XB, const double *mB, const double *nuB,
                            const double *sizeB, const double *uc, const int32_t *z_ptr, const int32_t *z_idx,
                            const double *z_val, const int32_t *q_ptr, const int32_t *q_idx, const double *q_val,

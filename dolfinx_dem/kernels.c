@@ -497,47 +497,100 @@ static void overlap_own(int64_t n, int32_t d, const int64_t *restrict p, const i
   }
 }
 
-/* Bounding boxes (see dem_overlap; dim components) of A and B + s0 + tau s1 overlap (open sets)
- * for some tau in [0, dt]. */
-static int32_t boxes_meet(int32_t nv, int32_t dim, const double *XA, const double *XB,
-                          const double *s0, const double *s1, double dt)
+/* out = R x + lift (lift may be NULL) for the CSR matrix R (n_rows rows): each row's sum in the
+ * order of its entries (as scipy's product), then the lift added. The free facet displacements
+ * of pair_contact.PairContact. */
+void dem_csr_apply(int64_t n_rows, const int32_t *restrict ptr, const int32_t *restrict idx,
+                   const double *restrict val, const double *restrict x, const double *restrict lift,
+                   double *restrict out)
 {
-  double la[2], ha[2], lb[2], hb[2];
-  box(nv, dim, XA, la, ha);
-  box(nv, dim, XB, lb, hb);
-  double start = 0.0, stop = dt;
-  for (int32_t c = 0; c < dim; ++c)
+  for (int64_t r = 0; r < n_rows; ++r)
   {
-    /* on axis c the boxes overlap while lo + tau rate < 0 < hi + tau rate */
-    const double lo = lb[c] - ha[c] + s0[c], hi = hb[c] - la[c] + s0[c];
-    const double rate = s1[c];
-    if (rate > 0)
-    {
-      const double a = -lo / rate, b = hi / -rate;
-      stop = a < stop ? a : stop;
-      start = b > start ? b : start;
-    }
-    else if (rate < 0)
-    {
-      const double a = -lo / rate, b = hi / -rate;
-      start = a > start ? a : start;
-      stop = b < stop ? b : stop;
-    }
-    else if (lo >= 0 || hi <= 0)
-      start = INFINITY;
+    double sum = 0.0;
+    for (int32_t e = ptr[r]; e < ptr[r + 1]; ++e)
+      sum += val[e] * x[idx[e]];
+    out[r] = lift ? sum + lift[r] : sum;
   }
-  return start < stop;
+}
+
+/* The facet that moved farthest since the list was built, relative to half its skin, at the free
+ * displacements uc + tau vc (n facets x d; vc NULL: uc): the k maximising |x_k - reference_k|^2 /
+ * half_skin2_k (returned; -1 if n = 0) and that ratio (*ratio; 0 if n = 0). */
+int64_t dem_pair_worst_motion(int64_t n, int32_t d, const double *restrict uc, const double *restrict vc, double tau,
+                              const double *restrict reference, const double *restrict half_skin2,
+                              double *restrict ratio)
+{
+  int64_t worst = -1;
+  double largest = 0.0;
+  for (int64_t k = 0; k < n; ++k)
+  {
+    double moved2 = 0.0;
+    for (int32_t c = 0; c < d; ++c)
+    {
+      const double x = vc ? uc[k * d + c] + tau * vc[k * d + c] : uc[k * d + c];
+      moved2 += (x - reference[k * d + c]) * (x - reference[k * d + c]);
+    }
+    const double r = moved2 / half_skin2[k];
+    if (worst < 0 || r > largest)
+    {
+      worst = k;
+      largest = r;
+    }
+  }
+  *ratio = largest;
+  return worst;
+}
+
+/* The separations of dem_pair_screen for n pairs of simplices A, B (d vertices of dim = d - 1
+ * components each, face k from vertex k, outward face normals mA, mB unnormalised): out (n x 2 d)
+ * = for each face k of A, then of B, min over the other's vertices Y_b of m_k . (Y_b - X_k),
+ * less margin |m_k| times the pair's size (the largest |coordinate| of its vertices). */
+void dem_pair_separations(int64_t n, int32_t d, const double *restrict XA, const double *restrict mA,
+                          const double *restrict XB, const double *restrict mB, double margin,
+                          double *restrict out)
+{
+  const int32_t dim = d - 1, stride = d * dim;
+  for (int64_t p = 0; p < n; ++p)
+  {
+    double size = 0.0;
+    for (int32_t k = 0; k < stride; ++k)
+      size = fmax(size, fmax(fabs(XA[p * stride + k]), fabs(XB[p * stride + k])));
+    for (int32_t side = 0; side < 2; ++side)
+    {
+      const double *X = (side ? XB : XA) + p * stride, *m = (side ? mB : mA) + p * stride;
+      const double *Y = (side ? XA : XB) + p * stride;
+      for (int32_t k = 0; k < d; ++k)
+      {
+        double low = INFINITY, norm2 = 0.0;
+        for (int32_t b = 0; b < d; ++b)
+        {
+          double h = 0.0;
+          for (int32_t c = 0; c < dim; ++c)
+            h += m[k * dim + c] * (Y[b * dim + c] - X[k * dim + c]);
+          low = h < low ? h : low;
+        }
+        for (int32_t c = 0; c < dim; ++c)
+          norm2 += m[k * dim + c] * m[k * dim + c];
+        out[p * 2 * d + side * d + k] = low - margin * sqrt(norm2) * size;
+      }
+    }
+  }
 }
 
 /* The pairs p of facets (i[p], j[p]) (d components, d = 2 or 3) whose c_p = w_p g_p^- may not
  * vanish for the free facet displacements uc + tau vc, 0 <= tau <= dt (uc, vc: n_facets x d):
- * the gap g = d0 + (u_j - u_i) . n negative at an end, and the bounding boxes of the projected
- * simplices XA and XB + t (u_j - u_i) (t: d - 1 rows of d) overlapping at some tau (open sets).
- * Without vc (NULL): g < 0 at uc and boxes not apart (as in dem_overlap). out[p] = 1 or 0. */
+ * the gap g = d0 + (u_j - u_i) . n negative at an end, and the projected simplices A and B +
+ * s(tau), s = t (u_j - u_i) (t: d - 1 rows of d), not separated by the line of a face at some
+ * tau. The faces' outward normals mA, mB (d per simplex, dim = d - 1 components) are the
+ * separating axes of two simplices in the plane (the line in 2D): B lies beyond A's face k while
+ * sep[k] + mA_k . s > 0, A beyond B's face k while sep[d + k] - mB_k . s > 0 (sep: d0's 2 d per
+ * pair, pair_contact._separations: the smallest distance of the other's vertices beyond each
+ * face at s = 0, less a margin), each affine in tau along the flight. Without vc (NULL): at uc.
+ * out[p] = 1 or 0. */
 void dem_pair_screen(int64_t n_pairs, int32_t d, const int64_t *restrict i, const int64_t *restrict j,
                      const double *restrict n, const double *restrict t, const double *restrict d0,
-                     const double *restrict XA, const double *restrict XB, const double *restrict uc,
-                     const double *restrict vc, double dt, int8_t *restrict out)
+                     const double *restrict sep, const double *restrict mA, const double *restrict mB,
+                     const double *restrict uc, const double *restrict vc, double dt, int8_t *restrict out)
 {
   const int32_t dim = d - 1, stride = d * dim;
   for (int64_t p = 0; p < n_pairs; ++p)
@@ -570,16 +623,46 @@ void dem_pair_screen(int64_t n_pairs, int32_t d, const int64_t *restrict i, cons
         s1[c] += t[(p * dim + c) * d + k] * dv[k];
       }
     }
-    if (vc)
-      out[p] = boxes_meet(d, dim, XA + p * stride, XB + p * stride, s0, s1, dt);
-    else
+    /* the separations h0 + tau h1 along the flight (span = dt; 0 without one): a pair is out if
+     * one stays non-negative at both ends (affine: all along), in if all are negative at an end,
+     * else if they are all negative at some time between (an interval: rarely computed) */
+    const double span = vc ? dt : 0.0;
+    double h0[6], h1[6];
+    int32_t apart = 0, in0 = 1, in1 = 1;
+    for (int32_t axis = 0; axis < 2 * d; ++axis)
     {
-      double Y[6];
-      for (int32_t k = 0; k < d; ++k)
-        for (int32_t c = 0; c < dim; ++c)
-          Y[k * dim + c] = XB[p * stride + k * dim + c] + s0[c];
-      out[p] = !boxes_apart(d, dim, XA + p * stride, Y);
+      const double *m = axis < d ? mA + p * stride + axis * dim : mB + p * stride + (axis - d) * dim;
+      const double sign = axis < d ? 1.0 : -1.0;
+      double a = 0.0, b = 0.0;
+      for (int32_t c = 0; c < dim; ++c)
+      {
+        a += m[c] * s0[c];
+        b += m[c] * s1[c];
+      }
+      h0[axis] = sep[p * 2 * d + axis] + sign * a;
+      h1[axis] = sign * b;
+      const double end = h0[axis] + span * h1[axis];
+      apart = apart || (h0[axis] >= 0 && end >= 0);
+      in0 = in0 && h0[axis] < 0;
+      in1 = in1 && end < 0;
     }
+    if (apart || in0 || in1)
+    {
+      out[p] = !apart;
+      continue;
+    }
+    double start = 0.0, stop = span;
+    for (int32_t axis = 0; axis < 2 * d; ++axis)
+    {
+      if (h0[axis] < 0 && h0[axis] + span * h1[axis] < 0)
+        continue; /* negative all along */
+      const double root = -h0[axis] / h1[axis]; /* h1 != 0: the two ends differ in sign */
+      if (h1[axis] > 0)
+        stop = root < stop ? root : stop;
+      else
+        start = root > start ? root : start;
+    }
+    out[p] = start <= stop;
   }
 }
 
@@ -669,6 +752,11 @@ static void interpolate_own(int64_t n_rows, int32_t n_own, const int64_t *restri
   }
 }
 
+/* Relative margin of the edge tests of pair_events (of the edge length) and of the separating
+ * axes of dem_pair_screen (of the pair's projected size): far above rounding, far below any
+ * configuration that matters. */
+#define EDGE_MARGIN 1e-9
+
 static int64_t find_root(int64_t *parent, int64_t k)
 {
   while (parent[k] != k)
@@ -740,6 +828,32 @@ static void pair_events(int64_t n, int32_t d, const int64_t *restrict p, const i
       const double root = -v0[k] / rate[k];
       tau[e * width + k] = (v0[k] * v1 < 0 && root > 0 && root < dt) ? root : INFINITY;
     }
+    /* In 3D, w (and dw) has kinks only where a vertex crosses an edge of the other triangle, not
+     * its line beyond the edge (the pieces of the overlap area of two translated convex polygons
+     * are cut by the segments vertex - edge in the offset plane): the crossings outside the edge
+     * are dropped, by a margin (a spare event costs, a missing one breaks the exact integration). */
+    if (dim == 2)
+      for (int32_t a = 0; a < d; ++a)
+        for (int32_t k = 0; k < d; ++k)
+          for (int32_t side = 0; side < 2; ++side)
+          {
+            double *root = tau + e * width + 1 + side * d * d + a * d + k;
+            if (!isfinite(*root))
+              continue;
+            /* the vertex x and the edge from y0 to y1 at the root, in A's frame */
+            const double *x = side ? xb + a * dim : xa + a * dim, *y0 = side ? xa + k * dim : xb + k * dim;
+            const double *y1 = side ? xa + ((k + 1) % d) * dim : xb + ((k + 1) % d) * dim;
+            double along = 0.0, norm2 = 0.0;
+            for (int32_t c = 0; c < dim; ++c)
+            {
+              const double shift = s0[c] + *root * s1[c]; /* B's offset: on x (side 1) or on y (side 0) */
+              const double rel = side ? (x[c] + shift) - y0[c] : x[c] - (y0[c] + shift);
+              along += rel * (y1[c] - y0[c]);
+              norm2 += (y1[c] - y0[c]) * (y1[c] - y0[c]);
+            }
+            if (!(along > -EDGE_MARGIN * norm2 && along < (1.0 + EDGE_MARGIN) * norm2))
+              *root = INFINITY;
+          }
   }
 }
 
@@ -1143,7 +1257,7 @@ done:
 /* pair_contact._At, the contact state at one displacement, in one call: the listed pairs
  * (facets (i, j), normal, tangents t, reference gap d0, projected simplices XA.., XB..) whose
  * c_p = w_p g_p^- may not vanish at the free facet displacements uc (n_facets x d), in order
- * (closed: dem_pair_screen without a flight), their gap g, overlap w, dw/du_j (d per pair; see
+ * (closed: dem_pair_screen without a flight, separations sep), their gap g, overlap w, dw/du_j (d per pair; see
  * dem_overlap), c = w g^-, and, over the own rows their z_p touch (Z^T: z_ptr, z_idx, z_val),
  * a = Q u + q (Q: q_ptr, q_idx, q_val on the patch values up), delta = Z c and mu_p = z_p . (a +
  * delta); energy[0], energy[1] += the sums of a delta + delta^2 / 2 over the touched elastic rows
@@ -1152,7 +1266,7 @@ done:
  * n_closed, or -1 if memory ran out. */
 int64_t dem_pair_state(int64_t n_pairs, int32_t d, const int64_t *restrict i, const int64_t *restrict j,
                        const double *restrict normal, const double *restrict t, const double *restrict d0,
-                       const double *restrict XA, const double *restrict mA, const double *restrict nuA,
+                       const double *restrict sep, const double *restrict XA, const double *restrict mA, const double *restrict nuA,
                        const double *restrict sizeA, const double *restrict XB, const double *restrict mB,
                        const double *restrict nuB, const double *restrict sizeB, const double *restrict uc,
                        const int32_t *restrict z_ptr, const int32_t *restrict z_idx, const double *restrict z_val,
@@ -1167,7 +1281,7 @@ int64_t dem_pair_state(int64_t n_pairs, int32_t d, const int64_t *restrict i, co
   double *a = NULL, *delta = NULL;
   if (!screen)
     goto done;
-  dem_pair_screen(n_pairs, d, i, j, normal, t, d0, XA, XB, uc, NULL, 0.0, screen);
+  dem_pair_screen(n_pairs, d, i, j, normal, t, d0, sep, mA, mB, uc, NULL, 0.0, screen);
   for (int64_t p = 0; p < n_pairs; ++p)
     if (screen[p])
     {

@@ -380,8 +380,9 @@ class PairContact:
         self.facets_all = F
         self._facet_bodies = np.ascontiguousarray(F.body, dtype=np.int64)  # for ``dem_pair_body_forces``
         self._R = R
+        self._Rc = _CSR(R)  # for the compiled products (``free_displacements``)
         self._RT = self._R.T  # CSC: its products sum in the order of R^T as CSR, without the copy
-        self._lift = F.lift
+        self._lift = np.ascontiguousarray(F.lift, dtype=np.float64).reshape(-1, self.d)
         self._known_reach = np.concatenate([self._local_reach, _reach(ghosts)])
         self._list(F, ucF)
 
@@ -426,10 +427,11 @@ class PairContact:
         # the facets projected on the plane normal to n, origin at f_i's barycentre; n . n_f >
         # |f| / (|f| + |f'|) for facing facets, so no projection degenerates
         project = lambda f: np.einsum("pkx,pax->pka", F.ends[f] - F.centre[i][:, None], t)  # noqa: E731
+        si, sj = _Simplices.of(project(i)), _Simplices.of(project(j))
         self.listed = _Pairs(
             i=i, j=j, n=n, t=t, e_i=e_i, e_j=e_j,
             d0=np.einsum("pi,pi->p", F.centre[j] - F.centre[i], n),
-            si=_Simplices.of(project(i)), sj=_Simplices.of(project(j)),
+            si=si, sj=sj, sep=_separations(si, sj),
             ZT=ZT, Q=Qp,
         )
         self._reference = ucF.copy()
@@ -609,10 +611,9 @@ class PairContact:
         uc, stale = at.uc, at.moved
         moving = v is not None and dt != 0.0
         if moving:
-            vc = (self._R @ vp).reshape(-1, self.d)
-            step = dt * vc
-            stale = stale or self._moved(uc + step)
-        drifted = self._drifted(uc, self._exchange_drift) or (moving and self._drifted(uc + step, self._exchange_drift))
+            vc = self._free_velocities(vp)
+            stale = stale or self._worst_motion(uc, vc, dt)[1] > 1.0
+        drifted = self._drifted(uc, vc if moving else None, dt)
         flags = np.array([stale, drifted], dtype=np.int32)
         self.comm.Allreduce(MPI.IN_PLACE, flags, op=MPI.MAX)
         if flags.any():
@@ -632,12 +633,10 @@ class PairContact:
                     "larger skin)")
             if moving:
                 if self._R is not R:
-                    uc, vc = self._at(up).uc, (self._R @ vp).reshape(-1, self.d)
-                    step = dt * vc
-                ratios = self._motion_ratios(uc + step)
-                k = int(np.argmax(ratios)) if len(ratios) else 0
-                worst = (float(ratios[k]), float(np.linalg.norm(step[k])),
-                         float(2.0 * np.sqrt(self._half_skin2[k]))) if len(ratios) else (0.0, 0.0, 0.0)
+                    uc, vc = self._at(up).uc, self._free_velocities(vp)
+                k, ratio = self._worst_motion(uc, vc, dt)
+                worst = (ratio, float(dt * np.linalg.norm(vc[k])), float(2.0 * np.sqrt(self._half_skin2[k]))) \
+                    if k >= 0 else (0.0, 0.0, 0.0)
                 ratio, motion, skin = self.comm.allreduce(worst, op=MPI.MAX)  # the worst facet's
                 if ratio > 1.0:
                     raise RuntimeError(
@@ -666,21 +665,26 @@ class PairContact:
     def _moved(self, uc: np.ndarray) -> bool:
         """Whether a facet known here (local or ghost) with free displacements ``uc`` has moved
         more than half its skin since the last list build (a pair not listed might then touch)."""
-        return bool((self._motion_ratios(uc) > 1.0).any())
+        return self._worst_motion(uc)[1] > 1.0
 
-    def _drifted(self, uc: np.ndarray, limit: float) -> bool:
-        """Whether a local facet with free displacements ``uc`` (those of the known facets) has
-        moved more than ``limit`` since the last exchange; never on one process."""
+    def _worst_motion(self, uc: np.ndarray, vc: np.ndarray | None = None, tau: float = 0.0) -> tuple[int, float]:
+        """The known facet that moved most since the last list build relative to half its skin,
+        at free displacements ``uc`` + ``tau`` ``vc``: its index (-1 if none) and (|motion| / (s/2))^2
+        (the compiled ``dem_pair_worst_motion``)."""
+        ratio = np.zeros(1)
+        k = lib.dem_pair_worst_motion(len(uc), self.d, pointer(uc), pointer(vc), float(tau), pointer(self._reference),
+                                      pointer(self._half_skin2), pointer(ratio))
+        return int(k), float(ratio[0])
+
+    def _drifted(self, uc: np.ndarray, vc: np.ndarray | None, dt: float) -> bool:
+        """Whether a local facet with free displacements ``uc`` (those of the known facets), or
+        ``uc`` + ``dt`` ``vc`` with ``vc``, has moved more than ``_exchange_drift`` since the last
+        exchange; never on one process."""
         if self.comm.size == 1:
             return False
-        moved = uc[: len(self._exchanged)] - self._exchanged
-        return bool((np.einsum("ni,ni->n", moved, moved) > limit**2).any())
-
-    def _motion_ratios(self, uc: np.ndarray) -> np.ndarray:
-        """(|motion since the last list build| / (half the skin))^2 of each known facet at free
-        displacements ``uc``."""
-        moved = uc - self._reference
-        return np.einsum("ni,ni->n", moved, moved) / self._half_skin2
+        ends = [uc] if vc is None else [uc, uc + dt * vc]
+        moved = [x[: len(self._exchanged)] - self._exchanged for x in ends]
+        return any(bool((np.einsum("ni,ni->n", m, m) > self._exchange_drift**2).any()) for m in moved)
 
     def motion_ratio(self, dp: np.ndarray) -> float:
         """The largest motion of a candidate facet's free reconstruction for the patch values
@@ -712,9 +716,17 @@ class PairContact:
         return last
 
     def free_displacements(self, up: np.ndarray) -> np.ndarray:
-        """Free reconstructions u_f of the known candidate facets (local, then ghosts), (n, d),
-        from patch values ``up``."""
-        return (self._R @ up).reshape(-1, self.d) + self._lift
+        """Free reconstructions u_f = R_f u + lift_f of the known candidate facets (local, then
+        ghosts), (n, d), from patch values ``up`` (the compiled ``dem_csr_apply``)."""
+        uc = np.empty((len(self._lift), self.d))
+        lib.dem_csr_apply(uc.size, *self._Rc.pointers, pointer(up), pointer(self._lift), pointer(uc))
+        return uc
+
+    def _free_velocities(self, vp: np.ndarray) -> np.ndarray:
+        """R_f v of the known candidate facets, (n, d), from patch values ``vp`` of a velocity."""
+        vc = np.empty((len(self._lift), self.d))
+        lib.dem_csr_apply(vc.size, *self._Rc.pointers, pointer(vp), pointer(None), pointer(vc))
+        return vc
 
     def _pair_displacements(self, up: np.ndarray):
         uc = self.free_displacements(up)
@@ -744,7 +756,8 @@ class PairContact:
         L = self.listed
         out = np.empty(len(L), dtype=np.int8)
         P = L.pointers
-        lib.dem_pair_screen(len(L), self.d, P["i"], P["j"], P["n"], P["t"], P["d0"], L.si.pointers[0], L.sj.pointers[0],
+        lib.dem_pair_screen(len(L), self.d, P["i"], P["j"], P["n"], P["t"], P["d0"], P["sep"], L.si.pointers[1],
+                            L.sj.pointers[1],
                             pointer(uc), pointer(vc), float(dt), pointer(out))
         return np.flatnonzero(out)
 
@@ -1220,6 +1233,21 @@ class _Simplices:
         return tuple(pointer(getattr(self, f)) for f in ("X", "m", "nu", "size"))
 
 
+def _separations(A: _Simplices, B: _Simplices) -> np.ndarray:
+    """The separations of the compiled screen ``dem_pair_screen``, (P, 2d) (the compiled
+    ``dem_pair_separations``): for each face k of A, then of B, how far the other simplex's
+    nearest vertex lies beyond the face's line (times |m_k|) at zero offset, min_b m_k . (Y_b - X_k)
+    and min_a m'_k . (X_a - Y_k). At offset s, A and B (moved by s) are separated by that line
+    while the first plus m_k . s, or the second minus m'_k . s, is positive: the face normals are
+    the separating axes of two simplices in the plane, so a pair with none positive overlaps. Less
+    a margin of 1e-9 |m_k| times the pair's size, far above rounding: the screen keeps a pair that
+    touches within it (then clipped: its w may be 0), and drops only pairs whose overlap is 0."""
+    out = np.empty((len(A.X), 2 * A.X.shape[1]))
+    lib.dem_pair_separations(len(A.X), A.X.shape[1], A.pointers[0], A.pointers[1], B.pointers[0], B.pointers[1],
+                             1e-9, pointer(out))
+    return out
+
+
 def _dot(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """sum_k a[..., k] b[..., k] over the few components k of the last axis (term by term:
     faster than a reduction over a short axis, and m . e exactly 0 when m is e turned)."""
@@ -1302,6 +1330,7 @@ class _Pairs:
     d0: np.ndarray
     si: _Simplices
     sj: _Simplices
+    sep: np.ndarray
     ZT: scipy.sparse.csr_matrix
     Q: scipy.sparse.csr_matrix
 
@@ -1322,8 +1351,8 @@ class _Pairs:
 
     @functools.cached_property
     def pointers(self) -> dict:
-        """C pointers to i, j, n, t, d0, e_i, e_j for the kernels (made once)."""
-        return {name: pointer(getattr(self, name)) for name in ("i", "j", "n", "t", "d0", "e_i", "e_j")}
+        """C pointers to i, j, n, t, d0, e_i, e_j, sep for the kernels (made once)."""
+        return {name: pointer(getattr(self, name)) for name in ("i", "j", "n", "t", "d0", "e_i", "e_j", "sep")}
 
     @functools.cached_property
     def z(self) -> _CSR:
@@ -1373,7 +1402,7 @@ class _At:
         closed, g, w, c, mu = np.empty(n, dtype=np.int64), np.empty(n), np.empty(n), np.empty(n), np.empty(n)
         dw, energy = np.empty((n, d)), np.zeros(2)
         P = L.pointers
-        k = lib.dem_pair_state(n, d, P["i"], P["j"], P["n"], P["t"], P["d0"], *L.si.pointers, *L.sj.pointers,
+        k = lib.dem_pair_state(n, d, P["i"], P["j"], P["n"], P["t"], P["d0"], P["sep"], *L.si.pointers, *L.sj.pointers,
                                pointer(self.uc), *L.z.pointers, *L.q.pointers, pointer(contact._q), pointer(self.up),
                                contact._elastic_row_pointer, pointer(L.slot), pointer(closed), pointer(g), pointer(w),
                                pointer(dw), pointer(c), pointer(mu), pointer(energy))
