@@ -41,7 +41,7 @@ ffibuilder.cdef(
                               const double *mB, double margin, double *out);
     void dem_pair_screen(int64_t n_pairs, int32_t d, const int64_t *i, const int64_t *j, const double *n,
                          const double *t, const double *d0, const double *sep, const double *mA, const double *mB,
-                         const double *uc, const double *vc, double dt, int8_t *out);
+                         const double *uc, const double *vc, double dt, double slack, int8_t *out);
     void dem_piecewise_midpoints(int64_t n_times, const int64_t *rows, const double *times, int64_t n, int64_t k,
                                  double dt, int64_t *counts, double *points, double *mid, double *length);
     void dem_pair_facet_corrections(int64_t n, int32_t d, const int64_t *p, const int64_t *i, const int64_t *j,
@@ -63,7 +63,8 @@ ffibuilder.cdef(
                                     const int32_t *q_ptr, const int32_t *q_idx, const double *q_val, const double *q,
                                     const double *up, const double *vp, int32_t *slot, double *facet_force,
                                     double *result);
-    int64_t dem_pair_state(int64_t n_pairs, int32_t d, const int64_t *i, const int64_t *j, const double *normal,
+    int64_t dem_pair_state(int64_t n_pairs, int64_t n_candidates, const int64_t *candidates, int32_t d,
+                           const int64_t *i, const int64_t *j, const double *normal,
                            const double *t, const double *d0, const double *sep, const double *XA, const double *mA, const double *nuA,
                            const double *sizeA, const double *XB, const double *mB, const double *nuB,
                            const double *sizeB, const double *uc, const int32_t *z_ptr, const int32_t *z_idx,

@@ -515,7 +515,7 @@ void dem_csr_apply(int64_t n_rows, const int32_t *restrict ptr, const int32_t *r
 
 /* The facet that moved farthest since the list was built, relative to half its skin, at the free
  * displacements uc + tau vc (n facets x d; vc NULL: uc): the k maximising |x_k - reference_k|^2 /
- * half_skin2_k (returned; -1 if n = 0) and that ratio (*ratio; 0 if n = 0). */
+ * half_skin2_k (half_skin2 NULL: 1) (returned; -1 if n = 0) and that ratio (*ratio; 0 if n = 0). */
 int64_t dem_pair_worst_motion(int64_t n, int32_t d, const double *restrict uc, const double *restrict vc, double tau,
                               const double *restrict reference, const double *restrict half_skin2,
                               double *restrict ratio)
@@ -530,7 +530,7 @@ int64_t dem_pair_worst_motion(int64_t n, int32_t d, const double *restrict uc, c
       const double x = vc ? uc[k * d + c] + tau * vc[k * d + c] : uc[k * d + c];
       moved2 += (x - reference[k * d + c]) * (x - reference[k * d + c]);
     }
-    const double r = moved2 / half_skin2[k];
+    const double r = half_skin2 ? moved2 / half_skin2[k] : moved2;
     if (worst < 0 || r > largest)
     {
       worst = k;
@@ -583,14 +583,18 @@ void dem_pair_separations(int64_t n, int32_t d, const double *restrict XA, const
  * s(tau), s = t (u_j - u_i) (t: d - 1 rows of d), not separated by the line of a face at some
  * tau. The faces' outward normals mA, mB (d per simplex, dim = d - 1 components) are the
  * separating axes of two simplices in the plane (the line in 2D): B lies beyond A's face k while
- * sep[k] + mA_k . s > 0, A beyond B's face k while sep[d + k] - mB_k . s > 0 (sep: d0's 2 d per
+ * sep[k] + mA_k . s > 0, A beyond B's face k while sep[d + k] - mB_k . s > 0 (sep: 2 d per
  * pair, pair_contact._separations: the smallest distance of the other's vertices beyond each
- * face at s = 0, less a margin), each affine in tau along the flight. Without vc (NULL): at uc.
- * out[p] = 1 or 0. */
+ * face at s = 0 times |m_k|, less a margin), each affine in tau along the flight. out[p] bit 0:
+ * such a pair. Without vc (NULL): at uc, bit 0 only. With vc, bit 1: the pair may be screened in
+ * (bit 0 of a screen without vc) at a displacement whose facets lie within slack / 2 of the
+ * flight's end, uc + dt vc: its gap there below slack, and no separation there above slack
+ * |m_k| (pair_contact._At screens those pairs only). */
 void dem_pair_screen(int64_t n_pairs, int32_t d, const int64_t *restrict i, const int64_t *restrict j,
                      const double *restrict n, const double *restrict t, const double *restrict d0,
                      const double *restrict sep, const double *restrict mA, const double *restrict mB,
-                     const double *restrict uc, const double *restrict vc, double dt, int8_t *restrict out)
+                     const double *restrict uc, const double *restrict vc, double dt, double slack,
+                     int8_t *restrict out)
 {
   const int32_t dim = d - 1, stride = d * dim;
   for (int64_t p = 0; p < n_pairs; ++p)
@@ -608,7 +612,8 @@ void dem_pair_screen(int64_t n_pairs, int32_t d, const int64_t *restrict i, cons
       g1 += (du[k] + dt * dv[k]) * n[p * d + k];
     }
     g1 = d0[p] + g1;
-    if (!(g0 < 0 || g1 < 0))
+    const int32_t closing = g0 < 0 || g1 < 0, near = vc && g1 < slack;
+    if (!closing && !near)
     {
       out[p] = 0;
       continue;
@@ -628,16 +633,17 @@ void dem_pair_screen(int64_t n_pairs, int32_t d, const int64_t *restrict i, cons
      * else if they are all negative at some time between (an interval: rarely computed) */
     const double span = vc ? dt : 0.0;
     double h0[6], h1[6];
-    int32_t apart = 0, in0 = 1, in1 = 1;
+    int32_t apart = 0, in0 = 1, in1 = 1, end_near = near;
     for (int32_t axis = 0; axis < 2 * d; ++axis)
     {
       const double *m = axis < d ? mA + p * stride + axis * dim : mB + p * stride + (axis - d) * dim;
       const double sign = axis < d ? 1.0 : -1.0;
-      double a = 0.0, b = 0.0;
+      double a = 0.0, b = 0.0, m2 = 0.0;
       for (int32_t c = 0; c < dim; ++c)
       {
         a += m[c] * s0[c];
         b += m[c] * s1[c];
+        m2 += m[c] * m[c];
       }
       h0[axis] = sep[p * 2 * d + axis] + sign * a;
       h1[axis] = sign * b;
@@ -645,24 +651,25 @@ void dem_pair_screen(int64_t n_pairs, int32_t d, const int64_t *restrict i, cons
       apart = apart || (h0[axis] >= 0 && end >= 0);
       in0 = in0 && h0[axis] < 0;
       in1 = in1 && end < 0;
+      end_near = end_near && (end < 0 || end * end < m2 * slack * slack);
     }
-    if (apart || in0 || in1)
+    int32_t touch = closing && !apart && (in0 || in1);
+    if (closing && !apart && !in0 && !in1)
     {
-      out[p] = !apart;
-      continue;
+      double start = 0.0, stop = span;
+      for (int32_t axis = 0; axis < 2 * d; ++axis)
+      {
+        if (h0[axis] < 0 && h0[axis] + span * h1[axis] < 0)
+          continue; /* negative all along */
+        const double root = -h0[axis] / h1[axis]; /* h1 != 0: the two ends differ in sign */
+        if (h1[axis] > 0)
+          stop = root < stop ? root : stop;
+        else
+          start = root > start ? root : start;
+      }
+      touch = start <= stop;
     }
-    double start = 0.0, stop = span;
-    for (int32_t axis = 0; axis < 2 * d; ++axis)
-    {
-      if (h0[axis] < 0 && h0[axis] + span * h1[axis] < 0)
-        continue; /* negative all along */
-      const double root = -h0[axis] / h1[axis]; /* h1 != 0: the two ends differ in sign */
-      if (h1[axis] > 0)
-        stop = root < stop ? root : stop;
-      else
-        start = root > start ? root : start;
-    }
-    out[p] = start <= stop;
+    out[p] = (int8_t)(touch | (end_near << 1));
   }
 }
 
@@ -1262,9 +1269,11 @@ done:
  * a = Q u + q (Q: q_ptr, q_idx, q_val on the patch values up), delta = Z c and mu_p = z_p . (a +
  * delta); energy[0], energy[1] += the sums of a delta + delta^2 / 2 over the touched elastic rows
  * (elastic[row] != 0) and the others, in the order the pairs first touch them. closed, g, w, c, mu: n_pairs,
- * dw: n_pairs d (the first n_closed written); slot as in dem_pair_force_integral. Returns
- * n_closed, or -1 if memory ran out. */
-int64_t dem_pair_state(int64_t n_pairs, int32_t d, const int64_t *restrict i, const int64_t *restrict j,
+ * dw: n_pairs d (the first n_closed written); slot as in dem_pair_force_integral. candidates
+ * (sorted, n_candidates; NULL: all pairs): the only pairs that may be closed (pair_contact._At:
+ * bit 1 of the last flight's screen). Returns n_closed, or -1 if memory ran out. */
+int64_t dem_pair_state(int64_t n_pairs, int64_t n_candidates, const int64_t *restrict candidates, int32_t d,
+                       const int64_t *restrict i, const int64_t *restrict j,
                        const double *restrict normal, const double *restrict t, const double *restrict d0,
                        const double *restrict sep, const double *restrict XA, const double *restrict mA, const double *restrict nuA,
                        const double *restrict sizeA, const double *restrict XB, const double *restrict mB,
@@ -1281,13 +1290,28 @@ int64_t dem_pair_state(int64_t n_pairs, int32_t d, const int64_t *restrict i, co
   double *a = NULL, *delta = NULL;
   if (!screen)
     goto done;
-  dem_pair_screen(n_pairs, d, i, j, normal, t, d0, sep, mA, mB, uc, NULL, 0.0, screen);
-  for (int64_t p = 0; p < n_pairs; ++p)
+  if (candidates)
+  {
+    const int32_t dim = d - 1, stride = d * dim;
+    for (int64_t k = 0; k < n_candidates; ++k)
+    {
+      const int64_t p = candidates[k];
+      dem_pair_screen(1, d, i + p, j + p, normal + p * d, t + p * dim * d, d0 + p, sep + p * 2 * d, mA + p * stride,
+                      mB + p * stride, uc, NULL, 0.0, 0.0, screen + p);
+    }
+  }
+  else
+    dem_pair_screen(n_pairs, d, i, j, normal, t, d0, sep, mA, mB, uc, NULL, 0.0, 0.0, screen);
+  const int64_t n_screened = candidates ? n_candidates : n_pairs;
+  for (int64_t k = 0; k < n_screened; ++k)
+  {
+    const int64_t p = candidates ? candidates[k] : k;
     if (screen[p])
     {
       closed[n++] = p;
       bound += z_ptr[p + 1] - z_ptr[p];
     }
+  }
   rows = alloc(bound, sizeof *rows);
   a = alloc(bound, sizeof *a);
   delta = calloc(bound > 0 ? bound : 1, sizeof *delta);

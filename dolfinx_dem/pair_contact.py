@@ -254,6 +254,9 @@ class PairContact:
         # reach of the broad phase's exchange between processes)
         self.skin = self.comm.allreduce(float(skins.min(initial=np.inf)), op=MPI.MIN)
         self.radius = self.comm.allreduce(float((2.0 * reach + skins).max(initial=0.0)), op=MPI.MAX)
+        # how far (relative gap, separations) the screen of a flight looks beyond its end for the
+        # pairs that may be closed there (``_end_candidates``): far above rounding
+        self._slack = 1e-9 * self.radius
         # A list round exchanges facets between processes only when a local facet has drifted
         # more than r - s/2 since the last exchange (r the largest pair radius, s the largest
         # skin: ``_drifted``), and then each process learns the other processes' facets within
@@ -285,6 +288,7 @@ class PairContact:
         self._facet_values = None  # the scatter of the facet corrections (outputs), made on first use
         self._last = None  # the _At of the last displacement evaluated (a step's end is the next one's start)
         self._flight = None  # (up, vp, dt, free facet velocities) of the flight ``prepare`` checked last
+        self._end = None  # (list, uc, vc, dt, candidates) of the last flight's screen (``_end_candidates``)
         self._build(self._facets.lift.copy())  # the free facet displacements at u = 0: R 0 + lift
         up = self.patch_values(zero)
         g, w = self._state(np.arange(len(self.listed)), *self._pair_displacements(up))[:2]
@@ -757,9 +761,22 @@ class PairContact:
         out = np.empty(len(L), dtype=np.int8)
         P = L.pointers
         lib.dem_pair_screen(len(L), self.d, P["i"], P["j"], P["n"], P["t"], P["d0"], P["sep"], L.si.pointers[1],
-                            L.sj.pointers[1],
-                            pointer(uc), pointer(vc), float(dt), pointer(out))
-        return np.flatnonzero(out)
+                            L.sj.pointers[1], pointer(uc), pointer(vc), float(dt), self._slack, pointer(out))
+        self._end = (L, uc, vc, float(dt), np.flatnonzero(out & 2))
+        return np.flatnonzero(out & 1)
+
+    def _end_candidates(self, uc: np.ndarray) -> np.ndarray | None:
+        """The only listed pairs that may be closed at free facet displacements ``uc`` (bit 1 of
+        the last flight's screen), if every facet lies within half the slack of that flight's end
+        (as at the step's end: uc = R u^{n+1} and the flight's end uc^n + dt vc differ by
+        rounding); None otherwise (then every pair is screened)."""
+        if self._end is None or self._end[0] is not self.listed:
+            return None
+        _, uc0, vc, dt, candidates = self._end
+        ratio = np.zeros(1)
+        lib.dem_pair_worst_motion(len(uc), self.d, pointer(uc0), pointer(vc), dt, pointer(uc), pointer(None),
+                                  pointer(ratio))
+        return candidates if ratio[0] <= (0.5 * self._slack)**2 else None
 
     def _gap(self, p, ui, uj):
         """Gap g of the pairs ``p`` (eq. (22), (30)) for their facets' free displacements ui, uj."""
@@ -1402,7 +1419,8 @@ class _At:
         closed, g, w, c, mu = np.empty(n, dtype=np.int64), np.empty(n), np.empty(n), np.empty(n), np.empty(n)
         dw, energy = np.empty((n, d)), np.zeros(2)
         P = L.pointers
-        k = lib.dem_pair_state(n, d, P["i"], P["j"], P["n"], P["t"], P["d0"], P["sep"], *L.si.pointers, *L.sj.pointers,
+        candidates = contact._end_candidates(self.uc)
+        k = lib.dem_pair_state(n, 0 if candidates is None else len(candidates), pointer(candidates), d, P["i"], P["j"], P["n"], P["t"], P["d0"], P["sep"], *L.si.pointers, *L.sj.pointers,
                                pointer(self.uc), *L.z.pointers, *L.q.pointers, pointer(contact._q), pointer(self.up),
                                contact._elastic_row_pointer, pointer(L.slot), pointer(closed), pointer(g), pointer(w),
                                pointer(dw), pointer(c), pointer(mu), pointer(energy))
