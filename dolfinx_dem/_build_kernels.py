@@ -61,7 +61,8 @@ ffibuilder.cdef(
                                     const double *vc, double dt, int32_t n_gauss, const double *xi, const double *wq,
                                     const int32_t *z_ptr, const int32_t *z_idx, const double *z_val,
                                     const int32_t *q_ptr, const int32_t *q_idx, const double *q_val, const double *q,
-                                    const double *up, const double *vp, int32_t *slot, double *facet_force,
+                                    const double *up, const double *vp, int32_t *slot, int64_t n_facet_rows,
+                                    const int32_t *r_ptr, const int32_t *r_idx, const double *r_val, int64_t n_patch,
                                     double *result);
     int64_t dem_pair_state(int64_t n_pairs, int64_t n_candidates, const int64_t *candidates, int32_t d,
                            const int64_t *i, const int64_t *j, const double *normal,

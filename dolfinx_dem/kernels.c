@@ -1038,8 +1038,10 @@ static void rows_apply(int64_t n_rows, const int32_t *restrict rows, const int32
  * XB..) along the flight uc + tau vc of the free facet displacements (n_facets x d), 0 <= tau
  * <= dt, the integrals of the contact force corrections (eq. (34), paper §4):
  *   result -= Q^T Z int c dtau            (the rows' term; result: patch values, accumulated),
- *   facet_force += int -mu dc/du_f dtau   (the pairs' term at the facets, n_facets x d; the
- *                                          caller applies R^T),
+ *   result += R^T int -mu dc/du_f dtau    (the pairs' term at the facets, n_facet_rows = n_facets
+ *                                          d, through the facets' reconstruction R: r_ptr, r_idx,
+ *                                          r_val, patch columns; summed as scipy's R.T @ f, then
+ *                                          added),
  * with c_p = w_p g_p^-, mu_p = z_p . (a + Z c) and a = Q u + q + tau Q v on the own rows the
  * z_p touch (Z^T: z_ptr, z_idx, z_val, one row per listed pair, columns the own rows; Q: q_ptr,
  * q_idx, q_val, own rows x patch dofs; up, vp: the patch values of u and v).
@@ -1065,8 +1067,9 @@ int64_t dem_pair_force_integral(int64_t n, int32_t d, const int64_t *restrict p,
                                 const int32_t *restrict z_idx, const double *restrict z_val,
                                 const int32_t *restrict q_ptr, const int32_t *restrict q_idx,
                                 const double *restrict q_val, const double *restrict q, const double *restrict up,
-                                const double *restrict vp, int32_t *restrict slot, double *restrict facet_force,
-                                double *restrict result)
+                                const double *restrict vp, int32_t *restrict slot, int64_t n_facet_rows,
+                                const int32_t *restrict r_ptr, const int32_t *restrict r_idx,
+                                const double *restrict r_val, int64_t n_patch, double *restrict result)
 {
   const int32_t n_tau = 1 + 2 * d * d, n_own = n_tau + 1;
   int64_t bound = 0, n_rows = 0, n_comp = 0, n_times = 0, k_max = 0, pieces = 0, stride = 0;
@@ -1084,9 +1087,11 @@ int64_t dem_pair_force_integral(int64_t n, int32_t d, const int64_t *restrict p,
   double *start_own = alloc(n * n_own, sizeof *start_own), *length_own = alloc(n * n_own, sizeof *length_own);
   double *w_own = alloc(n * n_own * n_gauss, sizeof *w_own), *dw_own = alloc(n * n_own * n_gauss * d, sizeof *dw_own);
   int64_t *entry = NULL;
+  double *facet_force = calloc(n_facet_rows > 0 ? n_facet_rows : 1, sizeof *facet_force);
+  double *pairs_term = calloc(n_patch > 0 ? n_patch : 1, sizeof *pairs_term);
   int64_t status = -1;
   if (!rows || !first || !parent || !label || !offsets || !a || !za || !tau || !zc || !time_rows ||
-      !times || !start_own || !length_own || !w_own || !dw_own || !g0 || !rate)
+      !times || !start_own || !length_own || !w_own || !dw_own || !g0 || !rate || !facet_force || !pairs_term)
     goto done;
 
   /* the own rows the pairs touch (slot: their numbers, by first appearance) and the components
@@ -1249,6 +1254,11 @@ int64_t dem_pair_force_integral(int64_t n, int32_t d, const int64_t *restrict p,
     }
   }
   dem_pair_facet_forces(n_nodes, d, entry, i, j, normal, mu, g, w, dw, facet_force);
+  for (int64_t r = 0; r < n_facet_rows; ++r)
+    for (int32_t e = r_ptr[r]; e < r_ptr[r + 1]; ++e)
+      pairs_term[r_idx[e]] += r_val[e] * facet_force[r];
+  for (int64_t k = 0; k < n_patch; ++k)
+    result[k] += pairs_term[k];
   status = pieces;
 
 done:
@@ -1257,7 +1267,8 @@ done:
   free(rows), free(first), free(parent), free(label), free(offsets), free(a), free(za), free(tau);
   free(zc), free(time_rows), free(counts), free(n_pieces), free(times), free(points), free(mid), free(length);
   free(nodes), free(weights), free(g), free(w), free(dw), free(c), free(mu), free(entry), free(work);
-  free(start_own), free(length_own), free(w_own), free(dw_own), free(g0), free(rate);
+  free(start_own), free(length_own), free(w_own), free(dw_own), free(g0), free(rate), free(facet_force);
+  free(pairs_term);
   return status;
 }
 

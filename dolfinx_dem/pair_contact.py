@@ -854,15 +854,14 @@ class PairContact:
             # touching pairs' z_p touch (a = Q u + q + tau Q v there: no sliced Q or Z) and the
             # pairs' term -int (z_p . (a + delta_a)) dc_p/du dtau at the facets.
             xi, wq = self._gauss
-            P, facet_force = L.pointers, np.zeros(len(self.facets_all) * self.d)
+            P = L.pointers
             pieces = lib.dem_pair_force_integral(
                 len(touching), self.d, pointer(touching), P["i"], P["j"], P["n"], P["t"], P["d0"], *L.si.pointers,
                 *L.sj.pointers, pointer(uc), pointer(vc), float(dt), len(xi), pointer(xi), pointer(wq),
                 *L.z.pointers, *L.q.pointers, pointer(self._q), pointer(up), pointer(vp), pointer(L.slot),
-                pointer(facet_force), pointer(result))
+                uc.size, *self._Rc.pointers, len(result), pointer(result))
             if pieces < 0:
                 raise MemoryError("contact between bodies: out of memory in the force integral of a step")
-            result += self._RT @ facet_force
         self.scatter.add(result, out)
         self.seconds += time.process_time() - start
         self.evaluations += len(self._gauss[0]) * pieces
