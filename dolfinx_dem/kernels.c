@@ -590,11 +590,11 @@ void dem_pair_separations(int64_t n, int32_t d, const double *restrict XA, const
  * (bit 0 of a screen without vc) at a displacement whose facets lie within slack / 2 of the
  * flight's end, uc + dt vc: its gap there below slack, and no separation there above slack
  * |m_k| (pair_contact._At screens those pairs only). */
-void dem_pair_screen(int64_t n_pairs, int32_t d, const int64_t *restrict i, const int64_t *restrict j,
-                     const double *restrict n, const double *restrict t, const double *restrict d0,
-                     const double *restrict sep, const double *restrict mA, const double *restrict mB,
-                     const double *restrict uc, const double *restrict vc, double dt, double slack,
-                     int8_t *restrict out)
+static inline __attribute__((always_inline)) void
+screen_pairs(int64_t n_pairs, const int32_t d, const int64_t *restrict i, const int64_t *restrict j,
+             const double *restrict n, const double *restrict t, const double *restrict d0,
+             const double *restrict sep, const double *restrict mA, const double *restrict mB,
+             const double *restrict uc, const double *restrict vc, double dt, double slack, int8_t *restrict out)
 {
   const int32_t dim = d - 1, stride = d * dim;
   for (int64_t p = 0; p < n_pairs; ++p)
@@ -671,6 +671,18 @@ void dem_pair_screen(int64_t n_pairs, int32_t d, const int64_t *restrict i, cons
     }
     out[p] = (int8_t)(touch | (end_near << 1));
   }
+}
+
+void dem_pair_screen(int64_t n_pairs, int32_t d, const int64_t *restrict i, const int64_t *restrict j,
+                     const double *restrict n, const double *restrict t, const double *restrict d0,
+                     const double *restrict sep, const double *restrict mA, const double *restrict mB,
+                     const double *restrict uc, const double *restrict vc, double dt, double slack,
+                     int8_t *restrict out)
+{
+  if (d == 3) /* a constant d: the loops unrolled */
+    screen_pairs(n_pairs, 3, i, j, n, t, d0, sep, mA, mB, uc, vc, dt, slack, out);
+  else
+    screen_pairs(n_pairs, 2, i, j, n, t, d0, sep, mA, mB, uc, vc, dt, slack, out);
 }
 
 /* patch.piecewise_midpoints: the times (n_times, each in (0, dt)) of rows ``rows`` (0 <= row < n)
