@@ -275,7 +275,7 @@ void dem_gram_abs_rowsums(int64_t first, int64_t n_out, const int32_t *restrict 
  * face normals m): the part [lower, lower + length] of the face inside O (the half-planes
  * m_k . (x - Y_k) <= 0, Liang-Barsky). With ties, a face lying on a face of O with the same
  * outward normal (mF: its own normal) is out. The same operations in the same order as numpy's. */
-static void clip_face(int32_t nv, int32_t dim, const int32_t *next, const double *X, int32_t f,
+static inline __attribute__((always_inline)) void clip_face(int32_t nv, int32_t dim, const int32_t *next, const double *X, int32_t f,
                       const double *mF, const double *Y, const double *m, int32_t ties,
                       double *lower, double *length)
 {
@@ -313,7 +313,7 @@ static void clip_face(int32_t nv, int32_t dim, const int32_t *next, const double
 }
 
 /* The smallest and largest coordinates (lo, hi: dim each) of nv points X of dim components. */
-static void box(int32_t nv, int32_t dim, const double *X, double *lo, double *hi)
+static inline __attribute__((always_inline)) void box(int32_t nv, int32_t dim, const double *X, double *lo, double *hi)
 {
   for (int32_t c = 0; c < dim; ++c)
   {
@@ -329,7 +329,7 @@ static void box(int32_t nv, int32_t dim, const double *X, double *lo, double *hi
 
 /* Whether the bounding boxes of the simplices X and Y are strictly apart (a gap on some axis):
  * then their intersection is empty. */
-static int32_t boxes_apart(int32_t nv, int32_t dim, const double *X, const double *Y)
+static inline __attribute__((always_inline)) int32_t boxes_apart(int32_t nv, int32_t dim, const double *X, const double *Y)
 {
   double lx[2], hx[2], ly[2], hy[2];
   box(nv, dim, X, lx, hx);
@@ -341,7 +341,7 @@ static int32_t boxes_apart(int32_t nv, int32_t dim, const double *X, const doubl
 }
 
 /* w = |A_q cap (B_q + s)| and dw/ds (dim components) of one simplex pair q; see dem_overlap. */
-static void overlap_one(int32_t dim, int64_t q, const double *XA, const double *mA, const double *nuA,
+static inline __attribute__((always_inline)) void overlap_one(int32_t dim, int64_t q, const double *XA, const double *mA, const double *nuA,
                         const double *sizeA, const double *XB, const double *mB, const double *nuB,
                         const double *sizeB, const double *s, double *w, double *dw)
 {
@@ -406,7 +406,7 @@ void dem_overlap(int64_t n, int32_t dim, const int64_t *restrict p, const double
 /* w and dw/du_j = t^T dw/ds (d components) of the simplex pair q (see dem_overlap) at the
  * relative displacement du = u_j - u_i (d components) of its facets: overlap_one at the
  * tangential offset s = t du (t: the pair's d - 1 tangent rows of d). */
-static void pair_overlap(int32_t d, int64_t q, const double *t, const double *du, const double *XA,
+static inline __attribute__((always_inline)) void pair_overlap(int32_t d, int64_t q, const double *t, const double *du, const double *XA,
                          const double *mA, const double *nuA, const double *sizeA, const double *XB,
                          const double *mB, const double *nuB, const double *sizeB, double *w, double *dw)
 {
@@ -435,7 +435,8 @@ static void pair_overlap(int32_t d, int64_t q, const double *t, const double *du
  * dw/du_j = t^T dw/ds (d components) at the tangential offset s = t (u_j - u_i)
  * (overlap_one); 0 on empty pieces and on those where the gap g0 + tau rate is not negative
  * (not clipped: nothing reads w there). t: the pairs' tangent bases (d - 1 rows of d). */
-static void overlap_own(int64_t n, int32_t d, const int64_t *restrict p, const int64_t *restrict i,
+static inline __attribute__((always_inline)) void
+overlap_own_d(int64_t n, const int32_t d, const int64_t *restrict p, const int64_t *restrict i,
                         const int64_t *restrict j, const double *restrict t, const double *restrict uc,
                         const double *restrict vc, int32_t n_tau, const double *restrict tau, double dt,
                         int32_t n_gauss, const double *restrict xi, const double *restrict XA,
@@ -495,6 +496,22 @@ static void overlap_own(int64_t n, int32_t d, const int64_t *restrict p, const i
       }
     }
   }
+}
+
+/* overlap_own with a constant d (its loops and clipping unrolled) */
+static void overlap_own(int64_t n, int32_t d, const int64_t *restrict p, const int64_t *restrict i,
+                        const int64_t *restrict j, const double *restrict t, const double *restrict uc,
+                        const double *restrict vc, int32_t n_tau, const double *restrict tau, double dt,
+                        int32_t n_gauss, const double *restrict xi, const double *restrict XA,
+                        const double *restrict mA, const double *restrict nuA, const double *restrict sizeA,
+                        const double *restrict XB, const double *restrict mB, const double *restrict nuB,
+                        const double *restrict sizeB, const double *restrict g0, const double *restrict rate,
+                        double *restrict start, double *restrict length, double *restrict w, double *restrict dw)
+{
+  if (d == 3)
+    overlap_own_d(n, 3, p, i, j, t, uc, vc, n_tau, tau, dt, n_gauss, xi, XA, mA, nuA, sizeA, XB, mB, nuB, sizeB, g0, rate, start, length, w, dw);
+  else
+    overlap_own_d(n, 2, p, i, j, t, uc, vc, n_tau, tau, dt, n_gauss, xi, XA, mA, nuA, sizeA, XB, mB, nuB, sizeB, g0, rate, start, length, w, dw);
 }
 
 /* out = R x + lift (lift may be NULL) for the CSR matrix R (n_rows rows): each row's sum in the
