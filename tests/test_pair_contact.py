@@ -987,6 +987,59 @@ def test_the_force_integral_over_a_flight_with_events_is_exact():
     assert np.abs(whole.array - reference.array).max() < 1e-6 * scale  # measured 3.5e-8
 
 
+def test_the_screen_keeps_every_pair_that_touches_during_a_flight_and_few_others():
+    """``_screen`` (``dem_pair_screen``: the gaps at the ends and the separating axes of the
+    projected triangles along the flight) against the pairs touching (g < 0, w > 0) at 801
+    sampled times of a flight of sliding cubes: it holds all of them, and few pairs more (those
+    touching between the samples or within the margin); the projections' bounding boxes, the
+    screen before the separating axes, held 204 pairs for the 131 touching."""
+    dem = two_boxes(MPI.COMM_SELF)
+    c = dem.pair_contact
+    u, v = cell_vector(dem, lambda x: oblique(x, 0.01)), cell_vector(dem, oblique)
+    dt = 0.02
+    up, vp = c.prepare(u, v, dt)
+    uc, vc = c.free_displacements(up), c._free_velocities(vp)
+    screened = c._screen(uc, vc, dt)
+    L, touched = c.listed, np.zeros(len(c.listed), dtype=bool)
+    for tau in np.linspace(0.0, dt, 801):
+        x = uc + tau * vc
+        g, w, _ = c._state(np.arange(len(L)), x[L.i], x[L.j])
+        touched |= (g < 0) & (w > 0)
+    assert touched.sum() > 20 and np.isin(np.flatnonzero(touched), screened).all()
+    assert len(screened) <= 1.02 * touched.sum()  # measured: 131 screened, 131 touching
+
+
+def test_the_state_at_a_steps_end_screens_the_flights_candidates_only_where_they_hold():
+    """The contact state at the end of a flight (``_At``) screens only the pairs that the
+    flight's screen found near closing there (``_end_candidates``): bit-identical to the state
+    that screens every listed pair; at a displacement away from the flight's end it screens
+    every pair again."""
+    from dolfinx_dem.pair_contact import _At
+
+    dem = two_boxes(MPI.COMM_SELF)
+    c = dem.pair_contact
+    u, v = cell_vector(dem, lambda x: oblique(x, 0.01)), cell_vector(dem, oblique)
+    dt = 0.004
+    out = dem.create_vector()
+    c.force_integral(*c.prepare(u, v, dt), dt, out)
+    end, far = u.copy(), u.copy()
+    end.axpy(dt, v)
+    far.axpy(0.5 * dt, v)
+    for x, reused in ((end, True), (far, False)):
+        up = c.patch_values(x)
+        candidates = c._end_candidates(c.free_displacements(up))
+        assert (candidates is not None) == reused
+        if reused:
+            assert 0 < len(candidates) < len(c.listed) / 4
+        state = _At(c, up)._values
+        flight, c._end = c._end, None  # no candidates: every pair screened
+        full = _At(c, up)._values
+        c._end = flight
+        assert len(state[0]) > 20
+        for a, b in zip(state, full):
+            assert np.array_equal(np.asarray(a), np.asarray(b))
+
+
 @pytest.mark.mpi
 def test_cubes_collide_obliquely_with_exact_energy_on_any_number_of_processes():
     """Two tetrahedral cubes meet obliquely and slide against each other (the overlaps change
