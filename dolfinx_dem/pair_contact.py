@@ -42,7 +42,9 @@ distributed force vector by a reverse scatter of the patch dofs.
 
 Events (paper §4). Along a MEMM free flight u + tau v, g_p and the side of each vertex of one
 projected facet with respect to each face (end point, edge line) of the other are affine in tau;
-between their roots w is a polynomial of degree d - 1 in tau, c_p of degree d and a pair's force
+their roots are the events (in 3D only where the vertex crosses the edge itself, within a margin:
+the overlap of two translated triangles has kinks there, not where a vertex crosses an edge's line
+beyond the edge); between them w is a polynomial of degree d - 1 in tau, c_p of degree d and a pair's force
 term of degree 2 d - 1, exactly integrated by d-point Gauss-Legendre (``_gauss_legendre``). A
 pair's term involves the c_p' of the pairs sharing an own row with it: the pairs of each
 connected component of that relation are integrated on common pieces cut at all the
@@ -755,8 +757,10 @@ class PairContact:
     def _screen(self, uc: np.ndarray, vc: np.ndarray, dt: float) -> np.ndarray:
         """The listed pairs whose c_p = w_p g_p^- may not vanish for the free facet displacements
         ``uc`` + tau ``vc``, 0 <= tau <= dt (known facets' rows): their gap negative at an end
-        and their projections' bounding boxes overlapping at some tau (the compiled kernel
-        ``dem_pair_screen``: one pass over the list; ``dem_pair_state`` screens a state with it)."""
+        and their projections not separated by the line of a face at some tau (``_separations``:
+        exact, less a margin; the compiled kernel ``dem_pair_screen``: one pass over the list;
+        ``dem_pair_state`` screens a state with it). Keeps those near closing at the flight's
+        end for the state there (``_end_candidates``)."""
         L = self.listed
         out = np.empty(len(L), dtype=np.int8)
         P = L.pointers
