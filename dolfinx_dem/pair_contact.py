@@ -620,9 +620,14 @@ class PairContact:
             vc = self._free_velocities(vp)
             stale = stale or self._worst_motion(uc, vc, dt)[1] > 1.0
         drifted = self._drifted(uc, vc if moving else None, dt)
-        flags = np.array([stale, drifted], dtype=np.int32)
+        # The flight's screen (``_screen``) before the reduction where the list stands, so that the
+        # reduction also tells whether a pair anywhere may touch during the step: if none does
+        # (and no list changes), ``force_integral`` adds nothing on every process.
+        screen = self._screen(uc, vc, dt) if moving and not stale else None
+        screened = self.listed
+        flags = np.array([stale, drifted, screen is None or len(screen) > 0], dtype=np.int32)
         self.comm.Allreduce(MPI.IN_PLACE, flags, op=MPI.MAX)
-        if flags.any():
+        if flags[:2].any():
             touching = self._touching_keys(at)
             R, scatter = self._R, self.scatter
             self._build(uc, stale, exchange=bool(flags[1]))
@@ -649,9 +654,13 @@ class PairContact:
                         f"contact between bodies: a candidate facet moves {motion:.3e} m in one step, more than half "
                         f"the Verlet skin ({skin:.3e} m): no pair list covers the step; reduce the time step or "
                         "pass a larger skin")
+            if moving and (screen is None or self.listed is not screened):
+                screen = self._screen(uc, vc, dt)
         # the flight checked valid at both ends, kept for ``force_integral`` (the free facet
-        # velocities too: neither is computed twice per step)
-        self._flight = (up, vp, float(dt), vc) if moving else None
+        # velocities and the screen too: none is computed twice per step), and whether no pair
+        # touches anywhere during it
+        quiet = not (flags[1] or flags[2])
+        self._flight = (up, vp, float(dt), vc, screen, quiet) if moving else None
         self.seconds += time.process_time() - start
         return up, vp
 
@@ -841,10 +850,12 @@ class PairContact:
         flight = self._flight
         if flight is None or flight[0] is not up or flight[1] is not vp or flight[2] != dt:
             raise RuntimeError("force_integral needs the patch values that prepare(u, v, dt) returned for this step")
-        uc, vc = self._at(up).uc, flight[3]
-        # The pairs whose c_p may not vanish during the step (``_screen``): the others add exact
-        # zeros, and splitting their neighbours at their events would only cost.
-        touching = self._screen(uc, vc, dt)
+        uc, vc, touching, quiet = self._at(up).uc, flight[3], flight[4], flight[5]
+        if quiet:  # no pair touches during the step, on any process
+            self.seconds += time.process_time() - start
+            return 0
+        # The pairs whose c_p may not vanish during the step (``_screen``, in ``prepare``): the
+        # others add exact zeros, and splitting their neighbours at their events would only cost.
         result = np.zeros_like(up)
         pieces = 0
         if touching.size:
@@ -984,6 +995,8 @@ class PairContact:
             c = np.where(np.isin(self.pair_keys(), active), w * g, 0.0)
             mu = L.ZT @ (L.Q @ up + self._q + L.Z @ c)
         out, P = np.zeros((len(self.body_pairs), self.d)), L.pointers
+        if len(p) == 0:
+            return out
         missing = lib.dem_pair_body_forces(len(p), self.d, pointer(p), P["i"], P["j"], P["n"],
                                            pointer(self._facet_bodies), len(self._body_pair_index),
                                            pointer(self._body_pair_index), pointer(mu), pointer(g), pointer(w),
@@ -1418,13 +1431,15 @@ class _At:
         contact, L = self.contact, self.listed
         if self.moved:
             contact._check_listed(self.uc)  # raises
-        n, d = len(L), contact.d
+        candidates = contact._end_candidates(self.uc)
+        n, d = 0 if candidates is not None and len(candidates) == 0 else len(L), contact.d  # 0: none closed
         closed, g, w, c, mu = np.empty(n, dtype=np.int64), np.empty(n), np.empty(n), np.empty(n), np.empty(n)
         dw, energy = np.empty((n, d)), np.zeros(2)
+        if n == 0:
+            return closed, g, w, dw, c, mu, (0.0, 0.0)
         P = L.pointers
-        candidates = contact._end_candidates(self.uc)
-        k = lib.dem_pair_state(n, 0 if candidates is None else len(candidates), pointer(candidates), d, P["i"], P["j"], P["n"], P["t"], P["d0"], P["sep"], *L.si.pointers, *L.sj.pointers,
-                               pointer(self.uc), *L.z.pointers, *L.q.pointers, pointer(contact._q), pointer(self.up),
+        k = lib.dem_pair_state(n, 0 if candidates is None else len(candidates), pointer(candidates), d, P["i"], P["j"],
+                               P["n"], P["t"], P["d0"], P["sep"], *L.si.pointers, *L.sj.pointers, pointer(self.uc), *L.z.pointers, *L.q.pointers, pointer(contact._q), pointer(self.up),
                                contact._elastic_row_pointer, pointer(L.slot), pointer(closed), pointer(g), pointer(w),
                                pointer(dw), pointer(c), pointer(mu), pointer(energy))
         if k < 0:
