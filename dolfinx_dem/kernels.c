@@ -690,16 +690,28 @@ screen_pairs(int64_t n_pairs, const int32_t d, const int64_t *restrict i, const 
   }
 }
 
+/* screen_pairs over the list, and its two sets as sorted indices: touching (bit 0) and
+ * candidates (bit 1), n_pairs each at most, counts[0] and counts[1] their numbers (out: n_pairs,
+ * work). */
 void dem_pair_screen(int64_t n_pairs, int32_t d, const int64_t *restrict i, const int64_t *restrict j,
                      const double *restrict n, const double *restrict t, const double *restrict d0,
                      const double *restrict sep, const double *restrict mA, const double *restrict mB,
                      const double *restrict uc, const double *restrict vc, double dt, double slack,
-                     int8_t *restrict out)
+                     int8_t *restrict out, int64_t *restrict touching, int64_t *restrict candidates,
+                     int64_t *restrict counts)
 {
   if (d == 3) /* a constant d: the loops unrolled */
     screen_pairs(n_pairs, 3, i, j, n, t, d0, sep, mA, mB, uc, vc, dt, slack, out);
   else
     screen_pairs(n_pairs, 2, i, j, n, t, d0, sep, mA, mB, uc, vc, dt, slack, out);
+  counts[0] = counts[1] = 0;
+  for (int64_t p = 0; p < n_pairs; ++p)
+  {
+    if (out[p] & 1)
+      touching[counts[0]++] = p;
+    if (out[p] & 2)
+      candidates[counts[1]++] = p;
+  }
 }
 
 /* patch.piecewise_midpoints: the times (n_times, each in (0, dt)) of rows ``rows`` (0 <= row < n)
@@ -1304,7 +1316,7 @@ done:
 /* pair_contact._At, the contact state at one displacement, in one call: the listed pairs
  * (facets (i, j), normal, tangents t, reference gap d0, projected simplices XA.., XB..) whose
  * c_p = w_p g_p^- may not vanish at the free facet displacements uc (n_facets x d), in order
- * (closed: dem_pair_screen without a flight, separations sep), their gap g, overlap w, dw/du_j (d per pair; see
+ * (closed: dem_pair_screen's test without a flight, separations sep), their gap g, overlap w, dw/du_j (d per pair; see
  * dem_overlap), c = w g^-, and, over the own rows their z_p touch (Z^T: z_ptr, z_idx, z_val),
  * a = Q u + q (Q: q_ptr, q_idx, q_val on the patch values up), delta = Z c and mu_p = z_p . (a +
  * delta); energy[0], energy[1] += the sums of a delta + delta^2 / 2 over the touched elastic rows
@@ -1336,12 +1348,18 @@ int64_t dem_pair_state(int64_t n_pairs, int64_t n_candidates, const int64_t *res
     for (int64_t k = 0; k < n_candidates; ++k)
     {
       const int64_t p = candidates[k];
-      dem_pair_screen(1, d, i + p, j + p, normal + p * d, t + p * dim * d, d0 + p, sep + p * 2 * d, mA + p * stride,
-                      mB + p * stride, uc, NULL, 0.0, 0.0, screen + p);
+      if (d == 3)
+        screen_pairs(1, 3, i + p, j + p, normal + p * d, t + p * dim * d, d0 + p, sep + p * 2 * d, mA + p * stride,
+                     mB + p * stride, uc, NULL, 0.0, 0.0, screen + p);
+      else
+        screen_pairs(1, 2, i + p, j + p, normal + p * d, t + p * dim * d, d0 + p, sep + p * 2 * d, mA + p * stride,
+                     mB + p * stride, uc, NULL, 0.0, 0.0, screen + p);
     }
   }
+  else if (d == 3)
+    screen_pairs(n_pairs, 3, i, j, normal, t, d0, sep, mA, mB, uc, NULL, 0.0, 0.0, screen);
   else
-    dem_pair_screen(n_pairs, d, i, j, normal, t, d0, sep, mA, mB, uc, NULL, 0.0, 0.0, screen);
+    screen_pairs(n_pairs, 2, i, j, normal, t, d0, sep, mA, mB, uc, NULL, 0.0, 0.0, screen);
   const int64_t n_screened = candidates ? n_candidates : n_pairs;
   for (int64_t k = 0; k < n_screened; ++k)
   {

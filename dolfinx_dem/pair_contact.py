@@ -723,10 +723,11 @@ class PairContact:
     def _at(self, up: np.ndarray) -> _At:
         """The contact state at patch values ``up`` (``_At``), kept for the next call: the energy
         at the end of a step, the per-step outputs and the next step's flight start at the same
-        displacement. Reused only for the same list and the same (read-only) array or bit-identical
-        values."""
+        displacement. Reused only for the same list and the same array, or bit-identical values
+        of a writeable one (a caller's own; MEMM's read-only arrays are new with each state)."""
         last = self._last
-        if last is None or last.listed is not self.listed or not (last.up is up or np.array_equal(last.up, up)):
+        if last is None or last.listed is not self.listed or not (
+                last.up is up or (up.flags.writeable and np.array_equal(last.up, up))):
             last = self._last = _At(self, up)
         return last
 
@@ -771,12 +772,13 @@ class PairContact:
         ``dem_pair_state`` screens a state with it). Keeps those near closing at the flight's
         end for the state there (``_end_candidates``)."""
         L = self.listed
-        out = np.empty(len(L), dtype=np.int8)
+        out, found, counts = np.empty(len(L), dtype=np.int8), np.empty((2, len(L)), dtype=np.int64), np.zeros(2, np.int64)
         P = L.pointers
         lib.dem_pair_screen(len(L), self.d, P["i"], P["j"], P["n"], P["t"], P["d0"], P["sep"], L.si.pointers[1],
-                            L.sj.pointers[1], pointer(uc), pointer(vc), float(dt), self._slack, pointer(out))
-        self._end = (L, uc, vc, float(dt), np.flatnonzero(out & 2))
-        return np.flatnonzero(out & 1)
+                            L.sj.pointers[1], pointer(uc), pointer(vc), float(dt), self._slack, pointer(out),
+                            pointer(found[0]), pointer(found[1]), pointer(counts))
+        self._end = (L, uc, vc, float(dt), found[1, : counts[1]])
+        return found[0, : counts[0]]
 
     def _end_candidates(self, uc: np.ndarray) -> np.ndarray | None:
         """The only listed pairs that may be closed at free facet displacements ``uc`` (bit 1 of
@@ -963,13 +965,16 @@ class PairContact:
         pairs of -(z_p . (a + delta_a)) w_p, the normal force one facet of the pair exerts on
         the other, compression positive (z_p . a' < 0 in compression), so that a pair pulling
         (z_p . a' > 0) lowers it. Between two bodies i, j whose contact facets share one outward
-        normal n_i (on i) it is -n_i . F_ij of ``pair_forces`` (collective: own rows' parts summed)."""
+        normal n_i (on i) it is -n_i . F_ij of ``pair_forces`` (collective: the sum over the
+        processes of ``contact_force_part``)."""
+        return self.comm.allreduce(self.contact_force_part(up), op=MPI.SUM)
+
+    def contact_force_part(self, up: np.ndarray) -> float:
+        """This process's part of ``contact_force`` (its own rows' parts of mu_p), over the closed
+        pairs (g < 0) alone: the sum must not depend on the pairs listed around them (w = 0 adds
+        nothing)."""
         at = self._at(up)
-        total = 0.0
-        if (at.c < 0).any():
-            # over the closed pairs (g < 0) alone: the sum must not depend on the pairs listed around them
-            total = -float((at.mu * at.w).sum())
-        return self.comm.allreduce(total, op=MPI.SUM)
+        return 0.0 - float((at.mu * at.w).sum())
 
     def pair_forces(self, up: np.ndarray, active: np.ndarray | None = None) -> np.ndarray:
         """This process's part (sum over processes) of the contact force between each pair of

@@ -54,8 +54,8 @@ class PairContactStatistics:
         self.previous = None  # the displacement of the previous step, until the first contact
         self.output_seconds = 0.0  # processor time of the per-step contact outputs (this process)
 
-    def record(self, t: float, stepper: MEMM, values: Mapping[str, float]):
-        """Update with the state at ``t`` and its series ``values`` (``contact_columns``)."""
+    def record(self, t: float, stepper: MEMM, penetration: float, momentum: np.ndarray):
+        """Update with the state at ``t``: its ``penetration`` and ``momentum`` (series columns)."""
         contact = self.dem.pair_contact
         if self.first_contact is None:
             if self.previous is not None:
@@ -63,10 +63,9 @@ class PairContactStatistics:
                 if tau is not None:
                     self.first_contact = t - stepper.dt + tau
             self.previous = stepper.u.copy()
-        self.penetration = max(self.penetration, values["penetration"])
+        self.penetration = max(self.penetration, penetration)
         if self.free:
-            p = np.array([values[f"momentum_{'xyz'[i]}"] for i in range(self.dem.d)])
-            self.momentum_change = max(self.momentum_change, np.abs(p - self.p0).max())
+            self.momentum_change = max(self.momentum_change, float(np.abs(momentum - self.p0).max()))
 
     def state(self) -> dict:
         """The running figures for a checkpoint (``previous`` follows from the state u)."""
