@@ -211,7 +211,8 @@ def contact_values(dem: DEMDiscretisation, u, patches: list[np.ndarray] | None =
     up = {id(c): values for c, values in zip(dem.contacts, patches)}
     up_rigid, up_pair = up.get(id(rigid)), up.get(id(pair))
     local = [rigid.force_sums(up_rigid)] if rigid is not None else []
-    local += [pair.pair_forces(up_pair).ravel(), [pair.contact_force_part(up_pair)]] if pair is not None else []
+    if pair is not None:
+        local += [pair.pair_forces(up_pair).ravel(), [pair.contact_force_part(up_pair), pair.closed_count(up_pair)]]
     sums = sum_over_processes(dem.comm, np.concatenate(local)) if local else None
     values = []
     if rigid is not None:
@@ -221,7 +222,8 @@ def contact_values(dem: DEMDiscretisation, u, patches: list[np.ndarray] | None =
         gap, x = rigid.contact_gap(up_rigid)
         values += [gap, normal / area if area > 0 else 0.0] + ([x] if dem.d == 1 else []) + list(forces)
     if pair is not None:
-        values += [sums[-1], pair.penetration(up_pair), *sums[:-1]]
+        # the penetration's scatter and reduction only where some process has a closed pair
+        values += [sums[-2], pair.penetration(up_pair) if sums[-1] > 0 else 0.0, *sums[:-2]]
     return values
 
 

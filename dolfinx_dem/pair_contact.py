@@ -969,6 +969,12 @@ class PairContact:
         processes of ``contact_force_part``)."""
         return self.comm.allreduce(self.contact_force_part(up), op=MPI.SUM)
 
+    def closed_count(self, up: np.ndarray) -> int:
+        """How many listed pairs of this process may have c_p != 0 at ``up`` (the closed pairs:
+        g_p < 0, projections not apart). Summed over the processes it is 0 when no pair touches
+        anywhere, and then ``penetration`` is 0 (``model.contact_values`` skips it)."""
+        return len(self._at(up).closed)
+
     def contact_force_part(self, up: np.ndarray) -> float:
         """This process's part of ``contact_force`` (its own rows' parts of mu_p), over the closed
         pairs (g < 0) alone: the sum must not depend on the pairs listed around them (w = 0 adds
