@@ -436,14 +436,14 @@ static inline __attribute__((always_inline)) void pair_overlap(int32_t d, int64_
  * (overlap_one); 0 on empty pieces and on those where the gap g0 + tau rate is not negative
  * (not clipped: nothing reads w there). t: the pairs' tangent bases (d - 1 rows of d). */
 static inline __attribute__((always_inline)) void
-overlap_own_d(int64_t n, const int32_t d, const int64_t *restrict p, const int64_t *restrict i,
-                        const int64_t *restrict j, const double *restrict t, const double *restrict uc,
-                        const double *restrict vc, int32_t n_tau, const double *restrict tau, double dt,
-                        int32_t n_gauss, const double *restrict xi, const double *restrict XA,
-                        const double *restrict mA, const double *restrict nuA, const double *restrict sizeA,
-                        const double *restrict XB, const double *restrict mB, const double *restrict nuB,
-                        const double *restrict sizeB, const double *restrict g0, const double *restrict rate,
-                        double *restrict start, double *restrict length, double *restrict w, double *restrict dw)
+overlap_own(int64_t n, const int32_t d, const int64_t *restrict p, const int64_t *restrict i,
+            const int64_t *restrict j, const double *restrict t, const double *restrict uc,
+            const double *restrict vc, int32_t n_tau, const double *restrict tau, double dt,
+            int32_t n_gauss, const double *restrict xi, const double *restrict XA,
+            const double *restrict mA, const double *restrict nuA, const double *restrict sizeA,
+            const double *restrict XB, const double *restrict mB, const double *restrict nuB,
+            const double *restrict sizeB, const double *restrict g0, const double *restrict rate,
+            double *restrict start, double *restrict length, double *restrict w, double *restrict dw)
 {
   const int32_t n_own = n_tau + 1;
   for (int64_t e = 0; e < n; ++e)
@@ -496,22 +496,6 @@ overlap_own_d(int64_t n, const int32_t d, const int64_t *restrict p, const int64
       }
     }
   }
-}
-
-/* overlap_own with a constant d (its loops and clipping unrolled) */
-static void overlap_own(int64_t n, int32_t d, const int64_t *restrict p, const int64_t *restrict i,
-                        const int64_t *restrict j, const double *restrict t, const double *restrict uc,
-                        const double *restrict vc, int32_t n_tau, const double *restrict tau, double dt,
-                        int32_t n_gauss, const double *restrict xi, const double *restrict XA,
-                        const double *restrict mA, const double *restrict nuA, const double *restrict sizeA,
-                        const double *restrict XB, const double *restrict mB, const double *restrict nuB,
-                        const double *restrict sizeB, const double *restrict g0, const double *restrict rate,
-                        double *restrict start, double *restrict length, double *restrict w, double *restrict dw)
-{
-  if (d == 3)
-    overlap_own_d(n, 3, p, i, j, t, uc, vc, n_tau, tau, dt, n_gauss, xi, XA, mA, nuA, sizeA, XB, mB, nuB, sizeB, g0, rate, start, length, w, dw);
-  else
-    overlap_own_d(n, 2, p, i, j, t, uc, vc, n_tau, tau, dt, n_gauss, xi, XA, mA, nuA, sizeA, XB, mB, nuB, sizeB, g0, rate, start, length, w, dw);
 }
 
 /* out = R x + lift (lift may be NULL) for the CSR matrix R (n_rows rows): each row's sum in the
@@ -1254,8 +1238,12 @@ int64_t dem_pair_force_integral(int64_t n, int32_t d, const int64_t *restrict p,
   }
 
   /* w and dw at the nodes: clipped on the pairs' own pieces, interpolated */
-  overlap_own(n, d, p, i, j, t, uc, vc, n_tau, tau, dt, n_gauss, xi, XA, mA, nuA, sizeA, XB, mB, nuB, sizeB, g0,
-              rate, start_own, length_own, w_own, dw_own);
+  if (d == 3) /* a constant d: the clipping unrolled */
+    overlap_own(n, 3, p, i, j, t, uc, vc, n_tau, tau, dt, n_gauss, xi, XA, mA, nuA, sizeA, XB, mB, nuB, sizeB, g0,
+                rate, start_own, length_own, w_own, dw_own);
+  else
+    overlap_own(n, 2, p, i, j, t, uc, vc, n_tau, tau, dt, n_gauss, xi, XA, mA, nuA, sizeA, XB, mB, nuB, sizeB, g0,
+                rate, start_own, length_own, w_own, dw_own);
   interpolate_own(n, n_own, offsets, n_gauss, d, start_own, length_own, nodes, xi, w_own, dw_own, w, dw);
   for (int64_t e = 0; e < n_nodes; ++e)
     c[e] = w[e] * (g[e] < 0.0 ? g[e] : 0.0);
