@@ -772,7 +772,7 @@ class PairContact:
         ``dem_pair_state`` screens a state with it). Keeps those near closing at the flight's
         end for the state there (``_end_candidates``)."""
         L = self.listed
-        out, found, counts = np.empty(len(L), dtype=np.int8), np.empty((2, len(L)), dtype=np.int64), np.zeros(2, np.int64)
+        out, found, counts = np.empty(len(L), np.int8), np.empty((2, len(L)), np.int64), np.zeros(2, np.int64)
         P = L.pointers
         lib.dem_pair_screen(len(L), self.d, P["i"], P["j"], P["n"], P["t"], P["d0"], P["sep"], L.si.pointers[1],
                             L.sj.pointers[1], pointer(uc), pointer(vc), float(dt), self._slack, pointer(out),
@@ -1450,7 +1450,8 @@ class _At:
             return closed, g, w, dw, c, mu, (0.0, 0.0)
         P = L.pointers
         k = lib.dem_pair_state(n, 0 if candidates is None else len(candidates), pointer(candidates), d, P["i"], P["j"],
-                               P["n"], P["t"], P["d0"], P["sep"], *L.si.pointers, *L.sj.pointers, pointer(self.uc), *L.z.pointers, *L.q.pointers, pointer(contact._q), pointer(self.up),
+                               P["n"], P["t"], P["d0"], P["sep"], *L.si.pointers, *L.sj.pointers, pointer(self.uc),
+                               *L.z.pointers, *L.q.pointers, pointer(contact._q), pointer(self.up),
                                contact._elastic_row_pointer, pointer(L.slot), pointer(closed), pointer(g), pointer(w),
                                pointer(dw), pointer(c), pointer(mu), pointer(energy))
         if k < 0:
