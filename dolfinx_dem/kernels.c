@@ -433,8 +433,8 @@ static inline __attribute__((always_inline)) void pair_overlap(int32_t d, int64_
  * events (padded with empty pieces up to n_tau + 1: start, length, as dem_piecewise_midpoints
  * and dem_pair_force_integral's nodes compute them), and at the n_gauss nodes xi of each non-empty piece w and
  * dw/du_j = t^T dw/ds (d components) at the tangential offset s = t (u_j - u_i)
- * (overlap_one); 0 on empty pieces and on those where the gap g0 + tau rate is not negative
- * (not clipped: nothing reads w there). t: the pairs' tangent bases (d - 1 rows of d). */
+ * (overlap_one); 0 on the pieces where the gap g0 + tau rate is not negative (not clipped:
+ * nothing reads w there); nothing on empty pieces (nothing reads them). t: the pairs' tangent bases (d - 1 rows of d). */
 static inline __attribute__((always_inline)) void
 overlap_own(int64_t n, const int32_t d, const int64_t *restrict p, const int64_t *restrict i,
             const int64_t *restrict j, const double *restrict t, const double *restrict uc,
@@ -478,10 +478,12 @@ overlap_own(int64_t n, const int32_t d, const int64_t *restrict p, const int64_t
       /* the gap is affine and its root an event: its sign on the piece is that at the middle,
        * and where it is not negative c = w g^- and the force term vanish whatever w is */
       const int32_t open = !(g0[e] + mid * rate[e] < 0.0);
+      if (!(len > 0))
+        continue; /* an empty piece: never read (interpolate_own) */
       for (int32_t g = 0; g < n_gauss; ++g)
       {
         const int64_t node = row * n_gauss + g;
-        if (!(len > 0) || open)
+        if (open)
         {
           w[node] = 0.0;
           for (int32_t c = 0; c < d; ++c)
@@ -742,12 +744,14 @@ void dem_piecewise_midpoints(int64_t n_times, const int64_t *restrict rows, cons
  * the times nodes[offsets[r] .. offsets[r + 1]) (increasing). At each time x: the last non-empty
  * piece starting at or before it (the first piece if none), and the Lagrange interpolation of its
  * values, summed in the order of the nodes. w (offsets[n_rows]) and dw (offsets[n_rows] width)
- * are overwritten. */
+ * are overwritten. cache_x (NAN on entry) and cache_basis (n_gauss each): work arrays of the
+ * largest number of times of a row. */
 static void interpolate_own(int64_t n_rows, int32_t n_own, const int64_t *restrict offsets, int32_t n_gauss,
                             int32_t width, const double *restrict start, const double *restrict length,
                             const double *restrict nodes, const double *restrict xi,
                             const double *restrict w_own, const double *restrict dw_own,
-                            double *restrict w, double *restrict dw)
+                            double *restrict w, double *restrict dw, double *restrict cache_x,
+                            double *restrict cache_basis)
 {
   for (int64_t r = 0; r < n_rows; ++r)
   {
@@ -761,18 +765,30 @@ static void interpolate_own(int64_t n_rows, int32_t n_own, const int64_t *restri
           piece = j;
       const double x = (t - s[piece]) / len[piece];
       const int64_t at = (r * n_own + piece) * n_gauss;
+      /* the basis at x, kept per node position: the rows of a component share their nodes, and
+       * those with one own piece their x */
+      double *cached = cache_basis + (out - offsets[r]) * n_gauss;
+      if (!(cache_x[out - offsets[r]] == x))
+      {
+        cache_x[out - offsets[r]] = x;
+        for (int32_t m = 0; m < n_gauss; ++m)
+        {
+          double basis = 1.0;
+          int32_t first = 1;
+          for (int32_t l = 0; l < n_gauss; ++l)
+            if (l != m)
+            {
+              const double factor = (x - xi[l]) / (xi[m] - xi[l]);
+              basis = first ? factor : basis * factor;
+              first = 0;
+            }
+          cached[m] = basis;
+        }
+      }
       double wsum = 0.0, dsum[3] = {0.0, 0.0, 0.0};
       for (int32_t m = 0; m < n_gauss; ++m)
       {
-        double basis = 1.0;
-        int32_t first = 1;
-        for (int32_t l = 0; l < n_gauss; ++l)
-          if (l != m)
-          {
-            const double factor = (x - xi[l]) / (xi[m] - xi[l]);
-            basis = first ? factor : basis * factor;
-            first = 0;
-          }
+        const double basis = cached[m];
         wsum = m == 0 ? basis * w_own[at + m] : wsum + basis * w_own[at + m];
         for (int32_t c = 0; c < width; ++c)
           dsum[c] = m == 0 ? basis * dw_own[(at + m) * width + c] : dsum[c] + basis * dw_own[(at + m) * width + c];
@@ -1109,6 +1125,7 @@ int64_t dem_pair_force_integral(int64_t n, int32_t d, const int64_t *restrict p,
   double *times = alloc(n * n_tau, sizeof *times), *points = NULL, *mid = NULL, *length = NULL;
   double *g0 = calloc(n > 0 ? n : 1, sizeof *g0), *rate = calloc(n > 0 ? n : 1, sizeof *rate);
   double *nodes = NULL, *weights = NULL, *g = NULL, *w = NULL, *dw = NULL, *c = NULL, *mu = NULL, *work = NULL;
+  double *cache_x = NULL, *cache_basis = NULL;
   double *start_own = alloc(n * n_own, sizeof *start_own), *length_own = alloc(n * n_own, sizeof *length_own);
   double *w_own = alloc(n * n_own * n_gauss, sizeof *w_own), *dw_own = alloc(n * n_own * n_gauss * d, sizeof *dw_own);
   int64_t *entry = NULL;
@@ -1127,18 +1144,23 @@ int64_t dem_pair_force_integral(int64_t n, int32_t d, const int64_t *restrict p,
   for (int64_t k = 0; k < n; ++k)
     parent[k] = k;
   for (int64_t k = 0; k < n; ++k)
+  {
+    int64_t x = find_root(parent, k); /* k's root, kept as the unions below change it */
     for (int32_t e = z_ptr[p[k]]; e < z_ptr[p[k] + 1]; ++e)
     {
       const int32_t r = slot[z_idx[e]];
       if (first[r] < 0)
-      {
         first[r] = k;
+      if (first[r] == k)
         continue;
-      }
-      const int64_t x = find_root(parent, k), y = find_root(parent, first[r]);
+      const int64_t y = find_root(parent, first[r]);
       if (x != y)
+      {
         parent[x > y ? x : y] = x < y ? x : y;
+        x = x < y ? x : y;
+      }
     }
+  }
   for (int64_t k = 0; k < n; ++k)
   {
     const int64_t root = find_root(parent, k);
@@ -1202,7 +1224,9 @@ int64_t dem_pair_force_integral(int64_t n, int32_t d, const int64_t *restrict p,
   mu = alloc(n_nodes, sizeof *mu);
   entry = alloc(n_nodes, sizeof *entry);
   work = calloc(n_rows * stride > 0 ? n_rows * stride : 1, sizeof *work);
-  if (!nodes || !weights || !g || !w || !dw || !c || !mu || !entry || !work)
+  cache_x = alloc(stride, sizeof *cache_x);
+  cache_basis = alloc(stride * n_gauss, sizeof *cache_basis);
+  if (!nodes || !weights || !g || !w || !dw || !c || !mu || !entry || !work || !cache_x || !cache_basis)
     goto done;
   for (int64_t k = 0; k < n; ++k)
   {
@@ -1244,7 +1268,10 @@ int64_t dem_pair_force_integral(int64_t n, int32_t d, const int64_t *restrict p,
   else
     overlap_own(n, 2, p, i, j, t, uc, vc, n_tau, tau, dt, n_gauss, xi, XA, mA, nuA, sizeA, XB, mB, nuB, sizeB, g0,
                 rate, start_own, length_own, w_own, dw_own);
-  interpolate_own(n, n_own, offsets, n_gauss, d, start_own, length_own, nodes, xi, w_own, dw_own, w, dw);
+  for (int64_t x = 0; x < stride; ++x)
+    cache_x[x] = NAN;
+  interpolate_own(n, n_own, offsets, n_gauss, d, start_own, length_own, nodes, xi, w_own, dw_own, w, dw, cache_x,
+                  cache_basis);
   for (int64_t e = 0; e < n_nodes; ++e)
     c[e] = w[e] * (g[e] < 0.0 ? g[e] : 0.0);
 
@@ -1296,6 +1323,7 @@ done:
   free(rows), free(first), free(parent), free(label), free(offsets), free(a), free(za), free(tau);
   free(zc), free(time_rows), free(counts), free(n_pieces), free(times), free(points), free(mid), free(length);
   free(nodes), free(weights), free(g), free(w), free(dw), free(c), free(mu), free(entry), free(work);
+  free(cache_x), free(cache_basis);
   free(start_own), free(length_own), free(w_own), free(dw_own), free(g0), free(rate), free(facet_force);
   free(pairs_term);
   return status;
