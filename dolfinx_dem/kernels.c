@@ -1060,17 +1060,25 @@ static int64_t number_columns(int64_t n, const int64_t *restrict p, const int32_
 }
 
 /* y[s] = sum over row rows[s] of the CSR matrix (q_ptr, q_idx, q_val) of its entries times x at
- * their columns, in the order of the entries, plus shift[rows[s]] (shift may be NULL). */
+ * their columns, in the order of the entries, plus shift[rows[s]]; with x2 (may be NULL), y2[s]
+ * the same sum of x2 without the shift, in the same pass. */
 static void rows_apply(int64_t n_rows, const int32_t *restrict rows, const int32_t *restrict q_ptr,
                        const int32_t *restrict q_idx, const double *restrict q_val, const double *restrict x,
-                       const double *restrict shift, double *restrict y)
+                       const double *restrict shift, double *restrict y, const double *restrict x2,
+                       double *restrict y2)
 {
   for (int64_t s = 0; s < n_rows; ++s)
   {
-    double sum = 0.0;
+    double sum = 0.0, sum2 = 0.0;
     for (int32_t e = q_ptr[rows[s]]; e < q_ptr[rows[s] + 1]; ++e)
+    {
       sum += q_val[e] * x[q_idx[e]];
-    y[s] = shift ? sum + shift[rows[s]] : sum;
+      if (x2)
+        sum2 += q_val[e] * x2[q_idx[e]];
+    }
+    y[s] = sum + shift[rows[s]];
+    if (x2)
+      y2[s] = sum2;
   }
 }
 
@@ -1168,8 +1176,7 @@ int64_t dem_pair_force_integral(int64_t n, int32_t d, const int64_t *restrict p,
   }
 
   /* a = (Q u + q, Q v) on the touched rows, and z_p . a of each pair */
-  rows_apply(n_rows, rows, q_ptr, q_idx, q_val, up, q, a);
-  rows_apply(n_rows, rows, q_ptr, q_idx, q_val, vp, NULL, a + n_rows);
+  rows_apply(n_rows, rows, q_ptr, q_idx, q_val, up, q, a, vp, a + n_rows);
   for (int64_t k = 0; k < n; ++k)
   {
     double y[2] = {0.0, 0.0};
@@ -1406,7 +1413,7 @@ int64_t dem_pair_state(int64_t n_pairs, int64_t n_candidates, const int64_t *res
   }
   /* a and delta = Z c on the touched rows; mu; the energy change */
   n_rows = number_columns(n, closed, z_ptr, z_idx, slot, rows, 0);
-  rows_apply(n_rows, rows, q_ptr, q_idx, q_val, up, q, a);
+  rows_apply(n_rows, rows, q_ptr, q_idx, q_val, up, q, a, NULL, NULL);
   for (int64_t k = 0; k < n; ++k)
     for (int32_t e = z_ptr[closed[k]]; e < z_ptr[closed[k] + 1]; ++e)
       delta[slot[z_idx[e]]] += z_val[e] * c[k];
