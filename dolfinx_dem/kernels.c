@@ -1408,7 +1408,10 @@ int64_t dem_pair_state(int64_t n_pairs, int64_t n_candidates, const int64_t *res
       gap += du[x] * normal[p * d + x];
     }
     g[k] = d0[p] + gap;
-    pair_overlap(d, p, t, du, XA, mA, nuA, sizeA, XB, mB, nuB, sizeB, w + k, dw + k * d);
+    if (d == 3) /* a constant d: the clipping unrolled */
+      pair_overlap(3, p, t, du, XA, mA, nuA, sizeA, XB, mB, nuB, sizeB, w + k, dw + k * d);
+    else
+      pair_overlap(2, p, t, du, XA, mA, nuA, sizeA, XB, mB, nuB, sizeB, w + k, dw + k * d);
     c[k] = w[k] * (g[k] < 0.0 ? g[k] : 0.0);
   }
   /* a and delta = Z c on the touched rows; mu; the energy change */
