@@ -805,6 +805,19 @@ static void interpolate_own(int64_t n_rows, int32_t n_own, const int64_t *restri
  * configuration that matters. */
 #define EDGE_MARGIN 1e-9
 
+/* The range [lo, hi) of the m values g (a pair's gaps at its nodes, in time order: affine, so
+ * those below 0 are contiguous) where g < 0 (lo = hi if none). */
+static void closed_range(const double *g, int64_t m, int64_t *lo, int64_t *hi)
+{
+  int64_t a = 0, b = m;
+  while (a < b && !(g[a] < 0))
+    ++a;
+  while (b > a && !(g[b - 1] < 0))
+    --b;
+  *lo = a;
+  *hi = b;
+}
+
 static int64_t find_root(int64_t *parent, int64_t k)
 {
   while (parent[k] != k)
@@ -1298,22 +1311,28 @@ int64_t dem_pair_force_integral(int64_t n, int32_t d, const int64_t *restrict p,
   /* the pairs' term: mu = z_p . a(tau) + z_p . (Z c)(tau) at the nodes (the pairs of a component
    * share their nodes), where g < 0, times the weights; then the facet forces */
   for (int64_t k = 0; k < n; ++k)
+  {
+    int64_t lo, hi; /* c and mu only where g < 0: elsewhere c = 0 adds nothing, mu is 0 */
+    closed_range(g + offsets[k], offsets[k + 1] - offsets[k], &lo, &hi);
     for (int32_t e = z_ptr[p[k]]; e < z_ptr[p[k] + 1]; ++e)
-      for (int64_t x = 0; x < offsets[k + 1] - offsets[k]; ++x)
+      for (int64_t x = lo; x < hi; ++x)
         work[slot[z_idx[e]] * stride + x] += z_val[e] * c[offsets[k] + x];
+  }
   for (int64_t k = 0; k < n; ++k)
   {
     const int64_t m = offsets[k + 1] - offsets[k];
+    int64_t lo, hi;
+    closed_range(g + offsets[k], m, &lo, &hi);
     for (int64_t x = 0; x < m; ++x)
       mu[offsets[k] + x] = 0.0;
     for (int32_t e = z_ptr[p[k]]; e < z_ptr[p[k] + 1]; ++e)
-      for (int64_t x = 0; x < m; ++x)
+      for (int64_t x = lo; x < hi; ++x)
         mu[offsets[k] + x] += z_val[e] * work[slot[z_idx[e]] * stride + x];
-    for (int64_t x = 0; x < m; ++x)
+    for (int64_t x = lo; x < hi; ++x)
     {
       const int64_t node = offsets[k] + x;
       const double value = (za[2 * k] + nodes[node] * za[2 * k + 1]) + mu[node];
-      mu[node] = (g[node] < 0 ? value : 0.0) * weights[node];
+      mu[node] = value * weights[node];
     }
   }
   dem_pair_facet_forces(n_nodes, d, entry, i, j, normal, mu, g, w, dw, facet_force);
