@@ -434,7 +434,8 @@ static inline __attribute__((always_inline)) void pair_overlap(int32_t d, int64_
  * and dem_pair_force_integral's nodes compute them), and at the n_gauss nodes xi of each non-empty piece w and
  * dw/du_j = t^T dw/ds (d components) at the tangential offset s = t (u_j - u_i)
  * (overlap_one); 0 on the pieces where the gap g0 + tau rate is not negative (not clipped:
- * nothing reads w there); nothing on empty pieces (nothing reads them). t: the pairs' tangent bases (d - 1 rows of d). */
+ * nothing reads w there); nothing on empty pieces (nothing reads them). t: the pairs' tangent
+ * bases (d - 1 rows of d). */
 static inline __attribute__((always_inline)) void
 overlap_own(int64_t n, const int32_t d, const int64_t *restrict p, const int64_t *restrict i,
             const int64_t *restrict j, const double *restrict t, const double *restrict uc,
