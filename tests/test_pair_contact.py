@@ -656,6 +656,30 @@ def test_force_integral_refuses_patch_values_prepare_did_not_return():
     c.force_integral(up, vp, 1e-3, out)
 
 
+@pytest.mark.mpi
+def test_a_step_without_a_touching_pair_anywhere_adds_nothing():
+    """``prepare``'s one reduction tells every process whether a pair anywhere may touch during
+    the step: if none does, ``force_integral`` adds exactly nothing (no kernel, no reverse
+    scatter) on every process, and the outputs' penetration is 0 without its scatter; once the
+    discs meet, every process integrates (also those whose own pairs do not touch: the reverse
+    scatter is collective) and the force and the penetration are positive."""
+    dem, facets = two_discs(h=0.03)
+    dem.set_contact_boundary(facets)
+    c, dt = dem.pair_contact, 1e-3
+    v = cell_vector(dem, approach)
+    for shift, touching in ((0.0, False), (0.04, True)):  # the gap is 0.02 m; 0.04 s at +-0.3 m/s close it
+        u = cell_vector(dem, lambda x: approach(x) * shift)
+        out = dem.create_vector()
+        up, vp = c.prepare(u, v, dt)
+        assert c._flight[5] == (not touching)  # the same on every process
+        evaluations = c.force_integral(up, vp, dt, out)
+        assert dem.comm.allreduce(evaluations, op=MPI.MAX) > 0 if touching else evaluations == 0
+        assert (out.norm() > 0) == touching
+        closed = dem.comm.allreduce(c.closed_count(c.patch_values(u)), op=MPI.SUM)
+        penetration = model.contact_values(dem, u)[1]
+        assert (closed > 0) == touching and (penetration > 0) == touching
+
+
 def test_a_step_longer_than_the_skin_is_an_error():
     """A facet that moves more than skin/2 in one step cannot be covered by any pair list."""
     dem, facets = two_discs(h=0.03)
