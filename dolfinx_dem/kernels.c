@@ -593,16 +593,19 @@ void dem_pair_separations(int64_t n, int32_t d, const double *restrict XA, const
  * such a pair. Without vc (NULL): at uc, bit 0 only. With vc, bit 1: the pair may be screened in
  * (bit 0 of a screen without vc) at a displacement whose facets lie within slack / 2 of the
  * flight's end, uc + dt vc: its gap there below slack, and no separation there above slack
- * |m_k| (pair_contact._At screens those pairs only). */
+ * |m_k| (pair_contact._At screens those pairs only). The pairs subset[0 .. count) (subset
+ * NULL: the pairs 0 .. count), out[p] for those only. */
 static inline __attribute__((always_inline)) void
-screen_pairs(int64_t n_pairs, const int32_t d, const int64_t *restrict i, const int64_t *restrict j,
-             const double *restrict n, const double *restrict t, const double *restrict d0,
-             const double *restrict sep, const double *restrict mA, const double *restrict mB,
-             const double *restrict uc, const double *restrict vc, double dt, double slack, int8_t *restrict out)
+screen_pairs(int64_t count, const int32_t d, const int64_t *restrict subset, const int64_t *restrict i,
+             const int64_t *restrict j, const double *restrict n, const double *restrict t,
+             const double *restrict d0, const double *restrict sep, const double *restrict mA,
+             const double *restrict mB, const double *restrict uc, const double *restrict vc, double dt, double slack,
+             int8_t *restrict out)
 {
   const int32_t dim = d - 1, stride = d * dim;
-  for (int64_t p = 0; p < n_pairs; ++p)
+  for (int64_t e = 0; e < count; ++e)
   {
+    const int64_t p = subset ? subset[e] : e;
     double du[3], dv[3], g0 = 0.0, g1 = 0.0;
     for (int32_t k = 0; k < d; ++k)
     {
@@ -680,6 +683,19 @@ screen_pairs(int64_t n_pairs, const int32_t d, const int64_t *restrict i, const 
 /* screen_pairs over the list, and its two sets as sorted indices: touching (bit 0) and
  * candidates (bit 1), n_pairs each at most, counts[0] and counts[1] their numbers (out: n_pairs,
  * work). */
+/* screen_pairs with a constant d (its loops unrolled) */
+static void screen(int64_t count, int32_t d, const int64_t *restrict subset, const int64_t *restrict i,
+                   const int64_t *restrict j, const double *restrict n, const double *restrict t,
+                   const double *restrict d0, const double *restrict sep, const double *restrict mA,
+                   const double *restrict mB, const double *restrict uc, const double *restrict vc, double dt,
+                   double slack, int8_t *restrict out)
+{
+  if (d == 3)
+    screen_pairs(count, 3, subset, i, j, n, t, d0, sep, mA, mB, uc, vc, dt, slack, out);
+  else
+    screen_pairs(count, 2, subset, i, j, n, t, d0, sep, mA, mB, uc, vc, dt, slack, out);
+}
+
 void dem_pair_screen(int64_t n_pairs, int32_t d, const int64_t *restrict i, const int64_t *restrict j,
                      const double *restrict n, const double *restrict t, const double *restrict d0,
                      const double *restrict sep, const double *restrict mA, const double *restrict mB,
@@ -687,10 +703,7 @@ void dem_pair_screen(int64_t n_pairs, int32_t d, const int64_t *restrict i, cons
                      int8_t *restrict out, int64_t *restrict touching, int64_t *restrict candidates,
                      int64_t *restrict counts)
 {
-  if (d == 3) /* a constant d: the loops unrolled */
-    screen_pairs(n_pairs, 3, i, j, n, t, d0, sep, mA, mB, uc, vc, dt, slack, out);
-  else
-    screen_pairs(n_pairs, 2, i, j, n, t, d0, sep, mA, mB, uc, vc, dt, slack, out);
+  screen(n_pairs, d, NULL, i, j, n, t, d0, sep, mA, mB, uc, vc, dt, slack, out);
   counts[0] = counts[1] = 0;
   for (int64_t p = 0; p < n_pairs; ++p)
   {
@@ -1380,34 +1393,18 @@ int64_t dem_pair_state(int64_t n_pairs, int64_t n_candidates, const int64_t *res
                        double *restrict dw, double *restrict c, double *restrict mu, double *restrict energy)
 {
   int64_t n = 0, bound = 0, n_rows = 0, status = -1;
-  int8_t *screen = alloc(n_pairs, sizeof *screen);
+  int8_t *closed_mark = alloc(n_pairs, sizeof *closed_mark);
   int32_t *rows = NULL;
   double *a = NULL, *delta = NULL;
-  if (!screen)
+  if (!closed_mark)
     goto done;
-  if (candidates)
-  {
-    const int32_t dim = d - 1, stride = d * dim;
-    for (int64_t k = 0; k < n_candidates; ++k)
-    {
-      const int64_t p = candidates[k];
-      if (d == 3)
-        screen_pairs(1, 3, i + p, j + p, normal + p * d, t + p * dim * d, d0 + p, sep + p * 2 * d, mA + p * stride,
-                     mB + p * stride, uc, NULL, 0.0, 0.0, screen + p);
-      else
-        screen_pairs(1, 2, i + p, j + p, normal + p * d, t + p * dim * d, d0 + p, sep + p * 2 * d, mA + p * stride,
-                     mB + p * stride, uc, NULL, 0.0, 0.0, screen + p);
-    }
-  }
-  else if (d == 3)
-    screen_pairs(n_pairs, 3, i, j, normal, t, d0, sep, mA, mB, uc, NULL, 0.0, 0.0, screen);
-  else
-    screen_pairs(n_pairs, 2, i, j, normal, t, d0, sep, mA, mB, uc, NULL, 0.0, 0.0, screen);
+  screen(candidates ? n_candidates : n_pairs, d, candidates, i, j, normal, t, d0, sep, mA, mB, uc, NULL, 0.0, 0.0,
+         closed_mark);
   const int64_t n_screened = candidates ? n_candidates : n_pairs;
   for (int64_t k = 0; k < n_screened; ++k)
   {
     const int64_t p = candidates ? candidates[k] : k;
-    if (screen[p])
+    if (closed_mark[p])
     {
       closed[n++] = p;
       bound += z_ptr[p + 1] - z_ptr[p];
@@ -1454,7 +1451,7 @@ int64_t dem_pair_state(int64_t n_pairs, int64_t n_candidates, const int64_t *res
 done:
   for (int64_t s = 0; s < n_rows; ++s)
     slot[rows[s]] = -1;
-  free(screen), free(rows), free(a), free(delta);
+  free(closed_mark), free(rows), free(a), free(delta);
   return status;
 }
 
