@@ -20,7 +20,7 @@ ffibuilder.cdef(
                          const double *z_new, const double *load, const double *mass,
                          const double *minv, double *u, const double *v_next, double *v_prev,
                          const double *f, int32_t advance, const int32_t *body, double *momentum,
-                         double *sums);
+                         double *total, double *sums);
     void dem_row_column_range(int64_t n_rows, const int32_t *rowptr, const int32_t *cols, int32_t n_cols,
                               int32_t *lo, int32_t *hi);
     void dem_transpose_pattern(const int64_t *ranges, int32_t n_ranges, const int32_t *rowptr, const int32_t *cols,

@@ -67,7 +67,7 @@ class DynamicRun:
         diag = self.stepper.initialise(*model.initial_state(dem, scene))
         self.first = diag
         self.stats = Statistics(diag.balance, scale=diag.mechanical)
-        self.pair_stats = PairContactStatistics(dem, self.stepper)
+        self.pair_stats = PairContactStatistics(dem, self.stepper, diag.momentum)
         columns = model.contact_columns(dem)
         self._penetration_column = columns.index("penetration") if "penetration" in columns else None
         self.setup_seconds = comm.allreduce(time.perf_counter() - self.wall, op=MPI.MAX)
@@ -181,9 +181,8 @@ class DynamicRun:
         tic = time.process_time()
         contact = model.contact_values(dem, stepper.u, stepper.contact_patch_values())
         if dem.pair_contact is not None:
-            momentum = model.momentum(dem, stepper)
-            contact += list(momentum)
-            self.pair_stats.record(diag.t, stepper, contact[self._penetration_column], momentum)
+            contact += list(diag.momentum)
+            self.pair_stats.record(diag.t, stepper, contact[self._penetration_column], diag.momentum)
             # contact work done at every step for its outputs: part of the contact share
             self.pair_stats.output_seconds += time.process_time() - tic
         if dem.contact is not None:

@@ -96,6 +96,7 @@ void dem_lift_sums(int64_t n, const int32_t *restrict rows, const double *restri
  *   sums[1]  += 1/2 m_b v_next_i v_new_i                  pseudo-kinetic energy
  *   sums[2]  += f_i u_i                                   (f may be NULL)
  *   momentum[body_b bs + j] += m_b v_new_i                (body may be NULL)
+ *   total[j] += m_b (v_next_i + v_new_i) / 2              the momentum of vbar (bs <= 3)
  * then v_prev_i <- v_new_i and z_old_i <- 0 (ready to accumulate the next Q^T y). */
 void dem_memm_update(int64_t n_blocks, int32_t bs, double dt, double c, double *restrict z_old,
                      const double *restrict z_new, const double *restrict load,
@@ -103,9 +104,9 @@ void dem_memm_update(int64_t n_blocks, int32_t bs, double dt, double c, double *
                      double *restrict u, const double *restrict v_next,
                      double *restrict v_prev, const double *restrict f, int32_t advance,
                      const int32_t *restrict body, double *restrict momentum,
-                     double *restrict sums)
+                     double *restrict total, double *restrict sums)
 {
-  double kinetic = 0.0, pseudo = 0.0, external = 0.0;
+  double kinetic = 0.0, pseudo = 0.0, external = 0.0, p[3] = {0.0, 0.0, 0.0};
   for (int64_t b = 0; b < n_blocks; ++b)
   {
     const double two_minv = 2.0 * minv[b];
@@ -121,6 +122,7 @@ void dem_memm_update(int64_t n_blocks, int32_t bs, double dt, double c, double *
       const double vbar = vn + v_new;
       k2 += vbar * vbar;
       p2 += vn * v_new;
+      p[j] += mass[b] * vbar;
       if (advance)
         u[i] += dt * vn;
       if (f)
@@ -136,6 +138,8 @@ void dem_memm_update(int64_t n_blocks, int32_t bs, double dt, double c, double *
   sums[0] += 0.125 * kinetic;
   sums[1] += 0.5 * pseudo;
   sums[2] += external;
+  for (int32_t j = 0; j < bs; ++j)
+    total[j] += 0.5 * p[j];
 }
 
 /* The smallest and largest column below n_cols of each row of a CSR (rowptr, cols) of n_rows

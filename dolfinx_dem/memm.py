@@ -49,10 +49,11 @@ import dataclasses
 import math
 
 import numpy as np
+from mpi4py import MPI
 from petsc4py import PETSc
 
 from dolfinx_dem.memm_state import (CONTACT_J, CONTACT_S, DATA_POTENTIAL, EXTERNAL, KINETIC, LIFT_J, LIFT_S,
-                                    LOAD_POWER, PSEUDO, ROWS_J, ROWS_S, StepState)
+                                    LOAD_POWER, MOMENTUM, PSEUDO, ROWS_J, ROWS_S, StepState)
 
 #: Default number of steps between true products for the energy rows (see the module docstring
 #: and docs/bench/README.md for the drift with and without).
@@ -89,7 +90,8 @@ class InstabilityError(RuntimeError):
 
 @dataclasses.dataclass(frozen=True)
 class Diagnostics:
-    """Energies at t_n (J, or J/m in 2D); the kinetic energy uses vbar = (v^{n-1/2} + v^{n+1/2})/2."""
+    """Energies at t_n (J, or J/m in 2D); the kinetic energy uses vbar = (v^{n-1/2} + v^{n+1/2})/2,
+    and so does the total linear momentum sum_c m_c vbar_c (kg m/s, or kg/s in 2D), shape (d,)."""
 
     step: int
     t: float
@@ -100,6 +102,7 @@ class Diagnostics:
     pseudo_kinetic: float  # 1/2 (v^{n-1/2})^T M v^{n+1/2}
     pseudo_energy: float  # pseudo_kinetic + the potential the force derives from (energies()["potential"])
     work: float = 0.0  # the work W^n done by time-dependent data and prescribed bodies since t0 (MEMM's docstring)
+    momentum: np.ndarray | None = None
 
     @property
     def balance(self) -> float:
@@ -294,7 +297,8 @@ class MEMM:
         external = -s[EXTERNAL]
         return Diagnostics(step=self.n, t=self.t, kinetic=s[KINETIC], elastic=elastic, stabilisation=stabilisation,
                            external=external, pseudo_kinetic=s[PSEUDO],
-                           pseudo_energy=s[PSEUDO] + elastic + stabilisation + external, work=self.work)
+                           pseudo_energy=s[PSEUDO] + elastic + stabilisation + external, work=self.work,
+                           momentum=s[MOMENTUM : MOMENTUM + self.problem.d].copy())
 
     def contact_patch_values(self) -> list[np.ndarray]:
         """The patch values of u^n of each contact model (``problem.contacts``), gathered once
@@ -324,6 +328,7 @@ class MEMM:
         w.scale(0.5)
         m.pointwiseMult(w, M)
         kinetic = 0.5 * m.dot(w)
+        momentum = self.problem.comm.allreduce(m.array_r.reshape(-1, self.problem.d).sum(axis=0), op=MPI.SUM)
         m.pointwiseMult(self.v_prev, M)
         pseudo_kinetic = 0.5 * m.dot(self.v_next)
         return Diagnostics(
@@ -335,6 +340,7 @@ class MEMM:
             external=e["external"],
             pseudo_kinetic=pseudo_kinetic,
             pseudo_energy=pseudo_kinetic + e["potential"],
+            momentum=momentum,
         )
 
     def check_stability(self, diag: Diagnostics):

@@ -30,10 +30,12 @@ _REVERSE = dict(addv=PETSc.InsertMode.ADD_VALUES, mode=PETSc.ScatterMode.REVERSE
 #: models' (this process's parts of their energy changes, set by MEMM before ``reduce``), the
 #: step's work of time-dependent data, v^{n+1/2} . int L dt (added by MEMM), and of prescribed
 #: bodies, -v_p^{n+1/2} . I_p (added by ``update``), and the data potential
-#: (``DEMDiscretisation.data_potential``); then the momentum of each free body (d per
-#: body, and d for the cells of clamped bodies).
+#: (``DEMDiscretisation.data_potential``); the total momentum sum_c m_c vbar_c at t_n (3 slots,
+#: d used); then the momentum of each free body at v^{n+1/2} (d per body, and d for the cells of
+#: clamped bodies).
 (ROWS_S, ROWS_J, KINETIC, PSEUDO, EXTERNAL, LIFT_S, LIFT_J, CONTACT_S, CONTACT_J, LOAD_POWER, DATA_POTENTIAL,
- MOMENTA) = range(12)
+ MOMENTUM) = range(12)
+MOMENTA = MOMENTUM + 3
 
 
 class StepState:
@@ -112,6 +114,8 @@ class StepState:
         M = problem.mass.array_r
         vp, vn = self.v_prev.array_r, self.v_next.array_r
         self.sums[KINETIC:EXTERNAL] = [0.125 * np.dot(M, (vp + vn) ** 2), 0.5 * np.dot(M * vp, vn)]
+        d = problem.d
+        self.sums[MOMENTUM : MOMENTUM + d] = 0.5 * (self._mass @ (vp + vn).reshape(-1, d))
         if self._p_body_force != ffi.NULL:
             self.sums[EXTERNAL] = np.dot(problem.external_force.array_r, self.u.array_r)
         if self._body is not None:
@@ -165,7 +169,7 @@ class StepState:
         lib.dem_memm_update(len(self._mass), self.problem.d, self.dt, 0.5 * self.dt**2, p[id(z_old)], p[id(z_new)],
                             p[id(impulse)], self._p_mass, self._p_minv, p[id(self.u)], p[id(self.v_next)],
                             p[id(self.v_prev)], self._p_body_force, 1 if advance else 0, self._p_body,
-                            self._p_sums + MOMENTA, self._p_sums + KINETIC)
+                            self._p_sums + MOMENTA, self._p_sums + MOMENTUM, self._p_sums + KINETIC)
         self.u.stateIncrease()  # written by the kernel: PETSc's cached norms are stale
         self.v_prev.stateIncrease()
         self._ghosts[0].fill(0.0)  # z_old becomes the next accumulator, ghost entries too

@@ -227,14 +227,6 @@ def contact_values(dem: DEMDiscretisation, u, patches: list[np.ndarray] | None =
     return values
 
 
-def momentum(dem: DEMDiscretisation, stepper) -> np.ndarray:
-    """Total linear momentum sum_c m_c vbar_c at t_n (vbar the mean of the two half-step
-    velocities of the ``memm.MEMM`` stepper), shape (d,)."""
-    m = dem.mass.array_r[:: dem.d]  # the d dofs of a cell share its mass (MEMM checks it)
-    v = 0.5 * (stepper.v_prev.array_r + stepper.v_next.array_r).reshape(-1, dem.d)
-    return sum_over_processes(dem.comm, m @ v)  # (m * v).sum(axis=0) took 80 of 93 us on cradle
-
-
 class Probes:
     """Displacement components at points: the P1 reconstruction (eq. (10)) of the cell whose
     barycentre is nearest to the point (ties broken by position, so any process count agrees)."""

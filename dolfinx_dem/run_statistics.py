@@ -12,7 +12,6 @@ from collections.abc import Mapping
 import numpy as np
 from mpi4py import MPI
 
-from dolfinx_dem import model
 from dolfinx_dem.discretisation import DEMDiscretisation
 from dolfinx_dem.memm import MEMM
 
@@ -41,9 +40,10 @@ class PairContactStatistics:
     and in the contact outputs computed at every step (``output_seconds``: the series' contact
     columns, the penetration and first-contact statistics)."""
 
-    def __init__(self, dem: DEMDiscretisation, stepper: MEMM):
+    def __init__(self, dem: DEMDiscretisation, stepper: MEMM, momentum: np.ndarray):
+        """``momentum``: the total momentum of the initial state (``memm.Diagnostics``)."""
         self.first_contact, self.penetration = None, 0.0
-        self.p0 = model.momentum(dem, stepper) if dem.pair_contact is not None else None
+        self.p0 = momentum if dem.pair_contact is not None else None
         m = dem.mass.array_r.reshape(-1, dem.d)
         v = 0.5 * (stepper.v_prev.array_r + stepper.v_next.array_r).reshape(-1, dem.d)
         self.p_scale = dem.comm.allreduce(float(np.abs(m * v).sum()), op=MPI.SUM)

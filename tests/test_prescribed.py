@@ -113,7 +113,7 @@ def test_a_free_block_pushed_by_a_prescribed_disc_balances_its_energy():
     summary reports no momentum_rel_change."""
     r, balances, _ = run(indentation() | {"dirichlet": [], "time": {"end": 0.004, "cfl": 0.5}})
     assert np.abs(balances - balances[0]).max() < 1e-12
-    assert model.momentum(r.dem, r.stepper)[1] < 0.0 and not r.pair_stats.free
+    assert r.stepper.diagnostics().momentum[1] < 0.0 and not r.pair_stats.free
 
 
 def test_the_indentation_scene_writes_a_force_indentation_curve(tmp_path):
