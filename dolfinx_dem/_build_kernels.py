@@ -37,6 +37,9 @@ ffibuilder.cdef(
                        const double *lift, double *out);
     int64_t dem_pair_worst_motion(int64_t n, int32_t d, const double *uc, const double *vc, double tau,
                                   const double *reference, const double *half_skin2, double *ratio);
+    int64_t dem_pair_state_motion(int64_t n, int32_t d, const double *uc, const double *reference,
+                                  const double *half_skin2, const double *end, const double *vc, double tau,
+                                  double *ratio);
     void dem_pair_separations(int64_t n, int32_t d, const double *XA, const double *mA, const double *XB,
                               const double *mB, double margin, double *out);
     void dem_pair_screen(int64_t n_pairs, int32_t d, const int64_t *i, const int64_t *j, const double *n,
@@ -73,7 +76,7 @@ ffibuilder.cdef(
                            const double *z_val, const int32_t *q_ptr, const int32_t *q_idx, const double *q_val,
                            const double *q, const double *up, const int8_t *elastic, int32_t *slot,
                            int64_t *closed, double *g, double *w, double *dw, double *c, double *mu,
-                           double *energy);
+                           double *sums);
     int64_t dem_pair_body_forces(int64_t n, int32_t d, const int64_t *p, const int64_t *i, const int64_t *j,
                               const double *normal, const int64_t *body, int64_t n_bodies, const int64_t *index,
                               const double *mu, const double *g, const double *w, const double *dw, const double *c,

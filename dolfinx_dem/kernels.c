@@ -549,6 +549,18 @@ int64_t dem_pair_worst_motion(int64_t n, int32_t d, const double *restrict uc, c
   return worst;
 }
 
+/* pair_contact._At's two motion checks in one call: dem_pair_worst_motion of uc against the
+ * list's reference (returned, ratio[0]), and (end != NULL) the largest |end + tau vc - uc|^2
+ * (ratio[1]): how far uc lies from the end of the last flight (end, vc, tau). */
+int64_t dem_pair_state_motion(int64_t n, int32_t d, const double *restrict uc, const double *restrict reference,
+                              const double *restrict half_skin2, const double *restrict end,
+                              const double *restrict vc, double tau, double *restrict ratio)
+{
+  if (end)
+    dem_pair_worst_motion(n, d, end, vc, tau, uc, NULL, ratio + 1);
+  return dem_pair_worst_motion(n, d, uc, NULL, 0.0, reference, half_skin2, ratio);
+}
+
 /* The separations of dem_pair_screen for n pairs of simplices A, B (d vertices of dim = d - 1
  * components each, face k from vertex k, outward face normals mA, mB unnormalised): out (n x 2 d)
  * = for each face k of A, then of B, min over the other's vertices Y_b of m_k . (Y_b - X_k),
@@ -1379,8 +1391,9 @@ done:
  * (closed: dem_pair_screen's test without a flight, separations sep), their gap g, overlap w, dw/du_j (d per pair; see
  * dem_overlap), c = w g^-, and, over the own rows their z_p touch (Z^T: z_ptr, z_idx, z_val),
  * a = Q u + q (Q: q_ptr, q_idx, q_val on the patch values up), delta = Z c and mu_p = z_p . (a +
- * delta); energy[0], energy[1] += the sums of a delta + delta^2 / 2 over the touched elastic rows
- * (elastic[row] != 0) and the others, in the order the pairs first touch them. closed, g, w, c, mu: n_pairs,
+ * delta); sums[0], sums[1] += the sums of a delta + delta^2 / 2 over the touched elastic rows
+ * (elastic[row] != 0) and the others, in the order the pairs first touch them (the energy change),
+ * sums[2] += the sum of mu_p w_p over the closed pairs (-contact_force_part). closed, g, w, c, mu: n_pairs,
  * dw: n_pairs d (the first n_closed written); slot as in dem_pair_force_integral. candidates
  * (sorted, n_candidates; NULL: all pairs): the only pairs that may be closed (pair_contact._At:
  * bit 1 of the last flight's screen). Returns n_closed, or -1 if memory ran out. */
@@ -1394,7 +1407,7 @@ int64_t dem_pair_state(int64_t n_pairs, int64_t n_candidates, const int64_t *res
                        const int32_t *restrict q_ptr, const int32_t *restrict q_idx, const double *restrict q_val,
                        const double *restrict q, const double *restrict up, const int8_t *restrict elastic,
                        int32_t *restrict slot, int64_t *restrict closed, double *restrict g, double *restrict w,
-                       double *restrict dw, double *restrict c, double *restrict mu, double *restrict energy)
+                       double *restrict dw, double *restrict c, double *restrict mu, double *restrict sums)
 {
   int64_t n = 0, bound = 0, n_rows = 0, status = -1;
   int8_t *closed_mark = alloc(n_pairs, sizeof *closed_mark);
@@ -1447,9 +1460,10 @@ int64_t dem_pair_state(int64_t n_pairs, int64_t n_candidates, const int64_t *res
     for (int32_t e = z_ptr[closed[k]]; e < z_ptr[closed[k] + 1]; ++e)
       y += z_val[e] * (a[slot[z_idx[e]]] + delta[slot[z_idx[e]]]);
     mu[k] = y;
+    sums[2] += y * w[k];
   }
   for (int64_t s = 0; s < n_rows; ++s)
-    energy[elastic[rows[s]] ? 0 : 1] += a[s] * delta[s] + 0.5 * delta[s] * delta[s];
+    sums[elastic[rows[s]] ? 0 : 1] += a[s] * delta[s] + 0.5 * delta[s] * delta[s];
   status = n;
 
 done:

@@ -12,15 +12,18 @@ except ImportError as err:  # pragma: no cover - an install without the build st
         "`make setup` or `pip install --no-build-isolation -e .`, which builds them from kernels.c with cffi"
     ) from err
 
-_C_TYPES = {np.dtype(np.float64): "double *", np.dtype(np.int32): "int32_t *", np.dtype(np.int64): "int64_t *",
-            np.dtype(np.int8): "int8_t *"}
+_C_ARRAYS = {np.dtype(np.float64): "double[]", np.dtype(np.int32): "int32_t[]", np.dtype(np.int64): "int64_t[]",
+             np.dtype(np.int8): "int8_t[]"}
 
 
 def pointer(array: np.ndarray | None):
-    """A C pointer to the data of a contiguous float64, int32, int64 or int8 array (NULL for None).
-    The array must stay alive, and at the same address, while the pointer is used."""
+    """A C array over the data of a C-contiguous float64, int32, int64 or int8 array, passed to
+    the kernels as a pointer (NULL for None); it keeps the array alive, and a non-contiguous array
+    raises (numpy's buffer). One ``ffi.from_buffer`` call: the per-step glue calls it some 70
+    times."""
     if array is None:
         return ffi.NULL
-    if not array.flags.c_contiguous:
-        raise ValueError("kernels need contiguous arrays")
-    return ffi.cast(_C_TYPES[array.dtype], ffi.from_buffer(array))
+    ctype = _C_ARRAYS.get(array.dtype)
+    if ctype is None:
+        raise TypeError(f"the compiled kernels take float64, int32, int64 or int8 arrays, not {array.dtype}")
+    return ffi.from_buffer(ctype, array)

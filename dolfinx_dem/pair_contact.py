@@ -257,7 +257,7 @@ class PairContact:
         self.skin = self.comm.allreduce(float(skins.min(initial=np.inf)), op=MPI.MIN)
         self.radius = self.comm.allreduce(float((2.0 * reach + skins).max(initial=0.0)), op=MPI.MAX)
         # how far (relative gap, separations) the screen of a flight looks beyond its end for the
-        # pairs that may be closed there (``_end_candidates``): far above rounding
+        # pairs that may be closed there (``_state_motion``): far above rounding
         self._slack = 1e-9 * self.radius
         # A list round exchanges facets between processes only when a local facet has drifted
         # more than r - s/2 since the last exchange (r the largest pair radius, s the largest
@@ -290,7 +290,7 @@ class PairContact:
         self._facet_values = None  # the scatter of the facet corrections (outputs), made on first use
         self._last = None  # the _At of the last displacement evaluated (a step's end is the next one's start)
         self._flight = None  # (up, vp, dt, free facet velocities) of the flight ``prepare`` checked last
-        self._end = None  # (list, uc, vc, dt, candidates) of the last flight's screen (``_end_candidates``)
+        self._end = None  # (list, uc, vc, dt, candidates) of the last flight's screen (``_state_motion``)
         self._build(self._facets.lift.copy())  # the free facet displacements at u = 0: R 0 + lift
         up = self.patch_values(zero)
         g, w = self._state(np.arange(len(self.listed)), *self._pair_displacements(up))[:2]
@@ -627,10 +627,11 @@ class PairContact:
         screened = self.listed
         flags = np.array([stale, drifted, screen is None or len(screen) > 0], dtype=np.int32)
         self.comm.Allreduce(MPI.IN_PLACE, flags, op=MPI.MAX)
-        if flags[:2].any():
+        stale_anywhere, drifted_anywhere, may_touch = flags.tolist()
+        if stale_anywhere or drifted_anywhere:
             touching = self._touching_keys(at)
             R, scatter = self._R, self.scatter
-            self._build(uc, stale, exchange=bool(flags[1]))
+            self._build(uc, stale, exchange=bool(drifted_anywhere))
             if self.scatter is not scatter:
                 up = self.patch_values(u)
                 vp = None if v is None else self.patch_values(v)
@@ -659,7 +660,7 @@ class PairContact:
         # the flight checked valid at both ends, kept for ``force_integral`` (the free facet
         # velocities and the screen too: none is computed twice per step), and whether no pair
         # touches anywhere during it
-        quiet = not (flags[1] or flags[2])
+        quiet = not (drifted_anywhere or may_touch)
         self._flight = (up, vp, float(dt), vc, screen, quiet) if moving else None
         self.seconds += time.process_time() - start
         return up, vp
@@ -770,7 +771,7 @@ class PairContact:
         and their projections not separated by the line of a face at some tau (``_separations``:
         exact, less a margin; the compiled kernel ``dem_pair_screen``: one pass over the list;
         ``dem_pair_state`` screens a state with it). Keeps those near closing at the flight's
-        end for the state there (``_end_candidates``)."""
+        end for the state there (``_state_motion``)."""
         L = self.listed
         out, found, counts = np.empty(len(L), np.int8), np.empty((2, len(L)), np.int64), np.zeros(2, np.int64)
         P = L.pointers
@@ -780,18 +781,18 @@ class PairContact:
         self._end = (L, uc, vc, float(dt), found[1, : counts[1]])
         return found[0, : counts[0]]
 
-    def _end_candidates(self, uc: np.ndarray) -> np.ndarray | None:
-        """The only listed pairs that may be closed at free facet displacements ``uc`` (bit 1 of
-        the last flight's screen), if every facet lies within half the slack of that flight's end
-        (as at the step's end: uc = R u^{n+1} and the flight's end uc^n + dt vc differ by
-        rounding); None otherwise (then every pair is screened)."""
-        if self._end is None or self._end[0] is not self.listed:
-            return None
-        _, uc0, vc, dt, candidates = self._end
-        ratio = np.zeros(1)
-        lib.dem_pair_worst_motion(len(uc), self.d, pointer(uc0), pointer(vc), dt, pointer(uc), pointer(None),
-                                  pointer(ratio))
-        return candidates if ratio[0] <= (0.5 * self._slack)**2 else None
+    def _state_motion(self, uc: np.ndarray) -> tuple[bool, np.ndarray | None]:
+        """For free facet displacements ``uc``, in one compiled call (``dem_pair_state_motion``):
+        whether the list is stale there (``_moved``), and the only listed pairs that may be closed
+        there (bit 1 of the last flight's screen) if every facet lies within half the slack of that
+        flight's end (as at the step's end: uc = R u^{n+1} and the flight's end uc^n + dt vc
+        differ by rounding), else None (then every pair is screened)."""
+        end = self._end if self._end is not None and self._end[0] is self.listed else None
+        _, uc0, vc, dt, candidates = end if end is not None else (None, None, None, 0.0, None)
+        ratio = np.zeros(2)
+        lib.dem_pair_state_motion(len(uc), self.d, pointer(uc), pointer(self._reference), pointer(self._half_skin2),
+                                  pointer(uc0), pointer(vc), dt, pointer(ratio))
+        return ratio[0] > 1.0, candidates if end is not None and ratio[1] <= (0.5 * self._slack)**2 else None
 
     def _gap(self, p, ui, uj):
         """Gap g of the pairs ``p`` (eq. (22), (30)) for their facets' free displacements ui, uj."""
@@ -858,7 +859,7 @@ class PairContact:
             return 0
         # The pairs whose c_p may not vanish during the step (``_screen``, in ``prepare``): the
         # others add exact zeros, and splitting their neighbours at their events would only cost.
-        result = np.zeros_like(up)
+        result = self.scatter.zeroed()  # the kernel sums into the scatter's own array
         pieces = 0
         if touching.size:
             # The rest in one compiled call (``dem_pair_force_integral``): each touching pair's
@@ -879,7 +880,7 @@ class PairContact:
                 uc.size, *self._Rc.pointers, len(result), pointer(result))
             if pieces < 0:
                 raise MemoryError("contact between bodies: out of memory in the force integral of a step")
-        self.scatter.add(result, out)
+        self.scatter.add_zeroed(out)
         self.seconds += time.process_time() - start
         self.evaluations += len(self._gauss[0]) * pieces
         return len(self._gauss[0]) * pieces
@@ -979,8 +980,7 @@ class PairContact:
         """This process's part of ``contact_force`` (its own rows' parts of mu_p), over the closed
         pairs (g < 0) alone: the sum must not depend on the pairs listed around them (w = 0 adds
         nothing)."""
-        at = self._at(up)
-        return 0.0 - float((at.mu * at.w).sum())
+        return 0.0 - self._at(up).mu_w
 
     def pair_forces(self, up: np.ndarray, active: np.ndarray | None = None) -> np.ndarray:
         """This process's part (sum over processes) of the contact force between each pair of
@@ -1421,8 +1421,8 @@ class _At:
     listed pairs ``closed`` whose c_p = w_p g_p^- may not vanish (the screen of
     ``PairContact._screen``: g_p < 0, projections not apart; the list checked valid there), their
     g, w, dw/du_j, c = w g^- and mu_p = z_p . (a + delta) (own rows' part), with a = Q u + q and
-    delta = Z c on the own rows, and the energy change of those rows (``energy``: elastic,
-    stabilisation). The energy of a step's end, the outputs there and the next step's flight
+    delta = Z c on the own rows, the energy change of those rows (``energy``: elastic,
+    stabilisation) and the sum of mu_p w_p (``mu_w``: ``contact_force_part``). The energy of a step's end, the outputs there and the next step's flight
     share it (``PairContact._at``)."""
 
     def __init__(self, contact: PairContact, up: np.ndarray):
@@ -1433,30 +1433,31 @@ class _At:
         self.uc = contact.free_displacements(self.up)
 
     @functools.cached_property
-    def moved(self) -> bool:
-        """Whether the list is stale here (``PairContact._moved``)."""
-        return self.contact._moved(self.uc)
+    def _motion(self) -> tuple[bool, np.ndarray | None]:
+        return self.contact._state_motion(self.uc)
+
+    moved = property(lambda self: self._motion[0], doc="Whether the list is stale here (``PairContact._moved``).")
 
     @functools.cached_property
     def _values(self) -> tuple:
         contact, L = self.contact, self.listed
-        if self.moved:
+        moved, candidates = self._motion
+        if moved:
             contact._check_listed(self.uc)  # raises
-        candidates = contact._end_candidates(self.uc)
         n, d = 0 if candidates is not None and len(candidates) == 0 else len(L), contact.d  # 0: none closed
         closed, g, w, c, mu = np.empty(n, dtype=np.int64), np.empty(n), np.empty(n), np.empty(n), np.empty(n)
-        dw, energy = np.empty((n, d)), np.zeros(2)
+        dw, sums = np.empty((n, d)), np.zeros(3)
         if n == 0:
-            return closed, g, w, dw, c, mu, (0.0, 0.0)
+            return closed, g, w, dw, c, mu, (0.0, 0.0), 0.0
         P = L.pointers
         k = lib.dem_pair_state(n, 0 if candidates is None else len(candidates), pointer(candidates), d, P["i"], P["j"],
                                P["n"], P["t"], P["d0"], P["sep"], *L.si.pointers, *L.sj.pointers, pointer(self.uc),
                                *L.z.pointers, *L.q.pointers, pointer(contact._q), pointer(self.up),
                                contact._elastic_row_pointer, pointer(L.slot), pointer(closed), pointer(g), pointer(w),
-                               pointer(dw), pointer(c), pointer(mu), pointer(energy))
+                               pointer(dw), pointer(c), pointer(mu), pointer(sums))
         if k < 0:
             raise MemoryError("contact between bodies: out of memory in the contact state")
-        return closed[:k], g[:k], w[:k], dw[:k], c[:k], mu[:k], (float(energy[0]), float(energy[1]))
+        return closed[:k], g[:k], w[:k], dw[:k], c[:k], mu[:k], (float(sums[0]), float(sums[1])), float(sums[2])
 
     closed = property(lambda self: self._values[0])
     g = property(lambda self: self._values[1])
@@ -1465,6 +1466,7 @@ class _At:
     c = property(lambda self: self._values[4])
     mu = property(lambda self: self._values[5])
     energy = property(lambda self: self._values[6])
+    mu_w = property(lambda self: self._values[7])  # the sum of mu_p w_p over the closed pairs
 
 
 class _CSC:

@@ -35,7 +35,8 @@ class PatchScatter:
 
     def __init__(self, template: PETSc.Vec, dofs: np.ndarray):
         self.dofs = np.asarray(dofs, dtype=PETSc.IntType)
-        self._local = PETSc.Vec().createSeq(len(self.dofs), comm=PETSc.COMM_SELF)
+        self._values = np.zeros(len(self.dofs))  # the memory of the patch vector _local
+        self._local = PETSc.Vec().createWithArray(self._values, comm=PETSc.COMM_SELF)
         index = PETSc.IS().createGeneral(self.dofs, comm=PETSc.COMM_SELF)
         self._scatter = PETSc.Scatter().create(template, index, self._local, None)
 
@@ -45,11 +46,23 @@ class PatchScatter:
     def gather(self, vec: PETSc.Vec) -> np.ndarray:
         """The values of ``vec`` at the patch dofs (a copy)."""
         self._scatter.scatter(vec, self._local, PETSc.InsertMode.INSERT, PETSc.ScatterMode.FORWARD)
-        return self._local.array_r.copy()
+        return self._values.copy()
 
     def add(self, values: np.ndarray, vec: PETSc.Vec, scale: float = 1.0) -> None:
         """vec += scale * values at the patch dofs, summed over the processes."""
-        self._local.array[:] = scale * values
+        np.multiply(values, scale, out=self._values)
+        self.add_zeroed(vec)
+
+    def zeroed(self) -> np.ndarray:
+        """The patch's own work array, zeroed, for a caller to sum its values into and then
+        ``add_zeroed`` them (no copy; valid until the next call of this scatter)."""
+        self._values.fill(0.0)
+        return self._values
+
+    def add_zeroed(self, vec: PETSc.Vec) -> None:
+        """vec += the values summed into the array of ``zeroed``, at the patch dofs, summed over
+        the processes."""
+        self._local.stateIncrease()  # written through its array
         self._scatter.scatter(self._local, vec, PETSc.InsertMode.ADD_VALUES, PETSc.ScatterMode.REVERSE)
 
 

@@ -1035,7 +1035,7 @@ def test_the_screen_keeps_every_pair_that_touches_during_a_flight_and_few_others
 
 def test_the_state_at_a_steps_end_screens_the_flights_candidates_only_where_they_hold():
     """The contact state at the end of a flight (``_At``) screens only the pairs that the
-    flight's screen found near closing there (``_end_candidates``): bit-identical to the state
+    flight's screen found near closing there (``_state_motion``): bit-identical to the state
     that screens every listed pair; at a displacement away from the flight's end it screens
     every pair again."""
     from dolfinx_dem.pair_contact import _At
@@ -1051,8 +1051,8 @@ def test_the_state_at_a_steps_end_screens_the_flights_candidates_only_where_they
     far.axpy(0.5 * dt, v)
     for x, reused in ((end, True), (far, False)):
         up = c.patch_values(x)
-        candidates = c._end_candidates(c.free_displacements(up))
-        assert (candidates is not None) == reused
+        moved, candidates = c._state_motion(c.free_displacements(up))
+        assert not moved and (candidates is not None) == reused
         if reused:
             assert 0 < len(candidates) < len(c.listed) / 4
         state = _At(c, up)._values
