@@ -42,10 +42,12 @@ ffibuilder.cdef(
                                   double *ratio);
     void dem_pair_separations(int64_t n, int32_t d, const double *XA, const double *mA, const double *XB,
                               const double *mB, double margin, double *out);
-    void dem_pair_screen(int64_t n_pairs, int32_t d, const int64_t *i, const int64_t *j, const double *n,
-                         const double *t, const double *d0, const double *sep, const double *mA, const double *mB,
-                         const double *uc, const double *vc, double dt, double slack, int8_t *out,
-                         int64_t *touching, int64_t *candidates, int64_t *counts);
+    int64_t dem_pair_flight(int64_t n_rows, const int32_t *ptr, const int32_t *idx, const double *val,
+                            const double *vp, const double *uc, double dt, const double *reference,
+                            const double *half_skin2, int32_t do_screen, int64_t n_pairs, int32_t d, const int64_t *i,
+                            const int64_t *j, const double *n, const double *t, const double *d0, const double *sep,
+                            const double *mA, const double *mB, double slack, double *vc, double *ratio, int8_t *out,
+                            int64_t *touching, int64_t *candidates, int64_t *counts);
     void dem_piecewise_midpoints(int64_t n_times, const int64_t *rows, const double *times, int64_t n, int64_t k,
                                  double dt, int64_t *counts, double *points, double *mid, double *length);
     void dem_pair_facet_corrections(int64_t n, int32_t d, const int64_t *p, const int64_t *i, const int64_t *j,

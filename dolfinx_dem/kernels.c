@@ -561,7 +561,7 @@ int64_t dem_pair_state_motion(int64_t n, int32_t d, const double *restrict uc, c
   return dem_pair_worst_motion(n, d, uc, NULL, 0.0, reference, half_skin2, ratio);
 }
 
-/* The separations of dem_pair_screen for n pairs of simplices A, B (d vertices of dim = d - 1
+/* The separations of flight_screen for n pairs of simplices A, B (d vertices of dim = d - 1
  * components each, face k from vertex k, outward face normals mA, mB unnormalised): out (n x 2 d)
  * = for each face k of A, then of B, min over the other's vertices Y_b of m_k . (Y_b - X_k),
  * less margin |m_k| times the pair's size (the largest |coordinate| of its vertices). */
@@ -696,9 +696,6 @@ screen_pairs(int64_t count, const int32_t d, const int64_t *restrict subset, con
   }
 }
 
-/* screen_pairs over the list, and its two sets as sorted indices: touching (bit 0) and
- * candidates (bit 1), n_pairs each at most, counts[0] and counts[1] their numbers (out: n_pairs,
- * work). */
 /* screen_pairs with a constant d (its loops unrolled) */
 static void screen(int64_t count, int32_t d, const int64_t *restrict subset, const int64_t *restrict i,
                    const int64_t *restrict j, const double *restrict n, const double *restrict t,
@@ -712,12 +709,15 @@ static void screen(int64_t count, int32_t d, const int64_t *restrict subset, con
     screen_pairs(count, 2, subset, i, j, n, t, d0, sep, mA, mB, uc, vc, dt, slack, out);
 }
 
-void dem_pair_screen(int64_t n_pairs, int32_t d, const int64_t *restrict i, const int64_t *restrict j,
-                     const double *restrict n, const double *restrict t, const double *restrict d0,
-                     const double *restrict sep, const double *restrict mA, const double *restrict mB,
-                     const double *restrict uc, const double *restrict vc, double dt, double slack,
-                     int8_t *restrict out, int64_t *restrict touching, int64_t *restrict candidates,
-                     int64_t *restrict counts)
+/* screen_pairs over the list, and its two sets as sorted indices: touching (bit 0) and
+ * candidates (bit 1), n_pairs each at most, counts[0] and counts[1] their numbers (out: n_pairs,
+ * work). */
+static void flight_screen(int64_t n_pairs, int32_t d, const int64_t *restrict i, const int64_t *restrict j,
+                          const double *restrict n, const double *restrict t, const double *restrict d0,
+                          const double *restrict sep, const double *restrict mA, const double *restrict mB,
+                          const double *restrict uc, const double *restrict vc, double dt, double slack,
+                          int8_t *restrict out, int64_t *restrict touching, int64_t *restrict candidates,
+                          int64_t *restrict counts)
 {
   screen(n_pairs, d, NULL, i, j, n, t, d0, sep, mA, mB, uc, vc, dt, slack, out);
   counts[0] = counts[1] = 0;
@@ -728,6 +728,28 @@ void dem_pair_screen(int64_t n_pairs, int32_t d, const int64_t *restrict i, cons
     if (out[p] & 2)
       candidates[counts[1]++] = p;
   }
+}
+
+/* pair_contact.PairContact._flight, a step's free flight uc + tau vc (0 <= tau <= dt) in one call:
+ * vc = R vp (dem_csr_apply: R n_rows = n_facets d rows), the facet farthest from the list's
+ * reference at the flight's end relative to half its skin (dem_pair_worst_motion: returned, and
+ * *ratio), and, if do_screen and *ratio <= 1, flight_screen (else counts = -1). */
+int64_t dem_pair_flight(int64_t n_rows, const int32_t *restrict ptr, const int32_t *restrict idx,
+                        const double *restrict val, const double *restrict vp, const double *restrict uc, double dt,
+                        const double *restrict reference, const double *restrict half_skin2, int32_t do_screen,
+                        int64_t n_pairs, int32_t d, const int64_t *restrict i, const int64_t *restrict j,
+                        const double *restrict n, const double *restrict t, const double *restrict d0,
+                        const double *restrict sep, const double *restrict mA, const double *restrict mB,
+                        double slack, double *restrict vc, double *restrict ratio, int8_t *restrict out,
+                        int64_t *restrict touching, int64_t *restrict candidates, int64_t *restrict counts)
+{
+  dem_csr_apply(n_rows, ptr, idx, val, vp, NULL, vc);
+  const int64_t worst = dem_pair_worst_motion(n_rows / d, d, uc, vc, dt, reference, half_skin2, ratio);
+  if (do_screen && !(*ratio > 1.0))
+    flight_screen(n_pairs, d, i, j, n, t, d0, sep, mA, mB, uc, vc, dt, slack, out, touching, candidates, counts);
+  else
+    counts[0] = counts[1] = -1;
+  return worst;
 }
 
 /* patch.piecewise_midpoints: the times (n_times, each in (0, dt)) of rows ``rows`` (0 <= row < n)
@@ -831,7 +853,7 @@ static void interpolate_own(int64_t n_rows, int32_t n_own, const int64_t *restri
 }
 
 /* Relative margin of the edge tests of pair_events (of the edge length) and of the separating
- * axes of dem_pair_screen (of the pair's projected size): far above rounding, far below any
+ * axes of flight_screen (of the pair's projected size): far above rounding, far below any
  * configuration that matters. */
 #define EDGE_MARGIN 1e-9
 
@@ -1388,7 +1410,7 @@ done:
 /* pair_contact._At, the contact state at one displacement, in one call: the listed pairs
  * (facets (i, j), normal, tangents t, reference gap d0, projected simplices XA.., XB..) whose
  * c_p = w_p g_p^- may not vanish at the free facet displacements uc (n_facets x d), in order
- * (closed: dem_pair_screen's test without a flight, separations sep), their gap g, overlap w, dw/du_j (d per pair; see
+ * (closed: flight_screen's test without a flight, separations sep), their gap g, overlap w, dw/du_j (d per pair; see
  * dem_overlap), c = w g^-, and, over the own rows their z_p touch (Z^T: z_ptr, z_idx, z_val),
  * a = Q u + q (Q: q_ptr, q_idx, q_val on the patch values up), delta = Z c and mu_p = z_p . (a +
  * delta); sums[0], sums[1] += the sums of a delta + delta^2 / 2 over the touched elastic rows

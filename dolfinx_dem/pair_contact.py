@@ -616,15 +616,14 @@ class PairContact:
         at = self._at(up)
         uc, stale = at.uc, at.moved
         moving = v is not None and dt != 0.0
-        if moving:
-            vc = self._free_velocities(vp)
-            stale = stale or self._worst_motion(uc, vc, dt)[1] > 1.0
-        drifted = self._drifted(uc, vc if moving else None, dt)
-        # The flight's screen (``_screen``) before the reduction where the list stands, so that the
+        # The flight's screen (``_free_flight``) before the reduction where the list stands, so that the
         # reduction also tells whether a pair anywhere may touch during the step: if none does
         # (and no list changes), ``force_integral`` adds nothing on every process.
-        screen = self._screen(uc, vc, dt) if moving and not stale else None
-        screened = self.listed
+        vc = screen = None
+        if moving:
+            vc, (_, ratio), screen = self._free_flight(uc, vp, dt, screen=not stale)
+            stale = stale or ratio > 1.0
+        drifted = self._drifted(uc, vc, dt)
         flags = np.array([stale, drifted, screen is None or len(screen) > 0], dtype=np.int32)
         self.comm.Allreduce(MPI.IN_PLACE, flags, op=MPI.MAX)
         stale_anywhere, drifted_anywhere, may_touch = flags.tolist()
@@ -643,10 +642,9 @@ class PairContact:
                     "list rebuild would "
                     "drop them and the energy would jump; the bodies are too soft for their load or speed (or pass a "
                     "larger skin)")
-            if moving:
-                if self._R is not R:
-                    uc, vc = self._at(up).uc, self._free_velocities(vp)
-                k, ratio = self._worst_motion(uc, vc, dt)
+            if moving:  # the flight again from the new list (and reconstructions)
+                uc = self._at(up).uc
+                vc, (k, ratio), screen = self._free_flight(uc, vp, dt)
                 worst = (ratio, float(dt * np.linalg.norm(vc[k])), float(2.0 * np.sqrt(self._half_skin2[k]))) \
                     if k >= 0 else (0.0, 0.0, 0.0)
                 ratio, motion, skin = self.comm.allreduce(worst, op=MPI.MAX)  # the worst facet's
@@ -655,8 +653,6 @@ class PairContact:
                         f"contact between bodies: a candidate facet moves {motion:.3e} m in one step, more than half "
                         f"the Verlet skin ({skin:.3e} m): no pair list covers the step; reduce the time step or "
                         "pass a larger skin")
-            if moving and (screen is None or self.listed is not screened):
-                screen = self._screen(uc, vc, dt)
         # the flight checked valid at both ends, kept for ``force_integral`` (the free facet
         # velocities and the screen too: none is computed twice per step), and whether no pair
         # touches anywhere during it
@@ -680,17 +676,12 @@ class PairContact:
 
     def _moved(self, uc: np.ndarray) -> bool:
         """Whether a facet known here (local or ghost) with free displacements ``uc`` has moved
-        more than half its skin since the last list build (a pair not listed might then touch)."""
-        return self._worst_motion(uc)[1] > 1.0
-
-    def _worst_motion(self, uc: np.ndarray, vc: np.ndarray | None = None, tau: float = 0.0) -> tuple[int, float]:
-        """The known facet that moved most since the last list build relative to half its skin,
-        at free displacements ``uc`` + ``tau`` ``vc``: its index (-1 if none) and (|motion| / (s/2))^2
-        (the compiled ``dem_pair_worst_motion``)."""
+        more than half its skin since the last list build (a pair not listed might then touch;
+        the compiled ``dem_pair_worst_motion``)."""
         ratio = np.zeros(1)
-        k = lib.dem_pair_worst_motion(len(uc), self.d, pointer(uc), pointer(vc), float(tau), pointer(self._reference),
-                                      pointer(self._half_skin2), pointer(ratio))
-        return int(k), float(ratio[0])
+        lib.dem_pair_worst_motion(len(uc), self.d, pointer(uc), pointer(None), 0.0, pointer(self._reference),
+                                  pointer(self._half_skin2), pointer(ratio))
+        return ratio[0] > 1.0
 
     def _drifted(self, uc: np.ndarray, vc: np.ndarray | None, dt: float) -> bool:
         """Whether a local facet with free displacements ``uc`` (those of the known facets), or
@@ -739,12 +730,6 @@ class PairContact:
         lib.dem_csr_apply(uc.size, *self._Rc.pointers, pointer(up), pointer(self._lift), pointer(uc))
         return uc
 
-    def _free_velocities(self, vp: np.ndarray) -> np.ndarray:
-        """R_f v of the known candidate facets, (n, d), from patch values ``vp`` of a velocity."""
-        vc = np.empty((len(self._lift), self.d))
-        lib.dem_csr_apply(vc.size, *self._Rc.pointers, pointer(vp), pointer(None), pointer(vc))
-        return vc
-
     def _pair_displacements(self, up: np.ndarray):
         uc = self.free_displacements(up)
         self._check_listed(uc)
@@ -765,21 +750,31 @@ class PairContact:
         dw[e] = np.einsum("ek,eki->ei", dw_t, t)
         return g, w, dw
 
-    def _screen(self, uc: np.ndarray, vc: np.ndarray, dt: float) -> np.ndarray:
-        """The listed pairs whose c_p = w_p g_p^- may not vanish for the free facet displacements
-        ``uc`` + tau ``vc``, 0 <= tau <= dt (known facets' rows): their gap negative at an end
-        and their projections not separated by the line of a face at some tau (``_separations``:
-        exact, less a margin; the compiled kernel ``dem_pair_screen``: one pass over the list;
-        ``dem_pair_state`` screens a state with it). Keeps those near closing at the flight's
-        end for the state there (``_state_motion``)."""
-        L = self.listed
+    def _free_flight(self, uc: np.ndarray, vp: np.ndarray, dt: float,
+                     screen: bool = True) -> tuple[np.ndarray, tuple[int, float], np.ndarray | None]:
+        """A step's free flight uc + tau vc, 0 <= tau <= dt, from the free facet displacements
+        ``uc`` (known facets' rows) and the patch values ``vp`` of the velocity, in one compiled
+        call (``dem_pair_flight``): the free facet velocities vc = R_f v, (n, d); the known facet
+        that moves farthest from where the list was built, at the flight's end, relative to half
+        its skin: its index (-1 if none) and (|motion| / (s/2))^2; and, if ``screen`` and that
+        ratio is at most 1 (else None), the screen: the listed pairs whose c_p = w_p g_p^- may
+        not vanish during the flight, their gap negative at an end and their projections not
+        separated by the line of a face at some tau (``_separations``: exact, less a margin; one
+        pass over the list; ``dem_pair_state`` screens a state with it). The screen keeps those
+        near closing at the flight's end for the state there (``_state_motion``)."""
+        L, d = self.listed, self.d
+        vc, ratio = np.empty((len(self._lift), d)), np.zeros(1)
         out, found, counts = np.empty(len(L), np.int8), np.empty((2, len(L)), np.int64), np.zeros(2, np.int64)
         P = L.pointers
-        lib.dem_pair_screen(len(L), self.d, P["i"], P["j"], P["n"], P["t"], P["d0"], P["sep"], L.si.pointers[1],
-                            L.sj.pointers[1], pointer(uc), pointer(vc), float(dt), self._slack, pointer(out),
-                            pointer(found[0]), pointer(found[1]), pointer(counts))
+        k = lib.dem_pair_flight(vc.size, *self._Rc.pointers, pointer(vp), pointer(uc), float(dt),
+                                pointer(self._reference), pointer(self._half_skin2), int(screen), len(L), d, P["i"],
+                                P["j"], P["n"], P["t"], P["d0"], P["sep"], L.si.pointers[1], L.sj.pointers[1],
+                                self._slack, pointer(vc), pointer(ratio), pointer(out), pointer(found[0]),
+                                pointer(found[1]), pointer(counts))
+        if counts[0] < 0:
+            return vc, (int(k), float(ratio[0])), None
         self._end = (L, uc, vc, float(dt), found[1, : counts[1]])
-        return found[0, : counts[0]]
+        return vc, (int(k), float(ratio[0])), found[0, : counts[0]]
 
     def _state_motion(self, uc: np.ndarray) -> tuple[bool, np.ndarray | None]:
         """For free facet displacements ``uc``, in one compiled call (``dem_pair_state_motion``):
@@ -857,7 +852,7 @@ class PairContact:
         if quiet:  # no pair touches during the step, on any process
             self.seconds += time.process_time() - start
             return 0
-        # The pairs whose c_p may not vanish during the step (``_screen``, in ``prepare``): the
+        # The pairs whose c_p may not vanish during the step (``_free_flight``, in ``prepare``): the
         # others add exact zeros, and splitting their neighbours at their events would only cost.
         result = self.scatter.zeroed()  # the kernel sums into the scatter's own array
         pieces = 0
@@ -1278,7 +1273,7 @@ class _Simplices:
 
 
 def _separations(A: _Simplices, B: _Simplices) -> np.ndarray:
-    """The separations of the compiled screen ``dem_pair_screen``, (P, 2d) (the compiled
+    """The separations of the compiled screen (``PairContact._flight``), (P, 2d) (the compiled
     ``dem_pair_separations``): for each face k of A, then of B, how far the other simplex's
     nearest vertex lies beyond the face's line (times |m_k|) at zero offset, min_b m_k . (Y_b - X_k)
     and min_a m'_k . (X_a - Y_k). At offset s, A and B (moved by s) are separated by that line
@@ -1419,7 +1414,7 @@ class _At:
     """The contact state of a ``PairContact`` at one displacement (patch values ``up``): the free
     facet displacements ``uc``, and on first use, in one compiled call (``dem_pair_state``), the
     listed pairs ``closed`` whose c_p = w_p g_p^- may not vanish (the screen of
-    ``PairContact._screen``: g_p < 0, projections not apart; the list checked valid there), their
+    ``PairContact._free_flight``: g_p < 0, projections not apart; the list checked valid there), their
     g, w, dw/du_j, c = w g^- and mu_p = z_p . (a + delta) (own rows' part), with a = Q u + q and
     delta = Z c on the own rows, the energy change of those rows (``energy``: elastic,
     stabilisation) and the sum of mu_p w_p (``mu_w``: ``contact_force_part``). The energy of a step's end, the outputs there and the next step's flight

@@ -1012,18 +1012,18 @@ def test_the_force_integral_over_a_flight_with_events_is_exact():
 
 
 def test_the_screen_keeps_every_pair_that_touches_during_a_flight_and_few_others():
-    """``_screen`` (``dem_pair_screen``: the gaps at the ends and the separating axes of the
-    projected triangles along the flight) against the pairs touching (g < 0, w > 0) at 801
-    sampled times of a flight of sliding cubes: it holds all of them, and few pairs more (those
-    touching between the samples or within the margin); the projections' bounding boxes, the
-    screen before the separating axes, held 204 pairs for the 131 touching."""
+    """``_free_flight``'s screen (``dem_pair_flight``: the gaps at the ends and the separating
+    axes of the projected triangles along the flight) against the pairs touching (g < 0, w > 0)
+    at 801 sampled times of a flight of sliding cubes: it holds all of them, and few pairs more
+    (those touching between the samples or within the margin); the projections' bounding boxes,
+    the screen before the separating axes, held 204 pairs for the 131 touching."""
     dem = two_boxes(MPI.COMM_SELF)
     c = dem.pair_contact
     u, v = cell_vector(dem, lambda x: oblique(x, 0.01)), cell_vector(dem, oblique)
     dt = 0.02
     up, vp = c.prepare(u, v, dt)
-    uc, vc = c.free_displacements(up), c._free_velocities(vp)
-    screened = c._screen(uc, vc, dt)
+    uc = c.free_displacements(up)
+    vc, _, screened = c._free_flight(uc, vp, dt)
     L, touched = c.listed, np.zeros(len(c.listed), dtype=bool)
     for tau in np.linspace(0.0, dt, 801):
         x = uc + tau * vc
