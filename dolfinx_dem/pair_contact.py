@@ -906,10 +906,11 @@ class PairContact:
         L, F, at = self.listed, self.facets_all, self._at(up)
         uf = at.uc + self._corrections_everywhere(up)
         weight, mean, P = np.zeros(len(F)), np.zeros(len(F)), L.pointers
-        worst = lib.dem_pair_penetration(len(at.closed), self.d, pointer(at.closed), P["i"], P["j"], P["n"],
-                                         pointer(F.centre), pointer(uf), pointer(at.w), self.num_own, pointer(weight),
-                                         pointer(mean))  # compiled: ``dem_pair_penetration``
-        return self.comm.allreduce(worst, op=MPI.MAX)
+        worst = np.array([lib.dem_pair_penetration(len(at.closed), self.d, pointer(at.closed), P["i"], P["j"], P["n"],
+                                                   pointer(F.centre), pointer(uf), pointer(at.w), self.num_own,
+                                                   pointer(weight), pointer(mean))])  # ``dem_pair_penetration``
+        self.comm.Allreduce(MPI.IN_PLACE, worst, op=MPI.MAX)
+        return float(worst[0])
 
     def _corrections_everywhere(self, up: np.ndarray) -> np.ndarray:
         """Facet corrections of every known facet (local and ghost), each from its owner (a

@@ -43,7 +43,8 @@ class PairContactStatistics:
     def __init__(self, dem: DEMDiscretisation, stepper: MEMM, momentum: np.ndarray):
         """``momentum``: the total momentum of the initial state (``memm.Diagnostics``)."""
         self.first_contact, self.penetration = None, 0.0
-        self.p0 = momentum if dem.pair_contact is not None else None
+        # floats: on a 3-vector, numpy's operations cost more than a loop, at every step
+        self.p0 = momentum.tolist() if dem.pair_contact is not None else None
         m = dem.mass.array_r.reshape(-1, dem.d)
         v = 0.5 * (stepper.v_prev.array_r + stepper.v_next.array_r).reshape(-1, dem.d)
         self.p_scale = dem.comm.allreduce(float(np.abs(m * v).sum()), op=MPI.SUM)
@@ -65,20 +66,20 @@ class PairContactStatistics:
             self.previous = stepper.u.copy()
         self.penetration = max(self.penetration, penetration)
         if self.free:
-            self.momentum_change = max(self.momentum_change, float(np.abs(momentum - self.p0).max()))
+            self.momentum_change = max(self.momentum_change, *(abs(p - p0) for p, p0 in zip(momentum.tolist(), self.p0)))
 
     def state(self) -> dict:
         """The running figures for a checkpoint (``previous`` follows from the state u)."""
         return {"first_contact": self.first_contact, "penetration": self.penetration,
                 "momentum_change": self.momentum_change, "p_scale": self.p_scale,
                 "output_seconds": self.output_seconds,
-                "p0": None if self.p0 is None else [float(x) for x in self.p0]}
+                "p0": self.p0}
 
     def restore(self, state: Mapping, stepper: MEMM):
         self.first_contact, self.penetration = state["first_contact"], state["penetration"]
         self.momentum_change, self.p_scale = state["momentum_change"], state["p_scale"]
         self.output_seconds = state["output_seconds"]
-        self.p0 = None if state["p0"] is None else np.array(state["p0"])
+        self.p0 = state["p0"]
         if self.dem.pair_contact is not None and self.first_contact is None:
             self.previous = stepper.u.copy()
 
