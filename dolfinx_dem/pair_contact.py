@@ -157,6 +157,25 @@ class _Facets:
                           for f in dataclasses.fields(_Facets)})
 
 
+def _timed(method):
+    """A method whose processor time counts in ``PairContact.seconds`` (the contact work of the
+    steps: the list rounds, the patch gathers, the force integrals and the energies), once: a
+    timed method called by another adds nothing of its own."""
+
+    @functools.wraps(method)
+    def timed(self, *args, **kwargs):
+        if self._timing:
+            return method(self, *args, **kwargs)
+        self._timing, start = True, time.process_time()
+        try:
+            return method(self, *args, **kwargs)
+        finally:
+            self.seconds += time.process_time() - start
+            self._timing = False
+
+    return timed
+
+
 class PairContact:
     """Contact between candidate facets of a 2D or 3D DEMDiscretisation; see the module docstring.
 
@@ -284,7 +303,8 @@ class PairContact:
         self.rebuilds = 0  # list builds on this process
         self.exchanges = 0  # exchanges of facets between processes (list rounds that make the ghosts)
         self._scheme_b_rule = np.empty(0, dtype=np.int64)  # keys of pairs under the B rule (own ones)
-        self.seconds = 0.0  # processor time of the contact work in force integrals and energies
+        self.seconds = 0.0  # processor time of the contact work of the steps (``_timed``)
+        self._timing = False  # inside a ``_timed`` method
         self._template = zero = dem.create_vector()  # the layout of the scatters' source vectors
         self.scatter = None  # the patch scatter, made by the list rounds (``_remake_scatters``)
         self._facet_values = None  # the scatter of the facet corrections (outputs), made on first use
@@ -589,6 +609,7 @@ class PairContact:
         because eq. (23)-(24) are not well posed for them (see ``_directions``); collective."""
         return self.comm.allreduce(len(self._scheme_b_rule), op=MPI.SUM)
 
+    @_timed
     def prepare(self, u: PETSc.Vec, v: PETSc.Vec | None = None, dt: float = 0.0,
                 up: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray | None]:
         """Make the Verlet list valid for the states u + tau v, 0 <= tau <= dt (u alone without
@@ -606,7 +627,6 @@ class PairContact:
         (gathered by the current ``scatter``: MEMM keeps those of the step's end), else they are
         gathered. Returns the patch values of u and v (None without v), gathered again after any
         rebuild: arrays of patch values gathered before a rebuild are invalid after it."""
-        start = time.process_time()
         if up is None:
             up = self.patch_values(u)
         elif len(up) != len(self.scatter):
@@ -658,7 +678,6 @@ class PairContact:
         # touches anywhere during it
         quiet = not (drifted_anywhere or may_touch)
         self._flight = (up, vp, float(dt), vc, screen, quiet) if moving else None
-        self.seconds += time.process_time() - start
         return up, vp
 
     def _touching_keys(self, at: _At) -> np.ndarray:
@@ -708,6 +727,7 @@ class PairContact:
                                "(MEMM does it every step)")
 
     # -- energy and force ----------------------------------------------------------------------
+    @_timed
     def patch_values(self, vec: PETSc.Vec) -> np.ndarray:
         """The values of ``vec`` at the patch dofs (collective); valid until the next rebuild."""
         return self.scatter.gather(vec)
@@ -794,12 +814,10 @@ class PairContact:
         L = self.listed
         return L.d0[p] + np.einsum("ei,ei->e", uj - ui, L.n[p])
 
+    @_timed
     def energy_correction(self, up: np.ndarray) -> tuple[float, float]:
         """(elastic, stabilisation) energy changes of this process's own rows (not reduced)."""
-        start = time.process_time()
-        elastic, stabilisation = self._at(up).energy
-        self.seconds += time.process_time() - start
-        return elastic, stabilisation
+        return self._at(up).energy
 
     def force_correction(self, up: np.ndarray, active: np.ndarray | None = None) -> np.ndarray:
         """This process's part of F - F_free at the patch dofs: the terms of its own rows (the
@@ -838,19 +856,18 @@ class PairContact:
         self.scatter.add(self.force_correction(self.patch_values(u), active), out)
 
     # -- events --------------------------------------------------------------------------------
+    @_timed
     def force_integral(self, up: np.ndarray, vp: np.ndarray, dt: float, out: PETSc.Vec) -> int:
         """out += int_0^dt (F - F_free)(u + tau v) dtau, split at the events and integrated by
         d-point Gauss-Legendre on each piece (module docstring), for the patch values up, vp of
         u and v that ``prepare`` returned; returns the number of force evaluations of the pair
         integral with the most pieces (collective)."""
-        start = time.process_time()
         L = self.listed
         flight = self._flight
         if flight is None or flight[0] is not up or flight[1] is not vp or flight[2] != dt:
             raise RuntimeError("force_integral needs the patch values that prepare(u, v, dt) returned for this step")
         uc, vc, touching, quiet = self._at(up).uc, flight[3], flight[4], flight[5]
         if quiet:  # no pair touches during the step, on any process
-            self.seconds += time.process_time() - start
             return 0
         # The pairs whose c_p may not vanish during the step (``_free_flight``, in ``prepare``): the
         # others add exact zeros, and splitting their neighbours at their events would only cost.
@@ -876,7 +893,6 @@ class PairContact:
             if pieces < 0:
                 raise MemoryError("contact between bodies: out of memory in the force integral of a step")
         self.scatter.add_zeroed(out)
-        self.seconds += time.process_time() - start
         self.evaluations += len(self._gauss[0]) * pieces
         return len(self._gauss[0]) * pieces
 
