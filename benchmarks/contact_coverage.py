@@ -21,10 +21,11 @@
 """
 
 import sys
+import types
 
 import numpy as np
 
-from dolfinx_dem.pair_contact import _overlap, _Simplices, _tangents
+from dolfinx_dem.pair_contact import _overlap, _project, _Simplices, _tangents
 
 
 def pairs(D, i, j, uc=None):
@@ -35,9 +36,9 @@ def pairs(D, i, j, uc=None):
     n = L[i, None] * N[i] - L[j, None] * N[j]
     n /= np.linalg.norm(n, axis=1)[:, None]
     t = _tangents(n)
-    project = lambda f: np.einsum("pkx,pax->pka", E[f] - C[i][:, None], t)  # noqa: E731
+    F = types.SimpleNamespace(ends=E, centre=C)
     g = np.einsum("pi,pi->p", C[j] + uc[j] - C[i] - uc[i], n)
-    w, _ = _overlap(_Simplices.of(project(i)), _Simplices.of(project(j)), np.arange(len(i)),
+    w, _ = _overlap(_Simplices.of(_project(F, i, i, t)), _Simplices.of(_project(F, j, i, t)), np.arange(len(i)),
                     np.einsum("pki,pi->pk", t, uc[j] - uc[i]))
     return n, g, w
 

@@ -40,6 +40,9 @@ ffibuilder.cdef(
     int64_t dem_pair_state_motion(int64_t n, int32_t d, const double *uc, const double *reference,
                                   const double *half_skin2, const double *end, const double *vc, double tau,
                                   double *ratio);
+    void dem_pair_project(int64_t n, int32_t d, const int64_t *f, const int64_t *origin, const double *ends,
+                          const double *centre, const double *t, double *X);
+    void dem_simplices(int64_t n, int32_t d, const double *X, double *end, double *m, double *nu, double *size);
     void dem_pair_separations(int64_t n, int32_t d, const double *XA, const double *mA, const double *XB,
                               const double *mB, double margin, double *out);
     int64_t dem_pair_flight(int64_t n_rows, const int32_t *ptr, const int32_t *idx, const double *val,

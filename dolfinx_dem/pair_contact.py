@@ -452,8 +452,7 @@ class PairContact:
                                      shape=(self._Q.shape[0], len(self.scatter)))
         # the facets projected on the plane normal to n, origin at f_i's barycentre; n . n_f >
         # |f| / (|f| + |f'|) for facing facets, so no projection degenerates
-        project = lambda f: np.einsum("pkx,pax->pka", F.ends[f] - F.centre[i][:, None], t)  # noqa: E731
-        si, sj = _Simplices.of(project(i)), _Simplices.of(project(j))
+        si, sj = _Simplices.of(_project(F, i, i, t)), _Simplices.of(_project(F, j, i, t))
         self.listed = _Pairs(
             i=i, j=j, n=n, t=t, e_i=e_i, e_j=e_j,
             d0=np.einsum("pi,pi->p", F.centre[j] - F.centre[i], n),
@@ -1270,23 +1269,29 @@ class _Simplices:
 
     @staticmethod
     def of(X: np.ndarray) -> _Simplices:
+        """The simplices of vertices X (the compiled ``dem_simplices``; segments: the faces are
+        the vertices, each facing away from the other)."""
         X = np.ascontiguousarray(X, dtype=np.float64)  # the layout of the kernel ``dem_overlap``
-        if X.shape[2] == 1:  # segments: the faces are the vertices, each facing away from the other
-            end, m, size = X, X - X[:, ::-1], np.ones(X.shape[:2])
-        else:
-            end = X[:, [1, 2, 0]]
-            e = end - X
-            a, b = X[:, 1] - X[:, 0], X[:, 2] - X[:, 0]
-            sign = np.sign(a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0])[:, None, None]  # +1: counter-clockwise
-            m, size = sign * np.stack([e[..., 1], -e[..., 0]], axis=2), np.linalg.norm(e, axis=2)
-        norm = np.linalg.norm(m, axis=2)[..., None]
-        nu = np.divide(m, norm, out=np.zeros_like(m), where=norm > 0)
+        end, m, nu, size = np.empty_like(X), np.empty_like(X), np.empty_like(X), np.empty(X.shape[:2])
+        lib.dem_simplices(len(X), X.shape[1], pointer(X), pointer(end), pointer(m), pointer(nu), pointer(size))
         return _Simplices(X, end, m, nu, size)
 
     @functools.cached_property
     def pointers(self) -> tuple:
         """C pointers to X, m, nu, size for the kernels (made once: a pointer costs microseconds)."""
         return tuple(pointer(getattr(self, f)) for f in ("X", "m", "nu", "size"))
+
+
+def _project(F: _Facets, f: np.ndarray, origin: np.ndarray, t: np.ndarray) -> np.ndarray:
+    """The vertices of the facets ``f`` relative to the barycentres of the facets ``origin``, on
+    the tangents ``t`` (P, d-1, d) of their pairs' planes: (P, d, d-1) (the compiled
+    ``dem_pair_project``)."""
+    d = t.shape[2]
+    X = np.empty((len(f), d, d - 1))
+    lib.dem_pair_project(len(f), d, pointer(np.ascontiguousarray(f, dtype=np.int64)),
+                         pointer(np.ascontiguousarray(origin, dtype=np.int64)), pointer(np.ascontiguousarray(F.ends)),
+                         pointer(np.ascontiguousarray(F.centre)), pointer(np.ascontiguousarray(t)), pointer(X))
+    return X
 
 
 def _separations(A: _Simplices, B: _Simplices) -> np.ndarray:

@@ -865,6 +865,38 @@ def test_overlap_of_random_triangles():
     assert np.abs(dw - fd).max() < 1e-7
 
 
+@pytest.mark.parametrize("d", [2, 3])
+def test_projected_simplices_by_their_formulas(d):
+    """The compiled projection of facets on their pairs' planes (``_project``) and the simplices
+    made of them (``_Simplices.of``) against their formulas in numpy, on random facets and planes:
+    vertices, faces' ends, outward normals (both orientations in 3D), unit normals and sizes."""
+    import types
+
+    from dolfinx_dem.pair_contact import _project, _Simplices
+
+    rng = np.random.default_rng(d)
+    F = types.SimpleNamespace(ends=rng.random((50, d, d)) - 0.5, centre=rng.random((50, d)))
+    i, j, t = rng.integers(0, 50, 300), rng.integers(0, 50, 300), rng.random((300, d - 1, d)) - 0.5
+    X = np.einsum("pkx,pax->pka", F.ends[j] - F.centre[i][:, None], t)
+    assert np.allclose(_project(F, j, i, t), X, rtol=0, atol=1e-15)
+    S = _Simplices.of(X)
+    if d == 2:  # the faces are the vertices, each facing away from the other
+        end, m, size = X, X - X[:, ::-1], np.ones((300, 2))
+    else:
+        end = X[:, [1, 2, 0]]
+        e = end - X
+        a, b = X[:, 1] - X[:, 0], X[:, 2] - X[:, 0]
+        sign = np.sign(a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0])[:, None, None]
+        assert (sign > 0).sum() > 100 and (sign < 0).sum() > 100
+        m, size = sign * np.stack([e[..., 1], -e[..., 0]], axis=2), np.linalg.norm(e, axis=2)
+    nu = m / np.linalg.norm(m, axis=2)[..., None]
+    for got, want in ((S.end, end), (S.m, m), (S.nu, nu), (S.size, size)):
+        assert np.allclose(got, want, rtol=0, atol=1e-15)
+    # outward: each face's normal points away from the opposite vertex (3D) or the other one (2D)
+    opposite = X[:, [2, 0, 1]] if d == 3 else X[:, ::-1]
+    assert (np.einsum("pka,pka->pk", S.m, opposite - X) < 0).all()
+
+
 def two_boxes(comm=MPI.COMM_WORLD, scheme="B"):
     """Two 0.2 m tetrahedral cubes 0.01 apart along x, the right one shifted by (0.07, 0.04) in
     (y, z): their facing sides (the contact boundary) do not match, pairs overlap partially."""
