@@ -37,9 +37,6 @@ ffibuilder.cdef(
                        const double *lift, double *out);
     int64_t dem_pair_worst_motion(int64_t n, int32_t d, const double *uc, const double *vc, double tau,
                                   const double *reference, const double *half_skin2, double *ratio);
-    int64_t dem_pair_state_motion(int64_t n, int32_t d, const double *uc, const double *reference,
-                                  const double *half_skin2, const double *end, const double *vc, double tau,
-                                  double *ratio);
     void dem_pair_project(int64_t n, int32_t d, const int64_t *f, const int64_t *origin, const double *ends,
                           const double *centre, const double *t, double *X);
     void dem_simplices(int64_t n, int32_t d, const double *X, double *end, double *m, double *nu, double *size);
@@ -73,15 +70,18 @@ ffibuilder.cdef(
                                     const double *up, const double *vp, int32_t *slot, int64_t n_facet_rows,
                                     const int32_t *r_ptr, const int32_t *r_idx, const double *r_val, int64_t n_patch,
                                     double *result);
-    int64_t dem_pair_state(int64_t n_pairs, int64_t n_candidates, const int64_t *candidates, int32_t d,
-                           const int64_t *i, const int64_t *j, const double *normal,
-                           const double *t, const double *d0, const double *sep, const double *XA, const double *mA, const double *nuA,
-                           const double *sizeA, const double *XB, const double *mB, const double *nuB,
-                           const double *sizeB, const double *uc, const int32_t *z_ptr, const int32_t *z_idx,
-                           const double *z_val, const int32_t *q_ptr, const int32_t *q_idx, const double *q_val,
-                           const double *q, const double *up, const int8_t *elastic, int32_t *slot,
-                           int64_t *closed, double *g, double *w, double *dw, double *c, double *mu,
-                           double *sums);
+    int64_t dem_pair_end_state(int64_t n_rows, const int32_t *r_ptr, const int32_t *r_idx, const double *r_val,
+                               const double *lift, double *uc, const double *reference, const double *half_skin2,
+                               const double *end, const double *vc, double tau, double slack2, int64_t n_candidates,
+                               const int64_t *candidates, double *ratio, int32_t *used, int64_t n_pairs, int32_t d,
+                               const int64_t *i, const int64_t *j, const double *normal, const double *t,
+                               const double *d0, const double *sep, const double *XA, const double *mA,
+                               const double *nuA, const double *sizeA, const double *XB, const double *mB,
+                               const double *nuB, const double *sizeB, const int32_t *z_ptr, const int32_t *z_idx,
+                               const double *z_val, const int32_t *q_ptr, const int32_t *q_idx, const double *q_val,
+                               const double *q, const double *up, const int8_t *elastic, int32_t *slot,
+                               int64_t *closed, double *g, double *w, double *dw, double *c, double *mu,
+                               double *sums);
     int64_t dem_pair_body_forces(int64_t n, int32_t d, const int64_t *p, const int64_t *i, const int64_t *j,
                               const double *normal, const int64_t *body, int64_t n_bodies, const int64_t *index,
                               const double *mu, const double *g, const double *w, const double *dw, const double *c,

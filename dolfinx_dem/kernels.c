@@ -549,12 +549,12 @@ int64_t dem_pair_worst_motion(int64_t n, int32_t d, const double *restrict uc, c
   return worst;
 }
 
-/* pair_contact._At's two motion checks in one call: dem_pair_worst_motion of uc against the
+/* dem_pair_end_state's two motion checks: dem_pair_worst_motion of uc against the
  * list's reference (returned, ratio[0]), and (end != NULL) the largest |end + tau vc - uc|^2
  * (ratio[1]): how far uc lies from the end of the last flight (end, vc, tau). */
-int64_t dem_pair_state_motion(int64_t n, int32_t d, const double *restrict uc, const double *restrict reference,
-                              const double *restrict half_skin2, const double *restrict end,
-                              const double *restrict vc, double tau, double *restrict ratio)
+static int64_t state_motion(int64_t n, int32_t d, const double *restrict uc, const double *restrict reference,
+                            const double *restrict half_skin2, const double *restrict end,
+                            const double *restrict vc, double tau, double *restrict ratio)
 {
   if (end)
     dem_pair_worst_motion(n, d, end, vc, tau, uc, NULL, ratio + 1);
@@ -1465,7 +1465,7 @@ done:
   return status;
 }
 
-/* pair_contact._At, the contact state at one displacement, in one call: the listed pairs
+/* The contact state of dem_pair_end_state at one displacement: the listed pairs
  * (facets (i, j), normal, tangents t, reference gap d0, projected simplices XA.., XB..) whose
  * c_p = w_p g_p^- may not vanish at the free facet displacements uc (n_facets x d), in order
  * (closed: flight_screen's test without a flight, separations sep), their gap g, overlap w, dw/du_j (d per pair; see
@@ -1477,17 +1477,17 @@ done:
  * dw: n_pairs d (the first n_closed written); slot as in dem_pair_force_integral. candidates
  * (sorted, n_candidates; NULL: all pairs): the only pairs that may be closed (pair_contact._At:
  * bit 1 of the last flight's screen). Returns n_closed, or -1 if memory ran out. */
-int64_t dem_pair_state(int64_t n_pairs, int64_t n_candidates, const int64_t *restrict candidates, int32_t d,
-                       const int64_t *restrict i, const int64_t *restrict j,
-                       const double *restrict normal, const double *restrict t, const double *restrict d0,
-                       const double *restrict sep, const double *restrict XA, const double *restrict mA, const double *restrict nuA,
-                       const double *restrict sizeA, const double *restrict XB, const double *restrict mB,
-                       const double *restrict nuB, const double *restrict sizeB, const double *restrict uc,
-                       const int32_t *restrict z_ptr, const int32_t *restrict z_idx, const double *restrict z_val,
-                       const int32_t *restrict q_ptr, const int32_t *restrict q_idx, const double *restrict q_val,
-                       const double *restrict q, const double *restrict up, const int8_t *restrict elastic,
-                       int32_t *restrict slot, int64_t *restrict closed, double *restrict g, double *restrict w,
-                       double *restrict dw, double *restrict c, double *restrict mu, double *restrict sums)
+static int64_t pair_state(int64_t n_pairs, int64_t n_candidates, const int64_t *restrict candidates, int32_t d,
+                          const int64_t *restrict i, const int64_t *restrict j,
+                          const double *restrict normal, const double *restrict t, const double *restrict d0,
+                          const double *restrict sep, const double *restrict XA, const double *restrict mA, const double *restrict nuA,
+                          const double *restrict sizeA, const double *restrict XB, const double *restrict mB,
+                          const double *restrict nuB, const double *restrict sizeB, const double *restrict uc,
+                          const int32_t *restrict z_ptr, const int32_t *restrict z_idx, const double *restrict z_val,
+                          const int32_t *restrict q_ptr, const int32_t *restrict q_idx, const double *restrict q_val,
+                          const double *restrict q, const double *restrict up, const int8_t *restrict elastic,
+                          int32_t *restrict slot, int64_t *restrict closed, double *restrict g, double *restrict w,
+                          double *restrict dw, double *restrict c, double *restrict mu, double *restrict sums)
 {
   int64_t n = 0, bound = 0, n_rows = 0, status = -1;
   int8_t *closed_mark = alloc(n_pairs, sizeof *closed_mark);
@@ -1551,6 +1551,42 @@ done:
     slot[rows[s]] = -1;
   free(closed_mark), free(rows), free(a), free(delta);
   return status;
+}
+
+/* pair_contact._At in one call: the free facet displacements uc = R up + lift (dem_csr_apply; R
+ * n_rows = n_facets d rows); state_motion (ratio[0], ratio[1]): if the list is stale at uc
+ * (ratio[0] > 1) returns -2 and nothing more; else the contact state (pair_state, its arguments
+ * after uc), screening only the candidates (n_candidates, sorted) if end != NULL and ratio[1] <=
+ * slack2 (*used = 1; none closed if there are none), every listed pair otherwise (*used = 0).
+ * Returns n_closed, -2 (stale) or -1 (out of memory). */
+int64_t dem_pair_end_state(int64_t n_rows, const int32_t *restrict r_ptr, const int32_t *restrict r_idx,
+                           const double *restrict r_val, const double *restrict lift, double *restrict uc,
+                           const double *restrict reference, const double *restrict half_skin2,
+                           const double *restrict end, const double *restrict vc, double tau, double slack2,
+                           int64_t n_candidates, const int64_t *restrict candidates, double *restrict ratio,
+                           int32_t *restrict used, int64_t n_pairs, int32_t d, const int64_t *restrict i,
+                           const int64_t *restrict j, const double *restrict normal, const double *restrict t,
+                           const double *restrict d0, const double *restrict sep, const double *restrict XA,
+                           const double *restrict mA, const double *restrict nuA, const double *restrict sizeA,
+                           const double *restrict XB, const double *restrict mB, const double *restrict nuB,
+                           const double *restrict sizeB, const int32_t *restrict z_ptr,
+                           const int32_t *restrict z_idx, const double *restrict z_val,
+                           const int32_t *restrict q_ptr, const int32_t *restrict q_idx,
+                           const double *restrict q_val, const double *restrict q, const double *restrict up,
+                           const int8_t *restrict elastic, int32_t *restrict slot, int64_t *restrict closed,
+                           double *restrict g, double *restrict w, double *restrict dw, double *restrict c,
+                           double *restrict mu, double *restrict sums)
+{
+  dem_csr_apply(n_rows, r_ptr, r_idx, r_val, up, lift, uc);
+  state_motion(n_rows / d, d, uc, reference, half_skin2, end, vc, tau, ratio);
+  *used = end && ratio[1] <= slack2;
+  if (ratio[0] > 1.0)
+    return -2;
+  if (*used && n_candidates == 0)
+    return 0;
+  return pair_state(n_pairs, *used ? n_candidates : 0, *used ? candidates : NULL, d, i, j, normal, t, d0, sep, XA, mA,
+                    nuA, sizeA, XB, mB, nuB, sizeB, uc, z_ptr, z_idx, z_val, q_ptr, q_idx, q_val, q, up, elastic, slot,
+                    closed, g, w, dw, c, mu, sums);
 }
 
 /* The forces between bodies of pair_contact.PairContact.pair_forces: for the entries k (pairs

@@ -276,7 +276,7 @@ class PairContact:
         self.skin = self.comm.allreduce(float(skins.min(initial=np.inf)), op=MPI.MIN)
         self.radius = self.comm.allreduce(float((2.0 * reach + skins).max(initial=0.0)), op=MPI.MAX)
         # how far (relative gap, separations) the screen of a flight looks beyond its end for the
-        # pairs that may be closed there (``_state_motion``): far above rounding
+        # pairs that may be closed there (``_At``): far above rounding
         self._slack = 1e-9 * self.radius
         # A list round exchanges facets between processes only when a local facet has drifted
         # more than r - s/2 since the last exchange (r the largest pair radius, s the largest
@@ -310,7 +310,7 @@ class PairContact:
         self._facet_values = None  # the scatter of the facet corrections (outputs), made on first use
         self._last = None  # the _At of the last displacement evaluated (a step's end is the next one's start)
         self._flight = None  # (up, vp, dt, free facet velocities) of the flight ``prepare`` checked last
-        self._end = None  # (list, uc, vc, dt, candidates) of the last flight's screen (``_state_motion``)
+        self._end = None  # (list, uc, vc, dt, candidates) of the last flight's screen (``_At``)
         self._build(self._facets.lift.copy())  # the free facet displacements at u = 0: R 0 + lift
         up = self.patch_values(zero)
         g, w = self._state(np.arange(len(self.listed)), *self._pair_displacements(up))[:2]
@@ -780,7 +780,7 @@ class PairContact:
         not vanish during the flight, their gap negative at an end and their projections not
         separated by the line of a face at some tau (``_separations``: exact, less a margin; one
         pass over the list; ``dem_pair_state`` screens a state with it). The screen keeps those
-        near closing at the flight's end for the state there (``_state_motion``)."""
+        near closing at the flight's end for the state there (``_At``)."""
         L, d = self.listed, self.d
         vc, ratio = np.empty((len(self._lift), d)), np.zeros(1)
         out, found, counts = np.empty(len(L), np.int8), np.empty((2, len(L)), np.int64), np.zeros(2, np.int64)
@@ -794,19 +794,6 @@ class PairContact:
             return vc, (int(k), float(ratio[0])), None
         self._end = (L, uc, vc, float(dt), found[1, : counts[1]])
         return vc, (int(k), float(ratio[0])), found[0, : counts[0]]
-
-    def _state_motion(self, uc: np.ndarray) -> tuple[bool, np.ndarray | None]:
-        """For free facet displacements ``uc``, in one compiled call (``dem_pair_state_motion``):
-        whether the list is stale there (``_moved``), and the only listed pairs that may be closed
-        there (bit 1 of the last flight's screen) if every facet lies within half the slack of that
-        flight's end (as at the step's end: uc = R u^{n+1} and the flight's end uc^n + dt vc
-        differ by rounding), else None (then every pair is screened)."""
-        end = self._end if self._end is not None and self._end[0] is self.listed else None
-        _, uc0, vc, dt, candidates = end if end is not None else (None, None, None, 0.0, None)
-        ratio = np.zeros(2)
-        lib.dem_pair_state_motion(len(uc), self.d, pointer(uc), pointer(self._reference), pointer(self._half_skin2),
-                                  pointer(uc0), pointer(vc), dt, pointer(ratio))
-        return ratio[0] > 1.0, candidates if end is not None and ratio[1] <= (0.5 * self._slack)**2 else None
 
     def _gap(self, p, ui, uj):
         """Gap g of the pairs ``p`` (eq. (22), (30)) for their facets' free displacements ui, uj."""
@@ -1447,34 +1434,46 @@ class _At:
         # knows it by identity; another is copied, since its caller may change it
         self.contact, self.listed = contact, contact.listed
         self.up = up if not up.flags.writeable else up.copy()
-        self.uc = contact.free_displacements(self.up)
 
     @functools.cached_property
-    def _motion(self) -> tuple[bool, np.ndarray | None]:
-        return self.contact._state_motion(self.uc)
-
-    moved = property(lambda self: self._motion[0], doc="Whether the list is stale here (``PairContact._moved``).")
-
-    @functools.cached_property
-    def _values(self) -> tuple:
-        contact, L = self.contact, self.listed
-        moved, candidates = self._motion
-        if moved:
-            contact._check_listed(self.uc)  # raises
-        n, d = 0 if candidates is not None and len(candidates) == 0 else len(L), contact.d  # 0: none closed
+    def _state(self) -> tuple:
+        """(uc, moved, candidates, the state or None if moved) in one compiled call
+        (``dem_pair_end_state``): the free facet displacements (``free_displacements``), whether
+        the list is stale there (``PairContact._moved``), the last flight's candidates if they
+        hold here (bit 1 of its screen: the only pairs that may be closed, when every facet lies
+        within half the slack of the flight's end, as at the step's end, where uc = R u^{n+1}
+        and the flight's end uc^n + dt vc differ by rounding; else None: every pair screened).
+        The state computed right away: a step's end needs it for its energy."""
+        contact, L, d = self.contact, self.listed, self.contact.d
+        end = contact._end if contact._end is not None and contact._end[0] is L else None
+        _, uc0, vc, dt, candidates = end if end is not None else (None, None, None, 0.0, None)
+        n = len(L)
+        uc, ratio, used = np.empty((len(contact._lift), d)), np.zeros(2), np.zeros(1, dtype=np.int32)
         closed, g, w, c, mu = np.empty(n, dtype=np.int64), np.empty(n), np.empty(n), np.empty(n), np.empty(n)
         dw, sums = np.empty((n, d)), np.zeros(3)
-        if n == 0:
-            return closed, g, w, dw, c, mu, (0.0, 0.0), 0.0
         P = L.pointers
-        k = lib.dem_pair_state(n, 0 if candidates is None else len(candidates), pointer(candidates), d, P["i"], P["j"],
-                               P["n"], P["t"], P["d0"], P["sep"], *L.si.pointers, *L.sj.pointers, pointer(self.uc),
-                               *L.z.pointers, *L.q.pointers, pointer(contact._q), pointer(self.up),
-                               contact._elastic_row_pointer, pointer(L.slot), pointer(closed), pointer(g), pointer(w),
-                               pointer(dw), pointer(c), pointer(mu), pointer(sums))
-        if k < 0:
+        k = lib.dem_pair_end_state(
+            uc.size, *contact._Rc.pointers, pointer(contact._lift), pointer(uc), pointer(contact._reference),
+            pointer(contact._half_skin2), pointer(uc0), pointer(vc), dt, (0.5 * contact._slack)**2,
+            0 if candidates is None else len(candidates), pointer(candidates), pointer(ratio), pointer(used), n, d,
+            P["i"], P["j"], P["n"], P["t"], P["d0"], P["sep"], *L.si.pointers, *L.sj.pointers, *L.z.pointers,
+            *L.q.pointers, pointer(contact._q), pointer(self.up), contact._elastic_row_pointer, pointer(L.slot),
+            pointer(closed), pointer(g), pointer(w), pointer(dw), pointer(c), pointer(mu), pointer(sums))
+        if k == -1:
             raise MemoryError("contact between bodies: out of memory in the contact state")
-        return closed[:k], g[:k], w[:k], dw[:k], c[:k], mu[:k], (float(sums[0]), float(sums[1])), float(sums[2])
+        state = None if k == -2 else (closed[:k], g[:k], w[:k], dw[:k], c[:k], mu[:k],
+                                      (float(sums[0]), float(sums[1])), float(sums[2]))
+        return uc, k == -2, candidates if used[0] else None, state
+
+    uc = property(lambda self: self._state[0], doc="The free facet displacements (``free_displacements``).")
+    moved = property(lambda self: self._state[1], doc="Whether the list is stale here (``PairContact._moved``).")
+    candidates = property(lambda self: self._state[2], doc="The pairs screened (None: every listed pair).")
+
+    @property
+    def _values(self) -> tuple:
+        if self.moved:
+            self.contact._check_listed(self.uc)  # raises
+        return self._state[3]
 
     closed = property(lambda self: self._values[0])
     g = property(lambda self: self._values[1])

@@ -1067,7 +1067,7 @@ def test_the_screen_keeps_every_pair_that_touches_during_a_flight_and_few_others
 
 def test_the_state_at_a_steps_end_screens_the_flights_candidates_only_where_they_hold():
     """The contact state at the end of a flight (``_At``) screens only the pairs that the
-    flight's screen found near closing there (``_state_motion``): bit-identical to the state
+    flight's screen found near closing there (``_At.candidates``): bit-identical to the state
     that screens every listed pair; at a displacement away from the flight's end it screens
     every pair again."""
     from dolfinx_dem.pair_contact import _At
@@ -1083,11 +1083,12 @@ def test_the_state_at_a_steps_end_screens_the_flights_candidates_only_where_they
     far.axpy(0.5 * dt, v)
     for x, reused in ((end, True), (far, False)):
         up = c.patch_values(x)
-        moved, candidates = c._state_motion(c.free_displacements(up))
-        assert not moved and (candidates is not None) == reused
+        at = _At(c, up)
+        assert not at.moved and (at.candidates is not None) == reused
+        assert np.array_equal(at.uc, c.free_displacements(up))
         if reused:
-            assert 0 < len(candidates) < len(c.listed) / 4
-        state = _At(c, up)._values
+            assert 0 < len(at.candidates) < len(c.listed) / 4
+        state = at._values
         flight, c._end = c._end, None  # no candidates: every pair screened
         full = _At(c, up)._values
         c._end = flight
