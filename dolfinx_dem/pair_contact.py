@@ -256,6 +256,7 @@ class PairContact:
         self._row_dofs, entry_dof = np.unique(dem.columns[self._Q.indices], return_inverse=True)
         self._Q_entry_dof = entry_dof.astype(np.int32)
         self._q = dem.row_lift(touched)
+        self._p_q = pointer(self._q)  # the kernels' pointers to arrays that stay, made once (_p_*)
         self._is_elastic_row = (touched < rows.num_elastic).astype(np.int8)
         self._elastic_row_pointer = pointer(self._is_elastic_row)
         an = geom.facet_area_normals[self.cells, geom.facet_local[self.facets, 0]]
@@ -289,6 +290,7 @@ class PairContact:
         self._exchange_drift = self.radius - 0.5 * self.comm.allreduce(float(skins.max(initial=0.0)), op=MPI.MAX)
         self._exchanged = None  # the local facets' free displacements at the last exchange (``_build``)
         self._gauss = _gauss_legendre(d)
+        self._p_gauss = tuple(pointer(x) for x in self._gauss)
 
         # The body pairs (i < j) whose force is an output: both bodies hold candidate facets.
         held = np.bincount(self._facets.body[: self.num_own], minlength=geom.num_bodies).astype(np.int64)
@@ -409,6 +411,7 @@ class PairContact:
         self._Rc = _CSR(R)  # for the compiled products (``free_displacements``)
         self._RT = self._R.T  # CSC: its products sum in the order of R^T as CSR, without the copy
         self._lift = np.ascontiguousarray(F.lift, dtype=np.float64).reshape(-1, self.d)
+        self._p_lift = pointer(self._lift)
         self._known_reach = np.concatenate([self._local_reach, _reach(ghosts)])
         self._list(F, ucF)
 
@@ -461,6 +464,7 @@ class PairContact:
         )
         self._reference = ucF.copy()
         self._half_skin2 = 0.25 * skins**2  # of the known facets
+        self._p_motion = (pointer(self._reference), pointer(self._half_skin2))
         self.rebuilds += 1
 
     def _exchange(self, uc: np.ndarray) -> tuple[_Facets, np.ndarray]:
@@ -697,8 +701,7 @@ class PairContact:
         more than half its skin since the last list build (a pair not listed might then touch;
         the compiled ``dem_pair_worst_motion``)."""
         ratio = np.zeros(1)
-        lib.dem_pair_worst_motion(len(uc), self.d, pointer(uc), pointer(None), 0.0, pointer(self._reference),
-                                  pointer(self._half_skin2), pointer(ratio))
+        lib.dem_pair_worst_motion(len(uc), self.d, pointer(uc), pointer(None), 0.0, *self._p_motion, pointer(ratio))
         return ratio[0] > 1.0
 
     def _drifted(self, uc: np.ndarray, vc: np.ndarray | None, dt: float) -> bool:
@@ -746,7 +749,7 @@ class PairContact:
         """Free reconstructions u_f = R_f u + lift_f of the known candidate facets (local, then
         ghosts), (n, d), from patch values ``up`` (the compiled ``dem_csr_apply``)."""
         uc = np.empty((len(self._lift), self.d))
-        lib.dem_csr_apply(uc.size, *self._Rc.pointers, pointer(up), pointer(self._lift), pointer(uc))
+        lib.dem_csr_apply(uc.size, *self._Rc.pointers, pointer(up), self._p_lift, pointer(uc))
         return uc
 
     def _pair_displacements(self, up: np.ndarray):
@@ -786,7 +789,7 @@ class PairContact:
         out, found, counts = np.empty(len(L), np.int8), np.empty((2, len(L)), np.int64), np.zeros(2, np.int64)
         P = L.pointers
         k = lib.dem_pair_flight(vc.size, *self._Rc.pointers, pointer(vp), pointer(uc), float(dt),
-                                pointer(self._reference), pointer(self._half_skin2), int(screen), len(L), d, P["i"],
+                                *self._p_motion, int(screen), len(L), d, P["i"],
                                 P["j"], P["n"], P["t"], P["d0"], P["sep"], L.si.pointers[1], L.sj.pointers[1],
                                 self._slack, pointer(vc), pointer(ratio), pointer(out), pointer(found[0]),
                                 pointer(found[1]), pointer(counts))
@@ -873,8 +876,8 @@ class PairContact:
             P = L.pointers
             pieces = lib.dem_pair_force_integral(
                 len(touching), self.d, pointer(touching), P["i"], P["j"], P["n"], P["t"], P["d0"], *L.si.pointers,
-                *L.sj.pointers, pointer(uc), pointer(vc), float(dt), len(xi), pointer(xi), pointer(wq),
-                *L.z.pointers, *L.q.pointers, pointer(self._q), pointer(up), pointer(vp), pointer(L.slot),
+                *L.sj.pointers, pointer(uc), pointer(vc), float(dt), len(xi), *self._p_gauss,
+                *L.z.pointers, *L.q.pointers, self._p_q, pointer(up), pointer(vp), P["slot"],
                 uc.size, *self._Rc.pointers, len(result), pointer(result))
             if pieces < 0:
                 raise MemoryError("contact between bodies: out of memory in the force integral of a step")
@@ -1162,7 +1165,7 @@ class PairContact:
         partition). The facets known stay those of the last exchange, and so does its
         reference: the next ``prepare`` exchanges again if the restored displacements are
         farther from it than any step may drift (a resumed run's model exchanged at u = 0)."""
-        self._reference = np.full_like(self._reference, np.inf)
+        self._reference.fill(np.inf)  # in place: ``_p_motion`` points to it
         if state is not None:
             self._scheme_b_rule = np.asarray(state["scheme_b_rule"], dtype=np.int64)
             self.rebuilds, self.evaluations, self.exchanges = (int(x) for x in state["counters"])
@@ -1399,8 +1402,8 @@ class _Pairs:
 
     @functools.cached_property
     def pointers(self) -> dict:
-        """C pointers to i, j, n, t, d0, e_i, e_j, sep for the kernels (made once)."""
-        return {name: pointer(getattr(self, name)) for name in ("i", "j", "n", "t", "d0", "e_i", "e_j", "sep")}
+        """C pointers to i, j, n, t, d0, e_i, e_j, sep, slot for the kernels (made once)."""
+        return {name: pointer(getattr(self, name)) for name in ("i", "j", "n", "t", "d0", "e_i", "e_j", "sep", "slot")}
 
     @functools.cached_property
     def z(self) -> _CSR:
@@ -1453,11 +1456,11 @@ class _At:
         dw, sums = np.empty((n, d)), np.zeros(3)
         P = L.pointers
         k = lib.dem_pair_end_state(
-            uc.size, *contact._Rc.pointers, pointer(contact._lift), pointer(uc), pointer(contact._reference),
-            pointer(contact._half_skin2), pointer(uc0), pointer(vc), dt, (0.5 * contact._slack)**2,
+            uc.size, *contact._Rc.pointers, contact._p_lift, pointer(uc), *contact._p_motion, pointer(uc0),
+            pointer(vc), dt, (0.5 * contact._slack)**2,
             0 if candidates is None else len(candidates), pointer(candidates), pointer(ratio), pointer(used), n, d,
             P["i"], P["j"], P["n"], P["t"], P["d0"], P["sep"], *L.si.pointers, *L.sj.pointers, *L.z.pointers,
-            *L.q.pointers, pointer(contact._q), pointer(self.up), contact._elastic_row_pointer, pointer(L.slot),
+            *L.q.pointers, contact._p_q, pointer(self.up), contact._elastic_row_pointer, P["slot"],
             pointer(closed), pointer(g), pointer(w), pointer(dw), pointer(c), pointer(mu), pointer(sums))
         if k == -1:
             raise MemoryError("contact between bodies: out of memory in the contact state")
