@@ -782,7 +782,7 @@ class PairContact:
         ratio is at most 1 (else None), the screen: the listed pairs whose c_p = w_p g_p^- may
         not vanish during the flight, their gap negative at an end and their projections not
         separated by the line of a face at some tau (``_separations``: exact, less a margin; one
-        pass over the list; ``dem_pair_state`` screens a state with it). The screen keeps those
+        pass over the list; ``dem_pair_end_state`` screens a state with it). The screen keeps those
         near closing at the flight's end for the state there (``_At``)."""
         L, d = self.listed, self.d
         vc, ratio = np.empty((len(self._lift), d)), np.zeros(1)
@@ -1418,19 +1418,20 @@ class _Pairs:
     @functools.cached_property
     def slot(self) -> np.ndarray:
         """One int32 per own row, -1 between the calls of ``dem_pair_force_integral`` and
-        ``dem_pair_state`` (which number the rows their pairs touch through it)."""
+        ``dem_pair_end_state`` (which number the rows their pairs touch through it)."""
         return np.full(self.Q.shape[0], -1, dtype=np.int32)
 
 
 class _At:
-    """The contact state of a ``PairContact`` at one displacement (patch values ``up``): the free
-    facet displacements ``uc``, and on first use, in one compiled call (``dem_pair_state``), the
-    listed pairs ``closed`` whose c_p = w_p g_p^- may not vanish (the screen of
-    ``PairContact._free_flight``: g_p < 0, projections not apart; the list checked valid there), their
-    g, w, dw/du_j, c = w g^- and mu_p = z_p . (a + delta) (own rows' part), with a = Q u + q and
-    delta = Z c on the own rows, the energy change of those rows (``energy``: elastic,
-    stabilisation) and the sum of mu_p w_p (``mu_w``: ``contact_force_part``). The energy of a step's end, the outputs there and the next step's flight
-    share it (``PairContact._at``)."""
+    """The contact state of a ``PairContact`` at one displacement (patch values ``up``), on first
+    use, in one compiled call (``dem_pair_end_state``): the free facet displacements ``uc``,
+    whether the list is stale there (``moved``), and, if it is not, the listed pairs ``closed``
+    whose c_p = w_p g_p^- may not vanish (the screen of ``PairContact._free_flight``: g_p < 0,
+    projections not apart), their g, w, dw/du_j, c = w g^- and mu_p = z_p . (a + delta) (own
+    rows' part), with a = Q u + q and delta = Z c on the own rows, the energy change of those
+    rows (``energy``: elastic, stabilisation) and the sum of mu_p w_p (``mu_w``:
+    ``contact_force_part``). The energy of a step's end, the outputs there and the next step's
+    flight share it (``PairContact._at``)."""
 
     def __init__(self, contact: PairContact, up: np.ndarray):
         # a read-only array (MEMM's shared patch values) is kept as it is: ``PairContact._at`` then
@@ -1521,7 +1522,7 @@ class _CSC:
 
 
 class _CSR:
-    """A CSR matrix's arrays and their C ``pointers``, for the compiled kernels ``dem_pair_state``
+    """A CSR matrix's arrays and their C ``pointers``, for the compiled kernels ``dem_pair_end_state``
     and ``dem_pair_force_integral`` (products over a few selected rows, the touching pairs' of a
     list of thousands, without slicing the matrix)."""
 

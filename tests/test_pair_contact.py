@@ -978,7 +978,7 @@ def _cubes_impact(comm, steps):
 
 
 def test_the_compiled_contact_state_is_its_definition_by_sparse_products():
-    """``_At``, the contact state in one compiled call (``dem_pair_state``), against its definition
+    """``_At``, the contact state in one compiled call (``dem_pair_end_state``), against its definition
     by numpy and scipy: its closed pairs hold every touching pair (g < 0, w > 0), and there g, w,
     dw/du_j (``_state``), c = w g^-, mu_p = z_p . (Q u + q + Z c) and the energy change
     sum (a delta + delta^2 / 2) of the own rows, elastic and stabilisation rows apart."""
