@@ -662,9 +662,10 @@ class PairContact:
                 raise RuntimeError(
                     "contact between bodies: touching pairs interpenetrate deeper than the pair list radius "
                     "(their facets' reaches plus their mean skin: facet centres farther apart are not listed), so a "
-                    "list rebuild would "
-                    "drop them and the energy would jump; the bodies are too soft for their load or speed (or pass a "
-                    "larger skin)")
+                    "list rebuild would drop them and the energy would jump. The bodies are too soft for their load "
+                    "or speed, or, in 3D, the contact is not resolved: on fine meshes the facets of the two bodies "
+                    "slide into each other's holes (docs/validation/contact3d.md). A larger skin lists deeper pairs "
+                    "but does not stop the interpenetration")
             if moving:  # the flight again from the new list (and reconstructions)
                 uc = self._at(up).uc
                 vc, (k, ratio), screen = self._free_flight(uc, vp, dt)
