@@ -119,11 +119,12 @@ def _execute(comm, args, out: pathlib.Path, start) -> int:
     """Run ``start(simulation)`` and report as the command does; returns the exit status."""
     from dolfinx_dem import checkpoint, io, scenes, simulation
     from dolfinx_dem.memm import InstabilityError
+    from dolfinx_dem.run_statistics import UnresolvedContactError
     from dolfinx_dem.statics import StaticsError
 
     try:
         summary = start(simulation)
-    except InstabilityError as err:
+    except (InstabilityError, UnresolvedContactError) as err:
         _error(comm, f"{err}\nPartial results (marked INCOMPLETE) are in {out}")
         return 1
     except (scenes.SceneError, checkpoint.CheckpointError, io.OutputFolderError, ValueError, FileNotFoundError,
@@ -135,21 +136,8 @@ def _execute(comm, args, out: pathlib.Path, start) -> int:
         if summary.get("contact_pairs_scheme_b_rule"):
             _print(f"note: {summary['contact_pairs_scheme_b_rule']} pairs of scheme A facets used the scheme B "
                    "contact rule, eq. (23)-(24) having no well-posed solution for them (docs/theory.md)")
-        if summary.get("max_penetration_over_facet_size", 0.0) > PENETRATION_NOTE:
-            _print(f"note: the contact surfaces interpenetrated by {summary['max_penetration']:.3g} m, "
-                   f"{summary['max_penetration_over_facet_size']:.2f} of the candidate facets' mean size: eq. (31) "
-                   "corrects only where facets overlap, and under a strong load the facets of two bodies can slide "
-                   "into holes of each other's mosaic (seen in 3D, growing with refinement: "
-                   "docs/validation/contact3d.md); check the result on another mesh or at a lower load")
         _print(f"results in {out.resolve()}")
     return INTERRUPTED if summary["status"] == "interrupted" else 0
-
-
-# A run whose contact surfaces interpenetrate by more than this fraction of the candidate facets'
-# size gets a note: 3D pair contact under a strong load opens holes in the facet mosaic (measured
-# over whole runs: two-balls 0.28 at h = 0.03 m, 1.8 at h = 0.02 m before the run stops; cradle
-# 0.33, ball-drop 0.05, two-disks 0.09, billiard 0.10, indentation 0.09).
-PENETRATION_NOTE = 0.5
 
 
 def summary_line(summary: dict) -> str:
@@ -201,6 +189,8 @@ def run_state(directory: pathlib.Path, summary: dict | None) -> str:
                 f"scene; continue it with: dolfinx-dem resume {directory}")
     if summary is not None and summary.get("status") == "unstable":
         return f"UNSTABLE: the stability monitor stopped the run: {summary.get('error', '')}"
+    if summary is not None and summary.get("status") == "unresolved":
+        return f"UNRESOLVED CONTACT: the run stopped: {summary.get('error', '')}"
     if marker.exists():
         error = directory / io.ERROR
         why = f"it failed, see {error}" if error.exists() else "it is still running, or was killed"

@@ -8,7 +8,10 @@ then integrates into the output folder (``io.OutputDirectory``) and ends with on
 - ``interrupted``: SIGINT or SIGTERM (``runcontrol.Interrupts``) stopped it after a step, on every
   process; outputs closed, checkpoint written, ``INCOMPLETE`` kept with a note;
 - ``unstable``: the stability monitor stopped it (``memm.InstabilityError``, raised after the
-  outputs and the summary are written).
+  outputs and the summary are written);
+- ``unresolved``: the contact surfaces of two bodies interpenetrated by more than
+  ``contact.max_penetration`` candidate facet sizes (``run_statistics.UnresolvedContactError``,
+  raised the same way).
 
 A checkpoint (``checkpoint.py``) is written every ``checkpoint_every`` steps, when interrupted and
 at the end; ``DynamicRun.resume`` continues from it, appending to the same series and solution,
@@ -30,7 +33,8 @@ from mpi4py import MPI
 from dolfinx_dem import _compat, checkpoint, io, model, plotting, runcontrol, scenes
 from dolfinx_dem.discretisation import DEMDiscretisation
 from dolfinx_dem.memm import MEMM, InstabilityError
-from dolfinx_dem.run_statistics import PairContactStatistics, Statistics, peak_rss_mb
+from dolfinx_dem.run_statistics import (MAX_PENETRATION, PairContactStatistics, Statistics, UnresolvedContactError,
+                                        peak_rss_mb)
 
 
 class DynamicRun:
@@ -67,7 +71,8 @@ class DynamicRun:
         diag = self.stepper.initialise(*model.initial_state(dem, scene))
         self.first = diag
         self.stats = Statistics(diag.balance, scale=diag.mechanical)
-        self.pair_stats = PairContactStatistics(dem, self.stepper, diag.momentum)
+        self.pair_stats = PairContactStatistics(dem, self.stepper, diag.momentum,
+                                                scene.get("contact", {}).get("max_penetration", MAX_PENETRATION))
         columns = model.contact_columns(dem)
         self._penetration_column = columns.index("penetration") if "penetration" in columns else None
         self.setup_seconds = comm.allreduce(time.perf_counter() - self.wall, op=MPI.MAX)
@@ -171,8 +176,10 @@ class DynamicRun:
                         break
             except InstabilityError as err:
                 status, error = "unstable", scene_instability(err, self.scene["time"])
+            except UnresolvedContactError as err:
+                status, error = "unresolved", err
             progress.finish()
-            if status != "unstable":
+            if error is None:
                 self._checkpoint(directory)
         return status, error
 
@@ -243,7 +250,7 @@ class DynamicRun:
                                 directory / "animation.gif", "von_mises", "von Mises stress (Pa)", scale, obstacles,
                                 dem.prescribed_body_numbers + 1)  # the ``body`` field is 1-based
 
-    def _summary(self, status: str, error: InstabilityError | None) -> dict:
+    def _summary(self, status: str, error: InstabilityError | UnresolvedContactError | None) -> dict:
         dem, stepper, stats = self.dem, self.stepper, self.stats
         summary = {
             "scene": self.scene["name"],
@@ -270,7 +277,7 @@ class DynamicRun:
             "multi_neumann_cells": dem.num_multi_neumann_cells,
             "extrapolated_facets": dem.num_extrapolated_facets,
         }
-        if status != "unstable":
+        if error is None:
             summary["checkpoint"] = checkpoint.DIRECTORY
         if dem.contact is not None:
             summary["contact_candidate_facets"] = dem.contact.num_facets
@@ -279,6 +286,7 @@ class DynamicRun:
             summary.update(self.pair_stats.summary(stats.stepping_seconds))
         if error is not None:
             summary["error"] = str(error)
+        if isinstance(error, InstabilityError):
             summary["suggested_dt"] = error.suggested_dt
         return summary
 

@@ -33,6 +33,20 @@ class Statistics:
         return self.drift / self.scale if self.scale > 0 else 0.0
 
 
+class UnresolvedContactError(RuntimeError):
+    """The contact between bodies is no longer resolved: the contact surfaces interpenetrate by
+    more than ``contact.max_penetration`` times the candidate facets' mean size
+    (``PairContactStatistics.record``); the run stops instead of going on with bodies passing
+    through each other."""
+
+
+#: The default of ``contact.max_penetration`` (candidate facets' mean sizes). Measured over whole
+#: runs: two-balls 0.28 (h = 0.03 m), cradle 0.33, ball-drop 0.05, two-disks 0.09, billiard 0.10,
+#: indentation 0.09; two-balls at h = 0.02 m passes 0.5 at t = 0.21 s, where its facets start to
+#: slide into each other's holes, and reaches 3.2 by 0.4 s (docs/validation/contact3d.md).
+MAX_PENETRATION = 0.5
+
+
 class PairContactStatistics:
     """Running figures of contact between bodies for ``summary.json``: first contact time (when
     the first gap closed, interpolated within the step), largest interpenetration, momentum
@@ -40,9 +54,12 @@ class PairContactStatistics:
     and in the contact outputs computed at every step (``output_seconds``: the series' contact
     columns, the penetration and first-contact statistics)."""
 
-    def __init__(self, dem: DEMDiscretisation, stepper: MEMM, momentum: np.ndarray):
-        """``momentum``: the total momentum of the initial state (``memm.Diagnostics``)."""
+    def __init__(self, dem: DEMDiscretisation, stepper: MEMM, momentum: np.ndarray, max_penetration: float):
+        """``momentum``: the total momentum of the initial state (``memm.Diagnostics``);
+        ``max_penetration``: the largest interpenetration a run accepts, in candidate facets'
+        mean sizes (``contact.max_penetration``)."""
         self.first_contact, self.penetration = None, 0.0
+        self.max_penetration = max_penetration
         # floats: on a 3-vector, numpy's operations cost more than a loop, at every step
         self.p0 = momentum.tolist() if dem.pair_contact is not None else None
         m = dem.mass.array_r.reshape(-1, dem.d)
@@ -65,6 +82,16 @@ class PairContactStatistics:
                     self.first_contact = t - stepper.dt + tau
             self.previous = stepper.u.copy()
         self.penetration = max(self.penetration, penetration)
+        size = contact.facet_size
+        if penetration > self.max_penetration * size:  # the same on every process (a reduced value)
+            raise UnresolvedContactError(
+                f"contact between bodies is not resolved at t = {t:.6g}: the contact surfaces interpenetrate by "
+                f"{penetration:.3g} m, {penetration / size:.3g} of the candidate facets' mean size ({size:.3g} m), "
+                f"more than contact.max_penetration = {self.max_penetration:g}. Eq. (31) corrects a gap only where "
+                "the facets of the two bodies overlap: the bodies are too soft for their load or speed, or, in 3D, "
+                "the facets slide into holes of each other's mosaic, which finer meshes make worse "
+                "(docs/validation/contact3d.md). The results from here on would be wrong; raise "
+                "contact.max_penetration only to look at them")
         if self.free:
             self.momentum_change = max(self.momentum_change, *(abs(p - p0) for p, p0 in zip(momentum.tolist(), self.p0)))
 

@@ -158,6 +158,7 @@ SCHEMA = {
         "self_contact": lambda k, v, d: _bool(k, v),
         "tolerance": lambda k, v, d: _number(k, v, nonnegative=True),
         "skin": lambda k, v, d: _number(k, v, positive=True),
+        "max_penetration": lambda k, v, d: _number(k, v, positive=True),
     },
     "prescribed": [{
         "tag": lambda k, v, d: _integer(k, v, minimum=0),
