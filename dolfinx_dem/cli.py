@@ -119,7 +119,7 @@ def _execute(comm, args, out: pathlib.Path, start) -> int:
     """Run ``start(simulation)`` and report as the command does; returns the exit status."""
     from dolfinx_dem import checkpoint, io, scenes, simulation
     from dolfinx_dem.memm import InstabilityError
-    from dolfinx_dem.run_statistics import UnresolvedContactError
+    from dolfinx_dem.pair_contact import UnresolvedContactError
     from dolfinx_dem.statics import StaticsError
 
     try:

@@ -9,8 +9,9 @@ then integrates into the output folder (``io.OutputDirectory``) and ends with on
   process; outputs closed, checkpoint written, ``INCOMPLETE`` kept with a note;
 - ``unstable``: the stability monitor stopped it (``memm.InstabilityError``, raised after the
   outputs and the summary are written);
-- ``unresolved``: the contact surfaces of two bodies interpenetrated by more than
-  ``contact.max_penetration`` candidate facet sizes (``run_statistics.UnresolvedContactError``,
+- ``unresolved``: contact between bodies no longer resolved: the contact surfaces
+  interpenetrated by more than ``contact.max_penetration`` candidate facet sizes, or deeper than
+  the pair list radius, or a facet outran its skin (``pair_contact.UnresolvedContactError``,
   raised the same way).
 
 A checkpoint (``checkpoint.py``) is written every ``checkpoint_every`` steps, when interrupted and
@@ -33,8 +34,8 @@ from mpi4py import MPI
 from dolfinx_dem import _compat, checkpoint, io, model, plotting, runcontrol, scenes
 from dolfinx_dem.discretisation import DEMDiscretisation
 from dolfinx_dem.memm import MEMM, InstabilityError
-from dolfinx_dem.run_statistics import (MAX_PENETRATION, PairContactStatistics, Statistics, UnresolvedContactError,
-                                        peak_rss_mb)
+from dolfinx_dem.pair_contact import UnresolvedContactError
+from dolfinx_dem.run_statistics import MAX_PENETRATION, PairContactStatistics, Statistics, peak_rss_mb
 
 
 class DynamicRun:

@@ -157,6 +157,15 @@ class _Facets:
                           for f in dataclasses.fields(_Facets)})
 
 
+class UnresolvedContactError(RuntimeError):
+    """The contact between bodies is no longer resolved, and a run stops instead of going on
+    with bodies passing through each other (collective: raised on every process alike): the
+    contact surfaces interpenetrate by more than ``contact.max_penetration`` times the candidate
+    facets' mean size (``run_statistics.PairContactStatistics.record``), touching pairs lie
+    deeper than the pair list radius, or a facet moves more than half its skin in one step
+    (``PairContact.prepare``)."""
+
+
 def _timed(method):
     """A method whose processor time counts in ``PairContact.seconds`` (the contact work of the
     steps: the list rounds, the patch gathers, the force integrals and the energies), once: a
@@ -659,7 +668,7 @@ class PairContact:
                 vp = None if v is None else self.patch_values(v)
             dropped = np.setdiff1d(touching, self.pair_keys())
             if self.comm.allreduce(len(dropped), op=MPI.SUM):
-                raise RuntimeError(
+                raise UnresolvedContactError(
                     "contact between bodies: touching pairs interpenetrate deeper than the pair list radius "
                     "(their facets' reaches plus their mean skin: facet centres farther apart are not listed), so a "
                     "list rebuild would drop them and the energy would jump. The bodies are too soft for their load "
@@ -673,7 +682,7 @@ class PairContact:
                     if k >= 0 else (0.0, 0.0, 0.0)
                 ratio, motion, skin = self.comm.allreduce(worst, op=MPI.MAX)  # the worst facet's
                 if ratio > 1.0:
-                    raise RuntimeError(
+                    raise UnresolvedContactError(
                         f"contact between bodies: a candidate facet moves {motion:.3e} m in one step, more than half "
                         f"the Verlet skin ({skin:.3e} m): no pair list covers the step; reduce the time step or "
                         "pass a larger skin")

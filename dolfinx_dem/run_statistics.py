@@ -14,6 +14,7 @@ from mpi4py import MPI
 
 from dolfinx_dem.discretisation import DEMDiscretisation
 from dolfinx_dem.memm import MEMM
+from dolfinx_dem.pair_contact import UnresolvedContactError
 
 
 @dataclasses.dataclass
@@ -31,13 +32,6 @@ class Statistics:
     @property
     def relative_drift(self) -> float:
         return self.drift / self.scale if self.scale > 0 else 0.0
-
-
-class UnresolvedContactError(RuntimeError):
-    """The contact between bodies is no longer resolved: the contact surfaces interpenetrate by
-    more than ``contact.max_penetration`` times the candidate facets' mean size
-    (``PairContactStatistics.record``); the run stops instead of going on with bodies passing
-    through each other."""
 
 
 #: The default of ``contact.max_penetration`` (candidate facets' mean sizes). Measured over whole

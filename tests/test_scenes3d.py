@@ -103,7 +103,8 @@ def test_contact_surfaces_interpenetrating_beyond_the_limit_stop_the_run(tmp_pat
     """Contact surfaces that interpenetrate by more than ``contact.max_penetration`` candidate
     facet sizes stop the run with a clear error (the command exits 1), the summary says
     ``unresolved`` and keeps the penetration, and the folder is marked INCOMPLETE; with the
-    default limit (0.5) the same impact goes on (two-balls at h = 0.06 m: 0.13 by 0.2 s)."""
+    default limit (0.5) the same impact goes on (two-balls at h = 0.06 m: 0.13 by 0.2 s); pairs
+    deeper than the list radius stop a run the same way."""
     from dolfinx_dem import cli, io
 
     with pytest.raises(scenes.SceneError, match="max_penetration' must be > 0"):
@@ -120,3 +121,8 @@ def test_contact_surfaces_interpenetrating_beyond_the_limit_stop_the_run(tmp_pat
     assert cli.main(["run", "two-balls", *coarse, "--quiet", "--out", str(tmp_path / "default")]) == 0
     default = json.loads((tmp_path / "default" / "summary.json").read_text())
     assert default["status"] == "completed" and 0.05 < default["max_penetration_over_facet_size"] < 0.5
+    # with the limit lifted, balls at 3 m/s go deeper than the pair list radius: the same stop
+    fast = ["--set", 'initial.velocity=["where(x < 0.25, 3.0, -3.0)", "0", "0"]', "--set", "contact.max_penetration=100"]
+    assert cli.main(["run", "two-balls", *coarse, *fast, "--quiet", "--out", str(tmp_path / "deep")]) == 1
+    deep = json.loads((tmp_path / "deep" / "summary.json").read_text())
+    assert deep["status"] == "unresolved" and "deeper than the pair list radius" in deep["error"]
