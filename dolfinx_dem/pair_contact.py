@@ -1295,7 +1295,7 @@ def _project(F: _Facets, f: np.ndarray, origin: np.ndarray, t: np.ndarray) -> np
 
 
 def _separations(A: _Simplices, B: _Simplices) -> np.ndarray:
-    """The separations of the compiled screen (``PairContact._flight``), (P, 2d) (the compiled
+    """The separations of the compiled screen (``PairContact._free_flight``), (P, 2d) (the compiled
     ``dem_pair_separations``): for each face k of A, then of B, how far the other simplex's
     nearest vertex lies beyond the face's line (times |m_k|) at zero offset, min_b m_k . (Y_b - X_k)
     and min_a m'_k . (X_a - Y_k). At offset s, A and B (moved by s) are separated by that line
