@@ -2,9 +2,10 @@
 size H) 0.01 m apart along x meet head-on at +-0.3 m/s (the material and speed of `two-balls`);
 the largest `penetration` over the run and the contact states at the given times
 (``contact_states.save``, for ``contact_coverage.py``). OFFSET shifts the right cube in y and z;
-``--no-sliding``: the diagnostic of ``contact_states.py``.
+``--no-sliding``: the diagnostic of ``contact_states.py``; ``--eta=ETA``: the stabilisation
+parameter of eq. (13) (Pa, default E).
 
-    .venv/bin/python benchmarks/two_cubes_impact.py H OFFSET OUT/tag 0.05 0.1 0.2 0.3 [--no-sliding]
+    .venv/bin/python benchmarks/two_cubes_impact.py H OFFSET OUT/tag 0.05 0.1 0.2 0.3 [--no-sliding] [--eta=1000]
 """
 
 import pathlib
@@ -24,9 +25,10 @@ from dolfinx_dem.memm import MEMM  # noqa: E402
 
 
 def main():
-    args = [a for a in sys.argv[1:] if a != "--no-sliding"]
+    args = [a for a in sys.argv[1:] if a != "--no-sliding" and not a.startswith("--eta=")]
     if "--no-sliding" in sys.argv:
         without_sliding()
+    eta = [float(a.split("=", 1)[1]) for a in sys.argv[1:] if a.startswith("--eta=")]
     h, offset, out, times = float(args[0]), float(args[1]), args[2], [float(t) for t in args[3:]]
 
     def build(gmsh):
@@ -38,7 +40,7 @@ def main():
         gmsh.model.mesh.generate(3)
 
     mesh = gmsh_mesh(MPI.COMM_SELF, build, gdim=3)
-    dem = DEMDiscretisation(mesh, ElasticMaterial(E=100.0, nu=0.2, rho=100.0), "B")
+    dem = DEMDiscretisation(mesh, ElasticMaterial(E=100.0, nu=0.2, rho=100.0, eta=eta[-1] if eta else None), "B")
     dem.set_contact_boundary(_compat.locate_boundary_facets(mesh, lambda x: (x[0] > 0.19) & (x[0] < 0.22)))
     c = dem.pair_contact
     dt = 0.2 * dem.stable_time_step()

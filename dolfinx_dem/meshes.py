@@ -222,7 +222,8 @@ def _check_round_bodies(word: str, d: int, bodies, h: float, frame, cut, refine,
             raise ValueError(f"refine h_min must satisfy 0 < h_min <= h = {h:g}, got {refine[1]!r}")
         if not (math.isfinite(distance) and distance > 0):
             raise ValueError(f"refine radius must be > 0, got {refine[2]!r}")
-        refine = (point, h_min, distance)
+        # h_min = h asks for size h everywhere: the uniform mesh (turns a scene's refinement off)
+        refine = (point, h_min, distance) if h_min < h else None
     return centres, radii, frame, cut, refine, boxes
 
 
@@ -315,7 +316,7 @@ def create_discs(comm: MPI.Comm, discs: Sequence[tuple[Sequence[float], float]],
     ``cut`` (axes "x", "y") keeps the half x_i >= c_i of every disc (a symmetric problem's half
     disc; the cut edge is part of the boundary tag i). ``refine = (point, h_min, radius)`` sets
     the size h_min within ``radius`` of ``point``, growing as h_min + 0.5 (distance - radius) up
-    to h further away (e.g. at a contact point).
+    to h further away (e.g. at a contact point); h_min = h gives the uniform mesh of ``refine = None``.
     """
     return _create_round_bodies(comm, 2, "disc", discs, h, frame, cut, refine, rectangles, "rectangle")
 
@@ -341,7 +342,8 @@ def create_balls(comm: MPI.Comm, balls: Sequence[tuple[Sequence[float], float]],
     x_i >= c_i of every ball: ``cut = ["x", "y"]`` is the quarter ball of a problem symmetric
     about the planes x = c_x and y = c_y, whose flat faces belong to boundary tag i (select them
     by a condition such as "x <= 0"). ``refine = (point, h_min, radius)``: size h_min within
-    ``radius`` of ``point``, growing as h_min + 0.5 (distance - radius) up to h.
+    ``radius`` of ``point``, growing as h_min + 0.5 (distance - radius) up to h; h_min = h gives
+    the uniform mesh of ``refine = None``.
     """
     return _create_round_bodies(comm, 3, "ball", balls, h, frame, cut, refine, boxes, "box")
 

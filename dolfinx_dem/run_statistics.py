@@ -83,8 +83,9 @@ class PairContactStatistics:
                 f"{penetration:.3g} m, {penetration / size:.3g} of the candidate facets' mean size ({size:.3g} m), "
                 f"more than contact.max_penetration = {self.max_penetration:g}. Eq. (31) corrects a gap only where "
                 "the facets of the two bodies overlap: the bodies are too soft for their load or speed, or, in 3D, "
-                "the facets slide into holes of each other's mosaic, which finer meshes make worse "
-                "(docs/validation/contact3d.md). The results from here on would be wrong; raise "
+                "the facets slide into holes of each other's mosaic on a mesh too fine for the stabilisation: a "
+                "larger material.eta (two-balls: 10 E) keeps the mosaic tiled (docs/validation/contact3d.md). The "
+                "results from here on would be wrong; raise "
                 "contact.max_penetration only to look at them")
         if self.free:
             self.momentum_change = max(self.momentum_change, *(abs(p - p0) for p, p0 in zip(momentum.tolist(), self.p0)))

@@ -201,6 +201,17 @@ def test_quarter_ball_refined_at_the_contact_point():
     assert edge[centre[:, 2] > 0.3].mean() > 0.04
 
 
+def test_refinement_to_h_is_the_uniform_mesh():
+    """refine_h = h turns a scene's refinement off: the very mesh of no refinement (the size
+    field of a constant h would mesh differently)."""
+    balls = [((0.0, 0.0, 0.0), 0.1)]
+    uniform = meshes.create_balls(MPI.COMM_SELF, balls, 0.05)[0]
+    same = meshes.create_balls(MPI.COMM_SELF, balls, 0.05, refine=((0.1, 0.0, 0.0), 0.05, 0.01))[0]
+    refined = meshes.create_balls(MPI.COMM_SELF, balls, 0.05, refine=((0.1, 0.0, 0.0), 0.049, 0.01))[0]
+    assert np.array_equal(same.geometry.x, uniform.geometry.x)
+    assert not np.array_equal(refined.geometry.x.shape, uniform.geometry.x.shape)
+
+
 @pytest.mark.parametrize("kwargs, match", [
     ({"balls": [((0, 0, 0), 1.0), ((1.5, 0, 0), 1.0)]}, "balls 1 and 2 overlap"),
     ({"balls": [((0, 0), 1.0)]}, "centre must be 3 finite"),
