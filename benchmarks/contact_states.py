@@ -2,7 +2,7 @@
 candidate facet (reference geometry, free displacement u_f^free, corrected u_f), the pair list
 and its free gaps g and overlaps w (serial), one ``<tag>_<t>.npz`` per time in OUTDIR.
 
-    .venv/bin/python benchmarks/contact_states.py two-balls '{"mesh.h": 0.02, "contact.skin": 0.05}' OUT/h02 0.1 0.2 0.25
+    .venv/bin/python benchmarks/contact_states.py two-balls '{"mesh.h": 0.02, "mesh.refine_h": 0.02, "material.eta": 100.0, "contact.skin": 0.05}' OUT/h02 0.1 0.2 0.25
     .venv/bin/python benchmarks/contact_states.py two-disks '{"mesh.h": 0.005}' OUT/d005 0.1 0.2 0.25
 
 ``--no-sliding`` (a DIAGNOSTIC, not the method: the force is then not the gradient of the energy)

@@ -1,9 +1,10 @@
 """The deepest facets of a `two-balls` run: at given times, the three facets of largest
 `penetration` (the overlap-weighted mean of their touching partners' corrected gaps), with their
 partners' free gaps g and overlaps w / |f| and the coverage sum w / |f| (1 for a facet its
-partners cover once). Scene overrides as JSON (a uniform skin keeps a deep run going).
+partners cover once). Scene overrides as JSON (a uniform skin keeps a deep run going; the
+sinking run of docs/validation/contact3d.md: a uniform mesh and the paper's eta = E).
 
-    .venv/bin/python benchmarks/deep_facets_two_balls.py '{"mesh.h": 0.02, "contact.skin": 0.05}' 0.2 0.25 0.28
+    .venv/bin/python benchmarks/deep_facets_two_balls.py '{"mesh.h": 0.02, "mesh.refine_h": 0.02, "material.eta": 100.0, "contact.skin": 0.05, "contact.max_penetration": 100}' 0.2 0.25 0.28
 """
 
 import json

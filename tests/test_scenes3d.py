@@ -1,4 +1,5 @@
-"""The 3D contact scenes (two-balls, cradle, ball-drop) on coarse meshes, a few steps each."""
+"""The 3D contact scenes (two-balls, cradle, ball-drop) on coarse meshes, a few steps each (two-balls
+keeps its refinement at the contact point and its eta = 10 E: at h = 0.06 m, 691 cells)."""
 
 import json
 import numpy as np
