@@ -1483,8 +1483,8 @@ class _At:
     moved = property(lambda self: self._state[1], doc="Whether the list is stale here (``PairContact._moved``).")
     candidates = property(lambda self: self._state[2], doc="The pairs screened (None: every listed pair).")
 
-    @property
-    def _values(self) -> tuple:
+    @functools.cached_property
+    def _values(self) -> tuple:  # raises (caching nothing) where the list is stale
         if self.moved:
             self.contact._check_listed(self.uc)  # raises
         return self._state[3]
