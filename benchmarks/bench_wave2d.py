@@ -277,7 +277,7 @@ def run_p2_ladder(n: int, max_steps: int) -> tuple[dict, list[dict]]:
 
 
 def sweep_dem(n: int, cfl: float, t_end: float, history: bool = False) -> dict:
-    from dolfinx_dem.memm import InstabilityError
+    from dolfinx_dem.errors import InstabilityError
 
     mesh, left, right = create_mesh(n)
     dem = build_dem(mesh, left, right)

@@ -121,7 +121,7 @@ import matplotlib.image  # noqa: E402
 import matplotlib.pyplot as plt  # noqa: E402
 
 from dolfinx_dem import hertz, scenes, simulation  # noqa: E402
-from dolfinx_dem.statics import StaticsError  # noqa: E402
+from dolfinx_dem.errors import StaticsError  # noqa: E402
 
 comm = MPI.COMM_WORLD
 # -

@@ -17,6 +17,7 @@ import dolfinx.cpp
 import dolfinx.fem
 import dolfinx.io
 import dolfinx.mesh
+from dolfinx_dem.errors import InputError
 
 
 #: glibc's mallopt parameters (malloc.h) and the values ``restore_malloc_mmap`` sets.
@@ -79,19 +80,19 @@ def local_mesh_data(mesh) -> LocalMeshData:
     tdim = topology.dim
     gdim = mesh.geometry.dim
     if gdim != tdim:
-        raise ValueError(
+        raise InputError(
             f"dolfinx_dem needs a mesh whose geometric dimension equals its topological "
             f"dimension; got tdim={tdim}, gdim={gdim} (manifold meshes are not supported)"
         )
     if mesh.geometry.cmap.degree != 1:
-        raise ValueError("dolfinx_dem needs an affine (degree-1) mesh geometry")
+        raise InputError("dolfinx_dem needs an affine (degree-1) mesh geometry")
     cell_map = topology.index_map(tdim)
     n = cell_map.size_local
     nv = tdim + 1
 
     c2v, off = _adjacency(topology, tdim, 0)
     if not np.all(np.diff(off) == nv):
-        raise ValueError(f"dolfinx_dem needs a simplex mesh (every cell with {nv} vertices)")
+        raise InputError(f"dolfinx_dem needs a simplex mesh (every cell with {nv} vertices)")
     c2v = c2v.reshape(-1, nv)[:n]
     c2f, _ = _adjacency(topology, tdim, tdim - 1)
     c2f = c2f.reshape(-1, nv)[:n]

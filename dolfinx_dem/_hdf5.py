@@ -15,6 +15,7 @@ import ctypes
 import pathlib
 import re
 from collections.abc import Iterable
+from dolfinx_dem.errors import OutputError
 
 _H5F_ACC_RDWR = 1
 _H5P_DEFAULT = 0
@@ -65,13 +66,13 @@ def _members(lib, fid: int, group: str) -> list[str]:
     try:
         info = _GroupInfo()
         if lib.H5Gget_info(gid, ctypes.byref(info)) < 0:
-            raise OSError(f"HDF5 cannot read group {group}")
+            raise OutputError(f"HDF5 cannot read group {group}")
         names = []
         for k in range(info.nlinks):
             buffer = ctypes.create_string_buffer(1024)
             n = lib.H5Lget_name_by_idx(gid, b".", 0, 0, k, buffer, len(buffer), _H5P_DEFAULT)  # by name, ascending
             if n < 0 or n >= len(buffer):
-                raise OSError(f"HDF5 cannot read the names in group {group}")
+                raise OutputError(f"HDF5 cannot read the names in group {group}")
             names.append(f"/{group.strip('/')}/{buffer.value.decode()}")
         return names
     finally:
@@ -87,7 +88,7 @@ def delete_unlisted(path: str | pathlib.Path, groups: Iterable[str], keep: Itera
     lib.H5Eset_auto2(_H5E_DEFAULT, None, None)
     fid = lib.H5Fopen(str(path).encode(), _H5F_ACC_RDWR, _H5P_DEFAULT)
     if fid < 0:
-        raise OSError(f"HDF5 cannot open {path} for writing")
+        raise OutputError(f"HDF5 cannot open {path} for writing")
     keep = set(keep)
     try:
         unlisted = [name for group in sorted(set(groups)) for name in _members(lib, fid, group) if name not in keep]
@@ -104,7 +105,7 @@ def delete(path: str | pathlib.Path, names: Iterable[str]) -> list[str]:
     lib.H5Eset_auto2(_H5E_DEFAULT, None, None)  # missing objects are expected: no error stack print
     fid = lib.H5Fopen(str(path).encode(), _H5F_ACC_RDWR, _H5P_DEFAULT)
     if fid < 0:
-        raise OSError(f"HDF5 cannot open {path} for writing")
+        raise OutputError(f"HDF5 cannot open {path} for writing")
     deleted = []
     try:
         for name in names:
@@ -113,7 +114,7 @@ def delete(path: str | pathlib.Path, names: Iterable[str]) -> list[str]:
             if all(lib.H5Lexists(fid, ("/" + "/".join(parts[: k + 1])).encode(), _H5P_DEFAULT) > 0
                    for k in range(len(parts))):
                 if lib.H5Ldelete(fid, ("/" + "/".join(parts)).encode(), _H5P_DEFAULT) < 0:
-                    raise OSError(f"HDF5 cannot delete {name} from {path}")
+                    raise OutputError(f"HDF5 cannot delete {name} from {path}")
                 deleted.append(name)
     finally:
         lib.H5Fclose(fid)

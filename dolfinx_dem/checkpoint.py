@@ -43,16 +43,13 @@ import numpy as np
 from mpi4py import MPI
 
 from dolfinx_dem.io import call_on_root
+from dolfinx_dem.errors import CheckpointError
 
 FORMAT = 4  # 2: per-process local files (the recurrence, contact states); no shared file; 3: MEMM work;
 # 4: the pair contact's exchange counter
 DIRECTORY = "checkpoint"
 HEADER = "checkpoint.json"
 VECTORS = ("u", "v_prev", "v_next")
-
-
-class CheckpointError(ValueError):
-    """There is no usable checkpoint, or it does not belong to this scene or mesh."""
 
 
 def package_version() -> str:

@@ -16,6 +16,7 @@ import sys
 import time
 
 from mpi4py import MPI
+from dolfinx_dem.errors import DEMError, InputError, InstabilityError, SceneError, UnresolvedContactError
 
 #: Exit status of a run stopped by SIGINT or SIGTERM (128 + SIGINT, as shells report Ctrl-C).
 INTERRUPTED = 130
@@ -93,7 +94,7 @@ def _run(args) -> int:
     comm = MPI.COMM_WORLD
     try:
         scene = scenes.load(args.scene, _overrides(args))
-    except (scenes.SceneError, FileNotFoundError) as err:
+    except InputError as err:
         _error(comm, err)
         return 2
     out = pathlib.Path(args.out or pathlib.Path("results") / scene["name"])
@@ -107,7 +108,7 @@ def _resume(args) -> int:
     comm = MPI.COMM_WORLD
     try:
         overrides = _overrides(args)
-    except scenes.SceneError as err:
+    except SceneError as err:
         _error(comm, err)
         return 2
     out = pathlib.Path(args.directory)
@@ -117,18 +118,14 @@ def _resume(args) -> int:
 
 def _execute(comm, args, out: pathlib.Path, start) -> int:
     """Run ``start(simulation)`` and report as the command does; returns the exit status."""
-    from dolfinx_dem import checkpoint, io, scenes, simulation
-    from dolfinx_dem.memm import InstabilityError
-    from dolfinx_dem.pair_contact import UnresolvedContactError
-    from dolfinx_dem.statics import StaticsError
+    from dolfinx_dem import simulation
 
     try:
         summary = start(simulation)
     except (InstabilityError, UnresolvedContactError) as err:
         _error(comm, f"{err}\nPartial results (marked INCOMPLETE) are in {out}")
         return 1
-    except (scenes.SceneError, checkpoint.CheckpointError, io.OutputFolderError, ValueError, FileNotFoundError,
-            NotADirectoryError, StaticsError) as err:
+    except DEMError as err:  # bad input, or a static problem without solution: nothing written
         _error(comm, err)
         return 2
     if comm.rank == 0 and not args.quiet:

@@ -37,6 +37,7 @@ from petsc4py import PETSc
 
 from dolfinx_dem.halo import owned_facet_marks
 from dolfinx_dem.patch import PatchScatter, negative_part_integral, piecewise_midpoints, scatter_sum
+from dolfinx_dem.errors import InputError
 
 
 #: Patch operators with at most this many entries are stored as dense arrays: a sparse
@@ -138,17 +139,17 @@ class RigidContact:
             n = np.asarray(ob.normal, dtype=float)
             p = np.asarray(ob.point, dtype=float)
             if n.shape != (d,) or p.shape != (d,) or not np.isfinite(n).all() or not np.isfinite(p).all():
-                raise ValueError(f"obstacle {k}: point and normal need {d} finite components")
+                raise InputError(f"obstacle {k}: point and normal need {d} finite components")
             if np.linalg.norm(n) == 0:
-                raise ValueError(f"obstacle {k}: the normal is zero")
+                raise InputError(f"obstacle {k}: the normal is zero")
             if not (np.isfinite(ob.tolerance) and ob.tolerance >= 0):
-                raise ValueError(f"obstacle {k}: the gap tolerance must be >= 0, got {ob.tolerance}")
+                raise InputError(f"obstacle {k}: the gap tolerance must be >= 0, got {ob.tolerance}")
             normals.append(n / np.linalg.norm(n))
             points.append(p)
             inside = (geom.cell_vertices[: dem.n_owned].reshape(-1, d) - p) @ normals[-1]
             deepest = self.comm.allreduce(-inside.min(initial=np.inf), op=MPI.MAX)
             if deepest > ob.tolerance:
-                raise ValueError(f"obstacle {k} intersects the body at t = 0: a vertex lies "
+                raise InputError(f"obstacle {k} intersects the body at t = 0: a vertex lies "
                                  f"{deepest:.3e} m inside it (tolerance {ob.tolerance:g} m)")
 
         # Candidate facets: the marked facets of the cells in halo layers 0 and 1.
@@ -162,21 +163,21 @@ class RigidContact:
         owned = cell < dem.n_owned
         counts = self.comm.allreduce(np.bincount(marks[cell[owned], j[owned]], minlength=len(obstacles)), op=MPI.SUM)
         for k in np.flatnonzero(counts == 0)[:1]:
-            raise ValueError(f"obstacle {k}: its contact candidate boundary has no facet")
+            raise InputError(f"obstacle {k}: its contact candidate boundary has no facet")
         interior = geom.facet_cells[f[owned], 1] >= 0
         bad = self.comm.allgather([(int(marks[cell[owned], j[owned]][interior][0]),
                                     geom.facet_centres[f[owned][interior][0]].tolist())] if interior.any() else [])
         bad = [b for part in bad for b in part]
         if bad:
-            raise ValueError(f"obstacle {bad[0][0]}: contact candidates must be boundary facets; the facet at "
+            raise InputError(f"obstacle {bad[0][0]}: contact candidates must be boundary facets; the facet at "
                              f"{bad[0][1]} is interior")
         dirichlet = self.comm.allreduce(bool(np.isin(f[owned], rec.dirichlet_facets).any()), op=MPI.LOR)
         if dirichlet:
-            raise ValueError("obstacle contact candidate facets must not carry a Dirichlet condition")
+            raise InputError("obstacle contact candidate facets must not carry a Dirichlet condition")
         if self.comm.allreduce(bool(np.isin(f[owned], rec.traction_facets).any()), op=MPI.LOR):
-            raise ValueError("obstacle contact candidate facets must not carry a traction")
+            raise InputError("obstacle contact candidate facets must not carry a traction")
         if dem._time_dependent:
-            raise ValueError("contact with time-dependent Dirichlet conditions or tractions is not supported")
+            raise InputError("contact with time-dependent Dirichlet conditions or tractions is not supported")
         order = np.lexsort((f, ~owned))  # own facets first
         self.facets, self.cells, obstacle = f[order], cell[order], marks[cell, j][order]
         self.num_obstacles, self._obstacle = len(obstacles), obstacle

@@ -32,6 +32,7 @@ from dolfinx_dem.halo import owned_facet_marks
 from dolfinx_dem.material import CellMaterials, ElasticMaterial
 from dolfinx_dem.operators import EnergyRows, compute_energy_rows
 from dolfinx_dem.reconstruction import Reconstruction, compute_reconstruction
+from dolfinx_dem.errors import InputError, SolverError
 
 
 @dataclasses.dataclass(frozen=True)
@@ -85,7 +86,7 @@ class PrescribedBody:
             return t * np.asarray(self.velocity, dtype=float)
         U = np.asarray(self.displacement(t), dtype=float).reshape(-1)
         if U.shape != (d,) or not np.isfinite(U).all():
-            raise ValueError(f"prescribed body {self.tag}: displacement({t:.9g}) must be {d} finite numbers, "
+            raise InputError(f"prescribed body {self.tag}: displacement({t:.9g}) must be {d} finite numbers, "
                              f"got {U.tolist()}")
         return U
 
@@ -102,11 +103,11 @@ def _facet_values(what: str, conditions, facet_order: np.ndarray, centres: np.nd
         else:
             value = np.asarray(bc.value, dtype=float)
             if value.shape != (d,):
-                raise ValueError(f"a constant {what} value needs {d} components, got {value.shape}")
+                raise InputError(f"a constant {what} value needs {d} components, got {value.shape}")
             values[index] = value
     if not np.isfinite(values).all():
         k = int(np.argmax(~np.isfinite(values).all(axis=1)))
-        raise ValueError(f"the {what} value at t = {t:.9g} is not finite: {values[k].tolist()} on the facet at "
+        raise InputError(f"the {what} value at t = {t:.9g} is not finite: {values[k].tolist()} on the facet at "
                          f"{centres[facet_order[k]].tolist()}")
     return values
 
@@ -182,13 +183,13 @@ class DEMDiscretisation:
         self.comm = mesh.comm
         self.d = d = mesh.topology.dim
         if prescribed and d != 2:
-            raise ValueError(f"prescribed bodies take part in contact between bodies, implemented in 2D, not {d}D")
+            raise InputError(f"prescribed bodies take part in contact between bodies, implemented in 2D, not {d}D")
         self.V = _compat.create_vector_space(mesh, "DG", 0)
         dirichlet, tractions = tuple(dirichlet), tuple(tractions)
         for k, bc in enumerate(dirichlet):
             components = range(d) if bc.components is None else bc.components
             if len(components) == 0 or any(not 0 <= int(i) < d for i in components):
-                raise ValueError(f"Dirichlet condition {k}: components must be a nonempty list of integers in "
+                raise InputError(f"Dirichlet condition {k}: components must be a nonempty list of integers in "
                                  f"[0, {d - 1}], got {list(components)}")
         # Dirichlet conditions are marked 0..n_D-1, tractions n_D.. (one condition per facet)
         conditions = dirichlet + tractions
@@ -217,7 +218,7 @@ class DEMDiscretisation:
         if np.any(selected == 0):
             k = int(np.argmin(selected))
             what = f"Dirichlet condition {k}" if k < len(dirichlet) else f"traction {k - len(dirichlet)}"
-            raise ValueError(f"{what} selects no facet (check its tag or marker)")
+            raise InputError(f"{what} selects no facet (check its tag or marker)")
         self._dirichlet = [(marked_facets[condition == k], bc) for k, bc in enumerate(dirichlet)]
         self._tractions = [(marked_facets[condition == len(dirichlet) + k], bc) for k, bc in enumerate(tractions)]
         is_dirichlet = condition < len(dirichlet)
@@ -288,7 +289,7 @@ class DEMDiscretisation:
         if body_force is not None:
             f = np.asarray(body_force, dtype=float)
             if f.shape != (d,):
-                raise ValueError(f"body_force must have {d} components, got {f.shape}")
+                raise InputError(f"body_force must have {d} components, got {f.shape}")
             self.body_force.array[:] = (volumes[:, None] * f).ravel()
 
         self.external_force = self.create_vector()  # f(t): the body force and the tractions' (P^T t_w)
@@ -309,11 +310,11 @@ class DEMDiscretisation:
         of ``material`` and every tag a cell; errors are raised on every process."""
         if isinstance(material, ElasticMaterial):
             if cell_tags is not None and not prescribed:
-                raise ValueError("cell_tags are only used with several materials ({cell tag: ElasticMaterial}) "
+                raise InputError("cell_tags are only used with several materials ({cell tag: ElasticMaterial}) "
                                  "or prescribed bodies")
             return CellMaterials.uniform(material, self.geometry.num_cells)
         if cell_tags is None:
-            raise ValueError("several materials ({cell tag: ElasticMaterial}) need cell_tags")
+            raise InputError("several materials ({cell tag: ElasticMaterial}) need cell_tags")
         tags = [int(t) for t in material]
         n = self.n_owned
         count = np.zeros(n, dtype=np.int64)  # tags of each owned cell (dolfinx_dem's cell order)
@@ -328,11 +329,11 @@ class DEMDiscretisation:
         counts = np.array([(count > 1).sum(), (count == 0).sum()])
         counts = self.comm.allreduce(counts, op=MPI.SUM)
         if np.any(selected == 0):
-            raise ValueError(f"the material of cell tag {tags[int(np.argmin(selected))]} selects no cell")
+            raise InputError(f"the material of cell tag {tags[int(np.argmin(selected))]} selects no cell")
         if counts[0]:
-            raise ValueError(f"{counts[0]} cells carry several material tags (materials overlap); tags {tags}")
+            raise InputError(f"{counts[0]} cells carry several material tags (materials overlap); tags {tags}")
         if counts[1]:
-            raise ValueError(f"{counts[1]} cells carry none of the material tags {tags}: give every cell a material")
+            raise InputError(f"{counts[1]} cells carry none of the material tags {tags}: give every cell a material")
         held = self.halo_exchange(index[:, None])[:, 0]
         return CellMaterials(tuple(material[t] for t in material), held.astype(np.int32))
 
@@ -373,40 +374,40 @@ class DEMDiscretisation:
             return
         d, geom = self.d, self.geometry
         if cell_tags is None:
-            raise ValueError("prescribed bodies are selected by cell tag: cell_tags are needed")
+            raise InputError("prescribed bodies are selected by cell tag: cell_tags are needed")
         owned_bodies = geom.cell_bodies[: self.n_owned]
         mine = np.zeros(geom.num_bodies, dtype=np.int64)  # bodies of prescribed cells (any body)
         for k, body in enumerate(prescribed):
             what = f"prescribed body {k if body.name is None else body.name!r} (cell tag {body.tag})"
             if (body.velocity is None) == (body.displacement is None):
-                raise ValueError(f"{what} needs exactly one of velocity and displacement")
+                raise InputError(f"{what} needs exactly one of velocity and displacement")
             if body.velocity is not None and np.shape(body.velocity) != (d,):
-                raise ValueError(f"{what}: velocity must have {d} components, got {list(np.ravel(body.velocity))}")
+                raise InputError(f"{what}: velocity must have {d} components, got {list(np.ravel(body.velocity))}")
             cells = self._tagged_cells(cell_tags, body.tag)
             if self.comm.allreduce(len(cells), op=MPI.SUM) == 0:
-                raise ValueError(f"{what} selects no cell")
+                raise InputError(f"{what} selects no cell")
             bodies = np.zeros(geom.num_bodies, dtype=np.int64)
             bodies[owned_bodies[cells]] = 1
             self.comm.Allreduce(MPI.IN_PLACE, bodies, op=MPI.MAX)
             untagged = np.isin(owned_bodies, np.flatnonzero(bodies))
             untagged[cells] = False
             if self.comm.allreduce(int(untagged.sum()), op=MPI.SUM):
-                raise ValueError(f"{what} is not a whole body: it shares facets with cells without the tag "
+                raise InputError(f"{what} is not a whole body: it shares facets with cells without the tag "
                                  "(a prescribed body must be meshed separately)")
             if mine[bodies > 0].any():
-                raise ValueError(f"{what} overlaps another prescribed body")
+                raise InputError(f"{what} overlaps another prescribed body")
             mine += bodies
             self._prescribed_cells.append(cells)
         rec = self.reconstruction
         for what, facets in (("a Dirichlet condition", rec.dirichlet_facets), ("a traction", rec.traction_facets)):
             cells = geom.facet_cells[facets, 0]
             if self.comm.allreduce(bool(mine[geom.cell_bodies[cells[cells < self.n_owned]]].any()), op=MPI.LOR):
-                raise ValueError(f"a prescribed body carries {what}: its motion is imposed already")
+                raise InputError(f"a prescribed body carries {what}: its motion is imposed already")
         from dolfinx_dem.pair_contact import _check_bodies_share_no_vertex
         try:
             _check_bodies_share_no_vertex(self, np.flatnonzero(mine))
         except ValueError as err:
-            raise ValueError(f"a prescribed body is not a whole body: {err}") from None
+            raise InputError(f"a prescribed body is not a whole body: {err}") from None
         self._prescribed_bodies = mine > 0
         dofs = (np.concatenate(self._prescribed_cells)[:, None] * d + np.arange(d)).ravel()
         self.mass.array[dofs] = 0.0
@@ -819,7 +820,7 @@ class DEMDiscretisation:
                 ksp.getPC().setFactorSolverType("mumps")
         eps.solve()
         if eps.getConverged() < n:
-            raise RuntimeError(f"SLEPc converged only {eps.getConverged()} of {n} eigenvalues of M^-1 K")
+            raise SolverError(f"SLEPc converged only {eps.getConverged()} of {n} eigenvalues of M^-1 K")
         values = np.array([eps.getEigenvalue(i).real for i in range(eps.getConverged())])
         eps.destroy()
         A.destroy()
@@ -836,7 +837,7 @@ class DEMDiscretisation:
         quadratically with the cells).
         """
         if method not in ("bound", "eigenvalue"):
-            raise ValueError(f"unknown stable time step method {method!r}; choose 'bound' or 'eigenvalue'")
+            raise InputError(f"unknown stable time step method {method!r}; choose 'bound' or 'eigenvalue'")
         if method not in self._stable_dt:
             if method == "bound":
                 lam = stability.largest_eigenvalue_bound(self.factored, self.row_keys(), self.ghost_owners(),

@@ -33,9 +33,9 @@ from mpi4py import MPI
 
 from dolfinx_dem import _compat, checkpoint, io, model, plotting, runcontrol, scenes
 from dolfinx_dem.discretisation import DEMDiscretisation
-from dolfinx_dem.memm import MEMM, InstabilityError
-from dolfinx_dem.pair_contact import UnresolvedContactError
+from dolfinx_dem.memm import MEMM
 from dolfinx_dem.run_statistics import MAX_PENETRATION, PairContactStatistics, Statistics, peak_rss_mb
+from dolfinx_dem.errors import CheckpointError, InputError, InstabilityError, UnresolvedContactError
 
 
 class DynamicRun:
@@ -48,7 +48,7 @@ class DynamicRun:
     def __init__(self, scene: Mapping, comm: MPI.Comm = MPI.COMM_WORLD, quiet: bool = False,
                  checkpoint_every: int | None = None, dt: float | None = None):
         if checkpoint_every is not None and not (isinstance(checkpoint_every, int) and checkpoint_every >= 1):
-            raise ValueError(f"checkpoint_every must be an integer >= 1, got {checkpoint_every!r}")
+            raise InputError(f"checkpoint_every must be an integer >= 1, got {checkpoint_every!r}")
         self.wall = time.perf_counter()
         self.scene, self.comm, self.quiet, self.checkpoint_every = scene, comm, quiet, checkpoint_every
         self.dem = dem = model.build(scene, comm)
@@ -91,15 +91,15 @@ class DynamicRun:
         if checkpoint.scene_hash(scene) != header["scene_hash"]:
             changed = checkpoint.scene_differences(header["scene"], scene)
             changed = [k for k in changed if k != "time.end"] or ["mesh.path (the mesh file's content)"]
-            raise checkpoint.CheckpointError(
+            raise CheckpointError(
                 f"the scene differs from the checkpoint's in {', '.join(changed)}: a resumed run may only change "
                 "time.end (start a new run for another scene)")
         end, dt, t = scene["time"]["end"], header["dt"], header["t"]
         steps = end / dt
         if abs(steps - round(steps)) > 1e-9 * steps:
-            raise checkpoint.CheckpointError(f"time.end = {end!r} is not a multiple of the run's time step dt = {dt!r}")
+            raise CheckpointError(f"time.end = {end!r} is not a multiple of the run's time step dt = {dt!r}")
         if round(steps) <= header["step"]:
-            raise checkpoint.CheckpointError(
+            raise CheckpointError(
                 f"the checkpoint is at step {header['step']} (t = {t:.9g}), not before time.end = {end:.9g}: "
                 "pass a later --set time.end=... to go further")
         run = cls(scene, comm, quiet, checkpoint_every or header["checkpoint_every"], dt)

@@ -72,6 +72,7 @@ import math
 import warnings
 
 import numpy as np
+from dolfinx_dem.errors import InputError
 
 __all__ = [
     "BarSolution",
@@ -152,7 +153,7 @@ class BarSolution:
     def _locate(self, t):
         t = np.asarray(t, dtype=float)
         if np.any(t < -1e-12 * self.dt) or np.any(t > self.t[-1] * (1 + 1e-14) + 1e-12 * self.dt):
-            raise ValueError(f"times must lie in [0, {self.t[-1]}]")
+            raise InputError(f"times must lie in [0, {self.t[-1]}]")
         k = np.clip(np.floor(t / self.dt + 1e-9).astype(int), 0, len(self.t) - 2)
         return t, k, np.clip(t - self.t[k], 0.0, self.dt)
 
@@ -214,7 +215,7 @@ def signorini_bar_characteristics(L, rho, E, v0, g, h0, t_end, n) -> BarSolution
     L, rho, E, v0, g, h0, t_end = (float(a) for a in (L, rho, E, v0, g, h0, t_end))
     n = int(n)
     if min(L, rho, E) <= 0 or h0 < 0 or g < 0 or t_end < 0 or n < 1:
-        raise ValueError("need L, rho, E > 0, h0 >= 0, g >= 0, t_end >= 0 and n >= 1")
+        raise InputError("need L, rho, E > 0, h0 >= 0, g >= 0, t_end >= 0 and n >= 1")
     c = math.sqrt(E / rho)
     dx = L / n
     dt = dx / c

@@ -25,6 +25,7 @@ import scipy.sparse
 from petsc4py import PETSc
 
 from dolfinx_dem.kernels import lib, pointer
+from dolfinx_dem.errors import InputError
 
 
 def local_numbering(ids: np.ndarray, start: int, stop: int) -> tuple[np.ndarray, np.ndarray]:
@@ -52,7 +53,7 @@ class FactoredStiffness:
     def __init__(self, comm, rows: scipy.sparse.csr_matrix, n_rows: int, n_elastic: int, n_owned: int,
                  ghosts: np.ndarray):
         if rows.indptr.dtype != np.int32 or rows.indices.dtype != np.int32 or rows.data.dtype != np.float64:
-            raise ValueError("the rows of Q need int32 indices and float64 values")
+            raise InputError("the rows of Q need int32 indices and float64 values")
         self.comm = comm
         self.ghosts = np.asarray(ghosts, dtype=PETSc.IntType)
         self.n_owned = int(n_owned)
@@ -85,7 +86,7 @@ class FactoredStiffness:
         shift[shift_index[j]] replaces x_j. Pointers are taken once: the arrays must keep their
         addresses."""
         if y.shape != (self.n_rows,) or y.dtype != np.float64:
-            raise ValueError(f"y needs {self.n_rows} float64 entries")
+            raise InputError(f"y needs {self.n_rows} float64 entries")
         px, pz = pointer(self.local_array(x)), pointer(self.local_array(z))
         py, ps, pi, pshift = pointer(y), pointer(sums), pointer(shift_index), pointer(shift)
         rowptr, cols, vals = self._csr

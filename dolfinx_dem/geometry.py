@@ -33,6 +33,7 @@ from mpi4py import MPI
 from petsc4py import PETSc
 
 from dolfinx_dem import _compat, halo
+from dolfinx_dem.errors import InputError
 
 #: facet_cells[f, 1] of a facet whose second cell is outside the halo (not a boundary facet).
 OUTSIDE = -2
@@ -193,7 +194,7 @@ def geometry_from_arrays(
     volumes = np.abs(det) / math.factorial(d)
     if np.any(volumes <= 0):
         bad = np.flatnonzero(volumes <= 0)[:5]
-        raise ValueError(f"degenerate cells (zero volume) in the mesh, e.g. cells {bad.tolist()}")
+        raise InputError(f"degenerate cells (zero volume) in the mesh, e.g. cells {bad.tolist()}")
     # Barycentric gradients: grad(lambda_j) for j >= 1 are the columns of Jt^{-1}; their sum is
     # -grad(lambda_0). The outward area normal of the facet opposite vertex j is -d |c| grad(lambda_j).
     grad_lambda = np.empty((N, nv, d))
@@ -206,7 +207,7 @@ def geometry_from_arrays(
     order = np.argsort(flat, kind="stable")
     counts = np.bincount(flat, minlength=num_facets)
     if np.any(counts > 2):
-        raise ValueError("inconsistent mesh: every facet must belong to one or two cells")
+        raise InputError("inconsistent mesh: every facet must belong to one or two cells")
     first = np.concatenate([[0], np.cumsum(counts)[:-1]])
     facet_cells = np.full((num_facets, 2), -1, dtype=np.int32)  # local numbers (int32: memory)
     facet_local = np.full((num_facets, 2), -1, dtype=np.int8)  # 0 .. d

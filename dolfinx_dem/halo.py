@@ -30,6 +30,7 @@ import numpy as np
 from mpi4py import MPI
 
 from dolfinx_dem import _compat
+from dolfinx_dem.errors import InputError
 
 #: Vertex-neighbour layers around the owned cells (reconstruction.py, geometry.py: why 3).
 HALO_LAYERS = 3
@@ -95,7 +96,7 @@ def owned_facet_marks(mesh, facets: np.ndarray, values: np.ndarray, what: str = 
     twice = rows[1:, 0][rows[1:, 0] == rows[:-1, 0]]
     twice = [f for part in comm.allgather(twice[:1].tolist()) for f in part]
     if twice:
-        raise ValueError(f"two {what} share a facet (global facet {twice[0]})")
+        raise InputError(f"two {what} share a facet (global facet {twice[0]})")
     out = np.full(local.cell_facet_global.shape, -1, dtype=np.int64)
     position = np.minimum(np.searchsorted(rows[:, 0], local.cell_facet_global), max(len(rows) - 1, 0))
     hit = (rows[position, 0] == local.cell_facet_global) if len(rows) else np.zeros(out.shape, bool)

@@ -19,6 +19,7 @@ import typing
 
 import numpy as np
 import numpy.typing as npt
+from dolfinx_dem.errors import InputError
 
 
 # --- analytic Hertz solution --------------------------------------------------------------------
@@ -46,9 +47,9 @@ def hertz_analytic(R: float, E: float, nu: float, body_force: float) -> HertzAna
     """
     for name, value in (("R (radius)", R), ("E", E), ("body_force", body_force)):
         if not (np.isfinite(value) and value > 0):
-            raise ValueError(f"{name} must be a positive number, got {value!r}")
+            raise InputError(f"{name} must be a positive number, got {value!r}")
     if not -1.0 < nu < 0.5:
-        raise ValueError(f"Poisson ratio nu must lie in (-1, 0.5), got {nu!r}")
+        raise InputError(f"Poisson ratio nu must lie in (-1, 0.5), got {nu!r}")
     f = body_force
     load = f * np.pi * R**2
     E_star = E / (1.0 - nu**2)
@@ -100,20 +101,20 @@ def contact_half_width_fit(
     x = np.asarray(x, dtype=np.float64).reshape(-1)
     p = np.asarray(pressure, dtype=np.float64).reshape(-1)
     if x.shape != p.shape:
-        raise ValueError(f"x and pressure must have the same shape, got {x.shape}, {p.shape}")
+        raise InputError(f"x and pressure must have the same shape, got {x.shape}, {p.shape}")
     if not 0.0 < fraction < 1.0:
-        raise ValueError(f"fraction must be in (0, 1), got {fraction!r}")
+        raise InputError(f"fraction must be in (0, 1), got {fraction!r}")
     if p.size == 0 or not np.max(p) > 0.0:
-        raise ValueError("no positive pressure sample: no contact")
+        raise InputError("no positive pressure sample: no contact")
     keep = p >= fraction * np.max(p)
     if np.count_nonzero(keep) < 3:
-        raise ValueError("fewer than 3 pressure samples above the threshold: cannot fit")
+        raise InputError("fewer than 3 pressure samples above the threshold: cannot fit")
     scale = np.max(np.abs(x[keep]))
     s = x[keep] / scale
     A = np.stack([np.ones_like(s), s, s**2], axis=1)
     c0, c1, c2 = np.linalg.lstsq(A, p[keep] ** 2, rcond=None)[0]
     if not c2 < 0.0:
-        raise ValueError("the fitted p^2 is not concave: the samples do not look like Hertz")
+        raise InputError("the fitted p^2 is not concave: the samples do not look like Hertz")
     peak = c0 - c1**2 / (4.0 * c2)
     a = np.sqrt(c1**2 - 4.0 * c0 * c2) / (2.0 * abs(c2)) * scale
     return float(a), float(np.sqrt(peak)), float(-c1 / (2.0 * c2) * scale)
@@ -146,11 +147,11 @@ def contact_half_width_moments(m0: float, m1: float, m2: float) -> tuple[float, 
         (a, xc): the half-width (m) and the centre (m).
     """
     if not m0 > 0.0:
-        raise ValueError(f"the total contact force m0 must be > 0, got {m0!r}: no contact")
+        raise InputError(f"the total contact force m0 must be > 0, got {m0!r}: no contact")
     xc = m1 / m0
     variance = m2 / m0 - xc**2
     if not variance > 0.0:
-        raise ValueError("the pressure has no spread (second central moment <= 0)")
+        raise InputError("the pressure has no spread (second central moment <= 0)")
     return float(2.0 * np.sqrt(variance)), float(xc)
 
 
@@ -168,7 +169,7 @@ def facet_pressure_moments(
     x1 = np.asarray(x_end, dtype=np.float64).reshape(-1)
     P = np.asarray(force, dtype=np.float64).reshape(-1)
     if not (x0.shape == x1.shape == P.shape):
-        raise ValueError(f"x_start, x_end and force must have the same shape, got {x0.shape}, "
+        raise InputError(f"x_start, x_end and force must have the same shape, got {x0.shape}, "
                          f"{x1.shape}, {P.shape}")
     xm, dx = 0.5 * (x0 + x1), x1 - x0
     return float(P.sum()), float(P @ xm), float(P @ (xm**2 + dx**2 / 12.0))
@@ -184,9 +185,9 @@ def contact_radius_moments(m0: float, m2: float) -> float:
     The axis is given, not fitted: a symmetric part of the zone (a quarter) has the same m2 / m0.
     """
     if not m0 > 0.0:
-        raise ValueError(f"the total contact force m0 must be > 0, got {m0!r}: no contact")
+        raise InputError(f"the total contact force m0 must be > 0, got {m0!r}: no contact")
     if not m2 > 0.0:
-        raise ValueError("the pressure has no spread (second moment <= 0)")
+        raise InputError("the pressure has no spread (second moment <= 0)")
     return float(np.sqrt(2.5 * m2 / m0))
 
 
@@ -203,7 +204,7 @@ def triangle_pressure_moments(
     v = np.asarray(vertices, dtype=np.float64)
     P = np.asarray(force, dtype=np.float64).reshape(-1)
     if v.ndim != 3 or v.shape[1:] != (3, 3) or v.shape[0] != P.shape[0]:
-        raise ValueError(f"vertices must have the shape (n, 3, 3) and force (n,), got {v.shape}, {P.shape}")
+        raise InputError(f"vertices must have the shape (n, 3, 3) and force (n,), got {v.shape}, {P.shape}")
     n = np.asarray(axis, dtype=np.float64)
     n = n / np.linalg.norm(n)
     w = v - np.asarray(point, dtype=np.float64)
@@ -226,7 +227,7 @@ def point_force_moments(
     x = np.asarray(points, dtype=np.float64)
     P = np.asarray(force, dtype=np.float64).reshape(-1)
     if x.ndim != 2 or x.shape[1] != 3 or x.shape[0] != P.shape[0]:
-        raise ValueError(f"points must have the shape (n, 3) and force (n,), got {x.shape}, {P.shape}")
+        raise InputError(f"points must have the shape (n, 3) and force (n,), got {x.shape}, {P.shape}")
     n = np.asarray(axis, dtype=np.float64)
     n = n / np.linalg.norm(n)
     w = x - np.asarray(point, dtype=np.float64)

@@ -51,6 +51,7 @@ from mpi4py import MPI
 
 import dolfinx.fem
 import dolfinx.io
+from dolfinx_dem.errors import InputError, MissingFileError, OutputFolderError
 
 INCOMPLETE = "INCOMPLETE"
 ERROR = "error.txt"
@@ -60,10 +61,6 @@ RUN_FILES = (INCOMPLETE, ERROR, "summary.json", "series.csv", "solution.xdmf", "
              ".solution.xdmf", ".solution.h5", "solution.xdmf.tmp")
 #: The files derived from a whole run, removed when it is resumed (the resumed run rewrites them).
 DERIVED_FILES = ("summary.json", "final.png", "animation.gif", "energies.png", "probes.png")
-
-
-class OutputFolderError(ValueError):
-    """The output folder cannot take this run (it holds another one); the message says what to do."""
 
 
 def call_on_root(comm: MPI.Comm, fn: Callable, *args):
@@ -111,7 +108,7 @@ class OutputDirectory:
     def _check(self) -> list[pathlib.Path]:
         """The run files present in the folder; raises if the run may not go there."""
         if self.path.exists() and not self.path.is_dir():
-            raise NotADirectoryError(f"output path {self.path} exists and is not a directory")
+            raise OutputFolderError(f"output path {self.path} exists and is not a directory")
         present = [self.path / name for name in RUN_FILES if os.path.lexists(self.path / name)]
         if self.resume or not present or self.overwrite:
             return present
@@ -177,7 +174,7 @@ class SolutionWriter:
     def __init__(self, comm: MPI.Comm, directory: str | pathlib.Path, mesh, resume_writes: int | None = None):
         directory = pathlib.Path(directory)
         if not directory.is_dir():
-            raise FileNotFoundError(f"output directory {directory} does not exist")
+            raise MissingFileError(f"output directory {directory} does not exist")
         self.path = directory / "solution.xdmf"
         self._work = directory / WORK_XDMF
         self._comm, self._mesh = comm, mesh
@@ -211,16 +208,16 @@ class SolutionWriter:
         Each Function is renamed to its key, which becomes its name in the XDMF file.
         """
         if not math.isfinite(t):
-            raise ValueError(f"time t must be finite, got {t!r}")
+            raise InputError(f"time t must be finite, got {t!r}")
         if not fields:
-            raise ValueError("fields must name at least one Function")
+            raise InputError("fields must name at least one Function")
         for name, f in fields.items():
             if not isinstance(name, str) or not name:
-                raise ValueError(f"field names must be non-empty strings, got {name!r}")
+                raise InputError(f"field names must be non-empty strings, got {name!r}")
             if not isinstance(f, dolfinx.fem.Function):
-                raise ValueError(f"field {name!r} must be a dolfinx.fem.Function, got {type(f)}")
+                raise InputError(f"field {name!r} must be a dolfinx.fem.Function, got {type(f)}")
             if f.function_space.mesh is not self._mesh:
-                raise ValueError(f"field {name!r} is not defined on the writer's mesh")
+                raise InputError(f"field {name!r} is not defined on the writer's mesh")
         for name, f in fields.items():
             f.name = name
             self._xdmf.write_function(f, float(t), self._mesh_xpath)
@@ -266,16 +263,16 @@ class SeriesWriter:
     ):
         columns = tuple(columns)
         if not columns:
-            raise ValueError("columns must name at least one column")
+            raise InputError("columns must name at least one column")
         for name in columns:
             if not isinstance(name, str) or not name or any(c in name for c in ",\n\r\""):
-                raise ValueError(
+                raise InputError(
                     f"column names must be non-empty, without , \" or newlines, got {name!r}"
                 )
         if len(set(columns)) != len(columns):
-            raise ValueError(f"column names must be unique, got {columns}")
+            raise InputError(f"column names must be unique, got {columns}")
         if not (isinstance(flush_every, int) and flush_every >= 1):
-            raise ValueError(f"flush_every must be an integer >= 1, got {flush_every!r}")
+            raise InputError(f"flush_every must be an integer >= 1, got {flush_every!r}")
         self.path = pathlib.Path(path)
         self.columns = columns
         self._flush_every = flush_every
@@ -293,10 +290,10 @@ class SeriesWriter:
             header = self._file.readline().rstrip("\n")
             if header != ",".join(columns):
                 self._file.close()
-                raise ValueError(f"{self.path} has the columns {header!r}, not {','.join(columns)!r}")
+                raise InputError(f"{self.path} has the columns {header!r}, not {','.join(columns)!r}")
             if not len(header) < append_at <= self.path.stat().st_size:
                 self._file.close()
-                raise ValueError(f"{self.path} has {self.path.stat().st_size} bytes, cannot continue at {append_at}")
+                raise InputError(f"{self.path} has {self.path.stat().st_size} bytes, cannot continue at {append_at}")
             self._file.truncate(append_at)
             self._file.seek(append_at)
 
@@ -306,14 +303,14 @@ class SeriesWriter:
         """Append one row: a mapping with exactly the column names, or values in column order."""
         if isinstance(row, Mapping):
             if set(row) != set(self.columns):
-                raise ValueError(
+                raise InputError(
                     f"row keys {sorted(row)} do not match the columns {sorted(self.columns)}"
                 )
             values = [row[name] for name in self.columns]
         else:
             values = list(row)
             if len(values) != len(self.columns):
-                raise ValueError(f"row has {len(values)} values for {len(self.columns)} columns")
+                raise InputError(f"row has {len(values)} values for {len(self.columns)} columns")
         values = [float(v) for v in values]
         if self._file is not None:
             self._file.write(",".join("%.17g" % v for v in values) + "\n")

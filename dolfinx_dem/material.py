@@ -6,6 +6,7 @@ import dataclasses
 import math
 
 import numpy as np
+from dolfinx_dem.errors import InputError
 
 
 @dataclasses.dataclass(frozen=True)
@@ -31,17 +32,17 @@ class ElasticMaterial:
         for name in ("E", "nu", "rho"):
             value = getattr(self, name)
             if not isinstance(value, (int, float)) or not math.isfinite(value):
-                raise ValueError(f"material parameter {name} must be a finite number, got {value!r}")
+                raise InputError(f"material parameter {name} must be a finite number, got {value!r}")
         if self.E <= 0:
-            raise ValueError(f"Young's modulus E must be > 0, got {self.E}")
+            raise InputError(f"Young's modulus E must be > 0, got {self.E}")
         if not -1.0 < self.nu < 0.5:
-            raise ValueError(f"Poisson ratio nu must lie in (-1, 0.5), got {self.nu}")
+            raise InputError(f"Poisson ratio nu must lie in (-1, 0.5), got {self.nu}")
         if self.rho <= 0:
-            raise ValueError(f"density rho must be > 0, got {self.rho}")
+            raise InputError(f"density rho must be > 0, got {self.rho}")
         if self.plane not in ("strain", "stress"):
-            raise ValueError(f"plane must be 'strain' or 'stress', got {self.plane!r}")
+            raise InputError(f"plane must be 'strain' or 'stress', got {self.plane!r}")
         if self.eta is not None and not (math.isfinite(self.eta) and self.eta > 0):
-            raise ValueError(f"stabilisation parameter eta must be > 0, got {self.eta}")
+            raise InputError(f"stabilisation parameter eta must be > 0, got {self.eta}")
 
     @property
     def stabilisation(self) -> float:
@@ -97,7 +98,7 @@ class CellMaterials:
     def __post_init__(self):
         planes = {m.plane for m in self.materials}
         if len(planes) > 1:
-            raise ValueError(f"all materials must share 'plane' (the body's 2D hypothesis), got {sorted(planes)}")
+            raise InputError(f"all materials must share 'plane' (the body's 2D hypothesis), got {sorted(planes)}")
 
     @classmethod
     def uniform(cls, material: ElasticMaterial, num_cells: int) -> CellMaterials:

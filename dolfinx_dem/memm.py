@@ -54,6 +54,7 @@ from petsc4py import PETSc
 
 from dolfinx_dem.memm_state import (CONTACT_J, CONTACT_S, DATA_POTENTIAL, EXTERNAL, KINETIC, LIFT_J, LIFT_S,
                                     LOAD_POWER, MOMENTUM, PSEUDO, ROWS_J, ROWS_S, StepState)
+from dolfinx_dem.errors import InputError, InstabilityError
 
 #: Default number of steps between true products for the energy rows (see the module docstring
 #: and docs/bench/README.md for the drift with and without).
@@ -67,7 +68,7 @@ class GaussLegendre:
 
     def __post_init__(self):
         if self.points not in (1, 2, 3, 4, 5):
-            raise ValueError(f"Gauss-Legendre quadrature needs 1 to 5 points, got {self.points}")
+            raise InputError(f"Gauss-Legendre quadrature needs 1 to 5 points, got {self.points}")
 
     @property
     def nodes_weights(self) -> tuple[np.ndarray, np.ndarray]:
@@ -77,15 +78,6 @@ class GaussLegendre:
 
 #: Quadrature names accepted by ``MEMM`` and scene files.
 QUADRATURES = {"midpoint": GaussLegendre(1)} | {f"gauss-legendre-{q}": GaussLegendre(q) for q in (1, 2, 3, 5)}
-
-
-class InstabilityError(RuntimeError):
-    """Raised by the stability monitor; carries the step, time, a suggested time step and the
-    monitor's reason (the message without the advice)."""
-
-    def __init__(self, message: str, step: int, t: float, dt: float, suggested_dt: float, reason: str = ""):
-        super().__init__(message)
-        self.step, self.t, self.dt, self.suggested_dt, self.reason = step, t, dt, suggested_dt, reason
 
 
 @dataclasses.dataclass(frozen=True)
@@ -142,13 +134,13 @@ class MEMM:
     def __init__(self, problem, dt: float, quadrature: str = "midpoint", growth_limit: float = 10.0,
                  refresh_every: int = REFRESH_EVERY):
         if not (isinstance(dt, (int, float)) and math.isfinite(dt) and dt > 0):
-            raise ValueError(f"time step dt must be a positive number, got {dt!r}")
+            raise InputError(f"time step dt must be a positive number, got {dt!r}")
         if quadrature not in QUADRATURES:
-            raise ValueError(f"unknown quadrature {quadrature!r}; choose from {sorted(QUADRATURES)}")
+            raise InputError(f"unknown quadrature {quadrature!r}; choose from {sorted(QUADRATURES)}")
         if not growth_limit > 1:
-            raise ValueError(f"growth_limit must be > 1, got {growth_limit}")
+            raise InputError(f"growth_limit must be > 1, got {growth_limit}")
         if not (isinstance(refresh_every, int) and refresh_every >= 0):
-            raise ValueError(f"refresh_every must be an integer >= 0, got {refresh_every!r}")
+            raise InputError(f"refresh_every must be an integer >= 0, got {refresh_every!r}")
         self.problem = problem
         self.dt = float(dt)
         self.quadrature = quadrature

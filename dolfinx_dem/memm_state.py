@@ -21,6 +21,7 @@ from mpi4py import MPI
 from petsc4py import PETSc
 
 from dolfinx_dem.kernels import ffi, lib, pointer
+from dolfinx_dem.errors import InputError
 
 _FORWARD = dict(addv=PETSc.InsertMode.INSERT_VALUES, mode=PETSc.ScatterMode.FORWARD)
 _REVERSE = dict(addv=PETSc.InsertMode.ADD_VALUES, mode=PETSc.ScatterMode.REVERSE)
@@ -59,7 +60,7 @@ class StepState:
         d = problem.d
         mass = problem.mass.array_r
         if not np.all(mass.reshape(-1, d) == mass[::d, None]):
-            raise ValueError("MEMM needs the d dofs of a cell to share their mass")
+            raise InputError("MEMM needs the d dofs of a cell to share their mass")
         self._mass = np.ascontiguousarray(mass[::d])  # the kernel reads one mass per cell
         self._prescribed = problem.prescribed_dofs  # mass 0: the kernel leaves their velocity
         self._minv = np.ascontiguousarray(problem.inverse_mass.array_r[::d])
@@ -132,7 +133,7 @@ class StepState:
         """Continue from ``recurrence()`` of the same rows (the same partition), after u and v
         are set: ``restart(t0)`` for the constant loads, then the stored y, z^n and means."""
         if y.shape != self.y.shape or len(z) != self.rows.n_owned:
-            raise ValueError("the stored recurrence belongs to other energy rows")
+            raise InputError("the stored recurrence belongs to other energy rows")
         self.restart(t0)
         self.y[:] = y
         for v in self._z:

@@ -33,6 +33,7 @@ import gmsh
 
 from dolfinx_dem import _compat
 from dolfinx_dem.io import call_on_root
+from dolfinx_dem.errors import InputError, MissingFileError
 
 XMIN, XMAX, YMIN, YMAX, ZMIN, ZMAX = 1, 2, 3, 4, 5, 6
 SIDE_NAMES = {"xmin": XMIN, "xmax": XMAX, "ymin": YMIN, "ymax": YMAX, "zmin": ZMIN, "zmax": ZMAX}
@@ -43,7 +44,7 @@ _DIAGONALS = tuple(dolfinx.mesh.DiagonalType.__members__)
 def _check_counts(n, d: int) -> list[int]:
     counts = np.atleast_1d(np.asarray(n))
     if counts.shape != (d,) or not all(float(c).is_integer() and c >= 1 for c in counts):
-        raise ValueError(f"n must be {d} integer(s) >= 1 (cells per direction), got {n!r}")
+        raise InputError(f"n must be {d} integer(s) >= 1 (cells per direction), got {n!r}")
     return [int(c) for c in counts]
 
 
@@ -51,9 +52,9 @@ def _check_corners(p0, p1, d: int) -> tuple[np.ndarray, np.ndarray]:
     a = np.asarray(p0, dtype=np.float64).reshape(-1)
     b = np.asarray(p1, dtype=np.float64).reshape(-1)
     if a.shape != (d,) or b.shape != (d,):
-        raise ValueError(f"corners must have {d} coordinate(s), got p0={p0!r}, p1={p1!r}")
+        raise InputError(f"corners must have {d} coordinate(s), got p0={p0!r}, p1={p1!r}")
     if not (np.all(np.isfinite(a)) and np.all(np.isfinite(b)) and np.all(b > a)):
-        raise ValueError(
+        raise InputError(
             f"need finite corners with p1 > p0 componentwise, got p0={p0!r}, p1={p1!r}"
         )
     return a, b
@@ -104,7 +105,7 @@ def create_rectangle(
     a, b = _check_corners(p0, p1, 2)
     counts = _check_counts(n, 2)
     if diagonal not in _DIAGONALS:
-        raise ValueError(f"diagonal must be one of {', '.join(_DIAGONALS)}; got {diagonal!r}")
+        raise InputError(f"diagonal must be one of {', '.join(_DIAGONALS)}; got {diagonal!r}")
     mesh = dolfinx.mesh.create_rectangle(
         comm,
         [a, b],
@@ -155,26 +156,26 @@ def _check_round_bodies(word: str, d: int, bodies, h: float, frame, cut, refine,
     """Checked (centres, radii, frame, cut axes, refine, blocks) of ``create_discs``/``create_balls``."""
     plural = {"rectangle": "rectangles", "box": "boxes"}[block_word]
     if len(bodies) == 0 and len(blocks) == 0:
-        raise ValueError(f"{word}s must hold at least one (centre, radius) pair (or give {plural})")
+        raise InputError(f"{word}s must hold at least one (centre, radius) pair (or give {plural})")
     centres, radii = [], []
     for i, body in enumerate(bodies, start=1):
         if len(body) != 2:
-            raise ValueError(f"{word} {i} must be a (centre, radius) pair, got {body!r}")
+            raise InputError(f"{word} {i} must be a (centre, radius) pair, got {body!r}")
         centre = np.asarray(body[0], dtype=np.float64).reshape(-1)
         radius = float(body[1])
         if centre.shape != (d,) or not np.all(np.isfinite(centre)):
-            raise ValueError(f"{word} {i}: centre must be {d} finite coordinates, got {body[0]!r}")
+            raise InputError(f"{word} {i}: centre must be {d} finite coordinates, got {body[0]!r}")
         if not (math.isfinite(radius) and radius > 0):
-            raise ValueError(f"{word} {i}: radius must be > 0, got {body[1]!r}")
+            raise InputError(f"{word} {i}: radius must be > 0, got {body[1]!r}")
         centres.append(centre)
         radii.append(radius)
     if not (math.isfinite(h) and h > 0):
-        raise ValueError(f"mesh size h must be > 0, got {h!r}")
+        raise InputError(f"mesh size h must be > 0, got {h!r}")
     for i in range(len(bodies)):
         for j in range(i):
             gap = np.linalg.norm(centres[i] - centres[j]) - radii[i] - radii[j]
             if gap < -1e-12 * (radii[i] + radii[j]):
-                raise ValueError(f"{word}s {j + 1} and {i + 1} overlap (gap {gap:g} m)")
+                raise InputError(f"{word}s {j + 1} and {i + 1} overlap (gap {gap:g} m)")
     corners = [("x0", "x1"), ("y0", "y1"), ("z0", "z1")][:d]
     shape = "[" + ", ".join([c[0] for c in corners] + [c[1] for c in corners]) + "] with " + \
         ", ".join(f"{a} < {b}" for a, b in corners)
@@ -182,46 +183,46 @@ def _check_round_bodies(word: str, d: int, bodies, h: float, frame, cut, refine,
     for j, block in enumerate(blocks, start=1):
         b = np.asarray(block, dtype=np.float64).reshape(-1)
         if b.shape != (2 * d,) or not np.all(np.isfinite(b)) or np.any(b[d:] <= b[:d]):
-            raise ValueError(f"{block_word} {j} must be {shape}, got {block!r}")
+            raise InputError(f"{block_word} {j} must be {shape}, got {block!r}")
         for i, (c, radius) in enumerate(zip(centres, radii), start=1):
             if np.linalg.norm(c - np.clip(c, b[:d], b[d:])) < radius * (1 - 1e-12):
-                raise ValueError(f"{block_word} {j} overlaps {word} {i}")
+                raise InputError(f"{block_word} {j} overlaps {word} {i}")
         for k, other in enumerate(boxes, start=1):
             if np.all(np.minimum(b[d:], other[d:]) > np.maximum(b[:d], other[:d])):
-                raise ValueError(f"{plural} {k} and {j} overlap")
+                raise InputError(f"{plural} {k} and {j} overlap")
         boxes.append(b)
     if frame is not None:
         if len(frame) != 3:
-            raise ValueError(f"frame must be (p0, p1, width), got {frame!r}")
+            raise InputError(f"frame must be (p0, p1, width), got {frame!r}")
         p0, p1 = _check_corners(frame[0], frame[1], d)
         width = float(frame[2])
         if not (math.isfinite(width) and width > 0):
-            raise ValueError(f"frame width must be > 0, got {frame[2]!r}")
+            raise InputError(f"frame width must be > 0, got {frame[2]!r}")
         for i, (c, r) in enumerate(zip(centres, radii), start=1):
             if np.any(c - r <= p0) or np.any(c + r >= p1):
-                raise ValueError(f"{word} {i} (centre {c.tolist()}, radius {r:g}) is not strictly inside "
+                raise InputError(f"{word} {i} (centre {c.tolist()}, radius {r:g}) is not strictly inside "
                                  f"the frame's opening {p0.tolist()} - {p1.tolist()}")
         for j, b in enumerate(boxes, start=1):
             if np.any(b[:d] <= p0) or np.any(b[d:] >= p1):
-                raise ValueError(f"{block_word} {j} {b.tolist()} is not strictly inside the frame's opening "
+                raise InputError(f"{block_word} {j} {b.tolist()} is not strictly inside the frame's opening "
                                  f"{p0.tolist()} - {p1.tolist()}")
         frame = (p0, p1, width)
     axes = "xyz"[:d]
     cut = list(cut or [])
     if any(a not in axes for a in cut) or len(set(cut)) != len(cut) or len(cut) == d:
-        raise ValueError(f"cut must be distinct axes among {', '.join(axes)}, fewer than {d}, got {cut!r}")
+        raise InputError(f"cut must be distinct axes among {', '.join(axes)}, fewer than {d}, got {cut!r}")
     cut = [axes.index(a) for a in cut]
     if refine is not None:
         if len(refine) != 3:
-            raise ValueError(f"refine must be (point, h_min, radius), got {refine!r}")
+            raise InputError(f"refine must be (point, h_min, radius), got {refine!r}")
         point = np.asarray(refine[0], dtype=np.float64).reshape(-1)
         h_min, distance = float(refine[1]), float(refine[2])
         if point.shape != (d,) or not np.all(np.isfinite(point)):
-            raise ValueError(f"refine point must be {d} finite coordinates, got {refine[0]!r}")
+            raise InputError(f"refine point must be {d} finite coordinates, got {refine[0]!r}")
         if not (math.isfinite(h_min) and 0 < h_min <= h):
-            raise ValueError(f"refine h_min must satisfy 0 < h_min <= h = {h:g}, got {refine[1]!r}")
+            raise InputError(f"refine h_min must satisfy 0 < h_min <= h = {h:g}, got {refine[1]!r}")
         if not (math.isfinite(distance) and distance > 0):
-            raise ValueError(f"refine radius must be > 0, got {refine[2]!r}")
+            raise InputError(f"refine radius must be > 0, got {refine[2]!r}")
         # h_min = h asks for size h everywhere: the uniform mesh (turns a scene's refinement off)
         refine = (point, h_min, distance) if h_min < h else None
     return centres, radii, frame, cut, refine, boxes
@@ -374,9 +375,9 @@ def read_mesh_named(comm: MPI.Comm, path: str | pathlib.Path):
     path = pathlib.Path(path)
     suffix = path.suffix.lower()
     if suffix not in (".msh", ".xdmf"):
-        raise ValueError(f"unknown mesh file type {path.suffix!r} of {path} (use .msh or .xdmf)")
+        raise InputError(f"unknown mesh file type {path.suffix!r} of {path} (use .msh or .xdmf)")
     if not comm.bcast(path.is_file() if comm.rank == 0 else None, root=0):
-        raise FileNotFoundError(f"mesh file {path} does not exist (looked for {path.resolve()})")
+        raise MissingFileError(f"mesh file {path} does not exist (looked for {path.resolve()})")
 
     if suffix == ".msh":
         names = {}
@@ -385,7 +386,7 @@ def read_mesh_named(comm: MPI.Comm, path: str | pathlib.Path):
             gmsh.merge(str(path))
             dim = gmsh.model.getDimension()
             if not gmsh.model.getPhysicalGroups(dim):
-                raise ValueError(f"{path} has no physical groups of dimension {dim} to read")
+                raise InputError(f"{path} has no physical groups of dimension {dim} to read")
             for _, tag in gmsh.model.getPhysicalGroups(dim - 1):
                 name = gmsh.model.getPhysicalName(dim - 1, tag)
                 if name:
@@ -397,7 +398,7 @@ def read_mesh_named(comm: MPI.Comm, path: str | pathlib.Path):
 
     names = call_on_root(comm, _xdmf_grid_names, path)
     if "mesh" not in names:
-        raise ValueError(f"{path} holds no mesh named 'mesh' (grids: {sorted(names)})")
+        raise InputError(f"{path} holds no mesh named 'mesh' (grids: {sorted(names)})")
     with dolfinx.io.XDMFFile(comm, str(path), "r") as xdmf:
         mesh = _compat.read_xdmf_mesh(xdmf, "mesh")
         tdim = mesh.topology.dim

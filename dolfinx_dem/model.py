@@ -18,6 +18,7 @@ from dolfinx_dem import _compat, meshes, scenes
 from dolfinx_dem.contact import HalfSpace
 from dolfinx_dem.discretisation import DEMDiscretisation, DirichletBC, PrescribedBody, Traction
 from dolfinx_dem.material import ElasticMaterial
+from dolfinx_dem.errors import SceneError
 
 SERIES_COLUMNS = ("t", "kinetic", "elastic", "stabilisation", "external", "pseudo_energy")
 
@@ -33,7 +34,7 @@ def create_mesh(comm: MPI.Comm, spec: Mapping):
                 "disc": ("centre", "radius", "h"), "discs": ("h",), "balls": ("h",), "file": ("path",)}[kind]
     for key in required:
         if key not in spec:
-            raise scenes.SceneError(f"scene key 'mesh.{key}' is missing for a mesh of type {kind!r}")
+            raise SceneError(f"scene key 'mesh.{key}' is missing for a mesh of type {kind!r}")
     names = {}
     if kind == "interval":
         mesh, cell_tags, tags = meshes.create_interval(comm, spec["n"], spec["x0"], spec["x1"])
@@ -47,7 +48,7 @@ def create_mesh(comm: MPI.Comm, spec: Mapping):
         d = 2 if kind == "discs" else 3
         for a, b in (("frame", "frame_width"), ("refine_point", "refine_h"), ("refine_point", "refine_radius")):
             if (a in spec) != (b in spec):
-                raise scenes.SceneError(f"scene keys 'mesh.{a}' and 'mesh.{b}' go together")
+                raise SceneError(f"scene keys 'mesh.{a}' and 'mesh.{b}' go together")
         frame = (spec["frame"][:d], spec["frame"][d:], spec["frame_width"]) if "frame" in spec else None
         refine = (spec["refine_point"], spec["refine_h"], spec["refine_radius"]) if "refine_point" in spec else None
         create = meshes.create_discs if kind == "discs" else meshes.create_balls
@@ -56,7 +57,7 @@ def create_mesh(comm: MPI.Comm, spec: Mapping):
             mesh, cell_tags, tags = create(comm, [(c[:d], c[d]) for c in spec.get(kind, [])], spec["h"], frame,
                                            spec.get("cut"), refine, blocks)
         except ValueError as err:
-            raise scenes.SceneError(f"scene table 'mesh': {err}") from None
+            raise SceneError(f"scene table 'mesh': {err}") from None
     else:
         mesh, cell_tags, tags, names = meshes.read_mesh_named(comm, spec["path"])
     if kind in ("interval", "rectangle", "box"):
@@ -75,7 +76,7 @@ def _boundary_facets(mesh, tags, names, boundary, key="dirichlet.boundary") -> n
         facets = _compat.locate_boundary_facets(
             mesh, lambda x: np.asarray(scenes.evaluate_condition(boundary, x[:d], key), dtype=bool))
         if mesh.comm.allreduce(len(facets), op=MPI.SUM) == 0:
-            raise scenes.SceneError(f"scene key '{key}': boundary condition {boundary!r} selects no facet")
+            raise SceneError(f"scene key '{key}': boundary condition {boundary!r} selects no facet")
         return facets
     if isinstance(boundary, int):
         tag = boundary
@@ -86,14 +87,14 @@ def _boundary_facets(mesh, tags, names, boundary, key="dirichlet.boundary") -> n
             else "unknown boundary"
         known = f"one of this mesh's names: {', '.join(sorted(names))}" if names else \
             "no name: this mesh defines none (side names belong to the interval, rectangle and box meshes)"
-        raise scenes.SceneError(
+        raise SceneError(
             f"scene key '{key}': {what} {boundary!r} (use 'all', an integer facet tag, a condition "
             f"such as 'y <= 0.2', or {known})")
     if tags is None:
-        raise scenes.SceneError(f"the mesh has no facet tags, so boundary {boundary!r} cannot be found")
+        raise SceneError(f"the mesh has no facet tags, so boundary {boundary!r} cannot be found")
     facets = tags.find(tag)
     if mesh.comm.allreduce(len(facets), op=MPI.SUM) == 0:
-        raise scenes.SceneError(f"scene key '{key}': boundary {boundary!r} (tag {tag}) has no facet")
+        raise SceneError(f"scene key '{key}': boundary {boundary!r} (tag {tag}) has no facet")
     return facets
 
 
@@ -109,7 +110,7 @@ def build(scene: Mapping, comm: MPI.Comm = MPI.COMM_WORLD) -> DEMDiscretisation:
         for i, b in enumerate(scene.get("prescribed", []))]
     for key in ("materials", "prescribed"):
         if key in scene and cell_tags is None:
-            raise scenes.SceneError(f"scene key '{key}' selects cells by tag, and this mesh has no cell tags (use "
+            raise SceneError(f"scene key '{key}' selects cells by tag, and this mesh has no cell tags (use "
                                     "a mesh of type 'discs' or a mesh file with cell tags)")
     if isinstance(material, ElasticMaterial) and not prescribed:
         cell_tags = None
@@ -235,13 +236,13 @@ class Probes:
         self.dem = dem
         self.names = [p["name"] for p in specs]
         if len(set(self.names)) != len(self.names):
-            raise scenes.SceneError(f"probe names must be unique: {self.names}")
+            raise SceneError(f"probe names must be unique: {self.names}")
         columns = SERIES_COLUMNS + reaction_columns(dem) + prescribed_columns(dem) + contact_columns(dem)
         clash = [name for name in self.names if name in columns]
         if clash:
-            raise scenes.SceneError(f"probe names {clash} are series columns of this scene; the columns: {columns}")
+            raise SceneError(f"probe names {clash} are series columns of this scene; the columns: {columns}")
         if any(p["component"] >= dem.d for p in specs):
-            raise scenes.SceneError(f"probe components must be < {dem.d}")
+            raise SceneError(f"probe components must be < {dem.d}")
         points = np.zeros((len(specs), 3))
         for i, p in enumerate(specs):
             points[i, : dem.d] = p["point"]
@@ -249,7 +250,7 @@ class Probes:
         inside = dem.comm.allreduce(inside.astype(int), op=MPI.SUM) > 0 if specs else inside
         if not np.all(inside):
             bad = int(np.argmin(inside))
-            raise scenes.SceneError(f"probe {self.names[bad]!r} at {specs[bad]['point']} is outside the mesh")
+            raise SceneError(f"probe {self.names[bad]!r} at {specs[bad]['point']} is outside the mesh")
         # Each process proposes its nearest owned cell (key: distance rounded relative to the
         # mesh extent, then position); the smallest key over the processes wins.
         xc = dem.geometry.cell_centres[: dem.n_owned]

@@ -28,6 +28,7 @@ import scipy.sparse
 from dolfinx_dem.geometry import MeshGeometry
 from dolfinx_dem.material import CellMaterials, ElasticMaterial
 from dolfinx_dem.reconstruction import Reconstruction
+from dolfinx_dem.errors import InputError
 
 
 def mandel(d: int) -> np.ndarray:
@@ -90,7 +91,7 @@ def _stack_rows(blocks: list, n_cols: int) -> scipy.sparse.csr_matrix:
     the blocks and the result never both exist in full."""
     n_rows, nnz = sum(b.shape[0] for b in blocks), sum(b.nnz for b in blocks)
     if nnz >= 2**31:
-        raise ValueError(f"{nnz} entries in the rows of one process: more than int32 indices address")
+        raise InputError(f"{nnz} entries in the rows of one process: more than int32 indices address")
     indptr = np.empty(n_rows + 1, dtype=np.int32)
     indices, data = np.empty(nnz, dtype=np.int32), np.empty(nnz)
     indptr[0] = row = at = 0

@@ -92,6 +92,7 @@ from petsc4py import PETSc
 from dolfinx_dem.halo import owned_facet_marks
 from dolfinx_dem.kernels import lib, pointer
 from dolfinx_dem.patch import PatchScatter
+from dolfinx_dem.errors import InputError, KernelMemoryError, StateError, UnresolvedContactError
 
 
 
@@ -157,15 +158,6 @@ class _Facets:
                           for f in dataclasses.fields(_Facets)})
 
 
-class UnresolvedContactError(RuntimeError):
-    """The contact between bodies is no longer resolved, and a run stops instead of going on
-    with bodies passing through each other (collective: raised on every process alike): the
-    contact surfaces interpenetrate by more than ``contact.max_penetration`` times the candidate
-    facets' mean size (``run_statistics.PairContactStatistics.record``), touching pairs lie
-    deeper than the pair list radius, or a facet moves more than half its skin in one step
-    (``PairContact.prepare``)."""
-
-
 def _timed(method):
     """A method whose processor time counts in ``PairContact.seconds`` (the contact work of the
     steps: the list rounds, the patch gathers, the force integrals and the energies), once: a
@@ -202,27 +194,27 @@ class PairContact:
                  tolerance: float = 0.0):
         geom, rec, d = dem.geometry, dem.reconstruction, dem.d
         if d not in (2, 3):
-            raise ValueError(f"contact between deformable bodies is implemented in 2D and 3D, not {d}D")
+            raise InputError(f"contact between deformable bodies is implemented in 2D and 3D, not {d}D")
         self.dem, self.comm, self.d = dem, dem.comm, d
         if not (np.isfinite(tolerance) and tolerance >= 0):
-            raise ValueError(f"the penetration tolerance must be >= 0, got {tolerance}")
+            raise InputError(f"the penetration tolerance must be >= 0, got {tolerance}")
         facets = np.asarray(facets, dtype=np.int32)
         marks = dem.halo_exchange(owned_facet_marks(dem.mesh, facets, np.zeros(len(facets), dtype=np.int64)))
         cell, j = np.nonzero((marks >= 0) & (geom.cell_layer <= 1)[:, None])
         f = geom.cell_facets[cell, j]
         owned = cell < dem.n_owned
         if self.comm.allreduce(int(owned.sum()), op=MPI.SUM) == 0:
-            raise ValueError("the contact boundary has no facet (check its tag)")
+            raise InputError("the contact boundary has no facet (check its tag)")
         interior = geom.facet_cells[f[owned], 1] >= 0
         bad = [b for part in self.comm.allgather(geom.facet_centres[f[owned][interior][:1]].tolist()) for b in part]
         if bad:
-            raise ValueError(f"contact facets must be boundary facets; the facet at {bad[0]} is interior")
+            raise InputError(f"contact facets must be boundary facets; the facet at {bad[0]} is interior")
         if self.comm.allreduce(bool(np.isin(f[owned], rec.dirichlet_facets).any()), op=MPI.LOR):
-            raise ValueError("contact facets must not carry a Dirichlet condition")
+            raise InputError("contact facets must not carry a Dirichlet condition")
         if self.comm.allreduce(bool(np.isin(f[owned], rec.traction_facets).any()), op=MPI.LOR):
-            raise ValueError("contact facets must not carry a traction")
+            raise InputError("contact facets must not carry a traction")
         if dem._time_dependent:
-            raise ValueError("contact with time-dependent Dirichlet conditions or tractions is not supported")
+            raise InputError("contact with time-dependent Dirichlet conditions or tractions is not supported")
         _check_bodies_share_no_vertex(dem)
         _check_bodies_do_not_overlap(dem)
         self.self_contact = bool(self_contact)
@@ -274,7 +266,7 @@ class PairContact:
         # one uniform skin is given; the list radius of a pair is its facets' reaches plus their
         # mean skin (``_build``), so a refined contact zone lists few pairs.
         if skin is not None and not skin > 0:
-            raise ValueError(f"the Verlet skin must be > 0, got {skin}")
+            raise InputError(f"the Verlet skin must be > 0, got {skin}")
         self._uniform_skin = None if skin is None else float(skin)
         self._local_reach = reach = _reach(self._facets)
         skins = self._skins(reach)
@@ -335,7 +327,7 @@ class PairContact:
         found = [x for x in self.comm.allgather(found) if x is not None]
         if found:
             g, bi, bj, xi, xj = min(found)
-            raise ValueError(f"bodies {bi} and {bj} overlap at t = 0: facets at {xi} and {xj} interpenetrate by "
+            raise InputError(f"bodies {bi} and {bj} overlap at t = 0: facets at {xi} and {xj} interpenetrate by "
                              f"{-g:.3e} m (tolerance {self.tolerance:g} m)")
 
     def _local_records(self, order, f, cell, numbers) -> _Facets:
@@ -642,7 +634,7 @@ class PairContact:
         if up is None:
             up = self.patch_values(u)
         elif len(up) != len(self.scatter):
-            raise ValueError(f"prepare: {len(up)} patch values of u given for a patch of {len(self.scatter)} dofs "
+            raise InputError(f"prepare: {len(up)} patch values of u given for a patch of {len(self.scatter)} dofs "
                              "(gathered before a list round?)")
         vp = None if v is None else self.patch_values(v)
         at = self._at(up)
@@ -734,7 +726,7 @@ class PairContact:
 
     def _check_listed(self, uc: np.ndarray):
         if self._moved(uc):
-            raise RuntimeError("contact between bodies: the candidate pair list is stale for these displacements "
+            raise StateError("contact between bodies: the candidate pair list is stale for these displacements "
                                "(a facet moved more than skin/2 since it was built); call prepare(u) first "
                                "(MEMM does it every step)")
 
@@ -864,7 +856,7 @@ class PairContact:
         L = self.listed
         flight = self._flight
         if flight is None or flight[0] is not up or flight[1] is not vp or flight[2] != dt:
-            raise RuntimeError("force_integral needs the patch values that prepare(u, v, dt) returned for this step")
+            raise StateError("force_integral needs the patch values that prepare(u, v, dt) returned for this step")
         uc, vc, touching, quiet = self._at(up).uc, flight[3], flight[4], flight[5]
         if quiet:  # no pair touches during the step, on any process
             return 0
@@ -890,7 +882,7 @@ class PairContact:
                 *L.z.pointers, *L.q.pointers, self._p_q, pointer(up), pointer(vp), P["slot"],
                 uc.size, *self._Rc.pointers, len(result), pointer(result))
             if pieces < 0:
-                raise MemoryError("contact between bodies: out of memory in the force integral of a step")
+                raise KernelMemoryError("contact between bodies: out of memory in the force integral of a step")
         self.scatter.add_zeroed(out)
         self.evaluations += len(self._gauss[0]) * pieces
         return len(self._gauss[0]) * pieces
@@ -1024,7 +1016,7 @@ class PairContact:
                                            pointer(self._body_pair_index), pointer(mu), pointer(g), pointer(w),
                                            pointer(dw), pointer(c), pointer(out))
         if missing:  # every body with a candidate facet is in ``body_pairs``: a broken invariant
-            raise RuntimeError(f"contact between bodies: {missing} touching pairs join bodies that have no body pair "
+            raise StateError(f"contact between bodies: {missing} touching pairs join bodies that have no body pair "
                                "(bodies without candidate facets?)")
         return out
 
@@ -1474,7 +1466,7 @@ class _At:
             *L.q.pointers, contact._p_q, pointer(self.up), contact._elastic_row_pointer, P["slot"],
             pointer(closed), pointer(g), pointer(w), pointer(dw), pointer(c), pointer(mu), pointer(sums))
         if k == -1:
-            raise MemoryError("contact between bodies: out of memory in the contact state")
+            raise KernelMemoryError("contact between bodies: out of memory in the contact state")
         state = None if k == -2 else (closed[:k], g[:k], w[:k], dw[:k], c[:k], mu[:k],
                                       (float(sums[0]), float(sums[1])), float(sums[2]))
         return uc, k == -2, candidates if used[0] else None, state
@@ -1587,7 +1579,7 @@ def _check_bodies_do_not_overlap(dem):
     found = [f for f in comm.allgather(found) if f is not None]
     if found:
         a, b, point = min(found)
-        raise ValueError(f"bodies {a} and {b} overlap at t = 0: a boundary vertex of body {a} at {point} "
+        raise InputError(f"bodies {a} and {b} overlap at t = 0: a boundary vertex of body {a} at {point} "
                          f"lies inside body {b}")
 
 
@@ -1617,5 +1609,5 @@ def _check_bodies_share_no_vertex(dem, bodies=None):
     point = rows[1:][same][0, :d].tolist() if same.any() else None
     shared = [p for p in comm.allgather(point) if p is not None]
     if shared:
-        raise ValueError(f"bodies share the vertex {min(shared)}: bodies in contact must be meshed "
+        raise InputError(f"bodies share the vertex {min(shared)}: bodies in contact must be meshed "
                          "separately (no common vertex)")

@@ -23,6 +23,7 @@ import matplotlib.figure
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 
 from dolfinx_dem import _compat
+from dolfinx_dem.errors import InputError, MissingFileError
 
 pyvista = _compat.import_pyvista()
 
@@ -52,11 +53,11 @@ def _gather_cells(mesh, displacement: np.ndarray | None, values: np.ndarray):
     n = stop - start
     values = np.asarray(values, dtype=np.float64)
     if values.shape != (n,):
-        raise ValueError(f"values must have shape ({n},) (owned cells), got {values.shape}")
+        raise InputError(f"values must have shape ({n},) (owned cells), got {values.shape}")
     if displacement is not None:
         displacement = np.asarray(displacement, dtype=np.float64)
         if displacement.shape != (n, gdim):
-            raise ValueError(
+            raise InputError(
                 f"displacement must have shape ({n}, {gdim}) (owned cells, gdim), "
                 f"got {displacement.shape}"
             )
@@ -157,7 +158,7 @@ def plot_bar(
     filename = pathlib.Path(filename)
     _check_output(filename, 1.0)
     if mesh.topology.dim != 1:
-        raise ValueError(f"plot_bar draws 1D meshes, not {mesh.topology.dim}D (use plot_cell_field)")
+        raise InputError(f"plot_bar draws 1D meshes, not {mesh.topology.dim}D (use plot_cell_field)")
     obstacles = _check_obstacles(obstacles, 1)
     if too_large(mesh):
         return None
@@ -304,9 +305,9 @@ def animate_solution(xdmf: str | pathlib.Path, filename: str | pathlib.Path, fie
 
 def _check_output(filename: pathlib.Path, scale: float):
     if not math.isfinite(scale):
-        raise ValueError(f"scale must be finite, got {scale!r}")
+        raise InputError(f"scale must be finite, got {scale!r}")
     if not filename.parent.is_dir():
-        raise FileNotFoundError(f"directory {filename.parent} of {filename} does not exist")
+        raise MissingFileError(f"directory {filename.parent} of {filename} does not exist")
 
 
 def _grid(mesh, displacement, values, title: str, scale: float):
@@ -335,7 +336,7 @@ def _check_obstacles(obstacles, gdim: int) -> list[tuple[np.ndarray, np.ndarray]
         p, n = np.asarray(point, dtype=float), np.asarray(normal, dtype=float)
         if p.shape != (gdim,) or n.shape != (gdim,) or not (np.isfinite(p).all() and np.isfinite(n).all()) \
                 or not np.linalg.norm(n) > 0:
-            raise ValueError(f"obstacle {k}: point and normal need {gdim} finite numbers, the normal nonzero")
+            raise InputError(f"obstacle {k}: point and normal need {gdim} finite numbers, the normal nonzero")
         out.append((p, n / np.linalg.norm(n)))
     return out
 
@@ -410,18 +411,18 @@ def plot_series(
     """
     csv_path = pathlib.Path(csv_path)
     if not csv_path.is_file():
-        raise FileNotFoundError(f"series file {csv_path} does not exist")
+        raise MissingFileError(f"series file {csv_path} does not exist")
     with open(csv_path) as f:
         header = f.readline().strip().split(",")
     columns = list(columns)
     if not columns:
-        raise ValueError("columns must name at least one column to plot")
+        raise InputError("columns must name at least one column to plot")
     for name in ["t", *columns]:
         if name not in header:
-            raise ValueError(f"column {name!r} is not in {csv_path} (columns: {', '.join(header)})")
+            raise InputError(f"column {name!r} is not in {csv_path} (columns: {', '.join(header)})")
     data = np.loadtxt(csv_path, delimiter=",", skiprows=1, ndmin=2)
     if data.shape[0] == 0:
-        raise ValueError(f"{csv_path} holds no rows")
+        raise InputError(f"{csv_path} holds no rows")
     t = data[:, header.index("t")]
 
     figure = matplotlib.figure.Figure(figsize=(7.0, 0.8 + 2.2 * len(columns)))

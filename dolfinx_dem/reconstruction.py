@@ -32,6 +32,7 @@ import scipy.sparse
 
 from dolfinx_dem.geometry import MeshGeometry
 from dolfinx_dem.material import CellMaterials
+from dolfinx_dem.errors import InputError
 
 #: Number of candidate cells (the nearest of the facet's mesh neighbourhood), by dimension.
 _NEIGHBOURS = {1: 2, 2: 10, 3: 14}
@@ -222,7 +223,7 @@ def compute_interior_stencils(geom: MeshGeometry, facets: np.ndarray | None = No
         np.empty((0, geom.d + 1), np.int64), np.empty((0, geom.d + 1)), np.empty(0))
     if np.any(min_alpha < _MAX_EXTRAPOLATION):
         bad = facets[min_alpha < _MAX_EXTRAPOLATION]
-        raise ValueError(
+        raise InputError(
             f"no simplex of {geom.d + 1} cell barycentres near interior facet {bad[0]} at "
             f"{geom.facet_centres[bad[0]].tolist()} interpolates its barycentre ({bad.size} such "
             "facets); the mesh is too distorted there for the DEM reconstruction of eq. (7)"
@@ -327,7 +328,7 @@ def compute_reconstruction(
     collective, so that every process raises the same error.
     """
     if scheme not in ("A", "B"):
-        raise ValueError(f"boundary scheme must be 'A' or 'B', got {scheme!r}")
+        raise InputError(f"boundary scheme must be 'A' or 'B', got {scheme!r}")
     d, N, F = geom.d, geom.num_cells, geom.num_facets
     rows = np.arange(F) if facets is None else np.asarray(facets, dtype=np.int64)
     # an interface facet reads the reconstructions of its two cells' other facets
@@ -341,9 +342,9 @@ def compute_reconstruction(
     if comm is not None:
         bad = [f for b in comm.allgather(bad) for f in b]
     if bad:
-        raise ValueError(f"Dirichlet facets must lie on the boundary; facet {bad[0]} is interior")
+        raise InputError(f"Dirichlet facets must lie on the boundary; facet {bad[0]} is interior")
     if np.isin(traction_facets, dirichlet_facets).any() or (geom.facet_cells[traction_facets, 1] >= 0).any():
-        raise ValueError("traction facets must be boundary facets without a Dirichlet condition")
+        raise InputError("traction facets must be boundary facets without a Dirichlet condition")
     boundary = np.intersect1d(geom.boundary_facets, rows)
     neumann = np.setdiff1d(boundary, dirichlet_facets)
 

@@ -14,7 +14,7 @@ from mpi4py import MPI
 
 from dolfinx_dem.discretisation import DEMDiscretisation
 from dolfinx_dem.memm import MEMM
-from dolfinx_dem.pair_contact import UnresolvedContactError
+from dolfinx_dem.errors import UnresolvedContactError
 
 
 @dataclasses.dataclass

@@ -28,6 +28,7 @@ from dolfinx_dem import io
 from dolfinx_dem.dynamics import DynamicRun
 from dolfinx_dem.model import Probes, build, contact_columns, contact_values  # noqa: F401 (public API)
 from dolfinx_dem.static_simulation import StaticRun
+from dolfinx_dem.errors import InputError
 
 
 def run(scene: Mapping, out: str | pathlib.Path, comm: MPI.Comm = MPI.COMM_WORLD, quiet: bool = False,
@@ -39,7 +40,7 @@ def run(scene: Mapping, out: str | pathlib.Path, comm: MPI.Comm = MPI.COMM_WORLD
     the one at an interrupt and at the end). Input errors are raised before ``out`` is touched.
     """
     if "statics" in scene and checkpoint_every is not None:
-        raise ValueError("a static scene has no time steps to checkpoint (drop --checkpoint-every)")
+        raise InputError("a static scene has no time steps to checkpoint (drop --checkpoint-every)")
     output = io.OutputDirectory(out, comm, overwrite=overwrite)
     output.check()
     if "statics" in scene:

@@ -32,6 +32,7 @@ from petsc4py import PETSc
 from dolfinx_dem.factored import FactoredStiffness
 from dolfinx_dem.halo import alltoall
 from dolfinx_dem.kernels import ffi, lib, pointer
+from dolfinx_dem.errors import InputError
 
 #: Relative margin added to the computed bound for its rounding: each entry of |K| is a sum of
 #: a few tens of products, so the computed row sums are within ~1e-14 of the exact ones.
@@ -132,10 +133,10 @@ def largest_eigenvalue_bound(factored: FactoredStiffness, row_keys: np.ndarray, 
     fetching the rows of other processes that reach owned dofs once (from the neighbours only).
     """
     if iterations < 1:
-        raise ValueError(f"iterations must be >= 1, got {iterations}")
+        raise InputError(f"iterations must be >= 1, got {iterations}")
     comm, n = factored.comm, factored.n_owned
     if len(row_keys) != factored.n_rows or np.any(row_keys[1:] <= row_keys[:-1]):
-        raise ValueError("row_keys must increase along the local rows of Q")
+        raise InputError("row_keys must increase along the local rows of Q")
     start, stop = inverse_mass.getOwnershipRange()
     # The pattern of Q^T on the owned dofs: for each, this process's rows through it (in row
     # order, so in key order; ``_transposed_blocks``), and the rows of other processes through it.

@@ -37,6 +37,7 @@ from mpi4py import MPI
 from dolfinx_dem import hertz, io, model, plotting, scenes
 from dolfinx_dem.run_statistics import peak_rss_mb
 from dolfinx_dem.statics import minimise_energy
+from dolfinx_dem.errors import SceneError
 
 
 def _top_point(dem) -> list[float]:
@@ -82,7 +83,7 @@ class StaticRun:
             return
         self.dem = dem = model.build(scene, comm)
         if dem.pair_contact is not None and dem.d != 2:
-            raise scenes.SceneError("a static scene with contact between bodies ('contact' table) is implemented "
+            raise SceneError("a static scene with contact between bodies ('contact' table) is implemented "
                                     "in 2D, not 3D")
         self.top = model.Probes(dem, [{"name": "top", "point": _top_point(dem), "component": dem.d - 1}])
         self.probes = model.Probes(dem, scene.get("probes", []))
@@ -211,7 +212,7 @@ def _fem_problem(scene: Mapping) -> dict:
         R = dim = None
     refine_point = mesh.get("refine_point", [0.0] * (dim or 3))
     if dim is None or any(horizontal) or not f > 0 or any(refine_point):
-        raise scenes.SceneError(
+        raise SceneError(
             "method 'fem-P2' solves the Hertz problems only: a 'disc' mesh centred at (0, radius) on the plane "
             "y = 0, or a 'balls' mesh of one ball centred at (0, 0, radius) with cut = ['x', 'y'] on the plane "
             "z = 0, with a downward 'loads.body_force' (and refinement, if any, at the origin)")

@@ -86,10 +86,7 @@ from collections.abc import Sequence
 import numpy as np
 from mpi4py import MPI
 from petsc4py import PETSc
-
-
-class StaticsError(RuntimeError):
-    """The minimisation failed; the message names the likely cause."""
+from dolfinx_dem.errors import InputError, StaticsError
 
 
 @dataclasses.dataclass(frozen=True)
@@ -142,7 +139,7 @@ def _constraints(dem, components, rotation) -> _Constraints:
     spurious force (a body pressed on a clamped one must not share its constraints)."""
     d, geom = dem.d, dem.geometry
     if rotation and d != 2:
-        raise ValueError("fixed_rotation is implemented for 2D bodies")
+        raise InputError("fixed_rotation is implemented for 2D bodies")
     m = dem.mass.array_r.reshape(-1, d)
     body = geom.cell_bodies[: dem.n_owned]
     held = np.zeros(geom.num_bodies, dtype=np.int64)
@@ -317,18 +314,18 @@ def minimise_energy(
     """
     d = dem.d
     if any(not (0 <= i < d) for i in fixed_mean):
-        raise ValueError(f"fixed_mean components must be in [0, {d}), got {list(fixed_mean)}")
+        raise InputError(f"fixed_mean components must be in [0, {d}), got {list(fixed_mean)}")
     if not 0 < rtol < 1:
-        raise ValueError(f"rtol must lie in (0, 1), got {rtol}")
+        raise InputError(f"rtol must lie in (0, 1), got {rtol}")
     if not np.isfinite(t):
-        raise ValueError(f"the load time t must be finite, got {t}")
+        raise InputError(f"the load time t must be finite, got {t}")
     if dem.pair_contact is not None and d != 2:
         # In 3D the overlaps are quadratic in u on a piece: the Hessian below assumes them affine.
-        raise NotImplementedError("statics with contact between bodies is implemented in 2D, not 3D")
+        raise InputError("statics with contact between bodies is implemented in 2D, not 3D")
     if dem.pair_contact is not None and dem.contact is not None:
-        raise ValueError("minimise_energy takes rigid obstacles or contact between bodies, not both")
+        raise InputError("minimise_energy takes rigid obstacles or contact between bodies, not both")
     if not 0 < gradient_rtol < 1:
-        raise ValueError(f"gradient_rtol must lie in (0, 1), got {gradient_rtol}")
+        raise InputError(f"gradient_rtol must lie in (0, 1), got {gradient_rtol}")
     comm = dem.comm
     if comm.allreduce(len(dem.reconstruction.dirichlet_facets), op=MPI.SUM) == 0 and not dem.contacts:
         raise StaticsError("the body is free: with neither a Dirichlet condition nor an obstacle its "

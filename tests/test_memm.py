@@ -17,7 +17,8 @@ from dolfinx_dem import _compat, meshes
 from dolfinx_dem.discretisation import DEMDiscretisation, DirichletBC, Traction
 from dolfinx_dem.fem.elastodynamics import first_eigenfrequency
 from dolfinx_dem.material import ElasticMaterial
-from dolfinx_dem.memm import MEMM, InstabilityError
+from dolfinx_dem.errors import InstabilityError
+from dolfinx_dem.memm import MEMM
 from helpers import cell_vector, gmsh_mesh, owned_centres
 
 MATERIAL = ElasticMaterial(E=1.0, nu=0.3, rho=1.0)

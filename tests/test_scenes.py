@@ -12,7 +12,7 @@ import pytest
 from mpi4py import MPI
 
 from dolfinx_dem import cli, dynamics, scenes, simulation
-from dolfinx_dem.memm import InstabilityError
+from dolfinx_dem.errors import InstabilityError
 
 
 def test_a_dirichlet_expression_in_t_needs_time_dependent():

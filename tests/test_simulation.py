@@ -11,7 +11,7 @@ import pytest
 from mpi4py import MPI
 
 from dolfinx_dem import cli, io, model, scenes, simulation
-from dolfinx_dem.memm import InstabilityError
+from dolfinx_dem.errors import InstabilityError
 
 CLI = str(pathlib.Path(sys.executable).parent / "dolfinx-dem")
 SHORT = {"bar-wave": 0.5, "cantilever": 0.05, "block": 0.05, "bar-impact": 0.2, "bar-bounce": 0.25,

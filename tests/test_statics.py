@@ -12,7 +12,8 @@ from dolfinx_dem import _compat, io, meshes, model, scenes, simulation, static_s
 from dolfinx_dem.contact import HalfSpace
 from dolfinx_dem.discretisation import DEMDiscretisation, DirichletBC, Traction
 from dolfinx_dem.material import ElasticMaterial
-from dolfinx_dem.statics import StaticsError, minimise_energy
+from dolfinx_dem.errors import StaticsError
+from dolfinx_dem.statics import minimise_energy
 from helpers import owned_centres
 
 

@@ -34,6 +34,7 @@ import dolfinx.fem.petsc
 import dolfinx.mesh
 
 from dolfinx_dem import _compat
+from dolfinx_dem.errors import InputError, SolverError
 
 __all__ = ["FEMCentralDifference", "FEMElastodynamics", "evaluate_at_points", "first_eigenfrequency"]
 
@@ -52,9 +53,9 @@ _SIMPLICES = (
 
 def _check_mesh(mesh) -> None:
     if mesh.topology.cell_type not in _SIMPLICES:
-        raise ValueError(f"mesh must be a simplex mesh, got cell type {mesh.topology.cell_type}")
+        raise InputError(f"mesh must be a simplex mesh, got cell type {mesh.topology.cell_type}")
     if mesh.geometry.dim != mesh.topology.dim:
-        raise ValueError(
+        raise InputError(
             f"mesh must have geometric dimension equal to its topological dimension, got "
             f"gdim={mesh.geometry.dim}, tdim={mesh.topology.dim}"
         )
@@ -63,14 +64,14 @@ def _check_mesh(mesh) -> None:
 def _check_degree(degree) -> int:
     is_int = isinstance(degree, (int, np.integer)) and not isinstance(degree, bool)
     if not is_int or degree not in (1, 2):
-        raise ValueError(f"degree must be 1 or 2 (Lagrange), got {degree!r}")
+        raise InputError(f"degree must be 1 or 2 (Lagrange), got {degree!r}")
     return int(degree)
 
 
 def _check_positive(name: str, value) -> float:
     value = float(value)
     if not (np.isfinite(value) and value > 0.0):
-        raise ValueError(f"{name} must be finite and > 0, got {value!r}")
+        raise InputError(f"{name} must be finite and > 0, got {value!r}")
     return value
 
 
@@ -79,20 +80,20 @@ def _check_material(E, nu, rho) -> tuple[float, float, float]:
     rho = _check_positive("rho (density)", rho)
     nu = float(nu)
     if not (-1.0 < nu < 0.5):
-        raise ValueError(f"nu (Poisson's ratio) must satisfy -1 < nu < 0.5, got {nu!r}")
+        raise InputError(f"nu (Poisson's ratio) must satisfy -1 < nu < 0.5, got {nu!r}")
     return E, nu, rho
 
 
 def _check_facets(mesh, clamped_facets) -> np.ndarray:
     facets = np.asarray(clamped_facets)
     if facets.ndim != 1 or (facets.size > 0 and not np.issubdtype(facets.dtype, np.integer)):
-        raise ValueError("clamped_facets must be a 1D array of process-local facet indices")
+        raise InputError("clamped_facets must be a 1D array of process-local facet indices")
     fdim = mesh.topology.dim - 1
     mesh.topology.create_entities(fdim)
     imap = mesh.topology.index_map(fdim)
     num_facets = imap.size_local + imap.num_ghosts
     if facets.size > 0 and (facets.min() < 0 or facets.max() >= num_facets):
-        raise ValueError(
+        raise InputError(
             f"clamped_facets must be process-local facet indices in [0, {num_facets}), got "
             f"values in [{facets.min()}, {facets.max()}]"
         )
@@ -177,7 +178,7 @@ class _FEMSolver:
         if body_force is not None:
             body_force = np.asarray(body_force, dtype=PETSc.ScalarType)
             if body_force.shape != (gdim,):
-                raise ValueError(f"body_force must have shape ({gdim},), got {body_force.shape}")
+                raise InputError(f"body_force must have shape ({gdim},), got {body_force.shape}")
 
         self.mesh = mesh
         self.comm: MPI.Comm = mesh.comm
@@ -337,7 +338,7 @@ class FEMElastodynamics(_FEMSolver):
         u.copy(u_old)
         self._solver.solve(b, u)
         if self._solver.getConvergedReason() < 0:
-            raise RuntimeError(f"LU solve failed: {self._solver.getConvergedReason()}")
+            raise SolverError(f"LU solve failed: {self._solver.getConvergedReason()}")
 
         # a_{n+1} = c0 (u_{n+1} - u_n) - c1 v_n - a_n ;  v_{n+1} = v_n + dt/2 (a_n + a_{n+1})
         a.copy(w)  # w = a_n
@@ -394,7 +395,7 @@ class FEMCentralDifference(_FEMSolver):
         allow_unstable: bool = False,
     ):
         if (dt is None) == (cfl is None):
-            raise ValueError("give exactly one of dt (time step) and cfl (fraction of dt_stable)")
+            raise InputError("give exactly one of dt (time step) and cfl (fraction of dt_stable)")
         step = _check_positive("dt (time step)" if cfl is None else "cfl", dt if cfl is None else cfl)
         super().__init__(mesh, 1, E, nu, rho, clamped_facets, body_force,
                          initial_displacement, initial_velocity, plane_stress)
@@ -413,7 +414,7 @@ class FEMCentralDifference(_FEMSolver):
         self.dt_stable = 2.0 / np.sqrt(_largest_eigenvalue(self.comm, self._K, self._inverse_mass))
         self.dt = step if cfl is None else step * self.dt_stable
         if self.dt >= self.dt_stable and not allow_unstable:
-            raise ValueError(
+            raise InputError(
                 f"dt (time step) = {self.dt:.6g} s is not below the stability limit "
                 f"dt_stable = 2/sqrt(lambda_max(m^-1 K)) = {self.dt_stable:.6g} s of central "
                 f"differences (pass allow_unstable=True to run it anyway)"
@@ -475,7 +476,7 @@ def _largest_eigenvalue(comm: MPI.Comm, K: PETSc.Mat, inverse_mass: PETSc.Vec) -
     eps.setTolerances(tol=1e-8, max_it=20000)
     eps.solve()
     if eps.getConverged() < 1:
-        raise RuntimeError("SLEPc did not converge the largest eigenvalue of m^-1 K")
+        raise SolverError("SLEPc did not converge the largest eigenvalue of m^-1 K")
     lam = max(eps.getEigenvalue(i).real for i in range(eps.getConverged()))
     eps.destroy()
     A.destroy()
@@ -486,12 +487,12 @@ def _largest_eigenvalue(comm: MPI.Comm, K: PETSc.Mat, inverse_mass: PETSc.Vec) -
 def _vector_field(field: VectorField, gdim: int, name: str):
     """Wrap a user callable (gdim, n) -> (gdim, n) for DOLFINx interpolation (x is (3, n))."""
     if not callable(field):
-        raise ValueError(f"{name} must be a callable x -> values, got {type(field).__name__}")
+        raise InputError(f"{name} must be a callable x -> values, got {type(field).__name__}")
 
     def wrapped(x: np.ndarray) -> np.ndarray:
         values = np.asarray(field(x[:gdim]), dtype=PETSc.ScalarType)
         if values.shape != (gdim, x.shape[1]):
-            raise ValueError(
+            raise InputError(
                 f"{name} must return an array of shape (gdim, n) = ({gdim}, {x.shape[1]}), got "
                 f"{values.shape}"
             )
@@ -517,7 +518,7 @@ def evaluate_at_points(function, points: npt.ArrayLike) -> np.ndarray:
     if pts.ndim == 1 and pts.shape[0] == gdim:
         pts = pts[None, :]
     if pts.ndim != 2 or pts.shape[1] != gdim:
-        raise ValueError(f"points must have shape (n, {gdim}), got {np.shape(points)}")
+        raise InputError(f"points must have shape (n, {gdim}), got {np.shape(points)}")
     n = pts.shape[0]
     x = np.zeros((n, 3), dtype=np.float64)
     x[:, :gdim] = pts
@@ -528,7 +529,7 @@ def evaluate_at_points(function, points: npt.ArrayLike) -> np.ndarray:
     comm.Allreduce(MPI.IN_PLACE, owner, op=MPI.MIN)
     if np.any(owner == comm.size):
         missing = pts[owner == comm.size]
-        raise ValueError(f"points outside the mesh: {missing.tolist()}")
+        raise InputError(f"points outside the mesh: {missing.tolist()}")
 
     value_size = function.function_space.dofmap.index_map_bs
     values = np.zeros((n, value_size), dtype=np.float64)
@@ -574,10 +575,10 @@ def first_eigenfrequency(
     E, nu, rho = _check_material(E, nu, rho)
     facets = _check_facets(mesh, clamped_facets)
     if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or n < 1:
-        raise ValueError(f"n (number of frequencies) must be an integer >= 1, got {n!r}")
+        raise InputError(f"n (number of frequencies) must be an integer >= 1, got {n!r}")
     comm = mesh.comm
     if comm.allreduce(facets.size, op=MPI.SUM) == 0:
-        raise ValueError("clamped_facets is empty on every rank: the free body has zero modes")
+        raise InputError("clamped_facets is empty on every rank: the free body has zero modes")
 
     V = _compat.create_vector_space(mesh, "Lagrange", degree)
     bcs = [_clamped_bc(V, facets)]
@@ -606,5 +607,5 @@ def first_eigenfrequency(
     M.destroy()
     lam = np.sort(lam[np.isfinite(lam) & (lam > 0.0)])
     if lam.size < n:
-        raise RuntimeError(f"SLEPc converged only {lam.size} of the {n} requested eigenvalues")
+        raise SolverError(f"SLEPc converged only {lam.size} of the {n} requested eigenvalues")
     return np.sqrt(lam[:n])

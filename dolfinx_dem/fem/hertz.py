@@ -100,6 +100,7 @@ from dolfinx_dem.hertz import (
     hertz_analytic,
     hertz_analytic_3d,
 )
+from dolfinx_dem.errors import InputError, SolverError
 
 __all__ = [
     "HertzAnalytic",
@@ -119,7 +120,7 @@ _CONTACT = 1  # facet tag of the potential contact boundary (lower half of the d
 def _check_positive(name: str, value) -> float:
     value = float(value)
     if not (np.isfinite(value) and value > 0.0):
-        raise ValueError(f"{name} must be finite and > 0, got {value!r}")
+        raise InputError(f"{name} must be finite and > 0, got {value!r}")
     return value
 
 
@@ -127,20 +128,20 @@ def _check_material(E, nu) -> tuple[float, float]:
     E = _check_positive("E (Young's modulus)", E)
     nu = float(nu)
     if not (-1.0 < nu < 0.5):
-        raise ValueError(f"nu (Poisson's ratio) must satisfy -1 < nu < 0.5, got {nu!r}")
+        raise InputError(f"nu (Poisson's ratio) must satisfy -1 < nu < 0.5, got {nu!r}")
     return E, nu
 
 
 def _check_degree(degree) -> int:
     is_int = isinstance(degree, (int, np.integer)) and not isinstance(degree, bool)
     if not is_int or degree not in (1, 2):
-        raise ValueError(f"degree must be 1 or 2 (Lagrange), got {degree!r}")
+        raise InputError(f"degree must be 1 or 2 (Lagrange), got {degree!r}")
     return int(degree)
 
 
 def _check_int(name: str, value, minimum: int) -> int:
     if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < minimum:
-        raise ValueError(f"{name} must be an integer >= {minimum}, got {value!r}")
+        raise InputError(f"{name} must be an integer >= {minimum}, got {value!r}")
     return int(value)
 
 
@@ -231,7 +232,7 @@ def _top_displacement(u, R: float) -> tuple[float, float]:
         value = np.real(u.eval(point, cell)).reshape(-1)[2] if cell[0] >= 0 else -np.inf
         found = mesh.comm.allreduce(value, op=MPI.MAX)  # any process holding the pole
         if not np.isfinite(found):
-            raise RuntimeError("the top of the ball (0, 0, 2R) is in no cell")
+            raise SolverError("the top of the ball (0, 0, 2R) is in no cell")
         return 2.0 * R, float(found)
     facets = _owned(mesh, _compat.locate_boundary_facets(mesh, lambda x: x[1] > R))
     cells, facet_x, _ = _compat.facet_cell_and_vertices(mesh, facets)
@@ -416,7 +417,7 @@ class _Newton:
     def solve(self, u) -> tuple[int, bool]:
         result = self.solver.solve(u)
         if self.ksp.getConvergedReason() < 0:
-            raise RuntimeError(f"the linear solve of the last Newton iteration failed (KSP reason "
+            raise SolverError(f"the linear solve of the last Newton iteration failed (KSP reason "
                                f"{self.ksp.getConvergedReason()})")
         return result
 
@@ -512,15 +513,15 @@ def solve_hertz(
     degree = _check_degree(degree)
     R = _check_positive("R (radius)", R)
     if h >= R:
-        raise ValueError(f"h (mesh size) must be smaller than R, got h={h}, R={R}")
+        raise InputError(f"h (mesh size) must be smaller than R, got h={h}, R={R}")
     E, nu = _check_material(E, nu)
     f = _check_positive("body_force", body_force)
     gamma0 = _check_positive("gamma0 (Nitsche parameter)", gamma0)
     theta = float(theta)
     if not -1.0 <= theta <= 1.0:
-        raise ValueError(f"theta must be in [-1, 1] (1, 0, -1 are the usual variants), got {theta}")
+        raise InputError(f"theta must be in [-1, 1] (1, 0, -1 are the usual variants), got {theta}")
     if singular_method not in _Newton._METHODS:
-        raise ValueError(
+        raise InputError(
             f"singular_method must be one of {', '.join(_Newton._METHODS)}, got {singular_method!r}"
         )
     regularisation = _check_positive("regularisation", regularisation)
@@ -529,12 +530,12 @@ def solve_hertz(
     samples_per_facet = _check_int("samples_per_facet", samples_per_facet, 1)
     rtol = _check_positive("rtol", rtol)
     if not 0.0 < fit_fraction < 1.0:
-        raise ValueError(f"fit_fraction must be in (0, 1), got {fit_fraction!r}")
+        raise InputError(f"fit_fraction must be in (0, 1), got {fit_fraction!r}")
     if quadrature_degree is None:
         quadrature_degree = 4 * degree
     quadrature_degree = _check_int("quadrature_degree", quadrature_degree, 1)
     if dim not in (2, 3):
-        raise ValueError(f"dim must be 2 (disc) or 3 (quarter ball), got {dim!r}")
+        raise InputError(f"dim must be 2 (disc) or 3 (quarter ball), got {dim!r}")
     d = dim
     if refine is not None:
         refine = ((0.0,) * d, *refine)  # at the contact point; create_* check the values
@@ -624,7 +625,7 @@ def solve_hertz(
             it, converged = newton.solve(u)
             iterations += int(it)
             if not converged:
-                raise RuntimeError(
+                raise SolverError(
                     f"Newton did not converge in {max_it} iterations (load step {step} of "
                     f"{load_steps}); try load_steps > 1 or another gamma0"
                 )

@@ -87,6 +87,7 @@ import dolfinx.fem
 from dolfinx_dem import _compat
 from dolfinx_dem.fem.hertz import _check_int, _check_material, _check_positive, _gather_sorted, _lame, _owned
 from dolfinx_dem.hertz import contact_half_width_fit, contact_half_width_last, contact_half_width_moments
+from dolfinx_dem.errors import InputError, SolverError
 
 __all__ = ["IndentationResult", "create_indentation_mesh", "indentation_reference", "solve_indentation"]
 
@@ -112,7 +113,7 @@ def create_indentation_mesh(comm: MPI.Comm, h: float):
 
     h = _check_positive("h (mesh size)", h)
     if h > FINE_BOX[1] / 2:
-        raise ValueError(f"h (mesh size) must be <= {FINE_BOX[1] / 2} m (the refined zone), got {h}")
+        raise InputError(f"h (mesh size) must be <= {FINE_BOX[1] / 2} m (the refined zone), got {h}")
 
     def build() -> int:
         gmsh.model.add("indentation")
@@ -282,11 +283,11 @@ class _Indentation:
 def _check_deltas(deltas, R: float) -> list[float]:
     values = [_check_positive("delta (indentation)", d) for d in np.atleast_1d(deltas)]
     if len(values) == 0:
-        raise ValueError("deltas must hold at least one indentation")
+        raise InputError("deltas must hold at least one indentation")
     if any(b <= a for a, b in zip(values, values[1:])):
-        raise ValueError(f"deltas must be increasing (each solve starts from the previous one), got {values}")
+        raise InputError(f"deltas must be increasing (each solve starts from the previous one), got {values}")
     if values[-1] > 0.5 * R:
-        raise ValueError(f"delta must be <= R / 2 = {0.5 * R} m (a / R would exceed 0.87), got {values[-1]}")
+        raise InputError(f"delta must be <= R / 2 = {0.5 * R} m (a / R would exceed 0.87), got {values[-1]}")
     return values
 
 
@@ -340,7 +341,7 @@ def solve_indentation(
     gamma0 = _check_positive("gamma0 (Nitsche parameter)", gamma0)
     theta = float(theta)
     if not -1.0 <= theta <= 1.0:
-        raise ValueError(f"theta must be in [-1, 1] (1, 0, -1 are the usual variants), got {theta}")
+        raise InputError(f"theta must be in [-1, 1] (1, 0, -1 are the usual variants), got {theta}")
     rtol = _check_positive("rtol", rtol)
     max_it = _check_int("max_it", max_it, 1)
     samples_per_facet = _check_int("samples_per_facet", samples_per_facet, 1)
@@ -360,19 +361,19 @@ def solve_indentation(
         problem.delta.value = delta
         iterations, converged = problem.solver.solve(problem.u)
         if not converged:
-            raise RuntimeError(f"Newton did not converge in {max_it} iterations (delta = {delta} m, h = {h} m)")
+            raise SolverError(f"Newton did not converge in {max_it} iterations (delta = {delta} m, h = {h} m)")
         t1 = time.perf_counter()
         # whole block = 2 x half block (the moments' ratios are the same)
         P = 2.0 * problem.integral(-lam * problem.normal[1] * ds_c)
         if not P > 0.0:
-            raise RuntimeError(f"no contact force at delta = {delta} m")
+            raise SolverError(f"no contact force at delta = {delta} m")
         reaction = 2.0 * comm.allreduce(dolfinx.fem.assemble_scalar(problem.reaction_form), op=MPI.SUM)
         m0, m2 = (2.0 * problem.integral(lam * x[0] ** k * ds_c) for k in (0, 2))
         a, _ = contact_half_width_moments(m0, 0.0, m2)
         xs, lam_s, p_s, g_s = problem.sample(samples_per_facet)
         edge = float(np.max(xs[lam_s > 0.0], initial=0.0))
         if edge > FINE_BOX[0] - 2.0 * h:
-            raise RuntimeError(f"the contact zone at delta = {delta} m reaches x = {edge:.3g} m, beyond the "
+            raise SolverError(f"the contact zone at delta = {delta} m reaches x = {edge:.3g} m, beyond the "
                                f"refined zone x < {FINE_BOX[0] - 2.0 * h:.3g} m: use a smaller delta")
         traction_in_contact = np.where(lam_s > 0.0, p_s, 0.0)
         # the fit needs both sides of the (symmetric) profile

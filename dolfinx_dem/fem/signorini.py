@@ -108,6 +108,7 @@ import dolfinx.fem.petsc
 import dolfinx.mesh
 
 from dolfinx_dem import _compat
+from dolfinx_dem.errors import InputError, SolverError
 
 __all__ = [
     "METHODS",
@@ -216,20 +217,20 @@ class BarOperators:
 
 def _check_method(method) -> str:
     if method not in METHODS:
-        raise ValueError(f"method must be one of {METHODS}, got {method!r}")
+        raise InputError(f"method must be one of {METHODS}, got {method!r}")
     return method
 
 
 def _check_benchmark(benchmark) -> str:
     key = _ALIASES.get(str(benchmark)) if isinstance(benchmark, (str, int)) else None
     if key is None:
-        raise ValueError(f"benchmark must be one of {sorted(_ALIASES)}, got {benchmark!r}")
+        raise InputError(f"benchmark must be one of {sorted(_ALIASES)}, got {benchmark!r}")
     return key
 
 
 def _check_n(n_cells) -> int:
     if isinstance(n_cells, bool) or not isinstance(n_cells, (int, np.integer)) or n_cells < 2:
-        raise ValueError(f"n_cells must be an integer >= 2, got {n_cells!r}")
+        raise InputError(f"n_cells must be an integer >= 2, got {n_cells!r}")
     return int(n_cells)
 
 
@@ -237,9 +238,9 @@ def _check_positive(name: str, value) -> float:
     try:
         value = float(value)
     except (TypeError, ValueError):
-        raise ValueError(f"{name} must be a number > 0, got {value!r}") from None
+        raise InputError(f"{name} must be a number > 0, got {value!r}") from None
     if not (math.isfinite(value) and value > 0.0):
-        raise ValueError(f"{name} must be finite and > 0, got {value!r}")
+        raise InputError(f"{name} must be finite and > 0, got {value!r}")
     return value
 
 
@@ -486,7 +487,7 @@ def _run_newmark_penalty(ops, data, dt, n_steps, s: _Series, grav0, kappa, newto
             if abs(residual) <= tol:
                 break
             if its == 50:
-                raise RuntimeError(f"semi-smooth Newton did not converge at step {n + 1}")
+                raise SolverError(f"semi-smooth Newton did not converge at step {n + 1}")
             chi = 1.0 if h0 + w < 0.0 else 0.0
             w = (y[0] - kappa * chi * z0 * h0) / (1.0 + kappa * chi * z0)
             its += 1
@@ -500,7 +501,7 @@ def _run_newmark_penalty(ops, data, dt, n_steps, s: _Series, grav0, kappa, newto
 
 def _time_step(t_end: float, h: float, c: float, cfl, dt) -> tuple[float, int]:
     if (cfl is None) == (dt is None):
-        raise ValueError("give exactly one of cfl and dt")
+        raise InputError("give exactly one of cfl and dt")
     if dt is None:
         cfl = _check_positive("cfl", cfl)
         n_steps = math.ceil(t_end * c / (cfl * h) * (1.0 - 1e-12))
@@ -508,7 +509,7 @@ def _time_step(t_end: float, h: float, c: float, cfl, dt) -> tuple[float, int]:
     dt = _check_positive("dt", dt)
     n_steps = max(1, round(t_end / dt))
     if abs(n_steps * dt - t_end) > 1e-9 * t_end:
-        raise ValueError(f"dt = {dt!r} does not divide t_end = {t_end!r}")
+        raise InputError(f"dt = {dt!r} does not divide t_end = {t_end!r}")
     return t_end / n_steps, n_steps
 
 
@@ -561,7 +562,7 @@ def solve_signorini_bar(
     cfl_limit = _cfl_limit(method, ops, c)
     # Strictly below the limit: at it, central differences have a double root -1 (linear growth).
     if method in EXPLICIT and cfl_actual >= cfl_limit * (1.0 - 1e-10) and not allow_unstable:
-        raise ValueError(f"method {method!r} is unstable at CFL {cfl_actual:.6g} (dt = {dt:.6g} s): it "
+        raise InputError(f"method {method!r} is unstable at CFL {cfl_actual:.6g} (dt = {dt:.6g} s): it "
                          f"needs a CFL number below its stability limit on {n_cells} cells, "
                          f"{cfl_limit:.6g} (dt = {cfl_limit * h / c:.6g} s); pass allow_unstable=True "
                          f"to run it anyway")

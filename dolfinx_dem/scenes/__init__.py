@@ -16,12 +16,9 @@ from collections.abc import Mapping
 import numpy as np
 
 from dolfinx_dem.material import ElasticMaterial
+from dolfinx_dem.errors import MissingFileError, SceneError
 
 BUILTIN = pathlib.Path(__file__).parent
-
-
-class SceneError(ValueError):
-    """A scene file or override is invalid; the message names the offending key."""
 
 
 def _number(key, v, positive=False, nonnegative=False):
@@ -388,7 +385,7 @@ def load(name_or_path: str, overrides: Mapping[str, object] | None = None) -> di
             raise SceneError(f"unknown scene {name_or_path!r}; built-in scenes: {', '.join(builtin_names())}")
         path = BUILTIN / f"{name_or_path}.toml"
     if not path.is_file():
-        raise FileNotFoundError(f"scene file {path} does not exist")
+        raise MissingFileError(f"scene file {path} does not exist")
     with open(path, "rb") as f:
         try:
             scene = tomllib.load(f)
