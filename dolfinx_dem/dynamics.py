@@ -32,8 +32,10 @@ import numpy as np
 from mpi4py import MPI
 
 from dolfinx_dem import _compat, checkpoint, io, model, plotting, runcontrol, scenes
+from dolfinx_dem.contact import PairContact, RigidContact
 from dolfinx_dem.discretisation import DEMDiscretisation
 from dolfinx_dem.memm import MEMM
+from dolfinx_dem.problem import DEMProblem
 from dolfinx_dem.run_statistics import MAX_PENETRATION, PairContactStatistics, Statistics, peak_rss_mb
 from dolfinx_dem.errors import CheckpointError, InputError, InstabilityError, UnresolvedContactError
 
@@ -51,17 +53,19 @@ class DynamicRun:
             raise InputError(f"checkpoint_every must be an integer >= 1, got {checkpoint_every!r}")
         self.wall = time.perf_counter()
         self.scene, self.comm, self.quiet, self.checkpoint_every = scene, comm, quiet, checkpoint_every
-        self.dem = dem = model.build(scene, comm)
+        self.problem = problem = model.build(scene, comm)
+        self.dem = dem = problem.dem
+        self.pairs, self.obstacles = problem.find(PairContact), problem.find(RigidContact)
         time_spec = scene["time"]
         self.dt = time_step(dem, time_spec) if dt is None else dt
         self.n_steps = max(1, round(time_spec["end"] / self.dt))
-        self.stepper = MEMM(dem, self.dt, time_spec.get("quadrature", "midpoint"))
-        self.probes = model.Probes(dem, scene.get("probes", []))
+        self.stepper = MEMM(problem, self.dt, time_spec.get("quadrature", "midpoint"))
+        self.probes = model.Probes(problem, scene.get("probes", []))
         # with time-dependent data or prescribed bodies, the work W^n they do (memm.py) and the
         # energy balance E^n - W^n
         self.work_columns = ("work", "balance") if self.stepper.does_work else ()
         self.columns = (model.SERIES_COLUMNS + self.work_columns + model.reaction_columns(dem)
-                        + model.prescribed_columns(dem) + model.contact_columns(dem) + tuple(self.probes.names))
+                        + model.prescribed_columns(dem) + model.contact_columns(problem) + tuple(self.probes.names))
         output = scene.get("output", {})
         self.every = output.get("every", max(1, self.n_steps // 50))
         self.series_every = output.get("series_every", 1)
@@ -72,10 +76,11 @@ class DynamicRun:
         diag = self.stepper.initialise(*model.initial_state(dem, scene))
         self.first = diag
         self.stats = Statistics(diag.balance, scale=diag.mechanical)
-        self.pair_stats = PairContactStatistics(dem, self.stepper, diag.momentum,
+        self.pair_stats = PairContactStatistics(problem, self.stepper, diag.momentum,
                                                 scene.get("contact", {}).get("max_penetration", MAX_PENETRATION))
-        columns = model.contact_columns(dem)
-        self._penetration_column = columns.index("penetration") if "penetration" in columns else None
+        columns = model.contact_columns(problem)
+        self._penetration_column = columns.index("penetration") if self.pairs is not None else None
+        self._gap_column = columns.index("contact_gap") if self.obstacles is not None else None
         self.setup_seconds = comm.allreduce(time.perf_counter() - self.wall, op=MPI.MAX)
 
     # -- resume ----------------------------------------------------------------------------------
@@ -119,7 +124,7 @@ class DynamicRun:
         counters = local["memm_counters"] if local else (m["force_evaluations"], m["max_step_evaluations"])
         self.stepper.restore(*(vectors[name].ravel() for name in checkpoint.VECTORS), m["t0"], m["n"], m["budget"],
                              m["work"], m["data_potential"], *counters, local and {name: local[name] for name in ("y", "z", "means")})
-        for k, contact in enumerate(dem.contacts):
+        for k, contact in enumerate(self.problem.contacts):
             prefix = f"contact{k}_"
             contact.restore_state(local and {name[len(prefix):]: a for name, a in local.items()
                                              if name.startswith(prefix)})
@@ -187,22 +192,22 @@ class DynamicRun:
     def _record(self, diag, force_fields: bool):
         dem, stepper = self.dem, self.stepper
         tic = time.process_time()
-        contact = model.contact_values(dem, stepper.u, stepper.contact_patch_values())
-        if dem.pair_contact is not None:
+        contact = model.contact_values(self.problem, stepper.u, stepper.contact_patch_values())
+        if self.pairs is not None:
             contact += list(diag.momentum)
             self.pair_stats.record(diag.t, stepper, contact[self._penetration_column], diag.momentum)
             # contact work done at every step for its outputs: part of the contact share
             self.pair_stats.output_seconds += time.process_time() - tic
-        if dem.contact is not None:
-            self.stats.min_gap = min(self.stats.min_gap, contact[0])
+        if self.obstacles is not None:
+            self.stats.min_gap = min(self.stats.min_gap, contact[self._gap_column])
         if diag.step % self.series_every == 0 or force_fields:
             work = [diag.work, diag.balance] if self.work_columns else []
             self.series.write([diag.t, diag.kinetic, diag.elastic, diag.stabilisation, diag.external,
                                diag.pseudo_energy, *work, *dem.reactions(stepper.u, diag.t).ravel(),
-                               *model.prescribed_values(dem, stepper.u, diag.t), *contact,
+                               *model.prescribed_values(self.problem, stepper.u, diag.t), *contact,
                                *self.probes.values(stepper.u, diag.t)])
         if diag.step % self.every == 0 or force_fields:
-            self.solution.write(diag.t, fields(dem, stepper))
+            self.solution.write(diag.t, fields(self.problem, stepper))
 
     def _checkpoint(self, directory: pathlib.Path):
         dem, stepper = self.dem, self.stepper
@@ -220,7 +225,7 @@ class DynamicRun:
             "every": self.every, "series_every": self.series_every, "checkpoint_every": self.checkpoint_every,
             "series_bytes": self.series.position(), "xdmf_writes": self.solution.writes,
         }
-        local = state["recurrence"] | {f"contact{k}_{name}": a for k, c in enumerate(dem.contacts)
+        local = state["recurrence"] | {f"contact{k}_{name}": a for k, c in enumerate(self.problem.contacts)
                                        for name, a in c.checkpoint_state().items()}
         local["memm_counters"] = np.array([state["force_evaluations"], state["max_step_evaluations"]], dtype=np.int64)
         vectors = {name: state[name].array_r.reshape(-1, dem.d) for name in checkpoint.VECTORS}
@@ -237,11 +242,11 @@ class DynamicRun:
         obstacles = [(ob["point"], ob["normal"]) for ob in self.scene.get("obstacles", [])]
         u = stepper.u.array_r.reshape(-1, dem.d)
         if dem.d == 1:
-            plotting.plot_bar(dem.mesh, u, dem.stress(stepper.u, stepper.t)[:, 0, 0], directory / "final.png",
+            plotting.plot_bar(dem.mesh, u, self.problem.stress(stepper.u, stepper.t)[:, 0, 0], directory / "final.png",
                               stepper.t, obstacles)
         else:
-            plotting.plot_cell_field(dem.mesh, u, dem.von_mises(stepper.u, stepper.t), directory / "final.png",
-                                     "von Mises stress (Pa)", scale, obstacles, dem.prescribed_cells)
+            plotting.plot_cell_field(dem.mesh, u, self.problem.von_mises(stepper.u, stepper.t), directory / "final.png",
+                                     "von Mises stress (Pa)", scale, obstacles, model.prescribed_cells(dem))
         if animation and output.get("animation") and not plotting.too_large(dem.mesh):
             if dem.d == 1:
                 io.call_on_root(self.comm, plotting.animate_bar, directory / "solution.xdmf",
@@ -249,7 +254,7 @@ class DynamicRun:
             else:
                 io.call_on_root(self.comm, plotting.animate_solution, directory / "solution.xdmf",
                                 directory / "animation.gif", "von_mises", "von Mises stress (Pa)", scale, obstacles,
-                                dem.prescribed_body_numbers + 1)  # the ``body`` field is 1-based
+                                dem.prescribed.body_numbers + 1)  # the ``body`` field is 1-based
 
     def _summary(self, status: str, error: InstabilityError | UnresolvedContactError | None) -> dict:
         dem, stepper, stats = self.dem, self.stepper, self.stats
@@ -280,10 +285,10 @@ class DynamicRun:
         }
         if error is None:
             summary["checkpoint"] = checkpoint.DIRECTORY
-        if dem.contact is not None:
-            summary["contact_candidate_facets"] = dem.contact.num_facets
+        if self.obstacles is not None:
+            summary["contact_candidate_facets"] = self.obstacles.num_facets
             summary["min_contact_gap"] = stats.min_gap
-        if dem.pair_contact is not None:
+        if self.pairs is not None:
             summary.update(self.pair_stats.summary(stats.stepping_seconds))
         if error is not None:
             summary["error"] = str(error)
@@ -341,20 +346,21 @@ def scene_instability(error: InstabilityError, time_spec: Mapping) -> Instabilit
                             error.step, error.t, error.dt, suggested, error.reason)
 
 
-def fields(dem: DEMDiscretisation, stepper: MEMM) -> dict:
+def fields(problem: DEMProblem, stepper: MEMM) -> dict:
     """DG0 displacement, velocity (vbar at t_n) and von Mises stress for XDMF output, in 1D the
     stress sigma_xx (``stress_xx``, signed, for ``plotting.animate_bar``), and with several
     bodies the body number of each cell (``body``: 1-based connected component)."""
+    dem = problem.dem
     v = stepper.v_prev.copy()
     v.axpy(1.0, stepper.v_next)
     v.scale(0.5)
     out = {
         "displacement": dem.function(stepper.u, "displacement"),
         "velocity": dem.function(v, "velocity"),
-        "von_mises": dem.scalar_function(dem.von_mises(stepper.u, stepper.t), "von_mises"),
+        "von_mises": dem.scalar_function(problem.von_mises(stepper.u, stepper.t), "von_mises"),
     }
     if dem.d == 1:
-        out["stress_xx"] = dem.scalar_function(dem.stress(stepper.u, stepper.t)[:, 0, 0], "stress_xx")
+        out["stress_xx"] = dem.scalar_function(problem.stress(stepper.u, stepper.t)[:, 0, 0], "stress_xx")
     if dem.geometry.num_bodies > 1:
-        out["body"] = dem.scalar_function(dem.body_labels[: dem.n_owned] + 1.0, "body")
+        out["body"] = dem.scalar_function(dem.geometry.cell_bodies[: dem.n_owned] + 1.0, "body")
     return out

@@ -47,6 +47,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import numbers
 
 import numpy as np
 from mpi4py import MPI
@@ -54,7 +55,8 @@ from petsc4py import PETSc
 
 from dolfinx_dem.memm_state import (CONTACT_J, CONTACT_S, DATA_POTENTIAL, EXTERNAL, KINETIC, LIFT_J, LIFT_S,
                                     LOAD_POWER, MOMENTUM, PSEUDO, ROWS_J, ROWS_S, StepState)
-from dolfinx_dem.errors import InputError, InstabilityError
+from dolfinx_dem.errors import InputError, InstabilityError, StateError
+from dolfinx_dem.problem import DEMProblem
 
 #: Default number of steps between true products for the energy rows (see the module docstring
 #: and docs/bench/README.md for the drift with and without).
@@ -113,14 +115,13 @@ def _read_only(a: np.ndarray) -> np.ndarray:
 
 
 class MEMM:
-    """The MEMM stepper for a ``DEMDiscretisation`` (``force``, ``energies``, ``factored``,
-    ``load``, ``lift``, ``mass``, ``contacts``, and for prescribed bodies ``prescribed``,
-    ``prescribed_dofs``, ``moving_prescribed``, ``impose``).
+    """The MEMM stepper of a ``problem.DEMProblem``: its discretisation's energy rows, mass,
+    data and prescribed bodies, and its contact models.
 
     Parameters
     ----------
-    problem : e.g. ``DEMDiscretisation``.
-    dt : time step (s), > 0.
+    problem : a ``DEMProblem`` (a discretisation and its contact models).
+    dt : time step (s), > 0 (any real number type: numpy scalars too).
     quadrature : name in ``QUADRATURES`` (default "midpoint").
     growth_limit : the stability monitor's bound on the mechanical energy relative to the
         conserved budget (see ``check_stability``).
@@ -133,20 +134,25 @@ class MEMM:
 
     def __init__(self, problem, dt: float, quadrature: str = "midpoint", growth_limit: float = 10.0,
                  refresh_every: int = REFRESH_EVERY):
-        if not (isinstance(dt, (int, float)) and math.isfinite(dt) and dt > 0):
-            raise InputError(f"time step dt must be a positive number, got {dt!r}")
+        if not isinstance(problem, DEMProblem):
+            raise InputError(f"MEMM integrates a DEMProblem, got {type(problem).__name__} (wrap a discretisation "
+                             "as DEMProblem(dem) or DEMProblem(dem, contacts))")
+        if not (isinstance(dt, numbers.Real) and not isinstance(dt, bool) and math.isfinite(dt) and dt > 0):
+            raise InputError(f"time step dt must be a positive finite real number, got {dt!r} "
+                             f"({type(dt).__name__})")
         if quadrature not in QUADRATURES:
             raise InputError(f"unknown quadrature {quadrature!r}; choose from {sorted(QUADRATURES)}")
         if not growth_limit > 1:
             raise InputError(f"growth_limit must be > 1, got {growth_limit}")
-        if not (isinstance(refresh_every, int) and refresh_every >= 0):
+        if not (isinstance(refresh_every, numbers.Integral) and not isinstance(refresh_every, bool)
+                and refresh_every >= 0):
             raise InputError(f"refresh_every must be an integer >= 0, got {refresh_every!r}")
         self.problem = problem
         self.dt = float(dt)
         self.quadrature = quadrature
         self.nodes, self.weights = QUADRATURES[quadrature].nodes_weights
         self.growth_limit = growth_limit
-        self.refresh_every = refresh_every
+        self.refresh_every = int(refresh_every)
         self.t0 = 0.0
         self.n = 0
         self.force_evaluations = 0
@@ -157,7 +163,9 @@ class MEMM:
         self._load_power = 0.0  # this process's v^{n+1/2} . int L dt of the step
         self._patches: list = []  # (scatter, patch values of u^n) of each contact model, see contact_patch_values
 
-        self._state = StepState(problem, self.dt)
+        self.dem = problem.dem
+        self._state = StepState(problem.dem, self.dt)
+        self._initialised = False
 
     @property
     def u(self) -> PETSc.Vec:
@@ -178,7 +186,7 @@ class MEMM:
     def does_work(self) -> bool:
         """Whether time-dependent data or prescribed bodies do work on the system: then E^n is not
         conserved, and ``work`` counts W^n (module docstring)."""
-        return self.problem.time_dependent or bool(self.problem.prescribed)
+        return self.dem.data.time_dependent or bool(self.dem.prescribed)
 
     @property
     def t(self) -> float:
@@ -194,10 +202,10 @@ class MEMM:
         for contact in self.problem.contacts:
             contact.prepare(u0)
         u0, v0 = u0.copy(), v0.copy()
-        self.problem.impose(u0, v0, self.t0, self.dt)  # u = U(t0) and its velocity on prescribed bodies
+        self.dem.prescribed.impose(u0, v0, self.t0, self.dt)  # u = U(t0) and its velocity on prescribed bodies
         self.problem.force(u0, self.t0, f)
         self.force_evaluations += 1
-        f.pointwiseMult(f, self.problem.inverse_mass)
+        f.pointwiseMult(f, self.dem.inverse_mass)
         u0.copy(self.u)
         v0.copy(self.v_prev)
         self.v_prev.axpy(-0.5 * self.dt, f)
@@ -207,15 +215,18 @@ class MEMM:
         v0.destroy()
         self._state.restart(self.t0)
         self.work, self._load_power, self._data_potential = 0.0, 0.0, None
+        self._initialised = True
         diag = self._diagnostics()
         self.budget = diag.mechanical
         return diag
 
     def step(self) -> Diagnostics:
         """Advance one step (eq. (35a)-(35b)) and return the diagnostics at the new time."""
+        if not self._initialised:
+            raise StateError("MEMM.step() before MEMM.initialise(u0, v0) (or restore): the stepper has no state")
         refresh = self.refresh_every > 0 and (self.n + 1) % self.refresh_every == 0
-        if self.problem.moving_prescribed:  # v^{n+1/2} = (U(t_{n+1}) - u^n)/dt on their dofs
-            self.problem.impose(self.u, self.v_next, self.t, self.dt, position=False)
+        if self.dem.prescribed.moving:  # v^{n+1/2} = (U(t_{n+1}) - u^n)/dt on their dofs
+            self.dem.prescribed.impose(self.u, self.v_next, self.t, self.dt, position=False)
         impulse = self.impulse()  # from u^n and v^{n+1/2}
         if refresh:
             self.u.axpy(self.dt, self.v_next)  # (35a) here: y^{n+1} from u^{n+1} by a true product
@@ -245,11 +256,11 @@ class MEMM:
         split = bool(contacts) and self.quadrature == "midpoint"
         evaluations = len(self.nodes)
         load = self._state.load
-        if self.problem.time_dependent:
+        if self.dem.data.time_dependent:
             out = self._state.impulse
             out.set(0.0)
             for x, w in zip(self.nodes, self.weights):
-                out.axpy(w * self.dt, self.problem.load(self.t + x * self.dt))
+                out.axpy(w * self.dt, self.dem.data.load(self.t + x * self.dt))
             self._load_power = self.v_next.array_r @ out.array_r
         elif contacts:
             out = self._state.impulse
@@ -277,7 +288,7 @@ class MEMM:
             de, ds = c.energy_correction(up)
             sums[CONTACT_S] += de
             sums[CONTACT_J] += ds
-        if self.problem.time_dependent:
+        if self.dem.data.time_dependent:
             sums[LOAD_POWER] += self._load_power
         s = self._state.reduce(self.t)
         if self.does_work:
@@ -313,8 +324,8 @@ class MEMM:
         """Energies at t_n recomputed from u^n by true products (``problem.energies``), reduced
         over all processes: a check of the values ``step`` returns, not used by it."""
         e = self.problem.energies(self.u, self.t)
-        M = self.problem.mass
-        w, m = self.problem.create_vector(), self.problem.create_vector()
+        M = self.dem.mass
+        w, m = self.dem.create_vector(), self.dem.create_vector()
         self.v_prev.copy(w)
         w.axpy(1.0, self.v_next)
         w.scale(0.5)
@@ -395,6 +406,7 @@ class MEMM:
         self.t0, self.n, self.budget = float(t0), int(n), float(budget)
         self.work, self._data_potential = float(work), data_potential
         self.force_evaluations, self.max_step_evaluations = int(force_evaluations), int(max_step_evaluations)
+        self._initialised = True
         if recurrence is not None:
             self._state.restore_recurrence(self.t, **recurrence)
         else:
@@ -402,6 +414,5 @@ class MEMM:
             self._state.reduce(self.t)  # the free bodies' mean velocities of v^{n+1/2}
 
     def suggested_dt(self) -> float:
-        """Half the problem's ``stable_time_step()`` (a bound: cheap, and cached by the problem)."""
-        stable = getattr(self.problem, "stable_time_step", None)
-        return 0.5 * stable() if stable is not None else 0.5 * self.dt
+        """Half the discretisation's ``stable_time_step()`` (a bound: cheap, and cached)."""
+        return 0.5 * self.dem.stable_time_step()

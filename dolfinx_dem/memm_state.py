@@ -31,7 +31,7 @@ _REVERSE = dict(addv=PETSc.InsertMode.ADD_VALUES, mode=PETSc.ScatterMode.REVERSE
 #: models' (this process's parts of their energy changes, set by MEMM before ``reduce``), the
 #: step's work of time-dependent data, v^{n+1/2} . int L dt (added by MEMM), and of prescribed
 #: bodies, -v_p^{n+1/2} . I_p (added by ``update``), and the data potential
-#: (``DEMDiscretisation.data_potential``); the total momentum sum_c m_c vbar_c at t_n (3 slots,
+#: (``BoundaryData.data_potential``); the total momentum sum_c m_c vbar_c at t_n (3 slots,
 #: d used); then the momentum of each free body at v^{n+1/2} (d per body, and d for the cells of
 #: clamped bodies).
 (ROWS_S, ROWS_J, KINETIC, PSEUDO, EXTERNAL, LIFT_S, LIFT_J, CONTACT_S, CONTACT_J, LOAD_POWER, DATA_POTENTIAL,
@@ -40,7 +40,7 @@ MOMENTA = MOMENTUM + 3
 
 
 class StepState:
-    """The vectors and kernel arguments of MEMM on a ``DEMDiscretisation`` with time step dt."""
+    """The vectors and kernel arguments of MEMM on a ``DEMDiscretisation`` (``problem``) with time step dt."""
 
     def __init__(self, problem, dt: float):
         self.problem, self.dt = problem, dt
@@ -49,7 +49,7 @@ class StepState:
         self.v_prev = K.create_vector()  # v^{n-1/2}
         self.v_next = K.create_vector()  # v^{n+1/2}: the pass over Q reads it at the ghost dofs
         # the pass's input when refreshing, rel(u): u itself when no body is free
-        self._x = K.create_vector() if len(problem.free_bodies[1]) else None
+        self._x = K.create_vector() if len(problem.bodies.mass) else None
         self._z = [K.create_vector(), K.create_vector()]  # Q^T y^n, and Q^T y^{n+1} accumulated
         self._ghosts = [K.local_array(z)[K.n_owned:] for z in self._z]  # zeroed before accumulating
         self.y = np.zeros(K.n_rows)
@@ -62,9 +62,9 @@ class StepState:
         if not np.all(mass.reshape(-1, d) == mass[::d, None]):
             raise InputError("MEMM needs the d dofs of a cell to share their mass")
         self._mass = np.ascontiguousarray(mass[::d])  # the kernel reads one mass per cell
-        self._prescribed = problem.prescribed_dofs  # mass 0: the kernel leaves their velocity
+        self._prescribed = problem.prescribed.dofs  # mass 0: the kernel leaves their velocity
         self._minv = np.ascontiguousarray(problem.inverse_mass.array_r[::d])
-        body, body_mass = problem.free_bodies
+        body, body_mass = problem.bodies.body_of_cell, problem.bodies.mass
         self.sums = np.zeros(MOMENTA + (len(body_mass) + 1) * d if len(body_mass) else MOMENTA)
         self._body = self._slot = self._means = None
         if len(body_mass):
@@ -89,22 +89,22 @@ class StepState:
         self._p_body = pointer(self._body)
         # f . u, the external potential's share, summed by the kernel for a constant f (not 0); a
         # time-dependent f(t) is read at t_{n+1} in ``reduce`` instead
-        force = problem.external_force.array
-        self._p_body_force = pointer(force) if force.any() and not problem.time_dependent else ffi.NULL
+        force = problem.data.external_force.array
+        self._p_body_force = pointer(force) if force.any() and not problem.data.time_dependent else ffi.NULL
 
     def restart(self, t0: float):
         """After u, v_prev and v_next are set: the constant loads, and y = Q rel(u) / dt by a true
         product with the local sums of t0 (reduce them with ``reduce``)."""
         problem = self.problem
         self.load = self._lift = None
-        if not problem.time_dependent:
-            load = problem.load(t0)
+        if not problem.data.time_dependent:
+            load = problem.data.load(t0)
             # collective (the copy is): a load can be zero on some processes (a traction on one side)
             if problem.comm.allreduce(bool(load.array_r.any()), op=MPI.LOR):
                 self.load = load.copy()
                 self.load.scale(self.dt)
                 self._p[id(self.load)] = pointer(self.load.array)
-            rows, values = problem.lift(t0)
+            rows, values = problem.data.lift(t0)
             if values.any():
                 self._lift = (rows, values.copy())
         for z in self._z:
@@ -118,7 +118,7 @@ class StepState:
         d = problem.d
         self.sums[MOMENTUM : MOMENTUM + d] = 0.5 * (self._mass @ (vp + vn).reshape(-1, d))
         if self._p_body_force != ffi.NULL:
-            self.sums[EXTERNAL] = np.dot(problem.external_force.array_r, self.u.array_r)
+            self.sums[EXTERNAL] = np.dot(problem.data.external_force.array_r, self.u.array_r)
         if self._body is not None:
             np.add.at(self.sums[MOMENTA:], self._slot[: len(vn)], M * vn)
 
@@ -149,7 +149,7 @@ class StepState:
         self._pass_over_rows(refresh, self._z[1])
 
     def _pass_over_rows(self, refresh: bool, z: PETSc.Vec):
-        x = self.problem.relative_displacement(self.u, out=self._x) if refresh else self.v_next
+        x = self.problem.bodies.relative_displacement(self.u, out=self._x) if refresh else self.v_next
         if self._parallel:
             x.ghostUpdate(**_FORWARD)
         self._pass[id(x), id(z)](0.0 if refresh else 1.0, 1.0 / self.dt if refresh else 1.0)
@@ -184,12 +184,12 @@ class StepState:
         work at u = 0); the free bodies' mean velocities for the next pass. Returns ``sums``
         (slots above)."""
         s = self.sums
-        if self.problem.time_dependent:
-            s[EXTERNAL] -= self.problem.external_potential(self.u, t)
-            s[DATA_POTENTIAL] += self.problem.data_potential(self.u, t)
+        if self.problem.data.time_dependent:
+            s[EXTERNAL] -= self.problem.data.external_potential(self.u, t)
+            s[DATA_POTENTIAL] += self.problem.data.data_potential(self.u, t)
         else:
-            s[EXTERNAL] += self.problem.external_constant(t)
-        lift = self.problem.lift(t) if self.problem.time_dependent else self._lift
+            s[EXTERNAL] += self.problem.data.external_constant(t)
+        lift = self.problem.data.lift(t) if self.problem.data.time_dependent else self._lift
         if lift is not None:
             rows, values = lift
             lib.dem_lift_sums(len(rows), pointer(rows), pointer(values), pointer(self.y), self.dt,

@@ -15,9 +15,11 @@ import numpy as np
 from mpi4py import MPI
 
 from dolfinx_dem import _compat, meshes, scenes
-from dolfinx_dem.contact import HalfSpace
-from dolfinx_dem.discretisation import DEMDiscretisation, DirichletBC, PrescribedBody, Traction
+from dolfinx_dem.conditions import DirichletBC, PrescribedBody, Traction
+from dolfinx_dem.contact import HalfSpace, PairContact, RigidContact
+from dolfinx_dem.discretisation import DEMDiscretisation
 from dolfinx_dem.material import ElasticMaterial
+from dolfinx_dem.problem import DEMProblem
 from dolfinx_dem.errors import SceneError
 
 SERIES_COLUMNS = ("t", "kinetic", "elastic", "stabilisation", "external", "pseudo_energy")
@@ -98,8 +100,8 @@ def _boundary_facets(mesh, tags, names, boundary, key="dirichlet.boundary") -> n
     return facets
 
 
-def build(scene: Mapping, comm: MPI.Comm = MPI.COMM_WORLD) -> DEMDiscretisation:
-    """The DEM discretisation a scene describes."""
+def build(scene: Mapping, comm: MPI.Comm = MPI.COMM_WORLD) -> DEMProblem:
+    """The DEM problem a scene describes: its discretisation and contact models."""
     mesh, cell_tags, tags, names = create_mesh(comm, scene["mesh"])
     scene = scenes.validate(scene, mesh.topology.dim)
     material = scenes.materials(scene)
@@ -111,9 +113,10 @@ def build(scene: Mapping, comm: MPI.Comm = MPI.COMM_WORLD) -> DEMDiscretisation:
     for key in ("materials", "prescribed"):
         if key in scene and cell_tags is None:
             raise SceneError(f"scene key '{key}' selects cells by tag, and this mesh has no cell tags (use "
-                                    "a mesh of type 'discs' or a mesh file with cell tags)")
+                             "a mesh of type 'discs' or a mesh file with cell tags)")
     if isinstance(material, ElasticMaterial) and not prescribed:
         cell_tags = None
+
     def data(section, i, bc):
         value = bc.get("value", [0.0] * mesh.topology.dim)
         field = (lambda x, t, v=value, key=f"{section}[{i}].value": scenes.evaluate_field(v, x, t, key)) \
@@ -130,67 +133,55 @@ def build(scene: Mapping, comm: MPI.Comm = MPI.COMM_WORLD) -> DEMDiscretisation:
         body_force = [material.rho * g for g in loads["gravity"]]  # one material (scenes.materials)
     scheme = scene["method"].split("-")[1]
     dem = DEMDiscretisation(mesh, material, scheme, dirichlet, body_force, tractions, cell_tags, prescribed)
-    obstacles = [HalfSpace(ob["point"], ob["normal"],
-                           _boundary_facets(mesh, tags, names, ob["boundary"], f"obstacles[{k}].boundary"),
-                           ob.get("tolerance", 0.0)) for k, ob in enumerate(scene.get("obstacles", []))]
-    dem.set_obstacles(obstacles)
+    contacts = []
+    if scene.get("obstacles"):
+        contacts.append(RigidContact(dem, [
+            HalfSpace(ob["point"], ob["normal"], _boundary_facets(mesh, tags, names, ob["boundary"],
+                                                                  f"obstacles[{k}].boundary"), ob.get("tolerance", 0.0))
+            for k, ob in enumerate(scene["obstacles"])]))
     if "contact" in scene:
         c = scene["contact"]
         facets = np.unique(np.concatenate([_boundary_facets(mesh, tags, names, b, f"contact.boundary[{k}]")
                                            for k, b in enumerate(c["boundary"])]))
-        dem.set_contact_boundary(facets, c.get("self_contact", False), c.get("tolerance", 0.0), c.get("skin"))
-    return dem
+        contacts.append(PairContact(dem, facets, c.get("self_contact", False), c.get("skin"), c.get("tolerance", 0.0)))
+    return DEMProblem(dem, contacts)
 
 
 def reaction_columns(dem: DEMDiscretisation) -> tuple[str, ...]:
     """Series columns ``reaction_<i>_<x|y|z>`` of the Dirichlet conditions' reactions
     (``DEMDiscretisation.reactions``), i the condition's ``name`` or its index."""
     return tuple(f"reaction_{i if bc.name is None else bc.name}_{'xyz'[k]}"
-                 for i, bc in enumerate(dem.dirichlet_conditions) for k in range(dem.d))
+                 for i, bc in enumerate(dem.data.dirichlet_conditions) for k in range(dem.d))
 
 
 def prescribed_columns(dem: DEMDiscretisation) -> tuple[str, ...]:
-    """Series columns of the prescribed bodies (``DEMDiscretisation.prescribed_values``): for
-    each, named by its ``name`` or else its number after the Dirichlet conditions (whose
-    reactions come first), its reaction ``reaction_<name>_<x|y>`` (the force it exerts on the
-    other bodies) and its translation ``prescribed_<name>_displacement_<x|y>``: together a
+    """Series columns of the prescribed bodies (``DEMProblem.prescribed_values``): for each,
+    named by its ``name`` or else its number after the Dirichlet conditions (whose reactions
+    come first), its reaction ``reaction_<name>_<x|y>`` (the force it exerts on the other
+    bodies) and its translation ``prescribed_<name>_displacement_<x|y>``: together a
     force-indentation curve."""
-    first = len(dem.dirichlet_conditions)
+    first = len(dem.data.dirichlet_conditions)
     names = [first + i if body.name is None else body.name for i, body in enumerate(dem.prescribed)]
     xyz = "xyz"[: dem.d]
     return tuple(f"reaction_{n}_{c}" for n in names for c in xyz) + tuple(
         f"prescribed_{n}_displacement_{c}" for n in names for c in xyz)
 
 
-def prescribed_values(dem: DEMDiscretisation, u, t: float, force=None) -> np.ndarray:
+def prescribed_values(problem: DEMProblem, u, t: float, force=None) -> np.ndarray:
     """The values of ``prescribed_columns`` (collective; ``force`` as in
-    ``DEMDiscretisation.prescribed_values``)."""
-    if not dem.prescribed:
+    ``DEMProblem.prescribed_values``)."""
+    if not problem.dem.prescribed:
         return np.empty(0)
-    values = dem.prescribed_values(u, t, force)
+    values = problem.prescribed_values(u, t, force)
     return np.concatenate([values[:, 0].ravel(), values[:, 1].ravel()])
 
 
-def contact_columns(dem: DEMDiscretisation) -> tuple[str, ...]:
-    """Series columns of contact.
-
-    With obstacles: the smallest gap, ``contact_pressure`` (the obstacles' total normal force
-    over the area of the facets in contact, exactly 0 with every gap open), in 1D the position
-    of the contact end, and the force of each obstacle k on the body,
-    ``contact_force_obstacle<k>_<x|y|z>`` (``RigidContact.force_sums``). With contact between
-    bodies: the summed normal contact force, the largest interpenetration of the contact
-    reconstructions, the force of body j on body i for each pair i < j of bodies with candidate
-    facets, ``contact_force_<i>_<j>_<x|y|z>`` (``PairContact.pair_forces``; the bodies numbered
-    as ``geometry.compute_bodies``, from 0), and the total linear momentum."""
-    xyz = "xyz"[: dem.d]
-    columns = ()
-    if dem.contact is not None:
-        columns += ("contact_gap", "contact_pressure") + (("tip_position",) if dem.d == 1 else ())
-        columns += tuple(f"contact_force_obstacle{k}_{c}" for k in range(dem.contact.num_obstacles) for c in xyz)
-    if dem.pair_contact is not None:
-        columns += ("contact_force", "penetration")
-        columns += tuple(f"contact_force_{i}_{j}_{c}" for i, j in dem.pair_contact.body_pairs for c in xyz)
-        columns += tuple(f"momentum_{c}" for c in xyz)
+def contact_columns(problem: DEMProblem) -> tuple[str, ...]:
+    """Series columns of contact: each contact model's ``output_columns`` (contact/), then, if a
+    model tracks it (contact between bodies), the total linear momentum ``momentum_<x|y|z>``."""
+    columns = tuple(name for c in problem.contacts for name in c.output_columns())
+    if any(c.tracks_momentum for c in problem.contacts):
+        columns += tuple(f"momentum_{c}" for c in "xyz"[: problem.d])
     return columns
 
 
@@ -202,42 +193,44 @@ def sum_over_processes(comm: MPI.Comm, a: np.ndarray) -> np.ndarray:
     return out
 
 
-def contact_values(dem: DEMDiscretisation, u, patches: list[np.ndarray] | None = None) -> list[float]:
+def contact_values(problem: DEMProblem, u, patches: list[np.ndarray] | None = None) -> list[float]:
     """The values of ``contact_columns`` but the momenta, for the displacement ``u``
-    (collective: the contact forces of all models are summed by one reduction); ``patches``: the
-    patch values of u of ``dem.contacts`` if the caller has them (``MEMM.contact_patch_values``)."""
-    rigid, pair = dem.contact, dem.pair_contact
+    (collective: the output sums of all models are reduced by one Allreduce); ``patches``: the
+    patch values of u of ``problem.contacts`` if the caller has them (``MEMM.contact_patch_values``)."""
+    contacts = problem.contacts
+    if not contacts:
+        return []
     if patches is None:
-        patches = [c.patch_values(u) for c in dem.contacts]
-    up = {id(c): values for c, values in zip(dem.contacts, patches)}
-    up_rigid, up_pair = up.get(id(rigid)), up.get(id(pair))
-    local = [rigid.force_sums(up_rigid)] if rigid is not None else []
-    if pair is not None:
-        local += [pair.pair_forces(up_pair).ravel(), [pair.contact_force_part(up_pair), pair.closed_count(up_pair)]]
-    sums = sum_over_processes(dem.comm, np.concatenate(local)) if local else None
-    values = []
-    if rigid is not None:
-        n = rigid.num_obstacles * dem.d
-        forces, normal, area = sums[:n], sums[n], sums[n + 1]
-        sums = sums[n + 2:]
-        gap, x = rigid.contact_gap(up_rigid)
-        values += [gap, normal / area if area > 0 else 0.0] + ([x] if dem.d == 1 else []) + list(forces)
-    if pair is not None:
-        # the penetration's scatter and reduction only where some process has a closed pair
-        values += [sums[-2], pair.penetration(up_pair) if sums[-1] > 0 else 0.0, *sums[:-2]]
+        patches = [c.patch_values(u) for c in contacts]
+    local = [c.output_sums(up) for c, up in zip(contacts, patches)]
+    sums = sum_over_processes(problem.comm, np.concatenate(local))
+    values, k = [], 0
+    for c, up, part in zip(contacts, patches, local):
+        values += c.output_values(up, sums[k : k + len(part)])
+        k += len(part)
     return values
+
+
+def prescribed_cells(dem: DEMDiscretisation) -> np.ndarray | None:
+    """Whether each owned cell belongs to a prescribed body, (n_owned,) booleans; None without
+    (the pictures draw them apart)."""
+    if not dem.prescribed:
+        return None
+    return np.isin(dem.geometry.cell_bodies[: dem.n_owned], dem.prescribed.body_numbers)
 
 
 class Probes:
     """Displacement components at points: the P1 reconstruction (eq. (10)) of the cell whose
-    barycentre is nearest to the point (ties broken by position, so any process count agrees)."""
+    barycentre is nearest to the point (ties broken by position, so any process count agrees),
+    with the contact-aware cell gradients of the problem."""
 
-    def __init__(self, dem: DEMDiscretisation, specs):
-        self.dem = dem
+    def __init__(self, problem: DEMProblem, specs):
+        self.problem = problem
+        dem = problem.dem
         self.names = [p["name"] for p in specs]
         if len(set(self.names)) != len(self.names):
             raise SceneError(f"probe names must be unique: {self.names}")
-        columns = SERIES_COLUMNS + reaction_columns(dem) + prescribed_columns(dem) + contact_columns(dem)
+        columns = SERIES_COLUMNS + reaction_columns(dem) + prescribed_columns(dem) + contact_columns(problem)
         clash = [name for name in self.names if name in columns]
         if clash:
             raise SceneError(f"probe names {clash} are series columns of this scene; the columns: {columns}")
@@ -275,12 +268,12 @@ class Probes:
         out = np.zeros(len(self.names))
         if len(self.names) == 0:
             return out
-        G = self.dem.gradient(u, t)  # collective
+        G = self.problem.gradient(u, t)  # collective
         if len(self.mine):
-            uc = u.array_r.reshape(-1, self.dem.d)[self.blocks]
+            uc = u.array_r.reshape(-1, self.problem.d)[self.blocks]
             rec = uc + np.einsum("nij,nj->ni", G[self.blocks], self.offsets)
             out[self.mine] = rec[np.arange(len(self.mine)), self.components]
-        return sum_over_processes(self.dem.comm, out)
+        return sum_over_processes(self.problem.comm, out)
 
 
 def initial_state(dem: DEMDiscretisation, scene: Mapping):

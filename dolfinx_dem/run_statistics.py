@@ -12,8 +12,9 @@ from collections.abc import Mapping
 import numpy as np
 from mpi4py import MPI
 
-from dolfinx_dem.discretisation import DEMDiscretisation
+from dolfinx_dem.contact import PairContact
 from dolfinx_dem.memm import MEMM
+from dolfinx_dem.problem import DEMProblem
 from dolfinx_dem.errors import UnresolvedContactError
 
 
@@ -49,27 +50,28 @@ class PairContactStatistics:
     and in the contact outputs computed at every step (``output_seconds``: the series' contact
     columns, the penetration and first-contact statistics)."""
 
-    def __init__(self, dem: DEMDiscretisation, stepper: MEMM, momentum: np.ndarray, max_penetration: float):
+    def __init__(self, problem: DEMProblem, stepper: MEMM, momentum: np.ndarray, max_penetration: float):
         """``momentum``: the total momentum of the initial state (``memm.Diagnostics``);
         ``max_penetration``: the largest interpenetration a run accepts, in candidate facets'
         mean sizes (``contact.max_penetration``)."""
+        dem = problem.dem
+        self.contact = problem.find(PairContact)
         self.first_contact, self.penetration = None, 0.0
         self.max_penetration = max_penetration
         # floats: on a 3-vector, numpy's operations cost more than a loop, at every step
-        self.p0 = momentum.tolist() if dem.pair_contact is not None else None
+        self.p0 = momentum.tolist() if self.contact is not None else None
         m = dem.mass.array_r.reshape(-1, dem.d)
         v = 0.5 * (stepper.v_prev.array_r + stepper.v_next.array_r).reshape(-1, dem.d)
         self.p_scale = dem.comm.allreduce(float(np.abs(m * v).sum()), op=MPI.SUM)
         self.momentum_change = 0.0
         # momentum is conserved without Dirichlet conditions and prescribed bodies (their impulse)
         self.free = dem.comm.allreduce(len(dem.reconstruction.dirichlet_facets), op=MPI.SUM) == 0 and not dem.prescribed
-        self.dem = dem
         self.previous = None  # the displacement of the previous step, until the first contact
         self.output_seconds = 0.0  # processor time of the per-step contact outputs (this process)
 
     def record(self, t: float, stepper: MEMM, penetration: float, momentum: np.ndarray):
         """Update with the state at ``t``: its ``penetration`` and ``momentum`` (series columns)."""
-        contact = self.dem.pair_contact
+        contact = self.contact
         if self.first_contact is None:
             if self.previous is not None:
                 tau = contact.touch_time(self.previous, stepper.u, stepper.dt)
@@ -103,12 +105,12 @@ class PairContactStatistics:
         self.momentum_change, self.p_scale = state["momentum_change"], state["p_scale"]
         self.output_seconds = state["output_seconds"]
         self.p0 = state["p0"]
-        if self.dem.pair_contact is not None and self.first_contact is None:
+        if self.contact is not None and self.first_contact is None:
             self.previous = stepper.u.copy()
 
     def summary(self, stepping_seconds: float) -> dict:
-        c = self.dem.pair_contact
-        comm = self.dem.comm
+        c = self.contact
+        comm = c.comm
         out = {
             "contact_candidate_facets": c.num_facets,
             "contact_pairs_listed": c.num_pairs,

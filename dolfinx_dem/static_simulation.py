@@ -35,6 +35,7 @@ import numpy as np
 from mpi4py import MPI
 
 from dolfinx_dem import hertz, io, model, plotting, scenes
+from dolfinx_dem.contact import PairContact, RigidContact
 from dolfinx_dem.run_statistics import peak_rss_mb
 from dolfinx_dem.statics import minimise_energy
 from dolfinx_dem.errors import SceneError
@@ -81,12 +82,14 @@ class StaticRun:
             self.fem = _fem_problem(scene)
             self.dem = None
             return
-        self.dem = dem = model.build(scene, comm)
-        if dem.pair_contact is not None and dem.d != 2:
+        self.problem = problem = model.build(scene, comm)
+        self.dem = dem = problem.dem
+        self.pairs, self.obstacles = problem.find(PairContact), problem.find(RigidContact)
+        if self.pairs is not None and dem.d != 2:
             raise SceneError("a static scene with contact between bodies ('contact' table) is implemented "
                                     "in 2D, not 3D")
-        self.top = model.Probes(dem, [{"name": "top", "point": _top_point(dem), "component": dem.d - 1}])
-        self.probes = model.Probes(dem, scene.get("probes", []))
+        self.top = model.Probes(problem, [{"name": "top", "point": _top_point(dem), "component": dem.d - 1}])
+        self.probes = model.Probes(problem, scene.get("probes", []))
         self.setup_seconds = comm.allreduce(time.perf_counter() - self.wall, op=MPI.MAX)
 
     def run(self, output: io.OutputDirectory) -> dict:
@@ -100,26 +103,26 @@ class StaticRun:
 
     def _run_dem(self, directory) -> dict:
         """DEM energy minimisation (statics.minimise_energy)."""
-        scene, comm, dem = self.scene, self.comm, self.dem
+        scene, comm, dem, problem = self.scene, self.comm, self.dem, self.problem
         options = scene["statics"]
         t = options.get("time", 0.0)
-        result = minimise_energy(dem, options.get("fixed_mean", ()), options.get("fixed_rotation", False),
+        result = minimise_energy(problem, options.get("fixed_mean", ()), options.get("fixed_rotation", False),
                                  options.get("rtol", 1e-12), gradient_rtol=options.get("gradient_rtol", 1e-10), t=t)
         u = result.u
         probes = self.probes
-        energies = dem.energies(u, t)
+        energies = problem.energies(u, t)
         reactions = dem.reactions(u, t)
-        prescribed = model.prescribed_values(dem, u, t, result.force)  # kinks' multipliers included
+        prescribed = model.prescribed_values(problem, u, t, result.force)  # kinks' multipliers included
         columns = (model.SERIES_COLUMNS + model.reaction_columns(dem) + model.prescribed_columns(dem)
-                   + model.contact_columns(dem) + tuple(probes.names))
-        momenta = [0.0] * dem.d if dem.pair_contact is not None else []  # at rest
+                   + model.contact_columns(problem) + tuple(probes.names))
+        momenta = [0.0] * dem.d if any(c.tracks_momentum for c in problem.contacts) else []  # at rest
         with io.SeriesWriter(comm, directory / "series.csv", columns) as series:
             series.write([t, 0.0, energies["elastic"], energies["stabilisation"], energies["external"],
-                          energies["potential"], *reactions.ravel(), *prescribed, *model.contact_values(dem, u),
+                          energies["potential"], *reactions.ravel(), *prescribed, *model.contact_values(problem, u),
                           *momenta, *probes.values(u, t)])
         with io.SolutionWriter(comm, directory, dem.mesh) as solution:
             solution.write(t, {"displacement": dem.function(u, "displacement"),
-                               "von_mises": dem.scalar_function(dem.von_mises(u, t), "von_mises")})
+                               "von_mises": dem.scalar_function(problem.von_mises(u, t), "von_mises")})
         summary = {
             "scene": scene["name"],
             "method": scene["method"],
@@ -138,19 +141,19 @@ class StaticRun:
         if reactions.size or prescribed.size:  # the force each Dirichlet condition and prescribed body exerts
             names = model.reaction_columns(dem) + model.prescribed_columns(dem)[: prescribed.size // 2]
             summary["reactions"] = dict(zip(names, reactions.ravel().tolist() + prescribed[: prescribed.size // 2].tolist()))
-        if dem.pair_contact is not None:
-            summary.update(_pair_summary(dem, u, result))
+        if self.pairs is not None:
+            summary.update(_pair_summary(self.pairs, u, result))
         obstacles = [(ob["point"], ob["normal"]) for ob in scene.get("obstacles", [])]
-        if dem.contact is not None:
+        if self.obstacles is not None:
             axis = obstacles[0] if dem.d == 3 and len(obstacles) == 1 else None
-            summary.update(_contact_summary(dem, u, result, directory / "contact_pressure.csv", axis))
+            summary.update(_contact_summary(self.obstacles, u, result, directory / "contact_pressure.csv", axis))
         if dem.d == 1:
-            plotting.plot_bar(dem.mesh, u.array_r.reshape(-1, 1), dem.stress(u, t)[:, 0, 0], directory / "final.png",
+            plotting.plot_bar(dem.mesh, u.array_r.reshape(-1, 1), problem.stress(u, t)[:, 0, 0], directory / "final.png",
                               0.0, obstacles)
         else:
-            plotting.plot_cell_field(dem.mesh, u.array_r.reshape(-1, dem.d), dem.von_mises(u, t),
+            plotting.plot_cell_field(dem.mesh, u.array_r.reshape(-1, dem.d), problem.von_mises(u, t),
                                      directory / "final.png", "von Mises stress (Pa)",
-                                     scene.get("output", {}).get("picture_scale", 1.0), obstacles, dem.prescribed_cells)
+                                     scene.get("output", {}).get("picture_scale", 1.0), obstacles, model.prescribed_cells(dem))
         return summary
 
     def _run_fem(self, directory) -> dict:
@@ -220,13 +223,13 @@ def _fem_problem(scene: Mapping) -> dict:
     return {"R": R, "body_force": f, "dim": dim, "refine": refine}
 
 
-def _contact_summary(dem, u, result, path: pathlib.Path, axis=None) -> dict:
+def _contact_summary(c: RigidContact, u, result, path: pathlib.Path, axis=None) -> dict:
     """The contact figures of a static DEM solution and the file of facet pressures. The own
     facets' pressures are gathered on rank 0 for the file and the half-width fits: output of a
     static contact zone, not a step of the computation. In 3D with ``axis = (point, normal)``
     (the one obstacle's) the contact radius is the moment measure about that axis
     (``hertz.contact_radius_moments``)."""
-    c, comm, geom = dem.contact, dem.comm, dem.geometry
+    dem, comm, geom = c.dem, c.comm, c.dem.geometry
     own = c.facets[: c.num_own]
     areas = geom.facet_areas[own]
     pressure = c.reactions(u) / areas
@@ -263,13 +266,13 @@ def _contact_summary(dem, u, result, path: pathlib.Path, axis=None) -> dict:
     return summary
 
 
-def _pair_summary(dem, u, result) -> dict:
+def _pair_summary(pc: PairContact, u, result) -> dict:
     """The contact figures of a static solution with contact between bodies: the force body j
     exerts on body i for each pair of bodies i < j with candidate facets (the pairs in contact
     and the multipliers of the pairs held on a contact switch, ``kink_pairs``), and the number of
     pairs in contact. The series' ``contact_force_<i>_<j>_*`` columns are the dynamics' outputs,
     which count a pinned pair by the sign its gap rounds to: the summary's are the ones to use."""
-    pc, comm = dem.pair_contact, dem.comm
+    comm = pc.comm
     forces = pc.pair_forces(pc.patch_values(u), result.contact_pairs) + pc.kink_forces(result.pinned, result.kink_forces)
     forces = comm.allreduce(forces, op=MPI.SUM)
     return {"contact_forces": {f"{i}_{j}": forces[k].tolist() for k, (i, j) in enumerate(pc.body_pairs)},

@@ -86,7 +86,9 @@ from collections.abc import Sequence
 import numpy as np
 from mpi4py import MPI
 from petsc4py import PETSc
+from dolfinx_dem.contact import PairContact, RigidContact
 from dolfinx_dem.errors import InputError, StaticsError
+from dolfinx_dem.problem import DEMProblem
 
 
 @dataclasses.dataclass(frozen=True)
@@ -144,7 +146,7 @@ def _constraints(dem, components, rotation) -> _Constraints:
     body = geom.cell_bodies[: dem.n_owned]
     held = np.zeros(geom.num_bodies, dtype=np.int64)
     held[geom.cell_bodies[geom.facet_cells[dem.reconstruction.dirichlet_facets, 0]]] = 1
-    held[dem.prescribed_body_numbers] = 1
+    held[dem.prescribed.body_numbers] = 1
     comm = dem.comm
     comm.Allreduce(MPI.IN_PLACE, held, op=MPI.MAX)
     normals = []
@@ -165,13 +167,13 @@ def _constraints(dem, components, rotation) -> _Constraints:
         for v in normals[:k]:
             w.axpy(-w.dot(v), v)
         w.scale(1.0 / w.norm())
-    return _Constraints(normals, dem.prescribed_dofs, bool(dem.prescribed))
+    return _Constraints(normals, dem.prescribed.dofs, bool(dem.prescribed))
 
 
-def _hessian(dem, active):
-    """K plus the contact correction for the own facets' active set, as a new PETSc matrix."""
+def _hessian(dem, c, active):
+    """K plus the correction of the rigid contact ``c`` for the own facets' active set, as a new
+    PETSc matrix."""
     H = dem.K.copy()
-    c = dem.contact
     if c is None or not dem.comm.allreduce(bool(active.any()), op=MPI.LOR):
         return H
     H.setOption(PETSc.Mat.Option.NEW_NONZERO_ALLOCATION_ERR, False)
@@ -270,10 +272,10 @@ class _Linear:
         self.ksp.destroy()
 
 
-def _gap_gradient(dem, facet: tuple[int, int], directions) -> PETSc.Vec:
+def _gap_gradient(c, facet: tuple[int, int], directions) -> PETSc.Vec:
     """P grad g_f for the candidate ``facet`` = (owner rank, own index): the gradient of its gap
     projected onto the subspace of the linear constraints (collective)."""
-    vec = dem.contact.gap_gradient(*facet)
+    vec = c.gap_gradient(*facet)
     _project(vec, directions)
     return vec
 
@@ -284,7 +286,7 @@ def _global(comm, mask: np.ndarray) -> list[tuple[int, int]]:
 
 
 def minimise_energy(
-    dem,
+    problem: DEMProblem,
     fixed_mean: Sequence[int] = (),
     fixed_rotation: bool = False,
     rtol: float = 1e-12,
@@ -297,7 +299,7 @@ def minimise_energy(
 
     Parameters
     ----------
-    dem : DEMDiscretisation, with obstacles or contact between bodies (not both) if any.
+    problem : a DEMProblem, with rigid obstacles or contact between bodies (not both) if any.
     fixed_mean : displacement components whose mass-weighted mean is held at zero (e.g. (0,) for
         the horizontal translation of a body on a frictionless horizontal plane).
     fixed_rotation : hold the mass-weighted mean rotation at zero (2D): a disc on a frictionless
@@ -312,39 +314,39 @@ def minimise_energy(
     t : the load time (s): the Dirichlet and traction values of time t (those declared time
         dependent), and the prescribed bodies held at their translation U(t).
     """
-    d = dem.d
+    dem, d = problem.dem, problem.d
+    c, pc = problem.find(RigidContact), problem.find(PairContact)
     if any(not (0 <= i < d) for i in fixed_mean):
         raise InputError(f"fixed_mean components must be in [0, {d}), got {list(fixed_mean)}")
     if not 0 < rtol < 1:
         raise InputError(f"rtol must lie in (0, 1), got {rtol}")
     if not np.isfinite(t):
         raise InputError(f"the load time t must be finite, got {t}")
-    if dem.pair_contact is not None and d != 2:
+    if pc is not None and d != 2:
         # In 3D the overlaps are quadratic in u on a piece: the Hessian below assumes them affine.
         raise InputError("statics with contact between bodies is implemented in 2D, not 3D")
-    if dem.pair_contact is not None and dem.contact is not None:
+    if pc is not None and c is not None:
         raise InputError("minimise_energy takes rigid obstacles or contact between bodies, not both")
     if not 0 < gradient_rtol < 1:
         raise InputError(f"gradient_rtol must lie in (0, 1), got {gradient_rtol}")
     comm = dem.comm
-    if comm.allreduce(len(dem.reconstruction.dirichlet_facets), op=MPI.SUM) == 0 and not dem.contacts:
+    if comm.allreduce(len(dem.reconstruction.dirichlet_facets), op=MPI.SUM) == 0 and not problem.contacts:
         raise StaticsError("the body is free: with neither a Dirichlet condition nor an obstacle its "
                            "rigid motions are unconstrained (unconstrained rigid mode)")
     start = time.perf_counter()
-    c = dem.contact
     directions = _constraints(dem, fixed_mean, fixed_rotation)
     same = lambda x, y: comm.allreduce(bool(np.array_equal(x, y)), op=MPI.LAND)  # noqa: E731
 
     # u starts at 0, the prescribed bodies at U(t)
     rhs, u, force = dem.create_vector(), dem.create_vector(), dem.create_vector()
-    dem.hold(u, t)
-    if dem.pair_contact is not None:
-        dem.pair_contact.prepare(u)
-    dem.force(u, t, force)
+    dem.prescribed.hold(u, t)
+    if pc is not None:
+        pc.prepare(u)
+    problem.force(u, t, force)
     _project(force, directions)
     norm0 = force.norm()
-    if dem.pair_contact is not None:
-        return _minimise_pairs(dem, u, t, directions, norm0, _Linear(dem, rtol), gradient_rtol, curvature,
+    if pc is not None:
+        return _minimise_pairs(problem, u, t, directions, norm0, _Linear(dem, rtol), gradient_rtol, curvature,
                                max_iterations, start)
 
     pinned = np.zeros(0, dtype=bool)
@@ -361,7 +363,7 @@ def minimise_energy(
     multipliers, facets = np.zeros(0), []
 
     def potential(vec):
-        return dem.energies(vec, t)["potential"]
+        return problem.energies(vec, t)["potential"]
 
     def pinned_values(values: np.ndarray) -> np.ndarray:
         """Per-facet values of the own facets -> the pinned facets' values, in ``facets`` order."""
@@ -371,8 +373,8 @@ def minimise_energy(
         # Newton step of the quadratic piece A at u: H_A d = F_A(u), with the pinned facets (if
         # any) held on the obstacle, g_C(u + d) = 0, by Lagrange multipliers mu:
         # d = z_0 - Z mu, H_A z_0 = F_A, H_A Z = P grad g_C, (grad g_C . Z) mu = g_C(u) + grad g_C . z_0.
-        H = _hessian(dem, active) if c is not None else dem.K
-        dem.force(u, t, rhs, contact=False)
+        H = _hessian(dem, c, active) if c is not None else dem.K
+        dem.force(u, t, rhs)
         if c is not None:
             c.add_force(u, rhs, active)
         _project(rhs, directions)
@@ -383,7 +385,7 @@ def minimise_energy(
             break
         facets = _global(comm, pinned)
         if facets:
-            gradients = [_gap_gradient(dem, f, directions) for f in facets]
+            gradients = [_gap_gradient(c, f, directions) for f in facets]
             Z = [dem.create_vector() for _ in facets]
             for b, z in zip(gradients, Z):
                 linear.solve(b, z, iteration)
@@ -448,7 +450,7 @@ def minimise_energy(
 
     # Gradient of the Lagrangian at the end: grad V of the active piece minus the pinned facets'
     # multiplier forces (= grad V itself when no facet is pinned).
-    dem.force(u, t, force, contact=False)
+    dem.force(u, t, force)
     if c is not None:
         c.add_force(u, force, active)
     kink_forces = np.zeros(c.num_own) if c is not None else np.zeros(0)
@@ -465,7 +467,7 @@ def minimise_energy(
         linear_iterations=linear.iterations,
         gradient_norm_initial=norm0,
         gradient_norm=gradient.norm(),
-        energy=dem.energies(u, t)["potential"],
+        energy=problem.energies(u, t)["potential"],
         contact_facets=comm.allreduce(int((active | pinned).sum()), op=MPI.SUM) if c is not None else 0,
         wall_time_s=time.perf_counter() - start,
         pinned=pinned.copy() if c is not None else np.zeros(0, dtype=bool),
@@ -474,12 +476,12 @@ def minimise_energy(
     )
 
 
-def _minimise_pairs(dem, u, t: float, directions, norm0: float, linear: _Linear, gradient_rtol: float,
+def _minimise_pairs(problem: DEMProblem, u, t: float, directions, norm0: float, linear: _Linear, gradient_rtol: float,
                     curvature: bool, max_iterations: int, start: float) -> StaticResult:
     """Damped Newton on the pieces of the potential with contact between bodies from ``u`` (the
     start, updated in place) at the load time t, pairs keyed by ``PairContact.pair_keys``, kinks
     held by multipliers (module docstring, "Contact between bodies")."""
-    comm, pc = dem.comm, dem.pair_contact
+    dem, comm, pc = problem.dem, problem.comm, problem.find(PairContact)
     rhs, step, trial = (dem.create_vector() for _ in range(3))
     up = pc.prepare(u)[0]
     # Start from the overlapping pairs of smallest gap (as for obstacles): the piece that holds
@@ -494,12 +496,12 @@ def _minimise_pairs(dem, u, t: float, directions, norm0: float, linear: _Linear,
 
     def potential(vec) -> float:
         pc.prepare(vec)  # a trial point may move facets by more than skin/2: rebuild the list
-        return dem.energies(vec, t)["potential"]
+        return problem.energies(vec, t)["potential"]
 
     def lagrangian_force(vec, out, project: bool = True) -> None:
         """out = -grad V_A(vec) - sum_C mu_p grad g_p, projected unless not ``project`` (-grad V
         without pinned pairs)."""
-        dem.force(vec, t, out, contact=False)
+        dem.force(vec, t, out)
         pc.add_force(vec, out, active)
         for key, m in zip(pinned, multipliers):
             out.axpy(-m, pc.gap_gradient(pc.patch_values(vec), key))
@@ -598,7 +600,7 @@ def _minimise_pairs(dem, u, t: float, directions, norm0: float, linear: _Linear,
         linear_iterations=linear.iterations,
         gradient_norm_initial=norm0,
         gradient_norm=norm,
-        energy=dem.energies(u, t)["potential"],
+        energy=problem.energies(u, t)["potential"],
         contact_facets=len(active) + len(pinned),
         wall_time_s=time.perf_counter() - start,
         pinned=pinned,

@@ -28,15 +28,15 @@ from __future__ import annotations
 
 import dataclasses
 from collections.abc import Mapping, Sequence
-from typing import Protocol, runtime_checkable
 
 import numpy as np
 import scipy.sparse
 from mpi4py import MPI
 from petsc4py import PETSc
 
-from dolfinx_dem.halo import owned_facet_marks
-from dolfinx_dem.patch import PatchScatter, negative_part_integral, piecewise_midpoints, scatter_sum
+from dolfinx_dem.conditions import facet_indices
+from dolfinx_dem.contact import candidates
+from dolfinx_dem.contact.patch import PatchScatter, negative_part_integral, piecewise_midpoints, scatter_sum
 from dolfinx_dem.errors import InputError
 
 
@@ -50,76 +50,18 @@ def _compact(A: scipy.sparse.spmatrix):
     return A.toarray() if A.shape[0] * A.shape[1] <= _DENSE_ENTRIES else A.tocsr()
 
 
-@runtime_checkable
-class ContactModel(Protocol):
-    """The interface of a contact model (``RigidContact``, ``pair_contact.PairContact``) that
-    ``DEMDiscretisation``, ``MEMM``, ``statics`` and the checkpoints use; nothing else of a model
-    is called from outside but its outputs (the series columns and summary figures of a run).
-    Methods that take PETSc vectors are collective; ``up`` are this process's patch values
-    (``patch_values``: its candidate facets' stencils and rows, gathered by a VecScatter),
-    valid until the next ``prepare``, which returns those of the state it prepares for. Each
-    process owns the candidate facets of its owned cells (the first ``num_own`` of ``cells``).
-
-    Two groups: the dynamics (``prepare`` ... ``force_integral``) and the checkpoint
-    (``checkpoint_state``, ``restore_state``). Statics (statics.py) also uses each model's own
-    active-set interface, which differs with the shape of its potential: ``RigidContact``'s
-    (``own_gaps`` ... ``gap_gradient_dot``, active sets of own facets; piecewise quadratic) and
-    ``PairContact``'s (``touching_pairs``, ``add_hessian``, active sets of pair keys; quartic on
-    each piece). ``active`` in ``force_correction`` and ``add_force`` is in the model's own form."""
-
-    cells: np.ndarray  # local cells of the candidate facets (own first), (n_facets,)
-    num_own: int  # candidate facets of owned cells
-    scatter: PatchScatter  # of the patch dofs (``PairContact``'s list rounds make new ones)
-
-    def prepare(self, u: PETSc.Vec, v: PETSc.Vec | None = None, dt: float = 0.0,
-                up: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray | None]:
-        """Make the model valid for the states u + tau v, 0 <= tau <= dt (MEMM: every step);
-        returns the patch values of u and of v (None without v). ``up``: the patch values of u
-        if the caller has them (gathered by the current ``scatter``), else they are gathered."""
-
-    def patch_values(self, vec: PETSc.Vec) -> np.ndarray:
-        """The values of ``vec`` at this process's patch dofs."""
-
-    def force_correction(self, up: np.ndarray, active: np.ndarray | None = None) -> np.ndarray:
-        """This process's part of F - F_free at the patch dofs (the exact negative gradient of
-        ``energy_correction``, summed over processes by ``add``); ``active`` imposes the
-        piece of the potential (statics: the candidates in contact), default: those with g < 0."""
-
-    def add(self, correction: np.ndarray, out: PETSc.Vec, scale: float = 1.0) -> None:
-        """out += scale * correction (patch values; a reverse scatter)."""
-
-    def add_force(self, u: PETSc.Vec, out: PETSc.Vec, active: np.ndarray | None = None) -> None:
-        """out += F - F_free at u; ``active`` as in ``force_correction``."""
-
-    def energy_correction(self, up: np.ndarray) -> tuple[float, float]:
-        """This process's part of the (elastic, stabilisation) energy changes (sum over processes)."""
-
-    def gradient_correction(self, up: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """(local cells, change of their gradients (n, d, d)) for the touching facets."""
-
-    def force_integral(self, up: np.ndarray, vp: np.ndarray, dt: float, out: PETSc.Vec) -> int:
-        """out += int_0^dt (F - F_free)(u + tau v) dtau, exactly, for the patch values up, vp
-        of u and v that ``prepare`` returned; returns the evaluations."""
-
-    def checkpoint_state(self) -> dict[str, np.ndarray]:
-        """The model's state that is not a function of u (e.g. the pair list) and its counters,
-        this process's arrays (``checkpoint.py``: read back by the same partition only)."""
-
-    def restore_state(self, state: Mapping[str, np.ndarray] | None) -> None:
-        """Restore ``checkpoint_state`` of the same partition; None (another partition): set the
-        state up again from the restored displacements at the next ``prepare``."""
-
-
 @dataclasses.dataclass(frozen=True)
 class HalfSpace:
     """Rigid obstacle {x : (x - point) . normal < 0}; ``normal`` points from the obstacle into the
-    free space. ``facets`` are the process-local candidate facets of the body (e.g. from a
-    MeshTags); ``tolerance`` (m, >= 0) is how far a body vertex may lie inside at t = 0."""
+    free space. ``facets`` are the candidate facets of the body: process-local facet indices or
+    a DOLFINx MeshTags (with ``tag``, its facets of that value; conditions.facet_indices);
+    ``tolerance`` (m, >= 0) is how far a body vertex may lie inside at t = 0."""
 
     point: Sequence[float]
     normal: Sequence[float]
     facets: np.ndarray
     tolerance: float = 0.0
+    tag: int | None = None
 
 
 class RigidContact:
@@ -131,9 +73,14 @@ class RigidContact:
     (coefficient times r_f), and adds them into the distributed force by a reverse scatter.
     """
 
+    tracks_momentum = False
+
     def __init__(self, dem, obstacles: Sequence[HalfSpace]):
         geom, rec, d = dem.geometry, dem.reconstruction, dem.d
         self.dem, self.comm, self.d = dem, dem.comm, d
+        obstacles = tuple(obstacles)
+        if not obstacles:
+            raise InputError("RigidContact needs at least one obstacle (HalfSpace)")
         normals, points = [], []
         for k, ob in enumerate(obstacles):
             n = np.asarray(ob.normal, dtype=float)
@@ -153,33 +100,16 @@ class RigidContact:
                                  f"{deepest:.3e} m inside it (tolerance {ob.tolerance:g} m)")
 
         # Candidate facets: the marked facets of the cells in halo layers 0 and 1.
-        facets = [np.asarray(ob.facets, dtype=np.int32) for ob in obstacles]
-        owned_marks = owned_facet_marks(dem.mesh, np.concatenate(facets),
-                                        np.repeat(np.arange(len(facets)), [len(f) for f in facets]),
-                                        "obstacles (a facet is a contact candidate of two obstacles)")
-        marks = dem.halo_exchange(owned_marks)
-        cell, j = np.nonzero((marks >= 0) & (geom.cell_layer <= 1)[:, None])
-        f = geom.cell_facets[cell, j]
-        owned = cell < dem.n_owned
-        counts = self.comm.allreduce(np.bincount(marks[cell[owned], j[owned]], minlength=len(obstacles)), op=MPI.SUM)
+        facets = [facet_indices(ob.facets, ob.tag, f"obstacle {k}", d) for k, ob in enumerate(obstacles)]
+        found = candidates.select(dem, np.concatenate(facets), np.repeat(np.arange(len(facets)), [len(f) for f in facets]),
+                                  "obstacles (a facet is a contact candidate of two obstacles)")
+        cell, j, f, owned, mark = found.cell, found.j, found.facet, found.owned, found.mark
+        counts = self.comm.allreduce(np.bincount(mark[owned], minlength=len(obstacles)), op=MPI.SUM)
         for k in np.flatnonzero(counts == 0)[:1]:
             raise InputError(f"obstacle {k}: its contact candidate boundary has no facet")
-        interior = geom.facet_cells[f[owned], 1] >= 0
-        bad = self.comm.allgather([(int(marks[cell[owned], j[owned]][interior][0]),
-                                    geom.facet_centres[f[owned][interior][0]].tolist())] if interior.any() else [])
-        bad = [b for part in bad for b in part]
-        if bad:
-            raise InputError(f"obstacle {bad[0][0]}: contact candidates must be boundary facets; the facet at "
-                             f"{bad[0][1]} is interior")
-        dirichlet = self.comm.allreduce(bool(np.isin(f[owned], rec.dirichlet_facets).any()), op=MPI.LOR)
-        if dirichlet:
-            raise InputError("obstacle contact candidate facets must not carry a Dirichlet condition")
-        if self.comm.allreduce(bool(np.isin(f[owned], rec.traction_facets).any()), op=MPI.LOR):
-            raise InputError("obstacle contact candidate facets must not carry a traction")
-        if dem._time_dependent:
-            raise InputError("contact with time-dependent Dirichlet conditions or tractions is not supported")
+        candidates.check(dem, found, "obstacles")
         order = np.lexsort((f, ~owned))  # own facets first
-        self.facets, self.cells, obstacle = f[order], cell[order], marks[cell, j][order]
+        self.facets, self.cells, obstacle = f[order], cell[order], mark[order]
         self.num_obstacles, self._obstacle = len(obstacles), obstacle
         self._facet_j = j[order]  # local index of each candidate in its cell
         self.num_own = int(owned.sum())
@@ -207,7 +137,7 @@ class RigidContact:
         normal_rows = scipy.sparse.csr_matrix(
             (self.normals.ravel(), (np.repeat(np.arange(nc), d), np.arange(nc * d))), shape=(nc, nc * d))
         R_free = rec.R[dofs]
-        self._D_free = dem.facet_lift(self.facets).ravel()
+        self._D_free = dem.data.facet_lift(self.facets).ravel()
         self._g0 = np.einsum("ni,ni->n", self.normals, geom.facet_centres[self.facets] - self.points)
         self._g0 += normal_rows @ self._D_free
 
@@ -224,7 +154,7 @@ class RigidContact:
         Q, R_free = Q[:, patch], R_free[:, patch]
         Rn = normal_rows @ R_free
         own_rows = touched < rows.num_owned
-        self._q = dem.row_lift(touched)
+        self._q = dem.data.row_lift(touched)
         self._is_elastic_row = touched < rows.num_elastic
         self._own_rows = own_rows
         self._Q, self._Y, self._Rn = _compact(Q), _compact(Y), _compact(Rn)
@@ -440,7 +370,27 @@ class RigidContact:
             area = self.dem.geometry.facet_areas[self.facets[own]][g < 0].sum()
         return np.append(forces.ravel(), [normal, area])
 
-    # -- checkpoint (ContactModel) ----------------------------------------------------------------
+    def output_columns(self) -> tuple[str, ...]:
+        """The smallest gap ``contact_gap`` (``contact_gap``), ``contact_pressure`` (the obstacles'
+        total normal force over the area of the facets in contact, exactly 0 with every gap
+        open), in 1D the position ``tip_position`` of the contact end, and the force of each
+        obstacle k on the body, ``contact_force_obstacle<k>_<x|y|z>`` (``force_sums``)."""
+        xyz = "xyz"[: self.d]
+        return (("contact_gap", "contact_pressure") + (("tip_position",) if self.d == 1 else ())
+                + tuple(f"contact_force_obstacle{k}_{c}" for k in range(self.num_obstacles) for c in xyz))
+
+    def output_sums(self, up: np.ndarray) -> np.ndarray:
+        """This process's part of the sums of the outputs: ``force_sums``."""
+        return self.force_sums(up)
+
+    def output_values(self, up: np.ndarray, sums: np.ndarray) -> list[float]:
+        """The values of ``output_columns`` from the reduced ``output_sums`` (collective)."""
+        n = self.num_obstacles * self.d
+        forces, normal, area = sums[:n], sums[n], sums[n + 1]
+        gap, x = self.contact_gap(up)
+        return [gap, normal / area if area > 0 else 0.0] + ([x] if self.d == 1 else []) + list(forces)
+
+    # -- checkpoint (contact.protocol.ContactModel) ----------------------------------------------------------------
     def checkpoint_state(self) -> dict[str, np.ndarray]:
         """Only a counter: every candidate is tested at every evaluation, nothing else persists."""
         return {"evaluations": np.array([self.evaluations], dtype=np.int64)}

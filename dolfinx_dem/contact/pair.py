@@ -89,9 +89,11 @@ import scipy.spatial
 from mpi4py import MPI
 from petsc4py import PETSc
 
-from dolfinx_dem.halo import owned_facet_marks
+from dolfinx_dem import bodies as _bodies
+from dolfinx_dem.conditions import facet_indices
+from dolfinx_dem.contact import candidates
 from dolfinx_dem.kernels import lib, pointer
-from dolfinx_dem.patch import PatchScatter
+from dolfinx_dem.contact.patch import PatchScatter
 from dolfinx_dem.errors import InputError, KernelMemoryError, StateError, UnresolvedContactError
 
 
@@ -183,43 +185,35 @@ class PairContact:
     Parameters
     ----------
     dem : DEMDiscretisation (2D or 3D); the candidate facets must be Neumann (boundary) facets.
-    facets : process-local indices of the candidate boundary facets (the contact boundaries).
+    facets : the candidate boundary facets (the contact boundaries): process-local facet indices or a
+        DOLFINx MeshTags (with ``tag``, its facets of that value; conditions.facet_indices).
     self_contact : also pair facets of the same body (never facets that share a vertex).
     skin : one Verlet-list margin (m) for every facet; default each facet's own diameter about its
         barycentre (its length in 2D).
     tolerance : how far facets may interpenetrate at t = 0 (m).
     """
 
+    tracks_momentum = True
+
     def __init__(self, dem, facets, self_contact: bool = False, skin: float | None = None,
-                 tolerance: float = 0.0):
+                 tolerance: float = 0.0, tag: int | None = None):
         geom, rec, d = dem.geometry, dem.reconstruction, dem.d
         if d not in (2, 3):
             raise InputError(f"contact between deformable bodies is implemented in 2D and 3D, not {d}D")
         self.dem, self.comm, self.d = dem, dem.comm, d
         if not (np.isfinite(tolerance) and tolerance >= 0):
             raise InputError(f"the penetration tolerance must be >= 0, got {tolerance}")
-        facets = np.asarray(facets, dtype=np.int32)
-        marks = dem.halo_exchange(owned_facet_marks(dem.mesh, facets, np.zeros(len(facets), dtype=np.int64)))
-        cell, j = np.nonzero((marks >= 0) & (geom.cell_layer <= 1)[:, None])
-        f = geom.cell_facets[cell, j]
-        owned = cell < dem.n_owned
+        facets = facet_indices(facets, tag, "the contact boundary", d)
+        found = candidates.select(dem, facets, np.zeros(len(facets), dtype=np.int64), "contact boundaries")
+        cell, j, f, owned = found.cell, found.j, found.facet, found.owned
         if self.comm.allreduce(int(owned.sum()), op=MPI.SUM) == 0:
             raise InputError("the contact boundary has no facet (check its tag)")
-        interior = geom.facet_cells[f[owned], 1] >= 0
-        bad = [b for part in self.comm.allgather(geom.facet_centres[f[owned][interior][:1]].tolist()) for b in part]
-        if bad:
-            raise InputError(f"contact facets must be boundary facets; the facet at {bad[0]} is interior")
-        if self.comm.allreduce(bool(np.isin(f[owned], rec.dirichlet_facets).any()), op=MPI.LOR):
-            raise InputError("contact facets must not carry a Dirichlet condition")
-        if self.comm.allreduce(bool(np.isin(f[owned], rec.traction_facets).any()), op=MPI.LOR):
-            raise InputError("contact facets must not carry a traction")
-        if dem._time_dependent:
-            raise InputError("contact with time-dependent Dirichlet conditions or tractions is not supported")
-        _check_bodies_share_no_vertex(dem)
-        _check_bodies_do_not_overlap(dem)
+        candidates.check(dem, found, "the contact boundary")
+        _bodies.check_share_no_vertex(geom, self.comm)
+        _bodies.check_do_not_overlap(geom, self.comm)
         self.self_contact = bool(self_contact)
         self._rigid = np.zeros(geom.num_bodies, dtype=bool)  # the prescribed bodies, by body number
-        self._rigid[dem.prescribed_body_numbers] = True
+        self._rigid[dem.prescribed.body_numbers] = True
         self.tolerance = float(tolerance)
 
         # The energy rows this process owns that candidate facets touch, and the local facets:
@@ -236,7 +230,7 @@ class PairContact:
         # Candidate numbers: the own facets of rank r after those of ranks < r; the first-layer
         # ones get their owners' numbers through the halo.
         first = self.comm.exscan(self.num_own) or 0
-        numbers = np.full(marks.shape, -1, dtype=np.int64)
+        numbers = np.full((geom.num_cells, d + 1), -1, dtype=np.int64)
         numbers[cell[order][: self.num_own], j[order][: self.num_own]] = first + np.arange(self.num_own)
         numbers = dem.halo_exchange(numbers[: dem.n_owned])[cell[order], j[order]]
         self._facets = self._local_records(order, f, cell, numbers)
@@ -256,7 +250,7 @@ class PairContact:
         # Q on them (``_build`` widens it to the patch)
         self._row_dofs, entry_dof = np.unique(dem.columns[self._Q.indices], return_inverse=True)
         self._Q_entry_dof = entry_dof.astype(np.int32)
-        self._q = dem.row_lift(touched)
+        self._q = dem.data.row_lift(touched)
         self._p_q = pointer(self._q)  # the kernels' pointers to arrays that stay, made once (_p_*)
         self._is_elastic_row = (touched < rows.num_elastic).astype(np.int8)
         self._elastic_row_pointer = pointer(self._is_elastic_row)
@@ -360,7 +354,7 @@ class PairContact:
             vertex_ids=geom.cell_vertex_ids[cell][mask].reshape(n, d), scheme_a=scheme_a,
             Ca=np.where(scheme_a[:, None, None, None], Ca, 0.0),
             R_dofs=R_dofs.reshape(n, d, width), R_values=R_values.reshape(n, d, width),
-            lift=dem.facet_lift(f),
+            lift=dem.data.facet_lift(f),
         )
 
     # -- broad phase ---------------------------------------------------------------------------
@@ -1020,6 +1014,26 @@ class PairContact:
                                "(bodies without candidate facets?)")
         return out
 
+    def output_columns(self) -> tuple[str, ...]:
+        """The summed normal contact force ``contact_force`` (``contact_force``), the largest
+        interpenetration ``penetration`` of the contact reconstructions (``penetration``), and the
+        force of body j on body i for each pair i < j of bodies with candidate facets,
+        ``contact_force_<i>_<j>_<x|y|z>`` (``pair_forces``; bodies numbered as
+        ``geometry.compute_bodies``, from 0)."""
+        xyz = "xyz"[: self.d]
+        return ("contact_force", "penetration") + tuple(f"contact_force_{i}_{j}_{c}" for i, j in self.body_pairs
+                                                        for c in xyz)
+
+    def output_sums(self, up: np.ndarray) -> np.ndarray:
+        """This process's part of the sums of the outputs: the pair forces, the contact force and
+        the count of closed pairs (``closed_count``)."""
+        return np.concatenate([self.pair_forces(up).ravel(), [self.contact_force_part(up), self.closed_count(up)]])
+
+    def output_values(self, up: np.ndarray, sums: np.ndarray) -> list[float]:
+        """The values of ``output_columns`` from the reduced ``output_sums``: the penetration's
+        scatter and reduction only where some process has a closed pair (collective)."""
+        return [sums[-2], self.penetration(up) if sums[-1] > 0 else 0.0, *sums[:-2]]
+
     # -- statics (statics.minimise_energy) ---------------------------------------------------
     def pair_keys(self) -> np.ndarray:
         """A number for each listed pair that neither the partition nor a list rebuild changes:
@@ -1533,81 +1547,3 @@ class _CSR:
         self.indices = np.ascontiguousarray(A.indices, dtype=np.int32)
         self.data = np.ascontiguousarray(A.data, dtype=np.float64)
         self.pointers = (pointer(self.indptr), pointer(self.indices), pointer(self.data))
-
-
-def _check_bodies_do_not_overlap(dem):
-    """No boundary vertex of a body may lie strictly inside a cell of another body (in the
-    reference configuration). Each process sends the boundary vertices of its owned cells to the
-    processes whose box of owned cells contains them, which test them against their owned cells
-    near them (point in simplex). Collective."""
-    geom, d, comm = dem.geometry, dem.d, dem.comm
-    owned = slice(0, dem.n_owned)
-    bf = np.intersect1d(geom.boundary_facets, geom.facets_of_layers(0))
-    cells, local = geom.facet_cells[bf, 0], geom.facet_local[bf, 0]
-    mask = np.ones((len(bf), d + 1), dtype=bool)
-    mask[np.arange(len(bf)), local] = False
-    points = geom.cell_vertices[cells][mask].reshape(-1, d)
-    bodies = np.repeat(geom.cell_bodies[cells], d)
-    x = geom.cell_vertices[owned].reshape(-1, d)
-    empty = np.array([np.inf] * d + [-np.inf] * d)
-    box = np.concatenate([x.min(axis=0), x.max(axis=0)]) if len(x) else empty
-    boxes = np.array(comm.allgather(box))
-    send = []
-    for q in range(comm.size):
-        inside = np.all((points >= boxes[q, :d]) & (points <= boxes[q, d:]), axis=1)
-        send.append((points[inside], bodies[inside]))
-    received = comm.alltoall(send)
-    points = np.concatenate([r[0] for r in received])
-    bodies = np.concatenate([r[1] for r in received])
-    found = None
-    if len(points) and dem.n_owned:
-        centres = geom.cell_centres[owned]
-        radius = np.linalg.norm(geom.cell_vertices[owned] - centres[:, None], axis=2).max()
-        near = scipy.spatial.cKDTree(points).sparse_distance_matrix(
-            scipy.spatial.cKDTree(centres), radius, output_type="ndarray")
-        k, c = near["i"], near["j"]
-        other = geom.cell_bodies[c] != bodies[k]
-        k, c = k[other], c[other]
-        if len(k):
-            v = geom.cell_vertices[c]  # (m, d+1, d)
-            lam = np.linalg.solve(np.swapaxes(v[:, 1:] - v[:, :1], 1, 2), (points[k] - v[:, 0])[..., None])[..., 0]
-            lam = np.concatenate([1 - lam.sum(axis=1, keepdims=True), lam], axis=1)
-            inside = lam.min(axis=1) > 1e-10
-            if inside.any():
-                m = int(np.flatnonzero(inside)[0])
-                found = (int(bodies[k[m]]), int(geom.cell_bodies[c[m]]), points[k[m]].tolist())
-    found = [f for f in comm.allgather(found) if f is not None]
-    if found:
-        a, b, point = min(found)
-        raise InputError(f"bodies {a} and {b} overlap at t = 0: a boundary vertex of body {a} at {point} "
-                         f"lies inside body {b}")
-
-
-def _check_bodies_share_no_vertex(dem, bodies=None):
-    """Separate bodies (connected through facets) must not share a vertex: contact between them
-    would be undefined at the shared point (``bodies``: only the vertices of these bodies). The
-    boundary vertices of the owned cells meet at the process their coordinates hash to.
-    Collective."""
-    geom, d, comm = dem.geometry, dem.d, dem.comm
-    bf = np.intersect1d(geom.boundary_facets, geom.facets_of_layers(0))
-    cells, local = geom.facet_cells[bf, 0], geom.facet_local[bf, 0]
-    mask = np.ones((len(bf), d + 1), dtype=bool)
-    mask[np.arange(len(bf)), local] = False
-    x = geom.cell_vertices[cells][mask].reshape(-1, d) + 0.0  # + 0.0: no -0.0
-    body = np.repeat(geom.cell_bodies[cells], d)
-    rows = np.unique(np.concatenate([x, body[:, None]], axis=1), axis=0)
-    bits = np.ascontiguousarray(rows[:, :d]).view(np.uint64)
-    mixed = np.zeros(len(rows), dtype=np.uint64)
-    for k in range(d):
-        mixed = (mixed * np.uint64(1000003)) ^ bits[:, k]
-    home = (mixed % np.uint64(comm.size)).astype(np.int64)
-    received = comm.alltoall([rows[home == q] for q in range(comm.size)])
-    rows = np.unique(np.concatenate(received), axis=0)
-    same = np.all(rows[1:, :d] == rows[:-1, :d], axis=1)
-    if bodies is not None:
-        same &= np.isin(rows[1:, d], bodies) | np.isin(rows[:-1, d], bodies)
-    point = rows[1:][same][0, :d].tolist() if same.any() else None
-    shared = [p for p in comm.allgather(point) if p is not None]
-    if shared:
-        raise InputError(f"bodies share the vertex {min(shared)}: bodies in contact must be meshed "
-                         "separately (no common vertex)")
