@@ -16,7 +16,8 @@ import numpy as np
 from mpi4py import MPI
 
 from dolfinx_dem import meshes
-from dolfinx_dem.discretisation import DEMDiscretisation, DirichletBC, Traction
+from dolfinx_dem.conditions import DirichletBC, Traction
+from dolfinx_dem.discretisation import DEMDiscretisation
 from dolfinx_dem.material import ElasticMaterial
 from dolfinx_dem.memm import MEMM
 

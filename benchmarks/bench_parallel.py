@@ -72,7 +72,8 @@ def child_scaling(cells: int, dim: int, steps: int) -> dict:
     from mpi4py import MPI
 
     from dolfinx_dem import meshes
-    from dolfinx_dem.discretisation import DEMDiscretisation, DirichletBC
+    from dolfinx_dem.conditions import DirichletBC
+    from dolfinx_dem.discretisation import DEMDiscretisation
     from dolfinx_dem.material import ElasticMaterial
     from dolfinx_dem.memm import MEMM
 

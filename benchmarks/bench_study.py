@@ -73,7 +73,8 @@ def _square(comm, n):
     import dolfinx.mesh
 
     from dolfinx_dem import _compat
-    from dolfinx_dem.discretisation import DEMDiscretisation, DirichletBC
+    from dolfinx_dem.conditions import DirichletBC
+    from dolfinx_dem.discretisation import DEMDiscretisation
     from dolfinx_dem.material import ElasticMaterial
 
     material = ElasticMaterial(E=1.0, nu=0.3, rho=1.0)

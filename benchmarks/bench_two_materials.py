@@ -28,7 +28,8 @@ from mpi4py import MPI
 from petsc4py import PETSc
 
 from dolfinx_dem import meshes
-from dolfinx_dem.discretisation import DEMDiscretisation, DirichletBC, Traction
+from dolfinx_dem.conditions import DirichletBC, Traction
+from dolfinx_dem.discretisation import DEMDiscretisation
 from dolfinx_dem.material import CellMaterials, ElasticMaterial
 from dolfinx_dem.memm import MEMM
 

@@ -166,7 +166,8 @@ def repeated(run, budget: float = 3.0, repeats: int = 3) -> dict:
 
 
 def build_dem(mesh, left, right):
-    from dolfinx_dem.discretisation import DEMDiscretisation, DirichletBC
+    from dolfinx_dem.conditions import DirichletBC
+    from dolfinx_dem.discretisation import DEMDiscretisation
     from dolfinx_dem.material import ElasticMaterial
 
     zero = [0.0, 0.0]

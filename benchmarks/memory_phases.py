@@ -28,7 +28,8 @@ def main(cells: int) -> None:
     from mpi4py import MPI
 
     from dolfinx_dem import meshes
-    from dolfinx_dem.discretisation import DEMDiscretisation, DirichletBC
+    from dolfinx_dem.conditions import DirichletBC
+    from dolfinx_dem.discretisation import DEMDiscretisation
     from dolfinx_dem.material import ElasticMaterial
     from dolfinx_dem.memm import MEMM
 

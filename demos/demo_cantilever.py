@@ -74,7 +74,7 @@ import matplotlib.pyplot as plt  # noqa: E402
 import matplotlib.ticker  # noqa: E402
 
 import dolfinx_dem.fem.elastodynamics as fem_elastodynamics  # noqa: E402
-from dolfinx_dem import meshes, scenes, simulation  # noqa: E402
+from dolfinx_dem import meshes, scenes, simulation, stability  # noqa: E402
 
 comm = MPI.COMM_WORLD
 # -
@@ -148,17 +148,17 @@ t_dem, tip_dem = series["t"], series["tip_uy"]
 # The undamped motion is a sum of the modes of $K x = \omega^2 M x$. The lumped mass is
 # diagonal, so the symmetric matrix $M^{-1/2} K M^{-1/2}$ has the eigenvalues $\omega^2$.
 # SLEPc finds the smallest ones by shift-and-invert around 0 (a direct LU solve, MUMPS in
-# parallel), in `DEMDiscretisation.eigenvalues`; `stable_time_step("eigenvalue")` uses its
+# parallel), in `stability.eigenvalues`; `stable_time_step("eigenvalue")` uses its
 # largest one (by default `stable_time_step()` uses a guaranteed upper bound on it instead).
 
 
 # +
 def dem_eigenfrequencies(dem, n=1):
     """The n lowest angular frequencies (rad/s) of M^-1 K for a DEMDiscretisation."""
-    return np.sqrt(dem.eigenvalues(n))
+    return np.sqrt(stability.eigenvalues(dem.K, dem.inverse_mass, n))
 
 
-dem = simulation.build(scene, comm)
+dem = simulation.build(scene, comm).dem
 omega_dem = float(dem_eigenfrequencies(dem)[0])
 # -
 
@@ -249,7 +249,7 @@ static_deflection_dem, static_deflection_fem = -mean_dem, -mean_fem
 omega_dem_refined, omega_p1_refined, omega_p2_refined = [], [], []
 for n in refinements:
     refined = scenes.load("cantilever", overrides={"mesh.n": n})
-    omega_dem_refined.append(float(dem_eigenfrequencies(simulation.build(refined, comm))[0]))
+    omega_dem_refined.append(float(dem_eigenfrequencies(simulation.build(refined, comm).dem)[0]))
     mesh_n, _, tags_n = meshes.create_rectangle(comm, scene["mesh"]["p0"], scene["mesh"]["p1"], n,
                                                 scene["mesh"]["diagonal"])
     for degree, omegas in ((1, omega_p1_refined), (2, omega_p2_refined)):

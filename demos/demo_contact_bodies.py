@@ -151,7 +151,7 @@ if comm.rank == 0:
 # (21)), and a pair of scheme A facets in contact gets the corrections of eq. (23)-(24): equal
 # normal tractions and no tangential traction on both sides, the gap closed for a fully
 # overlapping pair. As for scheme B, each pair's correction is weighted by its overlap
-# fraction, so the energy stays continuous when facets slide (see `pair_contact._directions`).
+# fraction, so the energy stays continuous when facets slide (see `contact.pair.PairContact._directions`).
 
 # +
 h_ab = 0.03 if QUICK else 0.01

@@ -530,7 +530,7 @@ if comm.rank == 0:
 
 # +
 dx_base = L / n_base
-dem_base = simulation.build(scenes.load("bar-impact", overrides={"method": "dem-A"}), comm)
+dem_base = simulation.build(scenes.load("bar-impact", overrides={"method": "dem-A"}), comm).dem
 cfl_limit = c * dem_base.stable_time_step("eigenvalue") / dx_base
 stability = []
 for cfl in cfl_sweep:

@@ -6,10 +6,11 @@ import pytest
 from mpi4py import MPI
 
 from dolfinx_dem import exact, meshes, model
-from dolfinx_dem.contact import HalfSpace
+from dolfinx_dem.contact import HalfSpace, RigidContact
 from dolfinx_dem.discretisation import DEMDiscretisation
 from dolfinx_dem.material import ElasticMaterial
 from dolfinx_dem.memm import MEMM
+from dolfinx_dem.problem import DEMProblem
 from helpers import cell_vector, owned_centres
 
 BAR = ElasticMaterial(E=900.0, nu=0.0, rho=1.0)
@@ -19,39 +20,37 @@ PLATE = ElasticMaterial(E=100.0, nu=0.3, rho=1.0)
 def bar(scheme, n=100, comm=MPI.COMM_WORLD):
     mesh, _, tags = meshes.create_interval(comm, n, 5.0, 15.0)
     dem = DEMDiscretisation(mesh, BAR, scheme)
-    dem.set_obstacles([HalfSpace([0.0], [1.0], tags.find(meshes.XMIN))])
-    return dem
+    return DEMProblem(dem, [RigidContact(dem, [HalfSpace([0.0], [1.0], tags.find(meshes.XMIN))])])
 
 
 def plate(scheme, comm=MPI.COMM_WORLD, gravity=0.0):
     """A 1 x 0.5 plate 0.01 above the plane y = 0, contact candidates on its bottom side."""
     mesh, _, tags = meshes.create_rectangle(comm, [0.0, 0.01], [1.0, 0.51], [8, 4], "crossed")
     dem = DEMDiscretisation(mesh, PLATE, scheme, body_force=[0.0, -PLATE.rho * gravity])
-    dem.set_obstacles([HalfSpace([0.0, 0.0], [0.0, 1.0], tags.find(meshes.YMIN))])
-    return dem
+    return DEMProblem(dem, [RigidContact(dem, [HalfSpace([0.0, 0.0], [0.0, 1.0], tags.find(meshes.YMIN))])])
 
 
-def potential(dem, u):
-    return dem.energies(u, 0.0)["potential"]
+def potential(problem, u):
+    return problem.energies(u, 0.0)["potential"]
 
 
 @pytest.mark.parametrize("scheme", ["A", "B"])
 @pytest.mark.parametrize("make", [bar, plate])
 def test_force_is_the_gradient_of_the_energy_in_contact(make, scheme):
     """Central differences of the potential against the force, with facets in and out of contact."""
-    dem = make(scheme)
+    problem = make(scheme)
+    dem, c = problem.dem, problem.contacts[0]
     rng = np.random.default_rng(3)
     d = dem.d
     # Push the body into the obstacle: some facets penetrate, others not (random field).
     shift = -5.05 if d == 1 else -0.012
     u = cell_vector(dem, lambda x: np.where(np.arange(d) == d - 1, shift, 0.0)
                     + 0.01 * rng.standard_normal(x.shape))
-    c = dem.contact
     gaps = c.gaps(c.patch_values(u))
     assert (gaps < 0).any() and (gaps > 0).any() if d > 1 else (gaps < 0).any()
     F, free = dem.create_vector(), dem.create_vector()
-    dem.force(u, 0.0, F)
-    dem.force(u, 0.0, free, contact=False)
+    problem.force(u, 0.0, F)
+    dem.force(u, 0.0, free)
     # The dofs tested are the dofs where the contact correction acts (before: 12 random dofs, of
     # which 1 (bar) or 2 (plate) were on the patch).
     correction = F.array - free.array
@@ -65,7 +64,7 @@ def test_force_is_the_gradient_of_the_energy_in_contact(make, scheme):
         um.array[k] -= h
         if np.any(np.sign(c.gaps(c.patch_values(up))) != np.sign(c.gaps(c.patch_values(um)))):
             continue  # a switch inside the stencil: central differences are not exact there
-        errors.append(abs((potential(dem, up) - potential(dem, um)) / (2 * h) + F.array[k]))
+        errors.append(abs((potential(problem, up) - potential(problem, um)) / (2 * h) + F.array[k]))
     assert len(errors) >= 0.8 * len(dofs)
     assert max(errors, default=0.0) < 1e-6 * max(1.0, np.abs(F.array).max())
 
@@ -76,8 +75,8 @@ def test_energy_and_reconstruction_are_continuous_across_the_switch(scheme):
     +-delta: the energy difference is O(delta) (it scales with delta: no jump at the switch)
     and the contact-aware facet lies on the obstacle inside and at the gap outside. (The
     unstrained bar had energies of 1e-16, where no jump could show.)"""
-    dem = bar(scheme, n=20)
-    c = dem.contact
+    problem = bar(scheme, n=20)
+    dem, c = problem.dem, problem.contacts[0]
     u = dem.create_vector()
     strained = 0.01 * (owned_centres(dem)[:, 0] - 5.0)
     u.array[:] = strained
@@ -87,7 +86,7 @@ def test_energy_and_reconstruction_are_continuous_across_the_switch(scheme):
         u.array[:] = strained - g0 + gap
         up = c.patch_values(u)
         assert c.gaps(up)[0] == pytest.approx(gap, abs=1e-13)
-        return potential(dem, u), c.facet_displacements(up)[0, 0]
+        return potential(problem, u), c.facet_displacements(up)[0, 0]
 
     jumps = {}
     for delta in (1e-9, 1e-6):
@@ -110,8 +109,8 @@ def test_scheme_a_contact_changes_the_traction_on_the_obstacle_normal_only_along
     mesh, _, tags = meshes.create_rectangle(MPI.COMM_WORLD, [0.0, 0.01], [1.0, 0.51], [8, 4], "crossed")
     dem = DEMDiscretisation(mesh, PLATE, "A")
     n = np.array([np.sin(tilt), np.cos(tilt)])
-    dem.set_obstacles([HalfSpace([0.0, 0.0], n, tags.find(meshes.YMIN))])
-    c = dem.contact
+    c = RigidContact(dem, [HalfSpace([0.0, 0.0], n, tags.find(meshes.YMIN))])
+    problem = DEMProblem(dem, [c])
     rng = np.random.default_rng(4)
     # Stretched along x, pushed along -n (the inclined plane rises from 0.01 below the plate's
     # left end), plus noise.
@@ -122,7 +121,7 @@ def test_scheme_a_contact_changes_the_traction_on_the_obstacle_normal_only_along
     touching = np.flatnonzero((c.gaps(up)[: len(cells)] < 0) & np.isin(c.facets[: len(cells)],
                                                                         dem.reconstruction.scheme_a_facets))
     assert len(touching) >= 4
-    G = dem.gradient(u, 0.0)[cells[touching]]
+    G = problem.gradient(u, 0.0)[cells[touching]]
     sigma, free = PLATE.stress(G), PLATE.stress(G - change[touching])
     t = np.array([n[1], -n[0]])
     tangential = [np.einsum("i,pij,j->p", t, s, n) for s in (sigma, free)]
@@ -143,25 +142,26 @@ def test_bar_impact_conserves_the_pseudo_energy_through_the_impact(scheme):
     F - F_free over the cells, exactly 0 once the bar has lifted off, close to the exact 300 in
     between (measured on [0, 1.4]: L1 error 5.21 Pa s, L2 error 24.7 Pa s^1/2 for both schemes,
     mean 296.2 on the contact interval; the peaks reach 432 as the wave fronts pass)."""
-    dem = bar(scheme)
-    stepper = MEMM(dem, 0.0025)
+    problem = bar(scheme)
+    dem = problem.dem
+    stepper = MEMM(problem, 0.0025)
     v0 = dem.create_vector()
     v0.set(-10.0)
     first = stepper.initialise(dem.create_vector(), v0)
-    columns = model.contact_columns(dem)
+    columns = model.contact_columns(problem)
     assert columns == ("contact_gap", "contact_pressure", "tip_position", "contact_force_obstacle0_x")
     t, drift, gap, pressure, force, correction = [], 0.0, [], [], [], []
     F, free = dem.create_vector(), dem.create_vector()
     for _ in range(560):
         diag = stepper.step()
         drift = max(drift, abs(diag.pseudo_energy - first.pseudo_energy) / 500.0)
-        values = dict(zip(columns, model.contact_values(dem, stepper.u)))
+        values = dict(zip(columns, model.contact_values(problem, stepper.u)))
         t.append(diag.t)
         gap.append(values["contact_gap"])
         pressure.append(values["contact_pressure"])
         force.append(values["contact_force_obstacle0_x"])
-        dem.force(stepper.u, diag.t, F)
-        dem.force(stepper.u, diag.t, free, contact=False)
+        problem.force(stepper.u, diag.t, F)
+        dem.force(stepper.u, diag.t, free)
         correction.append(dem.comm.allreduce((F.array - free.array).sum(), op=MPI.SUM))
     t, gap, pressure, force, correction = map(np.asarray, (t, gap, pressure, force, correction))
     assert drift < 1e-12
@@ -190,10 +190,11 @@ def test_refreshing_the_energy_rows_through_the_impact(scheme):
     contact integral of a refresh step still starts from u^n, so the trajectory is that of the
     pure recurrence and the pseudo-energy is conserved as tightly (measured 1e-14 to 7e-14 on
     bar-impact, 800 cells, for any refresh period)."""
-    dem = bar(scheme)
+    problem = bar(scheme)
+    dem = problem.dem
     runs = {}
     for refresh in (0, 7):
-        stepper = MEMM(dem, 0.0025, refresh_every=refresh)
+        stepper = MEMM(problem, 0.0025, refresh_every=refresh)
         v0 = dem.create_vector()
         v0.set(-10.0)
         first = stepper.initialise(dem.create_vector(), v0)
@@ -205,10 +206,11 @@ def test_refreshing_the_energy_rows_through_the_impact(scheme):
 
 
 def test_gauss_legendre_without_splitting_loses_the_energy_at_impact():
-    dem = bar("A")
+    problem = bar("A")
+    dem = problem.dem
     drifts = {}
     for quadrature in ("midpoint", "gauss-legendre-2"):
-        stepper = MEMM(dem, 0.0025, quadrature)
+        stepper = MEMM(problem, 0.0025, quadrature)
         v0 = dem.create_vector()
         v0.set(-10.0)
         E0 = stepper.initialise(dem.create_vector(), v0).pseudo_energy
@@ -221,11 +223,11 @@ def test_gauss_legendre_without_splitting_loses_the_energy_at_impact():
 @pytest.mark.parametrize("scheme", ["A", "B"])
 def test_plate_dropped_on_a_plane(scheme):
     """2D: a plate falls under gravity onto y = 0 and bounces, energy exact, no penetration."""
-    dem = plate(scheme, gravity=1.0)
+    problem = plate(scheme, gravity=1.0)
+    dem, c = problem.dem, problem.contacts[0]
     dt = 0.5 * dem.stable_time_step()
-    stepper = MEMM(dem, dt)
+    stepper = MEMM(problem, dt)
     first = stepper.initialise(dem.create_vector(), cell_vector(dem, lambda x: np.tile([0.0, -0.3], (len(x), 1))))
-    c = dem.contact
     scale, drift, min_gap, touched = 0.0, 0.0, np.inf, False
     for _ in range(int(0.3 / dt)):
         diag = stepper.step()
@@ -244,12 +246,12 @@ def test_bad_obstacles_are_rejected():
     dem = DEMDiscretisation(mesh, BAR, "A")
     left = tags.find(meshes.XMIN)
     with pytest.raises(ValueError, match="intersects the body at t = 0"):
-        dem.set_obstacles([HalfSpace([6.0], [1.0], left)])
+        RigidContact(dem, [HalfSpace([6.0], [1.0], left)])
     with pytest.raises(ValueError, match="must be boundary facets"):
-        dem.set_obstacles([HalfSpace([0.0], [1.0], np.arange(3, dtype=np.int32))])
+        RigidContact(dem, [HalfSpace([0.0], [1.0], np.arange(3, dtype=np.int32))])
     with pytest.raises(ValueError, match="tolerance must be >= 0"):
-        dem.set_obstacles([HalfSpace([0.0], [1.0], left, tolerance=-1e-3)])
+        RigidContact(dem, [HalfSpace([0.0], [1.0], left, tolerance=-1e-3)])
     with pytest.raises(ValueError, match="normal is zero"):
-        dem.set_obstacles([HalfSpace([0.0], [0.0], left)])
+        RigidContact(dem, [HalfSpace([0.0], [0.0], left)])
     with pytest.raises(ValueError, match="has no facet"):
-        dem.set_obstacles([HalfSpace([0.0], [1.0], np.empty(0, dtype=np.int32))])
+        RigidContact(dem, [HalfSpace([0.0], [1.0], np.empty(0, dtype=np.int32))])

@@ -9,7 +9,8 @@ import dolfinx.mesh
 from dolfinx.mesh import CellType, DiagonalType
 
 from dolfinx_dem import _compat
-from dolfinx_dem.discretisation import DEMDiscretisation, DirichletBC, Traction
+from dolfinx_dem.conditions import DirichletBC, Traction
+from dolfinx_dem.discretisation import DEMDiscretisation
 from dolfinx_dem.material import ElasticMaterial
 
 MATERIAL = ElasticMaterial(E=2.0, nu=0.25, rho=1.5, eta=0.7)

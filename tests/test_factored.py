@@ -9,7 +9,8 @@ from petsc4py import PETSc
 import dolfinx.mesh
 
 from dolfinx_dem import _compat
-from dolfinx_dem.discretisation import DEMDiscretisation, DirichletBC
+from dolfinx_dem.conditions import DirichletBC
+from dolfinx_dem.discretisation import DEMDiscretisation
 from dolfinx_dem.factored import local_numbering
 from dolfinx_dem.material import ElasticMaterial
 

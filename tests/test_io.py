@@ -207,7 +207,7 @@ def test_output_directory_resume_and_keep_incomplete(tmp_path):
 
 def test_output_directory_not_a_directory(tmp_path):
     (tmp_path / "file").write_text("")
-    with pytest.raises(NotADirectoryError, match="file"):
+    with pytest.raises(io.OutputFolderError, match="exists and is not a directory"):
         with io.OutputDirectory(tmp_path / "file", MPI.COMM_WORLD):
             pass
 

@@ -14,11 +14,13 @@ import dolfinx.mesh
 from dolfinx.mesh import DiagonalType
 
 from dolfinx_dem import _compat, meshes
-from dolfinx_dem.discretisation import DEMDiscretisation, DirichletBC, Traction
+from dolfinx_dem.conditions import DirichletBC, Traction
+from dolfinx_dem.discretisation import DEMDiscretisation
 from dolfinx_dem.fem.elastodynamics import first_eigenfrequency
 from dolfinx_dem.material import ElasticMaterial
 from dolfinx_dem.errors import InstabilityError
 from dolfinx_dem.memm import MEMM
+from dolfinx_dem.problem import DEMProblem
 from helpers import cell_vector, gmsh_mesh, owned_centres
 
 MATERIAL = ElasticMaterial(E=1.0, nu=0.3, rho=1.0)
@@ -58,7 +60,7 @@ def test_pseudo_energy_conserved_5000_steps():
     comm = MPI.COMM_WORLD
     dem = clamped_left(holed_cantilever(comm))
     assert 300 <= dem.geometry.num_cells_global <= 600
-    memm = MEMM(dem, 0.5 * dem.stable_time_step())
+    memm = MEMM(DEMProblem(dem), 0.5 * dem.stable_time_step())
     d0 = memm.initialise(dem.create_vector(), cell_vector(dem, bending_velocity))
     energy, mechanical, elastic = [d0.pseudo_energy], [d0.mechanical], [d0.elastic]
     for _ in range(5000):
@@ -83,7 +85,7 @@ def test_linear_momentum_free_body(body_force):
     comm = MPI.COMM_WORLD
     mesh = dolfinx.mesh.create_rectangle(comm, [[0.0, 0.0], [2.0, 0.5]], [12, 3], diagonal=DiagonalType.crossed)
     dem = DEMDiscretisation(mesh, MATERIAL, scheme="A", body_force=body_force)
-    memm = MEMM(dem, 0.5 * dem.stable_time_step())
+    memm = MEMM(DEMProblem(dem), 0.5 * dem.stable_time_step())
     u0 = cell_vector(dem, lambda x: 0.01 * np.cos(x))
     first = memm.initialise(u0, cell_vector(dem, bending_velocity))
     volume = comm.allreduce(dem.geometry.cell_volumes[: dem.n_owned].sum())
@@ -119,7 +121,7 @@ def test_gauss_legendre_equals_midpoint_for_linear_forces():
     steps = 150
     results = {}
     for name, q in [("midpoint", 1), ("gauss-legendre-2", 2), ("gauss-legendre-3", 3), ("gauss-legendre-5", 5)]:
-        memm = MEMM(dem, dt, quadrature=name)
+        memm = MEMM(DEMProblem(dem), dt, quadrature=name)
         memm.initialise(cell_vector(dem, lambda x: 0.01 * x**2), cell_vector(dem, bending_velocity))
         assert memm.force_evaluations == 1
         energies = [memm.step().pseudo_energy for _ in range(steps)]
@@ -158,7 +160,7 @@ def test_one_reduction_per_step(clamped):
     comm = MPI.COMM_WORLD
     mesh = dolfinx.mesh.create_rectangle(comm, [[0.0, 0.0], [2.0, 0.5]], [12, 3])
     dem = clamped_left(mesh, body_force=[0.0, -0.1]) if clamped else DEMDiscretisation(mesh, MATERIAL)
-    memm = MEMM(dem, 0.5 * dem.stable_time_step(), refresh_every=0)
+    memm = MEMM(DEMProblem(dem), 0.5 * dem.stable_time_step(), refresh_every=0)
     memm.initialise(cell_vector(dem, lambda x: 0.01 * x**2), cell_vector(dem, bending_velocity))
     counting = dem.comm = _CountingComm(comm)
     for _ in range(20):
@@ -174,7 +176,7 @@ def test_energy_rows_follow_the_true_product(refresh_every):
     refresh; the pseudo-energy conserved to 1e-13 (measured 4e-15 over 5000 steps)."""
     comm = MPI.COMM_WORLD
     dem = clamped_left(holed_cantilever(comm))
-    memm = MEMM(dem, 0.5 * dem.stable_time_step(), refresh_every=refresh_every)
+    memm = MEMM(DEMProblem(dem), 0.5 * dem.stable_time_step(), refresh_every=refresh_every)
     first = memm.initialise(dem.create_vector(), cell_vector(dem, bending_velocity))
     drift = mismatch = scale = 0.0
     for n in range(1, 2001):
@@ -200,7 +202,7 @@ def test_time_dependent_dirichlet_data(quadrature):
     shaken = DirichletBC(left, lambda x, t: np.stack([0.0 * x[0], 0.01 * np.sin(3.0 * t) + 0.0 * x[0]]),
                          time_dependent=True)
     dem = DEMDiscretisation(mesh, MATERIAL, dirichlet=[shaken], body_force=[0.0, -0.1])
-    memm = MEMM(dem, 0.5 * dem.stable_time_step(), quadrature=quadrature, refresh_every=0)
+    memm = MEMM(DEMProblem(dem), 0.5 * dem.stable_time_step(), quadrature=quadrature, refresh_every=0)
     memm.initialise(dem.create_vector(), dem.create_vector())
     worst = scale = 0.0
     for _ in range(300):
@@ -223,7 +225,7 @@ def _standing_wave_error(N, T=0.5):
         mesh, ElasticMaterial(E=1.0, nu=0.0, rho=1.0), dirichlet=[DirichletBC(_compat.exterior_facets(mesh), [0.0])]
     )
     steps = math.ceil(T / (0.5 * dem.stable_time_step()))
-    memm = MEMM(dem, T / steps)
+    memm = MEMM(DEMProblem(dem), T / steps)
     x = owned_centres(dem)[:, 0]
     memm.initialise(cell_vector(dem, lambda x: np.sin(np.pi * x)), dem.create_vector())
     for _ in range(steps):
@@ -288,7 +290,7 @@ def cantilever():
 @pytest.mark.parametrize("load", ["free", "gravity"])
 def test_monitor_detects_instability(cantilever, load):
     dem, stable = cantilever[load]
-    memm = MEMM(dem, 1.05 * stable)
+    memm = MEMM(DEMProblem(dem), 1.05 * stable)
     memm.initialise(dem.create_vector(), cell_vector(dem, lambda x: 0.1 * bending_velocity(x)))
     with pytest.raises(InstabilityError) as info:
         for _ in range(2000):
@@ -309,7 +311,7 @@ def test_monitor_detects_instability(cantilever, load):
 @pytest.mark.parametrize("load, start", [("free", "moving"), ("gravity", "rest"), ("gravity", "moving")])
 def test_monitor_quiet_below_the_limit(cantilever, load, start):
     dem, stable = cantilever[load]
-    memm = MEMM(dem, 0.95 * stable)
+    memm = MEMM(DEMProblem(dem), 0.95 * stable)
     v0 = cell_vector(dem, lambda x: 0.1 * bending_velocity(x)) if start == "moving" else dem.create_vector()
     first = memm.initialise(dem.create_vector(), v0)
     for _ in range(2000):
@@ -357,7 +359,7 @@ def test_stable_time_step_is_the_leapfrog_limit(cantilever):
 def test_bad_input(cantilever, kwargs, word):
     dem, _ = cantilever["free"]
     with pytest.raises(ValueError, match=word):
-        MEMM(dem, **kwargs)
+        MEMM(DEMProblem(dem), **kwargs)
 
 
 @pytest.mark.mpi
@@ -374,7 +376,7 @@ def test_energy_balance_with_tractions_and_rollers(scheme, time_dependent):
         if time_dependent else [0.7, 0.1]
     dem = DEMDiscretisation(mesh, MATERIAL, scheme, bcs,
                             tractions=[Traction(tags.find(meshes.XMAX), value, time_dependent)])
-    stepper = MEMM(dem, 0.5 * dem.stable_time_step())
+    stepper = MEMM(DEMProblem(dem), 0.5 * dem.stable_time_step())
     first = stepper.initialise(dem.create_vector(), dem.create_vector())
     balance, scale = [], 0.0
     for _ in range(300):
@@ -400,7 +402,7 @@ def test_pseudo_energy_conserved_with_two_materials(scheme):
     materials = {1: MATERIAL, 2: ElasticMaterial(E=8.0, nu=0.2, rho=0.25, eta=24.0)}
     dem = DEMDiscretisation(mesh, materials, scheme, [DirichletBC(tags.find(meshes.XMIN), [0.0, 0.0])],
                             cell_tags=cell_tags)
-    memm = MEMM(dem, 0.5 * dem.stable_time_step())
+    memm = MEMM(DEMProblem(dem), 0.5 * dem.stable_time_step())
     first = memm.initialise(dem.create_vector(), cell_vector(dem, bending_velocity))
     drift = scale = 0.0
     for _ in range(2000):

@@ -10,7 +10,8 @@ import dolfinx.mesh
 from dolfinx.mesh import DiagonalType
 
 from dolfinx_dem import _compat
-from dolfinx_dem.discretisation import DEMDiscretisation, DirichletBC
+from dolfinx_dem.conditions import DirichletBC
+from dolfinx_dem.discretisation import DEMDiscretisation
 from dolfinx_dem.material import ElasticMaterial
 from helpers import cell_vector, gmsh_mesh, owned_centres
 

@@ -12,7 +12,8 @@ from dolfinx_dem import _compat, meshes, model
 from dolfinx_dem.discretisation import DEMDiscretisation
 from dolfinx_dem.material import ElasticMaterial
 from dolfinx_dem.memm import MEMM
-from dolfinx_dem.pair_contact import PairContact
+from dolfinx_dem.contact import PairContact, RigidContact
+from dolfinx_dem.problem import DEMProblem
 from helpers import cell_vector, gmsh_mesh
 
 SOFT = ElasticMaterial(E=100.0, nu=0.2, rho=100.0)
@@ -56,8 +57,8 @@ def test_force_is_the_gradient_of_the_energy_in_contact(scheme):
     """Central differences of the potential against the force with pairs in partial overlap,
     in and out of contact: checks eq. (31) with the overlap weights and the sliding force (34)."""
     dem, facets = two_discs(h=0.02, scheme=scheme)
-    dem.set_contact_boundary(facets)
-    c = dem.pair_contact
+    problem = DEMProblem(dem, [PairContact(dem, facets)])
+    c = problem.find(PairContact)
     rng = np.random.default_rng(5)
     u = cell_vector(dem, lambda x: approach(x, 0.013) + 1e-3 * rng.standard_normal(x.shape))
     c.prepare(u)
@@ -67,15 +68,15 @@ def test_force_is_the_gradient_of_the_energy_in_contact(scheme):
     lengths = c.facets_all.length[c.listed.i[gap < 0]]
     assert (overlap > 0).sum() >= 4 and ((overlap > 0) & (overlap < lengths)).any()
     F, free = dem.create_vector(), dem.create_vector()
-    dem.force(u, 0.0, F)
-    dem.force(u, 0.0, free, contact=False)
+    problem.force(u, 0.0, F)
+    dem.force(u, 0.0, free)
     h, errors = 1e-7, []
     patch = c.scatter.dofs  # global = process-local dofs in serial
     for k in patch[rng.permutation(len(patch))[:60]]:
         up_, um_ = u.copy(), u.copy()
         up_.array[k] += h
         um_.array[k] -= h
-        diff = (dem.energies(up_, 0.0)["potential"] - dem.energies(um_, 0.0)["potential"]) / (2 * h)
+        diff = (problem.energies(up_, 0.0)["potential"] - problem.energies(um_, 0.0)["potential"]) / (2 * h)
         errors.append(abs(diff + F.array[k]))
     assert max(errors) < 1e-6 * np.abs(F.array).max()
     # The contact correction is not zero on the tested dofs (the test can fail).
@@ -88,8 +89,8 @@ def test_facet_corrections_are_the_reconstruction_the_energy_uses(scheme):
     """The reported facet values u_f (outputs: stresses, penetration) are the ones whose energy
     the force derives from: a = Q u + q changed by Q_F (u_F - u_F^free) gives the energy change."""
     dem, facets = two_discs(h=0.02, scheme=scheme)
-    dem.set_contact_boundary(facets)
-    c = dem.pair_contact
+    problem = DEMProblem(dem, [PairContact(dem, facets)])
+    c = problem.find(PairContact)
     rng = np.random.default_rng(5)
     u = cell_vector(dem, lambda x: approach(x, 0.013) + 1e-3 * rng.standard_normal(x.shape))
     c.prepare(u)
@@ -113,15 +114,15 @@ def test_two_discs_collide_and_separate_with_exact_energy_and_momentum(scheme):
     (P^{n+1} - P^n) / dt is the step's mean force, compared with the trapezoidal rule (measured:
     within 0.5 % (A) and 2.2 % (B) of the peak force)."""
     dem, facets = two_discs(h=0.03, scheme=scheme)
-    dem.set_contact_boundary(facets)
-    c = dem.pair_contact
+    problem = DEMProblem(dem, [PairContact(dem, facets)])
+    c = problem.find(PairContact)
     assert c.body_pairs == [(0, 1)]
-    assert model.contact_columns(dem)[2:4] == ("contact_force_0_1_x", "contact_force_0_1_y")
+    assert model.contact_columns(problem)[2:4] == ("contact_force_0_1_x", "contact_force_0_1_y")
     dt = 0.2 * dem.stable_time_step()
-    stepper = MEMM(dem, dt)
+    stepper = MEMM(problem, dt)
     first = stepper.initialise(dem.create_vector(), cell_vector(dem, approach))
     mass = dem.mass.array_r.reshape(-1, 2)
-    left_disc = dem.body_labels[: dem.n_owned] == 0
+    left_disc = dem.geometry.cell_bodies[: dem.n_owned] == 0
     assert dem.comm.allreduce(float(dem.geometry.cell_centres[: dem.n_owned][left_disc, 0].max(initial=0)),
                               op=MPI.MAX) < 0.25
 
@@ -133,13 +134,13 @@ def test_two_discs_collide_and_separate_with_exact_energy_and_momentum(scheme):
 
     p_scale = momentum()[1][0] * 2
     drift, momentum_change, contact_time, split = 0.0, 0.0, None, 0
-    lefts, forces = [momentum()[1]], [model.contact_values(dem, stepper.u)[2:4]]
+    lefts, forces = [momentum()[1]], [model.contact_values(problem, stepper.u)[2:4]]
     for _ in range(int(0.6 / dt)):
         diag = stepper.step()
         drift = max(drift, abs(diag.pseudo_energy - first.pseudo_energy) / first.mechanical)
         p, left = momentum()
         lefts.append(left)
-        forces.append(model.contact_values(dem, stepper.u)[2:4])
+        forces.append(model.contact_values(problem, stepper.u)[2:4])
         momentum_change = max(momentum_change, np.abs(p).max() / p_scale)
         if contact_time is None and c.touching(c.patch_values(stepper.u)):
             contact_time = diag.t
@@ -165,18 +166,18 @@ def test_pair_force_is_the_sum_of_the_contact_forces_on_a_body(scheme):
     """At a state in contact the pair force on the left disc equals the sum of F - F_free over
     its cells, and the force on the right disc is its opposite (no Dirichlet condition)."""
     dem, facets = two_discs(h=0.03, scheme=scheme)
-    dem.set_contact_boundary(facets)
+    problem = DEMProblem(dem, [PairContact(dem, facets)])
     u = cell_vector(dem, lambda x: np.stack([np.where(x[:, 0] < 0.25, 0.012, -0.012) + 0.002 * np.sin(40 * x[:, 1]),
                                              0.003 * np.cos(30 * x[:, 0])], axis=1))
-    dem.pair_contact.prepare(u)
+    problem.find(PairContact).prepare(u)
     F, free = dem.create_vector(), dem.create_vector()
-    dem.force(u, 0.0, F)
-    dem.force(u, 0.0, free, contact=False)
+    problem.force(u, 0.0, F)
+    dem.force(u, 0.0, free)
     correction = (F.array - free.array).reshape(-1, 2)
-    left = dem.body_labels[: dem.n_owned] == 0
+    left = dem.geometry.cell_bodies[: dem.n_owned] == 0
     on_left = dem.comm.allreduce(correction[left].sum(axis=0), op=MPI.SUM)
     on_right = dem.comm.allreduce(correction[~left].sum(axis=0), op=MPI.SUM)
-    pair = np.array(model.contact_values(dem, u)[2:4])
+    pair = np.array(model.contact_values(problem, u)[2:4])
     assert pair[0] < -0.1  # the right disc pushes the left one (measured -0.218 (A), -0.209 (B))
     assert np.abs(pair - on_left).max() < 1e-12 * np.abs(pair).max()
     assert np.abs(pair + on_right).max() < 1e-12 * np.abs(pair).max()
@@ -187,8 +188,8 @@ def test_a_touching_pair_between_bodies_without_a_body_pair_is_an_error():
     whose bodies have no body pair (an invariant: every body with a candidate facet has them)
     raises instead of being dropped, or written out of bounds."""
     dem, facets = two_discs(h=0.03, comm=MPI.COMM_SELF)
-    dem.set_contact_boundary(facets)
-    c = dem.pair_contact
+    problem = DEMProblem(dem, [PairContact(dem, facets)])
+    c = problem.find(PairContact)
     u = cell_vector(dem, lambda x: approach(x, 0.015))  # the discs 0.01 m into each other
     up, _ = c.prepare(u)
     assert np.abs(c.pair_forces(up)).max() > 0
@@ -206,12 +207,12 @@ def test_contact_force_is_the_signed_normal_force_compression_positive(scheme, s
     ``contact_force`` is -F_01 . n: positive in compression, negative when the pairs pull (a
     sum of absolute values, or the sign of the multipliers, would not match)."""
     dem, facets = two_blocks(scheme=scheme)
-    dem.set_contact_boundary(facets)
+    problem = DEMProblem(dem, [PairContact(dem, facets)])
     u = cell_vector(dem, lambda x: np.stack([np.where(x[:, 0] < 0.205, 0.008, -0.008)
                                              + stretch * (x[:, 0] - np.where(x[:, 0] < 0.205, 0.2, 0.21)),
                                              np.zeros(len(x))], axis=1))
-    dem.pair_contact.prepare(u)
-    force, _, pair_x, _ = model.contact_values(dem, u)
+    problem.find(PairContact).prepare(u)
+    force, _, pair_x, _ = model.contact_values(problem, u)
     assert np.sign(force) == (1.0 if stretch == 0.0 else -1.0)  # measured 4.37 (A, B); -0.054 (A), -0.102 (B)
     assert abs(force + pair_x) < 1e-12 * abs(force)
 
@@ -223,8 +224,8 @@ def test_matching_facets_close_the_gap_exactly(scheme):
     the gap; scheme A (eq. (23)-(24)) by the ratio of the two cells' compliances, here also
     half since the blocks are mirror images up to the triangulation."""
     dem, facets = two_blocks(scheme=scheme)
-    dem.set_contact_boundary(facets)
-    c = dem.pair_contact
+    problem = DEMProblem(dem, [PairContact(dem, facets)])
+    c = problem.find(PairContact)
     u = cell_vector(dem, lambda x: np.where(x[:, :1] < 0.205, [[0.008, 0.0]], [[-0.008, 0.0]]))
     up = c.patch_values(u)
     gap, overlap = c.pair_states(up)
@@ -242,11 +243,11 @@ def test_the_pair_list_follows_the_bodies_under_every_quadrature(quadrature):
     and the discs passed through each other (left disc still at +0.3 m/s)."""
     mesh, _, _ = meshes.create_discs(MPI.COMM_WORLD, [((0.14, 2.27), 0.1), ((0.46, 2.27), 0.1)], 0.03)
     dem = DEMDiscretisation(mesh, SOFT, "B")
-    dem.set_contact_boundary(_compat.locate_boundary_facets(mesh, lambda x: (x[0] >= 0.14) & (x[0] <= 0.46)))
-    c = dem.pair_contact
+    problem = DEMProblem(dem, [PairContact(dem, _compat.locate_boundary_facets(mesh, lambda x: (x[0] >= 0.14) & (x[0] <= 0.46)))])
+    c = problem.find(PairContact)
     assert c.num_pairs == 0
     dt = 0.2 * dem.stable_time_step()
-    stepper = MEMM(dem, dt, quadrature)
+    stepper = MEMM(problem, dt, quadrature)
     stepper.initialise(dem.create_vector(), cell_vector(dem, lambda x: approach(x - [0.05, 0.0])))
     touched = False
     for _ in range(int(0.6 / dt)):
@@ -265,16 +266,16 @@ def test_evaluations_refuse_a_stale_pair_list():
     """Forces and energies at displacements the list was not prepared for raise, instead of
     silently leaving out pairs; after ``prepare`` they are evaluated."""
     dem, facets = two_discs(h=0.03)
-    dem.set_contact_boundary(facets)
+    problem = DEMProblem(dem, [PairContact(dem, facets)])
     u = cell_vector(dem, lambda x: approach(x, 0.05))
     F = dem.create_vector()
     with pytest.raises(RuntimeError, match="pair list is stale.*call prepare"):
-        dem.force(u, 0.0, F)
+        problem.force(u, 0.0, F)
     with pytest.raises(RuntimeError, match="pair list is stale"):
-        dem.energies(u, 0.0)
-    dem.pair_contact.prepare(u)
-    dem.force(u, 0.0, F)
-    assert dem.energies(u, 0.0)["elastic"] > 0.0
+        problem.energies(u, 0.0)
+    problem.find(PairContact).prepare(u)
+    problem.force(u, 0.0, F)
+    assert problem.energies(u, 0.0)["elastic"] > 0.0
 
 
 @pytest.mark.mpi
@@ -283,10 +284,10 @@ def test_blocks_collide_with_exact_energy_and_bounded_penetration():
     little against each other and eq. (31) leaves a gap of the order of the slip times the cell
     gap (measured: about 0.25 of the deepest cell gap); the energy stays exact."""
     dem, facets = two_blocks()
-    dem.set_contact_boundary(facets)
-    c = dem.pair_contact
+    problem = DEMProblem(dem, [PairContact(dem, facets)])
+    c = problem.find(PairContact)
     dt = 0.3 * dem.stable_time_step()
-    stepper = MEMM(dem, dt)
+    stepper = MEMM(problem, dt)
     first = stepper.initialise(dem.create_vector(), cell_vector(dem, lambda x: approach(x + [0.045, 0], 0.3)))
     deepest, penetration, drift = 0.0, 0.0, 0.0
     for _ in range(int(0.15 / dt)):
@@ -303,24 +304,24 @@ def test_blocks_collide_with_exact_energy_and_bounded_penetration():
 def test_bad_contact_input_is_rejected():
     dem, facets = two_discs(h=0.05)
     with pytest.raises(ValueError, match="has no facet"):
-        dem.set_contact_boundary(np.empty(0, dtype=np.int32))
+        PairContact(dem, np.empty(0, dtype=np.int32))
     interior = np.setdiff1d(np.arange(dem.mesh.topology.index_map(1).size_local, dtype=np.int32),
                             _compat.exterior_facets(dem.mesh))
     with pytest.raises(ValueError, match="must be boundary facets"):
-        dem.set_contact_boundary(interior)
+        PairContact(dem, interior)
     with pytest.raises(ValueError, match="tolerance must be >= 0"):
-        dem.set_contact_boundary(facets, tolerance=-1.0)
+        PairContact(dem, facets, tolerance=-1.0)
     with pytest.raises(ValueError, match="skin must be > 0"):
         PairContact(dem, facets, skin=0.0)
     with pytest.raises(ValueError, match="overlap at t = 0"):
         overlapping = _two_discs(0.18, 0.1)  # the discs overlap by 0.02 m
-        overlapping.set_contact_boundary(_compat.exterior_facets(overlapping.mesh))
+        PairContact(overlapping, _compat.exterior_facets(overlapping.mesh))
     with pytest.raises(ValueError, match="overlap at t = 0: a boundary vertex"):
         inside = _two_discs(0.0, 0.05)  # a small disc inside the first one
-        inside.set_contact_boundary(_compat.exterior_facets(inside.mesh))
+        PairContact(inside, _compat.exterior_facets(inside.mesh))
     with pytest.raises(ValueError, match="share the vertex"):
         touching = _discs_sharing_a_vertex()
-        touching.set_contact_boundary(_compat.exterior_facets(touching.mesh))
+        PairContact(touching, _compat.exterior_facets(touching.mesh))
 
 
 def _two_discs(x2: float, r2: float):
@@ -385,10 +386,10 @@ def test_self_contact_closes_a_slot():
     for self_contact in (True, False):
         dem = DEMDiscretisation(gmsh_mesh(MPI.COMM_WORLD, build), SOFT, "B")
         walls = _compat.locate_boundary_facets(dem.mesh, lambda x: (x[0] > 0.14) & (x[0] < 0.16) & (x[1] > 0.05))
-        dem.set_contact_boundary(walls, self_contact=self_contact)
-        c = dem.pair_contact
+        problem = DEMProblem(dem, [PairContact(dem, walls, self_contact=self_contact)])
+        c = problem.find(PairContact)
         dt = 0.2 * dem.stable_time_step()
-        stepper = MEMM(dem, dt)
+        stepper = MEMM(problem, dt)
         v = cell_vector(dem, lambda x: np.stack([np.where(x[:, 0] < 0.15, 0.2, -0.2) * x[:, 1] / 0.2,
                                                   np.zeros(len(x))], axis=1))
         first = stepper.initialise(dem.create_vector(), v)
@@ -405,20 +406,19 @@ def test_self_contact_closes_a_slot():
 @pytest.mark.mpi
 def test_rigid_wall_and_contact_between_bodies_together():
     """The two discs collide while sinking onto a rigid floor: both contact models act in the
-    same steps (``dem.contacts``) and the pseudo-energy stays exact."""
+    same steps (``problem.contacts``) and the pseudo-energy stays exact."""
     from dolfinx_dem.contact import HalfSpace
 
     dem, facets = two_discs(h=0.03)
-    dem.set_contact_boundary(facets)
     floor = _compat.locate_boundary_facets(dem.mesh, lambda x: x[1] <= 2.27)
-    dem.set_obstacles([HalfSpace([0.0, 2.165], [0.0, 1.0], floor)])
-    assert len(dem.contacts) == 2
+    problem = DEMProblem(dem, [RigidContact(dem, [HalfSpace([0.0, 2.165], [0.0, 1.0], floor)]), PairContact(dem, facets)])
+    assert len(problem.contacts) == 2
     dt = 0.2 * dem.stable_time_step()
-    stepper = MEMM(dem, dt)
+    stepper = MEMM(problem, dt)
     v = cell_vector(dem, lambda x: approach(x) + [0.0, -0.1])
     first = stepper.initialise(dem.create_vector(), v)
-    pair, wall = dem.pair_contact, dem.contact
-    columns = model.contact_columns(dem)
+    pair, wall = problem.find(PairContact), problem.find(RigidContact)
+    columns = model.contact_columns(problem)
     assert columns == ("contact_gap", "contact_pressure", "contact_force_obstacle0_x", "contact_force_obstacle0_y",
                        "contact_force", "penetration", "contact_force_0_1_x", "contact_force_0_1_y",
                        "momentum_x", "momentum_y")
@@ -430,9 +430,9 @@ def test_rigid_wall_and_contact_between_bodies_together():
         if on_floor and pair.touching(pair.patch_values(stepper.u)):
             both += 1
             # the pair forces cancel: the obstacle's force is the sum of all contact forces
-            values = dict(zip(columns, model.contact_values(dem, stepper.u)))
-            dem.force(stepper.u, diag.t, F)
-            dem.force(stepper.u, diag.t, free, contact=False)
+            values = dict(zip(columns, model.contact_values(problem, stepper.u)))
+            problem.force(stepper.u, diag.t, F)
+            dem.force(stepper.u, diag.t, free)
             total = dem.comm.allreduce((F.array - free.array).reshape(-1, 2).sum(axis=0), op=MPI.SUM)
             floor_force = np.array([values["contact_force_obstacle0_x"], values["contact_force_obstacle0_y"]])
             assert floor_force[1] > 0.0 and values["contact_force_0_1_x"] < 0.0
@@ -447,20 +447,19 @@ def blocks_on_a_floor(scheme="B"):
     from dolfinx_dem.contact import HalfSpace
 
     dem, facets = two_blocks(scheme=scheme, y0=0.01)
-    dem.set_contact_boundary(facets)
     bottoms = _compat.locate_boundary_facets(dem.mesh, lambda x: x[1] < 0.02)
-    dem.set_obstacles([HalfSpace([0.0, 0.0], [0.0, 1.0], bottoms)])
-    return dem
+    problem = DEMProblem(dem, [RigidContact(dem, [HalfSpace([0.0, 0.0], [0.0, 1.0], bottoms)]), PairContact(dem, facets)])
+    return problem
 
 
-def _corrections_of_both_models(dem, u):
+def _corrections_of_both_models(problem, u):
     """delta_a of the rigid and of the pair contact on all energy rows (serial)."""
-    QF = dem.rows.QF
+    QF = problem.dem.rows.QF
 
     def rows(facets, delta):
         return QF[:, (facets[:, None] * 2 + np.arange(2)).ravel()] @ delta.ravel()
 
-    r, p = dem.contact, dem.pair_contact
+    r, p = problem.find(RigidContact), problem.find(PairContact)
     up = r.patch_values(u)
     return (rows(r.facets, -np.minimum(r.gaps(up), 0.0)[:, None] * r.directions),
             rows(p.facets, p.facet_corrections(p.patch_values(u))))
@@ -474,33 +473,34 @@ def test_rigid_and_pair_contact_on_shared_rows_is_the_sum_of_both_energy_changes
     + dV_pair, each dV = a . delta + |delta|^2 / 2 as if the other were absent: the energy of the
     summed reconstruction minus the cross term delta_rigid . delta_pair. The force is its exact
     gradient (central differences on the shared cells' dofs)."""
-    dem = blocks_on_a_floor(scheme)
+    problem = blocks_on_a_floor(scheme)
+    dem = problem.dem
     rng = np.random.default_rng(2)
     # The blocks pushed into each other and into the floor, offset vertically (facet ends apart,
     # off the kinks of the overlaps) and with a little strain.
     u = cell_vector(dem, lambda x: np.where(x[:, :1] < 0.205, [[0.008, -0.012]], [[-0.008, -0.0135]])
                     + 1e-4 * rng.standard_normal(x.shape))
-    dem.pair_contact.prepare(u)
+    problem.find(PairContact).prepare(u)
     a = dem.rows.Q @ u.array
-    d_rigid, d_pair = _corrections_of_both_models(dem, u)
+    d_rigid, d_pair = _corrections_of_both_models(problem, u)
     shared = (d_rigid != 0) & (d_pair != 0)
     assert shared.any()
     cross = float(d_rigid @ d_pair)
     combined = 0.5 * (a + d_rigid + d_pair) @ (a + d_rigid + d_pair)
-    V = dem.energies(u, 0.0)["potential"]
+    V = problem.energies(u, 0.0)["potential"]
     assert V == pytest.approx(combined - cross, rel=1e-12)
     assert abs(cross) > 1e-2 * V  # measured: 5.6e-4 J/m against V = 2.51e-2 J/m (2.2 %)
     # The force on the dofs of the cells both corrections act on is the exact gradient of V.
-    cells = np.intersect1d(dem.contact.cells, dem.pair_contact.cells)
+    cells = np.intersect1d(problem.find(RigidContact).cells, problem.find(PairContact).cells)
     assert len(cells) > 0
     F = dem.create_vector()
-    dem.force(u, 0.0, F)
+    problem.force(u, 0.0, F)
     h = 1e-7
     for k in (cells[:, None] * 2 + np.arange(2)).ravel():
         up, um = u.copy(), u.copy()
         up.array[k] += h
         um.array[k] -= h
-        diff = (dem.energies(up, 0.0)["potential"] - dem.energies(um, 0.0)["potential"]) / (2 * h)
+        diff = (problem.energies(up, 0.0)["potential"] - problem.energies(um, 0.0)["potential"]) / (2 * h)
         assert abs(diff + F.array[k]) < 1e-6 * np.abs(F.array).max()
     assert np.abs(F.array[(cells[:, None] * 2 + np.arange(2)).ravel()]).max() > 0.1 * np.abs(F.array).max()
 
@@ -509,10 +509,11 @@ def test_rigid_and_pair_contact_on_shared_rows_is_the_sum_of_both_energy_changes
 def test_blocks_pushed_together_on_a_floor_conserve_the_pseudo_energy():
     """Both models act on the bottom corner cells in the same steps; the pseudo-energy of
     V = V_free + dV_rigid + dV_pair is conserved to rounding and V stays positive."""
-    dem = blocks_on_a_floor()
-    rigid, pair = dem.contact, dem.pair_contact
+    problem = blocks_on_a_floor()
+    dem = problem.dem
+    rigid, pair = problem.find(RigidContact), problem.find(PairContact)
     dt = 0.3 * dem.stable_time_step()
-    stepper = MEMM(dem, dt)
+    stepper = MEMM(problem, dt)
     v = cell_vector(dem, lambda x: np.where(x[:, :1] < 0.205, [[0.3, -0.3]], [[-0.3, -0.3]]))
     first = stepper.initialise(dem.create_vector(), v)
     drift, both, lowest = 0.0, 0, np.inf
@@ -558,9 +559,8 @@ def disc_over_block(height: float, comm=MPI.COMM_WORLD, skin: float | None = Non
 
     mesh = gmsh_mesh(comm, build)
     dem = DEMDiscretisation(mesh, ElasticMaterial(E=100.0, nu=0.3, rho=100.0), "A")
-    dem.set_contact_boundary(_compat.locate_boundary_facets(mesh, lambda x: (x[1] <= 0.1 + height) & (x[1] >= -1e-9)),
-                             skin=skin)
-    return dem
+    facets = _compat.locate_boundary_facets(mesh, lambda x: (x[1] <= 0.1 + height) & (x[1] >= -1e-9))
+    return DEMProblem(dem, [PairContact(dem, facets, skin=skin)])
 
 
 def test_scheme_a_directions_where_eq_23_24_are_well_posed():
@@ -568,8 +568,9 @@ def test_scheme_a_directions_where_eq_23_24_are_well_posed():
     sign (cos^2 t > kappa = nu for both facets), with bounded directions that close the gap;
     the other pairs use the scheme B rule (e = +-n/2) and are counted. (A skin of the block's
     facet size lists pairs far round the disc: the per-facet default does not.)"""
-    dem = disc_over_block(0.01, skin=0.1)
-    c = dem.pair_contact
+    problem = disc_over_block(0.01, skin=0.1)
+    dem = problem.dem
+    c = problem.find(PairContact)
     L, F = c.listed, c.facets_all
     cos_i = np.einsum("pi,pi->p", L.n, F.normal[L.i])
     cos_j = np.einsum("pi,pi->p", L.n, F.normal[L.j])
@@ -589,11 +590,12 @@ def test_scheme_a_contact_runs_through_pairs_without_a_compliant_solution():
     """The disc falls onto the block: list rebuilds meet pairs with D <= 0 (before: a
     RuntimeError at t = 0.247 s). They use the scheme B rule; the energy stays exact and the
     disc bounces."""
-    dem = disc_over_block(0.12)
-    c = dem.pair_contact
+    problem = disc_over_block(0.12)
+    dem = problem.dem
+    c = problem.find(PairContact)
     assert c.num_pairs == 0 and c.scheme_b_pairs == 0
     dt = 0.3 * dem.stable_time_step()
-    stepper = MEMM(dem, dt)
+    stepper = MEMM(problem, dt)
     first = stepper.initialise(dem.create_vector(),
                                cell_vector(dem, lambda x: np.where(x[:, 1:] > 0.0, [[0.0, -0.5]], [[0.0, 0.0]])))
     drift = 0.0
@@ -644,8 +646,8 @@ def test_force_integral_refuses_patch_values_prepare_did_not_return():
     """The integral reads the flight ``prepare`` checked for this step: other patch values, or
     another dt, raise instead of being integrated over an unchecked flight."""
     dem, facets = two_discs(h=0.03)
-    dem.set_contact_boundary(facets)
-    c = dem.pair_contact
+    problem = DEMProblem(dem, [PairContact(dem, facets)])
+    c = problem.find(PairContact)
     u = cell_vector(dem, lambda x: approach(x, 0.05))
     v = cell_vector(dem, approach)
     up, vp = c.prepare(u, v, 1e-3)
@@ -664,8 +666,8 @@ def test_a_step_without_a_touching_pair_anywhere_adds_nothing():
     discs meet, every process integrates (also those whose own pairs do not touch: the reverse
     scatter is collective) and the force and the penetration are positive."""
     dem, facets = two_discs(h=0.03)
-    dem.set_contact_boundary(facets)
-    c, dt = dem.pair_contact, 1e-3
+    problem = DEMProblem(dem, [PairContact(dem, facets)])
+    c, dt = problem.find(PairContact), 1e-3
     v = cell_vector(dem, approach)
     for shift, touching in ((0.0, False), (0.04, True)):  # the gap is 0.02 m; 0.04 s at +-0.3 m/s close it
         u = cell_vector(dem, lambda x: approach(x) * shift)
@@ -676,15 +678,15 @@ def test_a_step_without_a_touching_pair_anywhere_adds_nothing():
         assert dem.comm.allreduce(evaluations, op=MPI.MAX) > 0 if touching else evaluations == 0
         assert (out.norm() > 0) == touching
         closed = dem.comm.allreduce(c.closed_count(c.patch_values(u)), op=MPI.SUM)
-        penetration = model.contact_values(dem, u)[1]
+        penetration = model.contact_values(problem, u)[1]
         assert (closed > 0) == touching and (penetration > 0) == touching
 
 
 def test_a_step_longer_than_the_skin_is_an_error():
     """A facet that moves more than skin/2 in one step cannot be covered by any pair list."""
     dem, facets = two_discs(h=0.03)
-    dem.set_contact_boundary(facets)
-    stepper = MEMM(dem, 0.1)  # 0.3 m/s x 0.1 s = 0.03 m > skin / 2 (facets of ~0.03 m)
+    problem = DEMProblem(dem, [PairContact(dem, facets)])
+    stepper = MEMM(problem, 0.1)  # 0.3 m/s x 0.1 s = 0.03 m > skin / 2 (facets of ~0.03 m)
     stepper.initialise(dem.create_vector(), cell_vector(dem, approach))
     with pytest.raises(RuntimeError, match="moves 3.000e-02 m in one step, more than half the Verlet skin"):
         stepper.step()
@@ -696,10 +698,12 @@ def test_both_contact_models_satisfy_the_contact_model_protocol():
 
     from dolfinx_dem.contact import ContactModel
 
-    dem = blocks_on_a_floor()
+    problem = blocks_on_a_floor()
+
+    dem = problem.dem
     members = [m for m in vars(ContactModel) if not m.startswith("_") and callable(getattr(ContactModel, m))]
     assert {"checkpoint_state", "restore_state", "prepare", "force_integral", "add", "add_force"} <= set(members)
-    for model in dem.contacts:
+    for model in problem.contacts:
         assert isinstance(model, ContactModel)
         for name in members:
             expected = list(inspect.signature(getattr(ContactModel, name)).parameters)[1:]
@@ -710,13 +714,13 @@ def test_both_contact_models_satisfy_the_contact_model_protocol():
 def test_a_traction_on_a_contact_facet_is_rejected():
     """A contact candidate facet carrying a traction has no defined reconstruction in the
     contact rule: refused on every process, before anything runs."""
-    from dolfinx_dem.discretisation import Traction
+    from dolfinx_dem.conditions import Traction
 
     mesh, _, _ = meshes.create_discs(MPI.COMM_WORLD, [((0.14, 2.27), 0.1), ((0.36, 2.27), 0.1)], 0.05)
     facets = _compat.locate_boundary_facets(mesh, lambda x: (x[0] >= 0.14) & (x[0] <= 0.36))
     dem = DEMDiscretisation(mesh, SOFT, "A", tractions=[Traction(facets, [0.0, -1.0])])
-    with pytest.raises(ValueError, match="contact facets must not carry a traction"):
-        dem.set_contact_boundary(_compat.exterior_facets(mesh))
+    with pytest.raises(ValueError, match="contact boundary: contact candidate facets must not carry a traction"):
+        problem = DEMProblem(dem, [PairContact(dem, _compat.exterior_facets(mesh))])
 
 
 # -- 3D: tetrahedral bodies, triangular facets ------------------------------------------------
@@ -764,7 +768,7 @@ def test_overlap_of_triangles_and_its_gradient(B, s, kind):
     """w = |A cap (B + s)| (boundary clipping, ``pair_contact._overlap``) against Sutherland-Hodgman
     clipping in every configuration, and its gradient against central differences where w is
     smooth; touching triangles have w = 0 exactly. (At kinks, events split the steps.)"""
-    from dolfinx_dem.pair_contact import _overlap, _Simplices
+    from dolfinx_dem.contact.pair import _overlap, _Simplices
 
     A, B, s = UNIT[None], np.asarray(B, float)[None], np.asarray(s, float)[None]
     pair = np.zeros(1, dtype=np.int64)
@@ -785,7 +789,7 @@ def test_pair_rows_are_the_product_of_the_directions_and_the_facet_columns():
     E^T @ QF^T with sorted indices: the exact zeros of cancelling entries dropped, pairs with a
     ghost facet (no columns here) taking their local facet's columns only."""
     import scipy.sparse
-    from dolfinx_dem.pair_contact import _CSC
+    from dolfinx_dem.contact.pair import _CSC
 
     rng = np.random.default_rng(3)
     d, n_local, n_known, rows = 2, 60, 80, 150
@@ -826,7 +830,7 @@ def test_pair_rows_are_the_product_of_the_directions_and_the_facet_columns():
 def test_piecewise_midpoints_cut_each_row_at_its_sorted_times():
     """The compiled cutting of [0, dt] at each row's break times (any order and count per row;
     rows without any keep one piece), against sorting them row by row."""
-    from dolfinx_dem.patch import piecewise_midpoints
+    from dolfinx_dem.contact.patch import piecewise_midpoints
 
     rng = np.random.default_rng(3)
     n, dt = 7, 0.5
@@ -849,7 +853,7 @@ def test_piecewise_midpoints_cut_each_row_at_its_sorted_times():
 def test_overlap_of_random_triangles():
     """Random triangles of both orientations: area against clipping, gradient against central
     differences."""
-    from dolfinx_dem.pair_contact import _overlap, _Simplices
+    from dolfinx_dem.contact.pair import _overlap, _Simplices
 
     rng = np.random.default_rng(0)
     A, B = rng.random((400, 3, 2)), rng.random((400, 3, 2)) - 0.3
@@ -872,7 +876,7 @@ def test_projected_simplices_by_their_formulas(d):
     vertices, faces' ends, outward normals (both orientations in 3D), unit normals and sizes."""
     import types
 
-    from dolfinx_dem.pair_contact import _project, _Simplices
+    from dolfinx_dem.contact.pair import _project, _Simplices
 
     rng = np.random.default_rng(d)
     F = types.SimpleNamespace(ends=rng.random((50, d, d)) - 0.5, centre=rng.random((50, d)))
@@ -911,8 +915,8 @@ def two_boxes(comm=MPI.COMM_WORLD, scheme="B"):
 
     mesh = gmsh_mesh(comm, build, gdim=3)
     dem = DEMDiscretisation(mesh, SOFT, scheme)
-    dem.set_contact_boundary(_compat.locate_boundary_facets(mesh, lambda x: (x[0] > 0.19) & (x[0] < 0.22)))
-    return dem
+    problem = DEMProblem(dem, [PairContact(dem, _compat.locate_boundary_facets(mesh, lambda x: (x[0] > 0.19) & (x[0] < 0.22)))])
+    return problem
 
 
 def oblique(x, speed=0.3):
@@ -926,8 +930,9 @@ def test_force_is_the_gradient_of_the_energy_in_contact_in_3d(scheme):
     """Central differences of the potential against the force, tetrahedral cubes with
     triangular facets in partial overlap: the overlap areas, their gradients (the sliding
     force) and the scheme A directions in 3D."""
-    dem = two_boxes(scheme=scheme)
-    c = dem.pair_contact
+    problem = two_boxes(scheme=scheme)
+    dem = problem.dem
+    c = problem.find(PairContact)
     rng = np.random.default_rng(5)
     u = cell_vector(dem, lambda x: oblique(x, 0.043) + 1e-3 * rng.standard_normal(x.shape))
     c.prepare(u)
@@ -937,15 +942,15 @@ def test_force_is_the_gradient_of_the_energy_in_contact_in_3d(scheme):
     areas = np.minimum(c.facets_all.length[c.listed.i], c.facets_all.length[c.listed.j])
     assert on.sum() >= 20 and (overlap[on] < 0.99 * areas[on]).sum() >= 10
     F, free = dem.create_vector(), dem.create_vector()
-    dem.force(u, 0.0, F)
-    dem.force(u, 0.0, free, contact=False)
+    problem.force(u, 0.0, F)
+    dem.force(u, 0.0, free)
     h, errors = 1e-7, []
     patch = c.scatter.dofs
     for k in patch[rng.permutation(len(patch))[:60]]:
         up_, um_ = u.copy(), u.copy()
         up_.array[k] += h
         um_.array[k] -= h
-        diff = (dem.energies(up_, 0.0)["potential"] - dem.energies(um_, 0.0)["potential"]) / (2 * h)
+        diff = (problem.energies(up_, 0.0)["potential"] - problem.energies(um_, 0.0)["potential"]) / (2 * h)
         errors.append(abs(diff + F.array[k]))
     assert max(errors) < 1e-6 * np.abs(F.array).max()  # measured 3.5e-10 (B), 4.9e-10 (A)
     assert np.abs(F.array - free.array).max() > 1e-2 * np.abs(F.array).max()
@@ -955,10 +960,11 @@ def _cubes_impact(comm, steps):
     """Run the oblique impact of ``two_boxes`` for ``steps`` MEMM steps: (largest relative
     pseudo-energy drift, total momentum change, the left cube's momentum, the pair force,
     the largest number of force evaluations of a step)."""
-    dem = two_boxes(comm)
-    c = dem.pair_contact
+    problem = two_boxes(comm)
+    dem = problem.dem
+    c = problem.find(PairContact)
     dt = 0.3 * dem.stable_time_step()
-    stepper = MEMM(dem, dt)
+    stepper = MEMM(problem, dt)
     first = stepper.initialise(dem.create_vector(), cell_vector(dem, oblique))
     mass = dem.mass.array_r.reshape(-1, 3)
     left = dem.geometry.cell_centres[: dem.n_owned, 0] < 0.205
@@ -982,8 +988,9 @@ def test_the_compiled_contact_state_is_its_definition_by_sparse_products():
     by numpy and scipy: its closed pairs hold every touching pair (g < 0, w > 0), and there g, w,
     dw/du_j (``_state``), c = w g^-, mu_p = z_p . (Q u + q + Z c) and the energy change
     sum (a delta + delta^2 / 2) of the own rows, elastic and stabilisation rows apart."""
-    dem = two_boxes(MPI.COMM_SELF)
-    c = dem.pair_contact
+    problem = two_boxes(MPI.COMM_SELF)
+    dem = problem.dem
+    c = problem.find(PairContact)
     u = cell_vector(dem, lambda x: oblique(x, 0.01))  # the cubes 0.01 m into each other
     up, _ = c.prepare(u)
     at, L = c._at(up), c.listed
@@ -1012,8 +1019,9 @@ def test_the_force_integral_over_a_flight_with_events_is_exact():
     [0, t1] and [t1, dt] to rounding (a piece missed or misplaced breaks this at the size of the
     quadrature error), and agrees with a composite 3-point Gauss rule of 200 pieces of the
     force correction (whose error comes from the kinks inside its pieces)."""
-    dem = two_boxes(MPI.COMM_SELF)
-    c = dem.pair_contact
+    problem = two_boxes(MPI.COMM_SELF)
+    dem = problem.dem
+    c = problem.find(PairContact)
     u, v = cell_vector(dem, lambda x: oblique(x, 0.01)), cell_vector(dem, oblique)
     dt, t1 = 0.02, 0.0073
 
@@ -1049,8 +1057,9 @@ def test_the_screen_keeps_every_pair_that_touches_during_a_flight_and_few_others
     at 801 sampled times of a flight of sliding cubes: it holds all of them, and few pairs more
     (those touching between the samples or within the margin); the projections' bounding boxes,
     the screen before the separating axes, held 204 pairs for the 131 touching."""
-    dem = two_boxes(MPI.COMM_SELF)
-    c = dem.pair_contact
+    problem = two_boxes(MPI.COMM_SELF)
+    dem = problem.dem
+    c = problem.find(PairContact)
     u, v = cell_vector(dem, lambda x: oblique(x, 0.01)), cell_vector(dem, oblique)
     dt = 0.02
     up, vp = c.prepare(u, v, dt)
@@ -1070,10 +1079,12 @@ def test_the_state_at_a_steps_end_screens_the_flights_candidates_only_where_they
     flight's screen found near closing there (``_At.candidates``): bit-identical to the state
     that screens every listed pair; at a displacement away from the flight's end it screens
     every pair again."""
-    from dolfinx_dem.pair_contact import _At
+    from dolfinx_dem.contact.pair import _At
 
-    dem = two_boxes(MPI.COMM_SELF)
-    c = dem.pair_contact
+    problem = two_boxes(MPI.COMM_SELF)
+
+    dem = problem.dem
+    c = problem.find(PairContact)
     u, v = cell_vector(dem, lambda x: oblique(x, 0.01)), cell_vector(dem, oblique)
     dt = 0.004
     out = dem.create_vector()
@@ -1132,11 +1143,11 @@ def test_self_contact_closes_a_slot_in_3d():
 
     dem = DEMDiscretisation(gmsh_mesh(MPI.COMM_WORLD, build, gdim=3), SOFT, "B")
     walls = _compat.locate_boundary_facets(dem.mesh, lambda x: (x[0] > 0.09) & (x[0] < 0.11) & (x[1] > 0.059))
-    dem.set_contact_boundary(walls, self_contact=True)
-    c = dem.pair_contact
+    problem = DEMProblem(dem, [PairContact(dem, walls, self_contact=True)])
+    c = problem.find(PairContact)
     assert c.num_pairs > 0 and c.body_pairs == []
     dt = 0.3 * dem.stable_time_step()
-    stepper = MEMM(dem, dt)
+    stepper = MEMM(problem, dt)
 
     def closing(x):
         """The arms close (x velocity growing with height) and slide along z."""
@@ -1164,15 +1175,15 @@ def test_a_list_round_rebuilds_only_the_lists_near_moving_facets():
         centres = [(0.14, 2.27), (0.36, 2.27), (0.14, 1.07), (0.36, 1.07)]
         mesh = meshes.create_discs(comm, [(c, 0.1) for c in centres], 0.04)[0]
         dem = DEMDiscretisation(mesh, SOFT, "B")
-        dem.set_contact_boundary(_compat.exterior_facets(mesh))
-        stepper = MEMM(dem, 0.2 * dem.stable_time_step())
+        problem = DEMProblem(dem, [PairContact(dem, _compat.exterior_facets(mesh))])
+        stepper = MEMM(problem, 0.2 * dem.stable_time_step())
         velocity = lambda x: approach(x) * (x[:, 1] > 1.67)[:, None]  # noqa: E731
         stepper.initialise(dem.create_vector(), cell_vector(dem, velocity))
         for n in range(150):
             stepper.step()
             if n % 30 == 0:
-                model.contact_values(dem, stepper.u)  # outputs after rounds that kept some lists
-        c = dem.pair_contact
+                model.contact_values(problem, stepper.u)  # outputs after rounds that kept some lists
+        c = problem.find(PairContact)
         moving = c.facets_all.centre[:, 1] > 1.67
         assert moving.any() or c.rebuilds == 1  # a process that knows no moving facet never rebuilt
         assert not moving.any() or c.rebuilds > 3
@@ -1185,8 +1196,8 @@ def test_a_list_round_rebuilds_only_the_lists_near_moving_facets():
     comm = dem.comm
     if comm.size > 1:
         assert comm.allreduce(c.rebuilds == 1, op=MPI.LOR)  # some process kept its list throughout
-    serial_dem, serial, _, serial_x = run(MPI.COMM_SELF)
-    assert serial_dem.pair_contact.rebuilds > 3
+    serial_dem, serial, serial_c, serial_x = run(MPI.COMM_SELF)
+    assert serial_c.rebuilds > 3
     # the same cells by their barycentres: the displacements agree to rounding
     import scipy.spatial
 
@@ -1212,19 +1223,19 @@ def test_discs_that_travel_far_between_exchanges_move_as_on_one_process():
     def run(comm):
         mesh = meshes.create_discs(comm, [(c, 0.1) for c in centres], 0.04)[0]
         dem = DEMDiscretisation(mesh, SOFT, "B")
-        dem.set_contact_boundary(_compat.exterior_facets(mesh))
-        stepper = MEMM(dem, 0.2 * dem.stable_time_step())
+        problem = DEMProblem(dem, [PairContact(dem, _compat.exterior_facets(mesh))])
+        stepper = MEMM(problem, 0.2 * dem.stable_time_step())
         stepper.initialise(dem.create_vector(), cell_vector(
             dem, lambda x: np.stack([np.where(x[:, 0] < 0.3, 0.4, np.where(x[:, 0] > 0.9, -0.4, 0.0)),
                                      np.zeros(len(x))], axis=1)))
         for _ in range(320):  # 0.89 s: contact from 0.65 s
             stepper.step()
-        return dem, stepper
+        return dem, stepper, problem.find(PairContact)
 
-    dem, stepper = run(MPI.COMM_WORLD)
-    c, comm = dem.pair_contact, dem.comm
-    serial_dem, serial = run(MPI.COMM_SELF)
-    assert serial_dem.pair_contact.exchanges == 0
+    dem, stepper, c = run(MPI.COMM_WORLD)
+    comm = dem.comm
+    serial_dem, serial, serial_c = run(MPI.COMM_SELF)
+    assert serial_c.exchanges == 0
     if comm.size > 1:
         assert c.exchanges >= 3 and comm.allreduce(c.rebuilds, op=MPI.MAX) > c.exchanges
     assert c.exchange_radius < 0.25
@@ -1236,7 +1247,7 @@ def test_discs_that_travel_far_between_exchanges_move_as_on_one_process():
     assert distance.max(initial=0.0) < 1e-12
     u_serial = serial.u.array_r.reshape(-1, 2)
     scale = np.abs(u_serial).max()
-    assert scale > 0.15 and serial_dem.pair_contact.rebuilds > 10  # the discs travelled and met
+    assert scale > 0.15 and serial_c.rebuilds > 10  # the discs travelled and met
     assert np.abs(stepper.u.array_r.reshape(-1, 2) - u_serial[found]).max(initial=0.0) < 1e-12 * scale
     assert touched
 
@@ -1248,9 +1259,9 @@ def test_a_restored_state_steps_as_the_first_time():
     facets known stay those of the last exchange; the restore does not force an exchange, the
     drift from the last exchange's places decides (none here after a short window)."""
     dem, facets = two_discs(h=0.03)
-    dem.set_contact_boundary(facets)
-    c = dem.pair_contact
-    stepper = MEMM(dem, 0.2 * dem.stable_time_step())
+    problem = DEMProblem(dem, [PairContact(dem, facets)])
+    c = problem.find(PairContact)
+    stepper = MEMM(problem, 0.2 * dem.stable_time_step())
     stepper.initialise(dem.create_vector(), cell_vector(dem, approach))
     for _ in range(25):  # contact from step 14
         stepper.step()
@@ -1282,8 +1293,8 @@ def test_a_process_knows_only_the_facets_of_other_processes_near_its_own():
     discs = [((np.cos(a), np.sin(a)), 0.1) for a in angles]
     mesh = meshes.create_discs(MPI.COMM_WORLD, discs, 0.03)[0]
     dem = DEMDiscretisation(mesh, SOFT, "B")
-    dem.set_contact_boundary(_compat.exterior_facets(mesh))
-    c = dem.pair_contact
+    problem = DEMProblem(dem, [PairContact(dem, _compat.exterior_facets(mesh))])
+    c = problem.find(PairContact)
     F, nl = c.facets_all, len(c.facets)
     import scipy.spatial
 
@@ -1299,9 +1310,9 @@ def test_memm_gathers_the_patch_values_once_per_step():
     end, the outputs and the next step's ``prepare``, gathered again after a step; ``prepare``
     refuses patch values of another patch."""
     dem, facets = two_discs(h=0.03)
-    dem.set_contact_boundary(facets)
-    c = dem.pair_contact
-    stepper = MEMM(dem, 0.2 * dem.stable_time_step())
+    problem = DEMProblem(dem, [PairContact(dem, facets)])
+    c = problem.find(PairContact)
+    stepper = MEMM(problem, 0.2 * dem.stable_time_step())
     stepper.initialise(dem.create_vector(), cell_vector(dem, approach))
     for _ in range(3):
         up = stepper.contact_patch_values()[0]
@@ -1317,7 +1328,7 @@ def test_bisection_groups_nearby_facets_for_the_list_round_summaries():
     """``_bisection`` (the boxes a list round gathers from each process): a permutation into
     at most k groups of equal size (to one point), each group's box much smaller than the
     whole; ``_box`` bounds its points column by column, and is empty without points."""
-    from dolfinx_dem.pair_contact import _bisection, _box
+    from dolfinx_dem.contact.pair import _bisection, _box
 
     angle = np.linspace(0.0, 2.0 * np.pi, 1001)[:-1]
     x = np.column_stack([np.cos(angle), np.sin(angle)]) + 0.01 * np.random.default_rng(3).random((1000, 2))

@@ -10,7 +10,10 @@ import pytest
 from mpi4py import MPI
 
 from dolfinx_dem import dynamics, io, meshes, model, scenes, statics
-from dolfinx_dem.discretisation import DEMDiscretisation, DirichletBC, PrescribedBody, Traction
+from dolfinx_dem.conditions import DirichletBC, PrescribedBody, Traction
+from dolfinx_dem.discretisation import DEMDiscretisation
+from dolfinx_dem.problem import DEMProblem
+from dolfinx_dem.contact import PairContact
 from dolfinx_dem.material import ElasticMaterial
 
 
@@ -32,12 +35,12 @@ def run(scene, comm=MPI.COMM_WORLD, check=None):
     """Steps a DynamicRun of ``scene`` (no outputs); returns (run, per-step balances, rows of
     prescribed_values), calling ``check(run)`` after every step."""
     r = dynamics.DynamicRun(scenes.validate(scene), comm, quiet=True)
-    balances, values = [r.first.balance], [model.prescribed_values(r.dem, r.stepper.u, 0.0)]
+    balances, values = [r.first.balance], [model.prescribed_values(r.problem, r.stepper.u, 0.0)]
     scale = r.first.mechanical
     for _ in range(r.n_steps):
         diag = r.stepper.step()
         balances.append(diag.balance)
-        values.append(model.prescribed_values(r.dem, r.stepper.u, diag.t))
+        values.append(model.prescribed_values(r.problem, r.stepper.u, diag.t))
         scale = max(scale, diag.mechanical)
         if check:
             check(r)
@@ -46,7 +49,7 @@ def run(scene, comm=MPI.COMM_WORLD, check=None):
 
 def disc_values(r, name="u"):
     """The values of ``name`` (a stepper vector) on the disc's owned cells, (n, 2)."""
-    cells = r.dem.body_labels[: r.dem.n_owned] == 1  # the disc is body 1 (the block's first barycentre is left of it)
+    cells = r.dem.geometry.cell_bodies[: r.dem.n_owned] == 1  # the disc is body 1 (the block's first barycentre is left of it)
     return getattr(r.stepper, name).array_r.reshape(-1, 2)[cells]
 
 
@@ -66,7 +69,7 @@ def test_the_work_of_a_prescribed_body_balances_the_energy_through_contact(presc
     assert values[-1, 1] < -1.0  # the disc pushes the block down (reaction_disc_y, N/m)
     assert np.allclose(values[:, 2:], [U(k * r.dt) for k in range(len(values))], atol=1e-15, rtol=0)
     assert max(follow) < 1e-15
-    block = r.stepper.u.array_r.reshape(-1, 2)[r.dem.body_labels[: r.dem.n_owned] == 0]
+    block = r.stepper.u.array_r.reshape(-1, 2)[r.dem.geometry.cell_bodies[: r.dem.n_owned] == 0]
     assert r.dem.comm.allreduce(block.min(initial=0), op=MPI.MIN) < -1e-3  # the block is indented
 
 
@@ -75,15 +78,15 @@ def test_the_reaction_is_the_derivative_of_the_energy_with_respect_to_the_transl
     reaction_disc column in contact."""
     r, _, values = run(indentation() | {"time": {"end": 0.004, "cfl": 0.5}})
     dem, u, t = r.dem, r.stepper.u, r.stepper.t
-    reaction = dem.prescribed_values(u, t)[0, 0]
-    cells = dem.body_labels[: dem.n_owned] == 1
+    reaction = r.problem.prescribed_values(u, t)[0, 0]
+    cells = dem.geometry.cell_bodies[: dem.n_owned] == 1
     delta, fd = 1e-7, np.zeros(2)
     for k in range(2):
         energy = []
         for sign in (1, -1):
             w = u.copy()
             w.array.reshape(-1, 2)[cells, k] += sign * delta
-            energy.append(dem.energies(w, t)["potential"])
+            energy.append(r.problem.energies(w, t)["potential"])
         fd[k] = (energy[0] - energy[1]) / (2 * delta)
     assert reaction[1] < -1.0
     assert np.abs(fd - reaction).max() < 1e-8 * np.abs(reaction).max()  # measured 4e-11
@@ -95,7 +98,7 @@ def test_a_prescribed_body_is_rigid_at_its_contact_facets():
     the block's facets take the whole correction: the corrections of a fully overlapping pair
     close its gap, and the block's facets carry them."""
     r, _, _ = run(indentation())
-    pc = r.dem.pair_contact
+    pc = r.pairs
     up = pc.patch_values(r.stepper.u)
     delta = pc.facet_corrections(up)
     on_disc = pc.facets_all.body[: len(pc.facets)] == 1
@@ -137,7 +140,8 @@ def test_unnamed_reactions_are_numbered_after_the_dirichlet_conditions():
     scene = indentation()
     scene["dirichlet"][0].pop("name")
     scene["prescribed"][0].pop("name")
-    dem = model.build(scenes.validate(scene))
+    problem = model.build(scenes.validate(scene))
+    dem = problem.dem
     assert model.reaction_columns(dem) + model.prescribed_columns(dem) == (
         "reaction_0_x", "reaction_0_y", "reaction_1_x", "reaction_1_y",
         "prescribed_1_displacement_x", "prescribed_1_displacement_y")
@@ -211,7 +215,7 @@ def test_bad_prescribed_bodies_are_rejected_by_the_discretisation():
                           prescribed=[PrescribedBody(1, velocity=[0.0, 1.0])])
     dem = DEMDiscretisation(mesh, MATERIAL, "B", cell_tags=tags, prescribed=[PrescribedBody(1, velocity=[0.0, 1.0])])
     with pytest.raises(ValueError, match="the load time t must be finite"):
-        statics.minimise_energy(dem, t=np.nan)
+        statics.minimise_energy(DEMProblem(dem), t=np.nan)
     box, _, _ = meshes.create_box(comm, [0.0, 0.0, 0.0], [1.0, 1.0, 1.0], [1, 1, 1])
     cells = np.arange(box.topology.index_map(3).size_local, dtype=np.int32)
     with pytest.raises(ValueError, match="implemented in 2D, not 3D"):
@@ -225,9 +229,9 @@ def static_indentation(t: float) -> dict:
 
 
 def solve_static(t: float, comm=MPI.COMM_WORLD):
-    """(dem, result) of minimise_energy on ``static_indentation(t)``."""
-    dem = model.build(scenes.validate(static_indentation(t)), comm)
-    return dem, statics.minimise_energy(dem, t=t)
+    """(problem, result) of minimise_energy on ``static_indentation(t)``."""
+    problem = model.build(scenes.validate(static_indentation(t)), comm)
+    return problem, statics.minimise_energy(problem, t=t)
 
 
 @pytest.mark.mpi
@@ -237,14 +241,14 @@ def test_statics_holds_the_prescribed_disc_and_balances_its_reaction():
     derivative of the minimum energy with respect to the disc's translation (envelope theorem:
     dV*/dt = dV/dU . dU/dt = -reaction_y)."""
     t = 0.0105  # indentation 0.01
-    dem, result = solve_static(t)
+    problem, result = solve_static(t)
     assert result.gradient_reduction < 1e-10
-    disc, base = dem.prescribed_values(result.u, t, result.force)[0], dem.reactions(result.u, t)[0]
+    disc, base = problem.prescribed_values(result.u, t, result.force)[0], problem.dem.reactions(result.u, t)[0]
     assert np.allclose(disc[1], [0.0, -t], rtol=0, atol=1e-15)
     assert disc[0][1] < 0 and np.abs(disc[0] + base).max() < 1e-8 * abs(base[1])
     if MPI.COMM_WORLD.size > 1:
-        serial_dem, serial = solve_static(t, MPI.COMM_SELF)
-        assert np.allclose(disc, serial_dem.prescribed_values(serial.u, t, serial.force)[0], rtol=1e-8, atol=0)
+        serial_problem, serial = solve_static(t, MPI.COMM_SELF)
+        assert np.allclose(disc, serial_problem.prescribed_values(serial.u, t, serial.force)[0], rtol=1e-8, atol=0)
         assert abs(result.energy - serial.energy) < 1e-10 * abs(serial.energy)
     eps = 1e-5
     energies = [solve_static(t + s)[1].energy for s in (-eps, eps)]

@@ -9,10 +9,11 @@ import dolfinx.mesh
 from dolfinx.mesh import DiagonalType
 
 from dolfinx_dem import _compat
-from dolfinx_dem.discretisation import DEMDiscretisation, DirichletBC
+from dolfinx_dem.conditions import DirichletBC
+from dolfinx_dem.discretisation import DEMDiscretisation
 from dolfinx_dem.geometry import compute_geometry, geometry_from_arrays
 from dolfinx_dem.material import CellMaterials, ElasticMaterial
-from dolfinx_dem.patch import PatchScatter
+from dolfinx_dem.contact.patch import PatchScatter
 from dolfinx_dem.reconstruction import compute_interior_stencils, compute_reconstruction
 
 MATERIAL = ElasticMaterial(E=1.0, nu=0.3, rho=1.0)

@@ -45,7 +45,8 @@ def test_expressions_that_are_not_finite_name_the_key_and_the_time(overrides, me
 
 def test_a_python_dirichlet_value_that_is_not_finite_is_an_error():
     from dolfinx_dem import meshes
-    from dolfinx_dem.discretisation import DEMDiscretisation, DirichletBC
+    from dolfinx_dem.conditions import DirichletBC
+    from dolfinx_dem.discretisation import DEMDiscretisation
     from dolfinx_dem.material import ElasticMaterial
 
     mesh, _, tags = meshes.create_interval(MPI.COMM_WORLD, 10, 0.0, 1.0)
@@ -91,7 +92,7 @@ def test_file_meshes_take_their_physical_names_not_side_names(tempdir):
     with pytest.raises(scenes.SceneError, match=r"'dirichlet\[0\]\.boundary': unknown boundary 'top' .*"
                                                 r"this mesh's names: hole, outer"):
         simulation.build(base | {"dirichlet": [{"boundary": "top"}]})
-    dem = simulation.build(base | {"dirichlet": [{"boundary": "hole"}]})
+    dem = simulation.build(base | {"dirichlet": [{"boundary": "hole"}]}).dem
     x = dem.geometry.facet_centres[dem.reconstruction.dirichlet_facets]
     assert len(x) > 8 and np.abs(np.linalg.norm(x - 0.5, axis=1) - 0.2).max() < 0.01
 

@@ -7,14 +7,17 @@ import pytest
 from mpi4py import MPI
 
 from dolfinx_dem import model, scenes, simulation
+from dolfinx_dem.contact import PairContact
+from dolfinx_dem.contact import RigidContact
 from helpers import cell_vector
 
 
 def test_closed_pairs_state_is_the_full_state_where_gaps_are_negative():
     """``PairContact._state(closed=True)`` clips only the pairs with g < 0 and gives the same
     g, w, dw/du there as clipping every listed pair (w = dw = 0 elsewhere)."""
-    dem = model.build(scenes.load("two-balls", {"mesh.h": 0.05}), MPI.COMM_SELF)
-    c = dem.pair_contact
+    problem = model.build(scenes.load("two-balls", {"mesh.h": 0.05}), MPI.COMM_SELF)
+    dem = problem.dem
+    c = problem.find(PairContact)
     u = cell_vector(dem, lambda x: np.stack([np.where(x[:, 0] < 0.25, 0.02, -0.02), 0.002 * x[:, 1],
                                              np.zeros(len(x))], axis=1))
     c.prepare(u)
@@ -34,7 +37,7 @@ def test_two_balls_conserve_energy_and_momentum_through_first_contact(tmp_path):
     at 0.6 m/s, a little more between the polyhedra (their facets' gaps along the pair normals
     at t = 0, at least the gap of the spheres, set the bounds)."""
     scene = scenes.load("two-balls", {"mesh.h": 0.06, "time.end": 0.05, "time.cfl": 0.5})
-    c = model.build(scene, MPI.COMM_SELF).pair_contact
+    c = model.build(scene, MPI.COMM_SELF).find(PairContact)
     gap = c.smallest_gap(c.patch_values(c.dem.create_vector()))
     assert 0.02 < gap < 0.03
     summary = simulation.run(scene, tmp_path, MPI.COMM_SELF, quiet=True)
@@ -73,8 +76,8 @@ def test_ball_drop_acts_with_the_floor_and_the_ball_in_the_same_steps():
     for _ in range(run.n_steps):
         diag = stepper.step()
         drift = max(drift, abs(diag.pseudo_energy - first.pseudo_energy) / max(first.mechanical, diag.mechanical))
-        floor = (dem.contact.gaps(dem.contact.patch_values(stepper.u)) < 0).any()
-        both += bool(floor and dem.pair_contact.touching(dem.pair_contact.patch_values(stepper.u)))
+        floor = (run.obstacles.gaps(run.obstacles.patch_values(stepper.u)) < 0).any()
+        both += bool(floor and run.pairs.touching(run.pairs.patch_values(stepper.u)))
     assert both >= 3
     assert drift <= 1e-12
 
@@ -82,8 +85,9 @@ def test_ball_drop_acts_with_the_floor_and_the_ball_in_the_same_steps():
 def test_a_rebuild_that_would_drop_touching_pairs_is_an_error():
     """Balls driven into each other deeper than the pair list radius: the pairs listed while
     they were shallow would be dropped by a rebuild (an energy jump): ``prepare`` raises."""
-    dem = model.build(scenes.load("two-balls", {"mesh.h": 0.06}), MPI.COMM_SELF)
-    c = dem.pair_contact
+    problem = model.build(scenes.load("two-balls", {"mesh.h": 0.06}), MPI.COMM_SELF)
+    dem = problem.dem
+    c = problem.find(PairContact)
     step = 0.2 * c.skin
     v = cell_vector(dem, lambda x: np.stack([np.where(x[:, 0] < 0.25, 1.0, -1.0), 0 * x[:, 1], 0 * x[:, 2]], axis=1))
     u = dem.create_vector()
@@ -109,8 +113,9 @@ def test_contact_skin_is_a_scene_key():
     """``contact.skin``: one Verlet skin for every facet (> 0), passed to the pair list."""
     with pytest.raises(scenes.SceneError, match="contact.skin' must be > 0"):
         scenes.load("two-balls", {"mesh.h": 0.06, "contact.skin": 0.0})
-    dem = model.build(scenes.load("two-balls", {"mesh.h": 0.06, "contact.skin": 0.05}), MPI.COMM_SELF)
-    assert dem.pair_contact.skin == 0.05
+    problem = model.build(scenes.load("two-balls", {"mesh.h": 0.06, "contact.skin": 0.05}), MPI.COMM_SELF)
+    dem = problem.dem
+    assert problem.find(PairContact).skin == 0.05
 
 
 def test_contact_surfaces_interpenetrating_beyond_the_limit_stop_the_run(tmp_path, capsys):

@@ -154,7 +154,7 @@ def test_stable_step_from_the_bound_or_the_eigenvalue(tmp_path):
     for method in ("bound", "eigenvalue"):
         scene = scenes.load("cantilever", {"time.end": 0.01, "time.stable_step": method})
         dts[method] = simulation.run(scene, tmp_path / method, MPI.COMM_SELF, quiet=True)["dt"]
-    dem = simulation.build(scenes.load("cantilever"), MPI.COMM_SELF)
+    dem = simulation.build(scenes.load("cantilever"), MPI.COMM_SELF).dem
     for method, dt in dts.items():
         assert 0.45 * dem.stable_time_step(method) < dt <= 0.5 * dem.stable_time_step(method)
     assert dts["bound"] < dts["eigenvalue"]
@@ -322,10 +322,10 @@ def test_a_moving_boundary_is_reported_as_not_conservative(tmp_path):
 def test_an_error_on_one_process_only_aborts_instead_of_hanging(tmp_path):
     script = tmp_path / "one.py"
     script.write_text(
-        "import sys\nfrom mpi4py import MPI\nfrom dolfinx_dem import cli, simulation\n\n"
+        "import sys\nfrom mpi4py import MPI\nfrom dolfinx_dem import cli, simulation\nfrom dolfinx_dem.errors import InputError\n\n"
         "def run(*args, **kwargs):\n"
         "    if MPI.COMM_WORLD.rank == 1:\n"
-        "        raise ValueError('found on process 1 only')\n"
+        "        raise InputError('found on process 1 only')\n"
         "    MPI.COMM_WORLD.barrier()  # the others wait in a collective\n\n"
         "simulation.run = run\n"
         f"sys.exit(cli.main(['run', 'bar-wave', '--out', '{tmp_path / 'out'}', '--quiet']))\n")

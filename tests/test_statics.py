@@ -9,11 +9,13 @@ from mpi4py import MPI
 from petsc4py import PETSc
 
 from dolfinx_dem import _compat, io, meshes, model, scenes, simulation, static_simulation
-from dolfinx_dem.contact import HalfSpace
-from dolfinx_dem.discretisation import DEMDiscretisation, DirichletBC, Traction
+from dolfinx_dem.conditions import DirichletBC, Traction
+from dolfinx_dem.discretisation import DEMDiscretisation
 from dolfinx_dem.material import ElasticMaterial
 from dolfinx_dem.errors import StaticsError
 from dolfinx_dem.statics import minimise_energy
+from dolfinx_dem.problem import DEMProblem
+from dolfinx_dem.contact import HalfSpace, PairContact, RigidContact
 from helpers import owned_centres
 
 
@@ -25,13 +27,13 @@ def test_bar_resting_on_an_obstacle(scheme):
     for n in (20, 40, 80):
         mesh, _, tags = meshes.create_interval(MPI.COMM_WORLD, n, 0.0, L)
         dem = DEMDiscretisation(mesh, ElasticMaterial(E=E, nu=0.0, rho=rho), scheme, body_force=[-rho * g])
-        dem.set_obstacles([HalfSpace([0.0], [1.0], tags.find(meshes.XMIN))])
-        result = minimise_energy(dem)
+        problem = DEMProblem(dem, [RigidContact(dem, [HalfSpace([0.0], [1.0], tags.find(meshes.XMIN))])])
+        result = minimise_energy(problem)
         assert result.gradient_reduction < 1e-8
         x = owned_centres(dem)[:, 0]
         exact = -rho * g * (L * x - x**2 / 2) / E
         errors.append(MPI.COMM_WORLD.allreduce(np.abs(result.u.array - exact).max(), op=MPI.MAX))
-        c = dem.contact
+        c = problem.find(RigidContact)
         assert c.contact_gap(c.patch_values(result.u))[0] == pytest.approx(0.0, abs=1e-14)
         reaction = MPI.COMM_WORLD.allreduce(c.reactions(result.u).sum(), op=MPI.SUM)  # one facet, |f| = 1
         assert reaction == pytest.approx(rho * g * L, rel=1e-8)
@@ -69,9 +71,9 @@ def test_free_body_is_rejected():
     mesh, _, _ = meshes.create_interval(MPI.COMM_WORLD, 10, 0.0, 1.0)
     dem = DEMDiscretisation(mesh, ElasticMaterial(E=1.0, nu=0.0, rho=1.0), "A", body_force=[-1.0])
     with pytest.raises(StaticsError, match="unconstrained rigid mode"):
-        minimise_energy(dem)
+        minimise_energy(DEMProblem(dem))
     with pytest.raises(ValueError, match="fixed_mean components"):
-        minimise_energy(dem, fixed_mean=(3,))
+        minimise_energy(DEMProblem(dem), fixed_mean=(3,))
 
 
 R_DISC, E_DISC, LOAD = 0.2, 25e6, 2e6  # the disc of the hertz scene
@@ -104,15 +106,16 @@ def disc_on_block(comm, h, stiffness=1.0, width=0.12, height=0.04, scheme="A"):
     bottom = _compat.locate_boundary_facets(mesh, lambda x: np.isclose(x[1], -height))
     dem = DEMDiscretisation(mesh, materials, scheme, [DirichletBC(bottom, [0.0, 0.0])],
                             body_force=[0.0, -LOAD], cell_tags=cells)
-    dem.set_contact_boundary(_compat.locate_boundary_facets(mesh, lambda x: (x[1] > -height / 2) & (x[1] < 0.05)))
-    return dem
+    facets = _compat.locate_boundary_facets(mesh, lambda x: (x[1] > -height / 2) & (x[1] < 0.05))
+    return DEMProblem(dem, [PairContact(dem, facets)])
 
 
-def _disc_figures(dem, result):
+def _disc_figures(problem, result):
     """(the disc's body number, its load (N/m), the contact force on it: pairs in contact plus
     the multipliers of pinned pairs (N/m, (2,)), its mean vertical displacement, and the
     contact half-width: the moment measure of the pair forces at the disc facets' centres)."""
-    comm, pc, geom = dem.comm, dem.pair_contact, dem.geometry
+    dem, pc = problem.dem, problem.find(PairContact)
+    comm, geom = dem.comm, dem.geometry
     up = pc.patch_values(result.u)
     body = geom.cell_bodies[: dem.n_owned]
     disc = comm.allreduce(int(body[geom.cell_centres[: dem.n_owned, 1] > 0].max(initial=0)), op=MPI.MAX)
@@ -143,11 +146,12 @@ def test_disc_resting_on_an_elastic_block():
     the serial one (COMM_SELF) to 1e-10."""
     results = []
     for comm in [MPI.COMM_WORLD] + ([MPI.COMM_SELF] if MPI.COMM_WORLD.size > 1 else []):
-        dem = disc_on_block(comm, 0.04, width=0.3, height=0.2)
-        result = minimise_energy(dem, fixed_mean=(0,), fixed_rotation=True)
+        problem = disc_on_block(comm, 0.04, width=0.3, height=0.2)
+        dem = problem.dem
+        result = minimise_energy(problem, fixed_mean=(0,), fixed_rotation=True)
         assert result.gradient_reduction < 1e-10
         assert len(result.pinned) == 1 and result.kink_forces[0] > 0  # the kink this mesh has
-        disc, load, force, uy, _ = _disc_figures(dem, result)
+        disc, load, force, uy, _ = _disc_figures(problem, result)
         assert force[1] == pytest.approx(load, rel=1e-8)
         results.append((result.energy, uy, force[1], result.iterations))
     assert results[0][3] <= 10
@@ -162,19 +166,19 @@ def test_disc_on_a_stiff_block_approaches_the_rigid_plane():
     at h = 0.02 m: the disc's mean vertical displacement differs by 0.32 %, the contact half-width
     (moment measure of the normal forces at the disc facets' centres) by -1.4 %."""
     comm = MPI.COMM_WORLD
-    dem = disc_on_block(comm, 0.02, stiffness=1e4)
-    result = minimise_energy(dem, fixed_mean=(0,), fixed_rotation=True)
+    problem = disc_on_block(comm, 0.02, stiffness=1e4)
+    dem = problem.dem
+    result = minimise_energy(problem, fixed_mean=(0,), fixed_rotation=True)
     assert result.gradient_reduction < 1e-10
-    disc, load, force, uy, half_width = _disc_figures(dem, result)
+    disc, load, force, uy, half_width = _disc_figures(problem, result)
     assert force[1] == pytest.approx(load, rel=1e-8)
 
     mesh, _, _ = meshes.create_disc(comm, [0.0, R_DISC], R_DISC, 0.02)
     rigid = DEMDiscretisation(mesh, ElasticMaterial(E=E_DISC, nu=0.25, rho=1.0, plane="strain"), "A",
                               body_force=[0.0, -LOAD])
-    rigid.set_obstacles([HalfSpace([0.0, 0.0], [0.0, 1.0],
-                                   _compat.locate_boundary_facets(mesh, lambda x: x[1] <= R_DISC), 1e-9)])
-    reference = minimise_energy(rigid, fixed_mean=(0,), fixed_rotation=True)
-    c = rigid.contact
+    c = RigidContact(rigid, [HalfSpace([0.0, 0.0], [0.0, 1.0],
+                                       _compat.locate_boundary_facets(mesh, lambda x: x[1] <= R_DISC), 1e-9)])
+    reference = minimise_energy(DEMProblem(rigid, [c]), fixed_mean=(0,), fixed_rotation=True)
     reactions = c.reactions(reference.u)
     x = rigid.geometry.facet_centres[c.facets[: c.num_own], 0]
     moments = comm.allreduce(np.array([reactions.sum(), reactions @ x, reactions @ x**2]), op=MPI.SUM)
@@ -190,8 +194,9 @@ def test_pair_contact_hessian_is_the_derivative_of_the_force():
     """On a fixed piece (pairs in contact, overlap configuration), the exact Hessian that
     ``PairContact.add_hessian`` adds (with ``curvature``) is the derivative of the force of the
     piece: central differences of the force along random directions."""
-    dem = disc_on_block(MPI.COMM_WORLD, 0.04, width=0.3, height=0.2)
-    pc = dem.pair_contact
+    problem = disc_on_block(MPI.COMM_WORLD, 0.04, width=0.3, height=0.2)
+    dem = problem.dem
+    pc = problem.find(PairContact)
     rng = np.random.default_rng(3)
     u = dem.create_vector()
     u.array.reshape(-1, 2)[:, 1] = np.where(owned_centres(dem)[:, 1] > 0, -0.01, 0.0)  # the disc pressed in
@@ -211,7 +216,7 @@ def test_pair_contact_hessian_is_the_derivative_of_the_force():
         for sign, out in ((1.0, plus), (-1.0, minus)):
             trial = u.copy()
             trial.axpy(sign, v)
-            dem.force(trial, 0.0, out, contact=False)
+            dem.force(trial, 0.0, out)
             pc.add_force(trial, out, active)
         H.mult(v, Hv)
         plus.axpy(-1.0, minus)  # F(u + v) - F(u - v) = -2 H v
@@ -222,21 +227,21 @@ def test_pair_contact_hessian_is_the_derivative_of_the_force():
 def test_pair_statics_ends_with_an_error_when_it_does_not_converge():
     """Not converged in the iterations allowed: a StaticsError naming the gradient reduction
     reached, never a result."""
-    dem = disc_on_block(MPI.COMM_WORLD, 0.04)
+    problem = disc_on_block(MPI.COMM_WORLD, 0.04)
+    dem = problem.dem
     with pytest.raises(StaticsError, match=r"no convergence in 2 iterations \(gradient reduction"):
-        minimise_energy(dem, fixed_mean=(0,), fixed_rotation=True, max_iterations=2)
+        minimise_energy(problem, fixed_mean=(0,), fixed_rotation=True, max_iterations=2)
     with pytest.raises(ValueError, match="gradient_rtol"):
-        minimise_energy(dem, gradient_rtol=0.0)
+        minimise_energy(problem, gradient_rtol=0.0)
 
 
 def test_statics_refuses_obstacles_with_contact_between_bodies():
     mesh, _, _ = meshes.create_discs(MPI.COMM_WORLD, [((0.0, 0.1), 0.1), ((0.25, 0.1), 0.1)], 0.05)
     dem = DEMDiscretisation(mesh, ElasticMaterial(E=100.0, nu=0.2, rho=1.0), "B", body_force=[0.0, -1.0])
     boundary = _compat.exterior_facets(mesh)
-    dem.set_obstacles([HalfSpace([0.0, 0.0], [0.0, 1.0], boundary, tolerance=1e-3)])
-    dem.set_contact_boundary(boundary)
+    problem = DEMProblem(dem, [RigidContact(dem, [HalfSpace([0.0, 0.0], [0.0, 1.0], boundary, tolerance=1e-3)]), PairContact(dem, boundary)])
     with pytest.raises(ValueError, match="rigid obstacles or contact between bodies, not both"):
-        minimise_energy(dem, fixed_mean=(0,))
+        minimise_energy(problem, fixed_mean=(0,))
 
 
 STACKED = {
@@ -256,7 +261,7 @@ def test_static_scene_with_contact_between_bodies(tempdir):
     pairs' multipliers) balances the upper disc's load; obstacles with contact are refused."""
     summary = simulation.run(scenes.validate(STACKED), pathlib.Path(tempdir) / "stacked", MPI.COMM_WORLD)
     assert summary["status"] == "completed" and summary["gradient_norm_reduction"] < 1e-10
-    dem = simulation.build(scenes.validate(STACKED))
+    dem = simulation.build(scenes.validate(STACKED)).dem
     geom = dem.geometry
     upper = geom.cell_bodies[: dem.n_owned][geom.cell_centres[: dem.n_owned, 1] > 0]
     upper = MPI.COMM_WORLD.allreduce(int(upper.max(initial=0)), op=MPI.MAX)
@@ -304,7 +309,7 @@ def test_scheme_b_minimum_on_a_kink(tempdir):
     vanishes."""
     scene = scenes.load("hertz", {"method": "dem-B", "mesh.h": 0.013})
     summary = simulation.run(scene, pathlib.Path(tempdir) / "kink", MPI.COMM_WORLD)
-    dem = simulation.build(scene)
+    dem = simulation.build(scene).dem
     area = MPI.COMM_WORLD.allreduce(dem.geometry.cell_volumes[: dem.n_owned].sum(), op=MPI.SUM)
     load = 2e6 * area  # the polygon's area, not pi R^2
     assert summary["kink_facets"] >= 1
@@ -324,7 +329,7 @@ def test_bar_under_an_end_traction(scheme):
     dem = DEMDiscretisation(mesh, ElasticMaterial(E=E, nu=0.0, rho=1.0), scheme,
                             [DirichletBC(tags.find(meshes.XMIN), [0.0])],
                             tractions=[Traction(tags.find(meshes.XMAX), [sigma])])
-    result = minimise_energy(dem, rtol=1e-14)
+    result = minimise_energy(DEMProblem(dem), rtol=1e-14)
     assert dem.reactions(result.u, 0.0)[0, 0] == pytest.approx(-sigma, rel=1e-12)
     if scheme == "A":
         x = owned_centres(dem)[:, 0]
@@ -347,7 +352,7 @@ def test_patch_test_with_rollers():
                              DirichletBC(tags.find(meshes.YMIN), [0.0, 0.0], components=[1])],
                             tractions=[Traction(tags.find(meshes.XMAX), [sigma, 0.0])])
     assert dem.num_multi_neumann_cells == 0
-    result = minimise_energy(dem, rtol=1e-14)
+    result = minimise_energy(DEMProblem(dem), rtol=1e-14)
     stress = dem.stress(result.u, 0.0)
     exact = np.array([[sigma, 0.0], [0.0, 0.0]])
     error = MPI.COMM_WORLD.allreduce(np.abs(stress - exact).max(initial=0.0), op=MPI.MAX)
@@ -366,12 +371,12 @@ def test_bar_pressed_on_a_wall_by_a_traction(n):
     mesh, _, tags = meshes.create_interval(MPI.COMM_SELF, n, 0.0, L)
     dem = DEMDiscretisation(mesh, ElasticMaterial(E=E, nu=0.0, rho=1.0), "A",
                             tractions=[Traction(tags.find(meshes.XMAX), [-p])])
-    dem.set_obstacles([HalfSpace([0.0], [1.0], tags.find(meshes.XMIN))])
-    result = minimise_energy(dem, rtol=1e-14)
-    assert np.allclose(dem.stress(result.u, 0.0)[:, 0, 0], -p, rtol=1e-12, atol=0)
-    assert float(dem.contact.reactions(result.u).sum()) == pytest.approx(p, rel=1e-12)
+    problem = DEMProblem(dem, [RigidContact(dem, [HalfSpace([0.0], [1.0], tags.find(meshes.XMIN))])])
+    result = minimise_energy(problem, rtol=1e-14)
+    assert np.allclose(problem.stress(result.u, 0.0)[:, 0, 0], -p, rtol=1e-12, atol=0)
+    assert float(problem.find(RigidContact).reactions(result.u).sum()) == pytest.approx(p, rel=1e-12)
     with pytest.raises(ValueError, match="must not carry a traction"):
-        dem.set_obstacles([HalfSpace([L], [-1.0], tags.find(meshes.XMAX))])
+        RigidContact(dem, [HalfSpace([L], [-1.0], tags.find(meshes.XMAX))])
 
 
 @pytest.mark.mpi
@@ -380,10 +385,11 @@ def test_hertz_ball_equilibrium_and_contact_radius(tempdir):
     force (the symmetry conditions act on u_x, u_y only), and the contact radius is near Hertz's
     (a = 0.0384 m; 0.0384 measured at h = 0.04, so 4 % allows for the coarse mesh only)."""
     scene = scenes.load("hertz3d", {"mesh.h": 0.06, "mesh.refine_h": 0.015})
-    dem = model.build(scene, MPI.COMM_WORLD)
-    result = minimise_energy(dem)
+    problem = model.build(scene, MPI.COMM_WORLD)
+    dem = problem.dem
+    result = minimise_energy(problem)
     assert result.gradient_reduction < 1e-8
-    figures = static_simulation._contact_summary(dem, result.u, result, pathlib.Path(tempdir) / "p.csv",
+    figures = static_simulation._contact_summary(problem.find(RigidContact), result.u, result, pathlib.Path(tempdir) / "p.csv",
                                                  ([0.0, 0.0, 0.0], [0.0, 0.0, 1.0]))
     volume = MPI.COMM_WORLD.allreduce(dem.mass.array_r[2::3].sum(), op=MPI.SUM)  # rho = 1
     assert figures["contact_force"] == pytest.approx(3e5 * volume, rel=1e-8)
