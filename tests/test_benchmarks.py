@@ -3,6 +3,7 @@ modes and write their JSON and charts, so that they never rot; the validation st
 reproduce the figures of their pages' JSON (docs/validation/) on the meshes they share."""
 
 import json
+import os
 import pathlib
 import shutil
 import subprocess
@@ -188,3 +189,26 @@ def test_hertz3d_diagnostics_quick_reproduces_its_page(tmp_path):
             if field in old[k]:
                 assert new[k][field] == pytest.approx(old[k][field], rel=1e-7), (k, field)
     assert "## Conclusion" in (tmp_path / "hertz3d_diagnostics.md").read_text()
+
+
+def test_the_run_comparison_tools_of_contact3d_md(tmp_path):
+    """compare_series.py and body_momenta.py on a coarse two-balls run: a run against itself
+    differs by nothing, and the balls carry opposite momenta along x."""
+    from mpi4py import MPI
+
+    from dolfinx_dem import scenes, simulation
+
+    scene = scenes.load("two-balls", {"mesh.h": 0.06, "time.end": 0.05})
+    assert simulation.run(scene, tmp_path / "run", MPI.COMM_SELF, quiet=True)["status"] == "completed"
+    proc = subprocess.run([sys.executable, str(ROOT / "validation" / "compare_series.py"), str(tmp_path / "run"),
+                           str(tmp_path / "run"), "--speed", "0.3"], capture_output=True, text=True, timeout=60)
+    assert proc.returncode == 0, proc.stderr
+    report = json.loads(proc.stdout)
+    assert {"kinetic", "contact_force", "penetration", "momentum_x"} <= set(report["columns"])
+    assert all(c["max_abs_diff"] == 0 for c in report["columns"].values())
+    proc = subprocess.run([sys.executable, str(ROOT / "validation" / "body_momenta.py"), str(tmp_path / "run"),
+                           "--rho", "100"], capture_output=True, text=True, timeout=60,
+                          env={**os.environ, "PYVISTA_OFF_SCREEN": "true"})
+    assert proc.returncode == 0, proc.stderr
+    first = json.loads(proc.stdout)["0"]
+    assert first["1"][0] == pytest.approx(-first["2"][0], rel=0.01) and first["1"][0] > 0.1

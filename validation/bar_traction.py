@@ -1,4 +1,4 @@
-"""1D bar under a suddenly applied end traction (issue 15): DEM/MEMM against the exact wave solution.
+"""1D bar under a suddenly applied end traction: DEM/MEMM against the exact wave solution.
 
 Bar [0, L], clamped at x = 0, at rest, traction sigma on x = L from t = 0 on. The exact tip
 displacement is piecewise linear in time: u(L, t) = sigma c s / E for s = t mod 4L/c <= 2L/c, then

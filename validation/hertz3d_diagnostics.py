@@ -1,4 +1,4 @@
-"""What the DEM's contact radius of the 3D Hertz ball converges to (issue 14): the error terms of
+"""What the DEM's contact radius of the 3D Hertz ball converges to: the error terms of
 ``hertz3d.py``'s a, measured per mesh level.
 
 For each level s of ``--scales`` (the scene ``hertz3d`` of hertz3d.py, h = 0.04 / s,

@@ -1,4 +1,4 @@
-"""The force-indentation curve of the built-in scene ``indentation`` (issue 15): a rigid disc
+"""The force-indentation curve of the built-in scene ``indentation``: a rigid disc
 (a prescribed body) pushed at constant speed into a clamped elastic block, against the DEM
 statics solution and the P2 FEM Nitsche reference (docs/validation/indentation_fem.json).
 

@@ -1,4 +1,4 @@
-"""Two materials in 1D (issue 15): springs in series, and a pulse crossing the interface.
+"""Two materials in 1D: springs in series, and a pulse crossing the interface.
 
 Material 1 (E1 = 1, rho1 = 1, Z1 = 1) for x < a, material 2 (E2 = 4, rho2 = 1, Z2 = 2) after.
 
