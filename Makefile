@@ -38,7 +38,7 @@ export OMPI_ALLOW_RUN_AS_ROOT_CONFIRM=1
 export OMPI_MCA_btl_vader_single_copy_mechanism=none
 export PYVISTA_OFF_SCREEN=true
 
-.PHONY: setup apt verify test demo bench clean
+.PHONY: setup apt verify test demo bench validate clean
 
 setup: $(STAMP) verify
 
@@ -95,12 +95,12 @@ test: setup
 	  mpirun -n $$np --oversubscribe $(PYTHON) -m pytest -q -m mpi -p no:cacheprovider $(PYTEST_ARGS) tests || exit $$?; \
 	done
 
-# --- demo / benchmarks ----------------------------------------------------------
+# --- demo / benchmarks / validation ----------------------------------------------
 demo: setup
 	$(VENV)/bin/dolfinx-dem run cantilever --out results/cantilever --overwrite
 	@echo "Results of the cantilever scene are in $(CURDIR)/results/cantilever"
 
-# The studies of docs/bench/README.md (~50 min; needs ~17 GB for the largest parallel run).
+# The benchmark studies of docs/bench/README.md (~50 min; ~17 GB for the largest parallel run).
 bench: export OMP_NUM_THREADS = 1
 bench: setup
 	$(PYTHON) benchmarks/bench_study.py
@@ -109,6 +109,30 @@ bench: setup
 	$(PYTHON) benchmarks/bench_contact_scaling.py --out docs/bench/contact_scaling.json
 	$(PYTHON) benchmarks/bench_contact3d.py --out docs/bench/contact3d.json
 	$(PYTHON) benchmarks/bench_parallel.py --out docs/bench/parallel.json
+
+# The validation studies of docs/validation/README.md (~1.5 h alone): each writes its JSON and
+# page there. The pages written by the demos and the 3D contact runs give their own commands.
+# hertz3d_diagnostics adds its levels to its JSON, so that starts empty.
+VALIDATE_WORK := results/validate
+validate: export OMP_NUM_THREADS = 1
+validate: setup
+	$(PYTHON) validation/bar_traction.py --out docs/validation/bar_traction.json
+	$(PYTHON) validation/two_materials.py --meshes 350 700 1400 2800 --out docs/validation/two_materials.json
+	$(PYTHON) validation/indentation_fem.py --out docs/validation/indentation_fem.json
+	$(PYTHON) validation/indentation_fem.py --meshes 0.0005 --out docs/validation/indentation_fem_fine.json
+	mkdir -p $(VALIDATE_WORK)
+	$(PYTHON) validation/indentation.py --h 0.04 0.02 --speeds 0.5 0.25 --slow-h 0.04 --slow-speeds 0.125 --static-h --out $(VALIDATE_WORK)/a.json
+	$(PYTHON) validation/indentation.py --h 0.01 --speeds 0.5 --slow-h --static-h --out $(VALIDATE_WORK)/b.json
+	$(PYTHON) validation/indentation.py --h --static-h 0.04 0.02 0.01 --out $(VALIDATE_WORK)/c.json
+	$(PYTHON) validation/indentation.py --h 0.02 --speeds 0.0625 --slow-h --static-h --out $(VALIDATE_WORK)/d.json
+	$(PYTHON) validation/indentation.py --merge $(VALIDATE_WORK)/{a,b,c,d}.json --out docs/validation/indentation.json
+	$(PYTHON) validation/hertz3d.py --scales 1 1.41 2 2.83 --fem-extra 4 --work $(VALIDATE_WORK)/hertz3d
+	rm -f docs/validation/hertz3d_diagnostics.json
+	$(PYTHON) validation/hertz3d_diagnostics.py --dem --fem --scales 0.5 0.71 1 1.41 2
+	$(PYTHON) validation/hertz3d_diagnostics.py --dem --scales 2.83
+	$(PYTHON) validation/hertz3d_diagnostics.py --dem --fem --scales 0.9 1.1 1.3 1.55 1.8 2.2
+	$(PYTHON) validation/hertz3d_diagnostics.py --fem --scales 2 --load-factors 0.9 1.1
+	$(PYTHON) validation/hertz3d_diagnostics.py --dem --fem --scales 2.5 3.0
 
 # --- cleaning (keeps .venv) -----------------------------------------------------
 clean:

@@ -40,8 +40,8 @@ def cradle(t_end: float) -> dict:
 
 def idle_balls(n_idle: int, h: float, t0: float, t1: float) -> dict:
     balls = [[0.14, 0.0, 0.0, 0.1], [0.36, 0.0, 0.0, 0.1]] + [[0.4 * k, 0.6, 0.0, 0.1] for k in range(n_idle)]
-    # uniform mesh and eta = E, as when the figures of docs/bench began (the scene refines its
-    # contact point and takes eta = 10 E since 2026-12-01)
+    # a uniform mesh and eta = E (the scene refines its contact point and takes eta = 10 E): the
+    # same configuration as the figures of CHANGELOG.md, so that they compare
     scene = scenes.load("two-balls", {"mesh.h": h, "mesh.refine_h": h, "material.eta": 100.0, "mesh.balls": balls,
                                       "contact.boundary": ["all"], "time.end": t1})
     run = DynamicRun(scene, MPI.COMM_SELF, quiet=True)

@@ -1,19 +1,34 @@
-"""The benchmark studies run (quick mode) and write their JSON and charts, so that they never rot."""
+"""The benchmark studies (benchmarks/) and the validation studies (validation/) run in their quick
+modes and write their JSON and charts, so that they never rot; the validation studies' quick runs
+reproduce the figures of their pages' JSON (docs/validation/) on the meshes they share."""
 
 import json
+import os
 import pathlib
+import shutil
 import subprocess
 import sys
 
+import pytest
+
 ROOT = pathlib.Path(__file__).resolve().parent.parent
+VALIDATION = ROOT / "docs" / "validation"
+
+
+def _quick(script, *args, timeout=300):
+    """Run ``script`` (a path from the repository root) with ``--quick`` and ``args``."""
+    proc = subprocess.run([sys.executable, str(ROOT / script), "--quick", *args],
+                          capture_output=True, text=True, timeout=timeout, cwd=ROOT)
+    assert proc.returncode == 0, proc.stderr
+    return proc
+
+
+def _documented(path):
+    return json.loads((VALIDATION / path).read_text())
 
 
 def test_bench_study_quick(tmp_path):
-    proc = subprocess.run(
-        [sys.executable, str(ROOT / "benchmarks" / "bench_study.py"), "--quick", "--out", str(tmp_path)],
-        capture_output=True, text=True, timeout=600, cwd=ROOT,
-    )
-    assert proc.returncode == 0, proc.stderr
+    _quick("benchmarks/bench_study.py", "--out", str(tmp_path), timeout=600)
     data = json.loads((tmp_path / "results.json").read_text())
     for key in ("force_vs_matmult_ratio", "contact_fraction_billiard", "mpi_speedup_2",
                 "setup_seconds_per_million_cells"):
@@ -39,40 +54,33 @@ def test_bench_study_quick(tmp_path):
         assert (tmp_path / name).stat().st_size > 1000
 
 
-def _quick(script, *args, timeout=300):
-    proc = subprocess.run([sys.executable, str(ROOT / "benchmarks" / script), "--quick", *args],
-                          capture_output=True, text=True, timeout=timeout, cwd=ROOT)
-    assert proc.returncode == 0, proc.stderr
-    return proc
-
-
 def test_bench_signorini_quick(tmp_path):
-    _quick("bench_signorini.py", "--out-dir", str(tmp_path))
+    _quick("benchmarks/bench_signorini.py", "--out-dir", str(tmp_path))
     data = json.loads((tmp_path / "signorini.json").read_text())
     assert data["quick"]
 
 
 def test_bench_wave2d_quick(tmp_path):
-    _quick("bench_wave2d.py", "--out-dir", str(tmp_path))
+    _quick("benchmarks/bench_wave2d.py", "--out-dir", str(tmp_path))
     assert json.loads((tmp_path / "wave2d.json").read_text())
 
 
 def test_bench_contact_scaling_quick(tmp_path):
-    _quick("bench_contact_scaling.py", "--out", str(tmp_path / "scaling.json"))
+    _quick("benchmarks/bench_contact_scaling.py", "--out", str(tmp_path / "scaling.json"))
     data = json.loads((tmp_path / "scaling.json").read_text())
     # the contact work per step does not grow like the contact facets (5 x more here)
     assert data["contact_facets_ratio"] == 5.0 and data["contact_work_ratio"] < 3.0
 
 
 def test_bench_contact3d_quick(tmp_path):
-    _quick("bench_contact3d.py", "--out", str(tmp_path / "contact3d.json"))
+    _quick("benchmarks/bench_contact3d.py", "--out", str(tmp_path / "contact3d.json"))
     data = json.loads((tmp_path / "contact3d.json").read_text())
     assert 0 < data["cradle"]["contact_fraction"] < 1
     assert [r["idle_balls"] for r in data["idle_balls"]] == [0, 2]
 
 
 def test_bench_parallel_quick(tmp_path):
-    _quick("bench_parallel.py", "--repeat", "1", "--out", str(tmp_path / "parallel.json"))
+    _quick("benchmarks/bench_parallel.py", "--repeat", "1", "--out", str(tmp_path / "parallel.json"))
     data = json.loads((tmp_path / "parallel.json").read_text())
     runs = data["scaling"]
     assert [r["processes"] for r in runs] == [1, 2, 4] and len({r["cells"] for r in runs}) == 1
@@ -83,16 +91,124 @@ def test_bench_parallel_quick(tmp_path):
     assert data["pile"][0]["cells"] == data["pile"][1]["cells"]
 
 
-def test_bench_two_materials_small(tmp_path):
-    """The two-material study on two coarse meshes: T converges, the energy is conserved, the
-    reaction balances the load."""
-    proc = subprocess.run([sys.executable, str(ROOT / "benchmarks" / "bench_two_materials.py"), "--meshes", "140",
-                           "280", "--out", str(tmp_path / "two.json")], capture_output=True, text=True, timeout=300,
-                          cwd=ROOT)
-    assert proc.returncode == 0, proc.stderr
+def test_bar_traction_quick_reproduces_its_page(tmp_path):
+    """50 and 100 cells, both schemes: the tip errors of bar_traction.json, first order, the
+    energy conserved."""
+    _quick("validation/bar_traction.py", "--out", str(tmp_path / "bar.json"))
+    rows = json.loads((tmp_path / "bar.json").read_text())["results"]
+    documented = {(r["n"], r["scheme"]): r for r in _documented("bar_traction.json")["results"]}
+    assert [(r["n"], r["scheme"]) for r in rows] == [(50, "A"), (100, "A"), (50, "B"), (100, "B")]
+    for r in rows:
+        d = documented[(r["n"], r["scheme"])]
+        for key in ("tip_l2_rel_error", "tip_max_error_rel_peak", "tip_peak_rel"):
+            assert r[key] == pytest.approx(d[key], rel=1e-7), key
+        assert r["pseudo_energy_rel_drift"] < 1e-13
+    assert all(0.9 < r["order"] < 1.1 for r in rows if "order" in r)
+
+
+def test_two_materials_quick_reproduces_its_page(tmp_path):
+    """350 and 700 cells: T converges at second order, the energy is conserved, the reaction
+    balances the load, and R, T and the stress error are those of two_materials.json."""
+    _quick("validation/two_materials.py", "--out", str(tmp_path / "two.json"))
     data = json.loads((tmp_path / "two.json").read_text())
-    for study in data["weights"].values():
-        rows = study["dynamic_A"]["rows"]
-        assert rows[1]["T_error"] < 0.5 * rows[0]["T_error"]
-        assert all(r["pseudo_energy_drift_rel"] < 1e-14 for r in rows)
+    documented = _documented("two_materials.json")["weights"]
+    for name, study in data["weights"].items():
+        for scheme in "AB":
+            rows = study[f"dynamic_{scheme}"]["rows"]
+            assert rows[1]["T_error"] < 0.3 * rows[0]["T_error"]
+            assert all(r["pseudo_energy_drift_rel"] < 1e-14 for r in rows)
+            same = {r["n"]: r for r in documented[name][f"dynamic_{scheme}"]["rows"]}
+            for r in rows:
+                for key in ("R", "T", "stress_l2_error_rel"):
+                    assert r[key] == pytest.approx(same[r["n"]][key], rel=1e-7), (name, scheme, key)
         assert all(s["reaction_error_rel"] < 1e-10 for s in study["static"])
+
+
+def test_indentation_fem_quick_reproduces_its_page(tmp_path):
+    """The coarsest mesh (h = 0.004 m) of indentation_fem.json: P, a and p_max, and the balance."""
+    _quick("validation/indentation_fem.py", "--out", str(tmp_path / "fem.json"))
+    data = json.loads((tmp_path / "fem.json").read_text())
+    documented = _documented("indentation_fem.json")["deltas"]
+    for delta, entry in data["deltas"].items():
+        (row,) = entry["rows"]
+        (same,) = [r for r in documented[delta]["rows"] if r["h"] == row["h"] == 0.004]
+        for key in ("P", "a", "p_max"):
+            assert row[key] == pytest.approx(same[key], rel=1e-6), (delta, key)
+        assert abs(row["reaction"] - row["P"]) < 1e-9 * row["P"]
+
+
+def test_indentation_quick_reproduces_its_page(tmp_path):
+    """h = 0.04 m: the dynamic force at 0.5 m/s and the static force at each indentation are
+    those of indentation.json; the energy balances the disc's work, the statics the reactions."""
+    _quick("validation/indentation.py", "--out", str(tmp_path / "ind.json"))
+    data = json.loads((tmp_path / "ind.json").read_text())
+    documented = _documented("indentation.json")
+    (dynamic,) = data["dynamic"]
+    (same,) = [r for r in documented["dynamic"] if r["h"] == 0.04 and r["speed"] == 0.5]
+    assert dynamic["steps"] == same["steps"] and dynamic["energy_balance"] < 1e-13
+    for delta, force in dynamic["force_at_indentation"].items():
+        assert force == pytest.approx(same["force_at_indentation"][delta], rel=1e-7), delta
+    (static,) = data["static"]
+    (same,) = [r for r in documented["static"] if r["h"] == 0.04]
+    for delta, row in static["indentations"].items():
+        assert row["force"] == pytest.approx(same["indentations"][delta]["force"], rel=1e-7), delta
+        assert abs(row["balance"]) < 1e-9
+
+
+def test_hertz3d_quick_reproduces_its_pages(tmp_path):
+    """The coarsest levels: the DEM's a at s = 0.5 and the FEM at s = 0.5, 0.71, 1 are those of
+    hertz3d_diagnostics.json (and hertz3d.json at s = 1); the page is written."""
+    _quick("validation/hertz3d.py", "--out", str(tmp_path / "hertz3d.json"), "--work", str(tmp_path / "runs"))
+    data = json.loads((tmp_path / "hertz3d.json").read_text())
+    rows = {(r["method"], r["scale"]): r for r in _documented("hertz3d_diagnostics.json")["rows"]
+            if r.get("load_factor", 1.0) == 1.0}
+    (dem,) = data["dem"]
+    assert dem["a"] == pytest.approx(rows[("dem-A", 0.5)]["a_uniform"], rel=1e-7)
+    assert dem["a_barycentre"] == pytest.approx(rows[("dem-A", 0.5)]["a_point"], rel=1e-7)
+    assert dem["approach"] == pytest.approx(rows[("dem-A", 0.5)]["approach"], rel=1e-7)
+    assert [r["scale"] for r in data["fem"]] == [0.5, 0.71, 1.0]
+    for r in data["fem"]:
+        for key in ("a", "approach"):
+            assert r[key] == pytest.approx(rows[("fem-P2", r["scale"])][key], rel=1e-7), (r["scale"], key)
+    assert data["fem"][-1]["a"] == pytest.approx(_documented("hertz3d.json")["fem"][0]["a"], rel=1e-7)
+    assert "## Criteria" in (tmp_path / "hertz3d.md").read_text()
+
+
+def test_hertz3d_diagnostics_quick_reproduces_its_page(tmp_path):
+    """The level s = 0.5 solved again next to copies of the two JSON files: the same rows, and
+    the page rendered with every level."""
+    for name in ("hertz3d.json", "hertz3d_diagnostics.json"):
+        shutil.copy(VALIDATION / name, tmp_path / name)
+    _quick("validation/hertz3d_diagnostics.py", "--out", str(tmp_path / "hertz3d_diagnostics.json"))
+    key = lambda r: (r["method"], r["scale"], r.get("load_factor", 1.0))  # noqa: E731
+    new = {key(r): r for r in json.loads((tmp_path / "hertz3d_diagnostics.json").read_text())["rows"]}
+    old = {key(r): r for r in _documented("hertz3d_diagnostics.json")["rows"]}
+    assert new.keys() == old.keys()
+    for k in (("dem-A", 0.5, 1.0), ("fem-P2", 0.5, 1.0)):
+        for field in ("cells", "contact_force", "approach", "a_uniform", "a_point", "a"):
+            if field in old[k]:
+                assert new[k][field] == pytest.approx(old[k][field], rel=1e-7), (k, field)
+    assert "## Conclusion" in (tmp_path / "hertz3d_diagnostics.md").read_text()
+
+
+def test_the_run_comparison_tools_of_contact3d_md(tmp_path):
+    """compare_series.py and body_momenta.py on a coarse two-balls run: a run against itself
+    differs by nothing, and the balls carry opposite momenta along x."""
+    from mpi4py import MPI
+
+    from dolfinx_dem import scenes, simulation
+
+    scene = scenes.load("two-balls", {"mesh.h": 0.06, "time.end": 0.05})
+    assert simulation.run(scene, tmp_path / "run", MPI.COMM_SELF, quiet=True)["status"] == "completed"
+    proc = subprocess.run([sys.executable, str(ROOT / "validation" / "compare_series.py"), str(tmp_path / "run"),
+                           str(tmp_path / "run"), "--speed", "0.3"], capture_output=True, text=True, timeout=60)
+    assert proc.returncode == 0, proc.stderr
+    report = json.loads(proc.stdout)
+    assert {"kinetic", "contact_force", "penetration", "momentum_x"} <= set(report["columns"])
+    assert all(c["max_abs_diff"] == 0 for c in report["columns"].values())
+    proc = subprocess.run([sys.executable, str(ROOT / "validation" / "body_momenta.py"), str(tmp_path / "run"),
+                           "--rho", "100"], capture_output=True, text=True, timeout=60,
+                          env={**os.environ, "PYVISTA_OFF_SCREEN": "true"})
+    assert proc.returncode == 0, proc.stderr
+    first = json.loads(proc.stdout)["0"]
+    assert first["1"][0] == pytest.approx(-first["2"][0], rel=0.01) and first["1"][0] > 0.1

@@ -1,12 +1,17 @@
 """The documentation against the code: every error message of docs/scenes.md is the one the
 command prints, the lists of built-in scenes, top-level keys, summary keys and demos are
-complete, and docs/theory.md describes what is implemented."""
+complete, docs/theory.md describes what is implemented, every link and script the documents name
+exists, and the benchmark and validation pages quote the figures of their JSON."""
 
 import contextlib
 import io
+import json
 import pathlib
 import re
 import shlex
+import shutil
+import subprocess
+import sys
 
 import pytest
 from mpi4py import MPI
@@ -96,3 +101,107 @@ def test_theory_describes_what_is_implemented():
     assert "$-Ku$" not in theory  # the force is -Q^T(Qw + q) + f, in factored form
     for section in ("Contact between deformable bodies", "Rigid obstacles and contact between bodies together"):
         assert f"## {section}" in theory
+
+
+def _documents():
+    """The project's markdown documents: docs/ (recursively), the READMEs, the changelog."""
+    return sorted([*(ROOT / "docs").rglob("*.md"), ROOT / "README.md", ROOT / "CHANGELOG.md",
+                   ROOT / "demos" / "README.md"])
+
+
+def test_every_link_of_the_documents_resolves():
+    broken = []
+    for page in _documents():
+        for target in re.findall(r"\]\(([^)\s]+)\)", page.read_text()):
+            path = target.split("#", 1)[0]
+            if path and not re.match(r"[a-z]+:", path) and not (page.parent / path).exists():
+                broken.append(f"{page.relative_to(ROOT)}: {target}")
+    assert broken == []
+
+
+def test_every_script_the_documents_name_exists():
+    """Scripts of benchmarks/, validation/ and demos/ named by a page, a JSON of docs/, the
+    Makefile or a test (the changelog names the history's scripts too)."""
+    sources = [p for p in _documents() if p.name != "CHANGELOG.md"]
+    sources += [*(ROOT / "docs").rglob("*.json"), ROOT / "Makefile", *(ROOT / "tests").glob("*.py")]
+    named = {m for p in sources for m in re.findall(r"\b(?:benchmarks|validation|demos)/\w+\.py", p.read_text())}
+    assert named and {m for m in named if not (ROOT / m).exists()} == set()
+
+
+def test_every_figure_and_json_of_the_result_pages_is_named_by_a_page():
+    pages = "".join(p.read_text() for p in (ROOT / "docs").rglob("*.md"))
+    files = [p for d in ("bench", "validation") for p in (ROOT / "docs" / d).iterdir() if p.suffix != ".md"]
+    assert [p.name for p in files if p.name not in pages] == []
+
+
+@pytest.mark.parametrize("script, page", [("hertz3d.py", "hertz3d.md"),
+                                          ("hertz3d_diagnostics.py", "hertz3d_diagnostics.md")])
+def test_the_hertz3d_pages_are_their_json_rendered(script, page, tmp_path):
+    validation = ROOT / "docs" / "validation"
+    for name in ("hertz3d.json", "hertz3d_diagnostics.json"):
+        shutil.copy(validation / name, tmp_path / name)
+    out = tmp_path / page.replace(".md", ".json")
+    proc = subprocess.run([sys.executable, str(ROOT / "validation" / script), "--render", "--out", str(out)],
+                          capture_output=True, text=True, timeout=120, cwd=ROOT)
+    assert proc.returncode == 0, proc.stderr
+    assert out.with_suffix(".md").read_text() == (validation / page).read_text()
+
+
+def _row(text: str, section: str, first: str) -> list:
+    """The cells after the first of the first table row after the heading ``section`` that starts
+    with ``| first |``, bold removed."""
+    lines = text[text.index(f"\n{section}\n"):].splitlines()
+    line = next(line for line in lines if line.startswith(f"| {first} |"))
+    return [c.strip() for c in line.replace("**", "").strip("|").split("|")][1:]
+
+
+def _quotes(cell: str, value: float, scale: float = 1.0) -> bool:
+    """Whether the first number of ``cell`` is ``value`` times ``scale`` to its printed digits."""
+    number = re.match(r"[-+]?[\d,]*\.?\d+(?:e[-+]?\d+)?", cell).group().replace(",", "")
+    mantissa, _, exponent = number.partition("e")
+    decimals = len(mantissa.split(".")[1]) if "." in mantissa else 0
+    return abs(float(number) - value * scale) <= 0.5 * 10.0 ** (int(exponent or 0) - decimals) * 1.0001
+
+
+def test_the_benchmark_pages_quote_their_json():
+    bench = ROOT / "docs" / "bench"
+    readme, parallel = (bench / "README.md").read_text(), (bench / "parallel.md").read_text()
+    results = json.loads((bench / "results.json").read_text())
+    for r in results["cost_growth"]:
+        cells = _row(readme, "## The MEMM step, the set-up and the stable time step", f"{r['cells']:,}")
+        step = r["seconds"]["step"] / r["seconds"]["matmult"]
+        median = r["seconds_median"]["step"] / r["seconds_median"]["matmult"]
+        assert _quotes(cells[0], step) and _quotes(cells[0].split("(")[1], median), cells
+        assert _quotes(cells[1], r["force_vs_matmult_ratio"]), cells
+        assert _quotes(cells[2], r["stable_time_step"]["bound_seconds"]), cells
+        assert _quotes(cells[3], r["stable_time_step"]["fraction_of_setup"], 100), cells
+    for scene, r in results["bound_tightness"].items():
+        cells = _row(readme, "### The bound on the stable time step against SLEPc (`bound_tightness`)", f"`{scene}`")
+        assert _quotes(cells[2], r["lambda_bound_over_lambda_max"]), cells
+        assert _quotes(cells[3], r["dt_bound_over_dt_eigenvalue"]), cells
+    for run, r in results["residual_refresh"].items():
+        first = next(c for c in ("`cantilever`", "unit square, 1e4 cells, smooth u0",
+                                 "`bar-impact`, 800 cells (free body, contact)") if c.strip("`")[:9] in run)
+        cells = _row(readme, "### Drift of the pseudo-energy with and without the refresh (`residual_refresh`)", first)
+        for column, key in ((1, "pseudo_energy_drift"), (2, "energy_rows_distance")):
+            quoted = cells[column].split(" / ")
+            assert all(_quotes(q, r["refresh_every"][k][key]) for q, k in zip(quoted, ("0", "1000", "100"))), cells
+    contact3d = json.loads((bench / "contact3d.json").read_text())
+    assert f"`contact_fraction` **{contact3d['cradle']['contact_fraction']:.3f}**" in readme
+    for r in contact3d["idle_balls"]:
+        cells = _row(readme, "## Contact between bodies in 3D", str(r["idle_balls"]))
+        assert _quotes(cells[4], r["contact_ms_per_step"]) and _quotes(cells[5], r["step_ms"]), cells
+    data = json.loads((bench / "parallel.json").read_text())
+    for r in data["scaling"]:
+        cells = _row(parallel, "## Set-up, memory and step at 1e6 cells", str(r["processes"]))
+        assert _quotes(cells[0], r["setup_seconds"]) and _quotes(cells[2], r["stable_step_seconds"]), cells
+        assert _quotes(cells[3], r["peak_mb_max"]) and _quotes(cells[5], r["bytes_per_cell_summed"], 1e-3), cells
+        assert _quotes(cells[7], r["step_seconds_median"], 1e3), cells
+    one = [r for r in data["pile"] if r["processes"] == 1]
+    two = [r for r in data["pile"] if r["processes"] == 2]
+    for k, (a, b) in enumerate(zip(one, two)):
+        cells = _row(parallel, "## Contact work of a pile of 64 discs", str(k + 1))
+        assert _quotes(cells[0], a["contact_seconds_per_step_max"], 1e3), cells
+        assert _quotes(cells[1], b["contact_seconds_per_step_max"], 1e3), cells
+        assert _quotes(cells[3], b["contact_seconds_per_step_max"] / a["contact_seconds_per_step_max"]), cells
+    assert f"Median ratio **{data['contact_2_over_1']:.3f}**" in parallel

@@ -11,8 +11,8 @@ wall times; per delta, the differences between successive meshes (relative to th
 the ratio of successive differences; and the half-space estimates a_H = sqrt(4 P R / (pi E*)),
 p0_H = 2 P / (pi a_H) (indicative only: the block is finite). Serial. Usage::
 
-    python benchmarks/bench_indentation_fem.py --out docs/validation/indentation_fem.json  # ~3.5 min
-    python benchmarks/bench_indentation_fem.py --meshes 0.01 0.005 --out /tmp/ind.json   # seconds
+    .venv/bin/python validation/indentation_fem.py --out docs/validation/indentation_fem.json  # ~3.5 min
+    .venv/bin/python validation/indentation_fem.py --quick --out OUT.json     # --meshes 0.004: seconds
 """
 
 from __future__ import annotations
@@ -63,7 +63,10 @@ def main():
                         help="mesh sizes h in the contact zone (m), coarse to fine")
     parser.add_argument("--deltas", type=float, nargs="+", default=[0.005, 0.01, 0.02], help="indentations (m)")
     parser.add_argument("--out", default=None, help="JSON file to write")
+    parser.add_argument("--quick", action="store_true", help="--meshes 0.004 (seconds)")
     args = parser.parse_args()
+    if args.quick:
+        args.meshes = [0.004]
     comm = MPI.COMM_WORLD
     started = datetime.datetime.now(datetime.timezone.utc).strftime("%Y-%m-%d %H:%M UTC")
     per_delta = {d: [] for d in args.deltas}

@@ -1,4 +1,4 @@
-"""The force-indentation curve of the built-in scene ``indentation`` (issue 15): a rigid disc
+"""The force-indentation curve of the built-in scene ``indentation``: a rigid disc
 (a prescribed body) pushed at constant speed into a clamped elastic block, against the DEM
 statics solution and the P2 FEM Nitsche reference (docs/validation/indentation_fem.json).
 
@@ -14,9 +14,10 @@ Static solutions (``--static-h``): ``statics.minimise_energy`` at the load time 
 indentation (the disc held at U(t) = velocity t), the disc's reaction and the base's (their sum is
 the discrete equilibrium residual), Newton iterations and wall time.
 
-    .venv/bin/python benchmarks/bench_indentation.py [--h 0.04 0.02] [--speeds 0.5 0.25] [--slow-h 0.04]
+    .venv/bin/python validation/indentation.py [--h 0.04 0.02] [--speeds 0.5 0.25] [--slow-h 0.04]
         [--slow-speeds 0.125 0.0625] [--static-h 0.04 0.02] [--out indentation.json]
-    .venv/bin/python benchmarks/bench_indentation.py --merge a.json b.json --out indentation.json
+    .venv/bin/python validation/indentation.py --merge a.json b.json --out indentation.json
+    .venv/bin/python validation/indentation.py --quick --out OUT.json    # h = 0.04 m, 0.5 m/s and statics
 
 ``--merge``: one file of the runs of several (e.g. concurrent) invocations, in their order, with the
 FEM reference (the finest mesh of docs/validation/indentation_fem.json) and the table of
@@ -138,7 +139,10 @@ def main():
     parser.add_argument("--curve-every", type=int, default=20)
     parser.add_argument("--out", default="indentation.json")
     parser.add_argument("--merge", nargs="+", help="files of earlier invocations to merge into --out, nothing run")
+    parser.add_argument("--quick", action="store_true", help="--h 0.04 --speeds 0.5 --slow-h --static-h 0.04")
     args = parser.parse_args()
+    if args.quick:
+        args.h, args.speeds, args.slow_h, args.static_h = [0.04], [0.5], [], [0.04]
     if args.merge:
         parts = [json.load(open(path)) for path in args.merge]
         with open(args.out, "w") as f:

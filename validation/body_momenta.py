@@ -1,7 +1,7 @@
 """The momentum of each body at the first and last output times of a run, from the cells of its
 solution.xdmf: rho |c| v_c summed over the cells of each `body` (one material of density rho).
 
-    PYVISTA_OFF_SCREEN=true .venv/bin/python benchmarks/body_momenta.py results/two-balls --rho 100
+    PYVISTA_OFF_SCREEN=true .venv/bin/python validation/body_momenta.py results/two-balls --rho 100
 """
 
 import argparse

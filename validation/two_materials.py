@@ -1,4 +1,4 @@
-"""Two materials in 1D (issue 15): springs in series, and a pulse crossing the interface.
+"""Two materials in 1D: springs in series, and a pulse crossing the interface.
 
 Material 1 (E1 = 1, rho1 = 1, Z1 = 1) for x < a, material 2 (E2 = 4, rho2 = 1, Z2 = 2) after.
 
@@ -16,7 +16,8 @@ Each is run with the facet weight eta_f of eq. (13) between the two materials as
 computes it (``CellMaterials.facet_stabilisation``: harmonic mean) and, for comparison, as the
 arithmetic mean and the minimum of the two cells' eta (substituted here, for this measurement only).
 
-    .venv/bin/python benchmarks/bench_two_materials.py [--out docs/validation/two_materials.json]
+    .venv/bin/python validation/two_materials.py [--meshes 350 700 1400 2800] [--out docs/validation/two_materials.json]
+    .venv/bin/python validation/two_materials.py --quick     # 350 and 700 cells (seconds), for the tests
 """
 
 import argparse
@@ -138,7 +139,10 @@ def main():
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--out", default=None)
     parser.add_argument("--meshes", type=int, nargs="+", default=[350, 700, 1400])
+    parser.add_argument("--quick", action="store_true", help="--meshes 350 700")
     args = parser.parse_args()
+    if args.quick:
+        args.meshes = [350, 700]
     comm = MPI.COMM_WORLD
     results = {"R_exact": R, "T_exact": T, "weights": {}}
     for name, weight in WEIGHTS.items():

@@ -1,4 +1,4 @@
-"""1D bar under a suddenly applied end traction (issue 15): DEM/MEMM against the exact wave solution.
+"""1D bar under a suddenly applied end traction: DEM/MEMM against the exact wave solution.
 
 Bar [0, L], clamped at x = 0, at rest, traction sigma on x = L from t = 0 on. The exact tip
 displacement is piecewise linear in time: u(L, t) = sigma c s / E for s = t mod 4L/c <= 2L/c, then
@@ -6,11 +6,14 @@ back to 0 at s = 4L/c (peak 2 sigma L / E, period 4L/c). Reported: the L2-in-tim
 displacement (the P1 reconstruction of eq. (10) at x = L) relative to the L2 norm of the exact one,
 its order between meshes, and the pseudo-energy drift (the traction is constant: conserved).
 
-    .venv/bin/python benchmarks/bench_bar_traction.py [--out docs/validation/bar_traction.json]
+    .venv/bin/python validation/bar_traction.py [--out docs/validation/bar_traction.json] [--quick]
+
+``--quick``: 50 and 100 cells (seconds), for the tests.
 """
 
 import argparse
 import json
+import sys
 
 import numpy as np
 from mpi4py import MPI
@@ -67,7 +70,10 @@ def main():
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--out", default=None)
     parser.add_argument("--n", type=int, nargs="+", default=[50, 100, 200])
+    parser.add_argument("--quick", action="store_true", help="--n 50 100")
     args = parser.parse_args()
+    if args.quick:
+        args.n = [50, 100]
     results = []
     for scheme in ("A", "B"):
         rows = [run(n, scheme) for n in args.n]
@@ -80,7 +86,7 @@ def main():
             print(json.dumps(r))
         if args.out:
             with open(args.out, "w") as f:
-                json.dump({"command": "benchmarks/bench_bar_traction.py", "L": L, "E": E, "rho": RHO,
+                json.dump({"command": " ".join([".venv/bin/python", "validation/bar_traction.py"] + sys.argv[1:]), "L": L, "E": E, "rho": RHO,
                            "sigma": SIGMA, "periods": PERIODS, "cfl": CFL, "results": results}, f, indent=1)
 
 

@@ -5,7 +5,7 @@ force, momenta to sum m |v0| (= 2 K0 / speed for bodies all launched at one spee
 its largest value. With --growth, the family-relative difference of every column, largest over
 windows of the run, shows how a difference grows with time.
 
-    .venv/bin/python benchmarks/compare_series.py results/two-balls results/two-balls-2 --speed 0.3
+    .venv/bin/python validation/compare_series.py results/two-balls results/two-balls-2 --speed 0.3
 """
 
 import argparse

@@ -1,14 +1,14 @@
-"""What the DEM's contact radius of the 3D Hertz ball converges to (issue 14): the error terms of
-``bench_hertz3d.py``'s a, measured per mesh level.
+"""What the DEM's contact radius of the 3D Hertz ball converges to: the error terms of
+``hertz3d.py``'s a, measured per mesh level.
 
-For each level s of ``--scales`` (the scene ``hertz3d`` of bench_hertz3d.py, h = 0.04 / s,
+For each level s of ``--scales`` (the scene ``hertz3d`` of hertz3d.py, h = 0.04 / s,
 h_c = 0.01 / s) the DEM statics (scheme A, ``statics.minimise_energy``, as the static runner
 calls it, no output files) and, with ``--fem``, the P2 FEM reference are solved, and written:
 
 * the statics check: the total contact force (facet reactions plus the kink facets'
   multipliers) against the weight of the meshed quarter, f |mesh|, and both against the quarter
   of the exact ball, P/4 = f pi R^3 / 3 (the inscribed polyhedron is lighter: a ~ P^(1/3));
-* a_uniform, the moment measure of bench_hertz3d.py (each facet's force spread uniformly over its
+* a_uniform, the moment measure of hertz3d.py (each facet's force spread uniformly over its
   triangle, ``hertz.triangle_pressure_moments``), and a_point, the same moments of the facet
   forces put at the facets' barycentres, where the DEM measures the gap; they differ by the
   triangles' own second moments, sum F_f (mean r^2 over f - r_f^2) = sum F_f sum |e_i|^2 / 12
@@ -21,12 +21,13 @@ calls it, no output files) and, with ``--fem``, the P2 FEM reference are solved,
   side of an equilateral triangle of the same area);
 * the approach -u_z at the top, the iterations and the processor time of the minimisation.
 
-    .venv/bin/python benchmarks/hertz3d_diagnostics.py --dem --fem --scales 0.5 0.71 1
-        [--load-factors 0.9 1.1] [--out docs/validation/hertz3d_diagnostics.json] [--render]
+    .venv/bin/python validation/hertz3d_diagnostics.py --dem --fem --scales 0.5 0.71 1
+        [--load-factors 0.9 1.1] [--out docs/validation/hertz3d_diagnostics.json] [--render] [--quick]
 
 adds its rows to the JSON (replacing those of the same method, level and load factor) and writes,
 next to it, hertz3d_diagnostics.md (the tables; the commands, dates and commits), using the
-FEM reference of hertz3d.json (bench_hertz3d.py) next to it; ``--render`` only rewrites the markdown.
+FEM reference of hertz3d.json (hertz3d.py) next to it; ``--render`` only rewrites the markdown.
+``--quick``: ``--dem --fem --scales 0.5`` (seconds; the markdown needs the other levels in the JSON), for the tests.
 """
 
 import argparse
@@ -130,14 +131,17 @@ def main():
                         help="also FEM runs with the body force times these factors (the exponent of a(P))")
     parser.add_argument("--out", default=str(ROOT / "docs" / "validation" / "hertz3d_diagnostics.json"))
     parser.add_argument("--render", action="store_true", help="no runs: rewrite the markdown from the JSON")
+    parser.add_argument("--quick", action="store_true", help="--dem --fem --scales 0.5")
     args = parser.parse_args()
+    if args.quick:
+        args.dem, args.fem, args.scales = True, True, [0.5]
     out = pathlib.Path(args.out)
     data = json.loads(out.read_text()) if out.exists() else {"runs": [], "rows": []}
     if args.render:
         out.with_suffix(".md").write_text(markdown(data, json.loads(out.with_name("hertz3d.json").read_text())))
         return
     data["runs"].append({
-        "command": " ".join(["python", "benchmarks/hertz3d_diagnostics.py"] + sys.argv[1:]),
+        "command": " ".join([".venv/bin/python", "validation/hertz3d_diagnostics.py"] + sys.argv[1:]),
         "date": datetime.datetime.now(datetime.timezone.utc).strftime("%Y-%m-%d %H:%M UTC"),
         "commit": subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=ROOT, capture_output=True,
                                  text=True).stdout.strip(),
@@ -233,17 +237,20 @@ def markdown(data: dict, bench: dict) -> str:
                               for r, total, systematic, forces in parts)
     levels = [p for p in parts if p[0]["scale"] in {b["scale"] for b in bench["dem"]}]
     monotone = all(abs(x[2]) > abs(y[2]) for x, y in zip(levels, levels[1:]))
-    runs = "\n".join(f"- `{r['command']}` on {r['date']}, commit {r['commit']} (load average {r['load']})"
-                     for r in data["runs"])
-    return f"""# 3D static Hertz: what the DEM's contact radius converges to (issue 14)
+    runs = "\n".join(f"{r['command']}" for r in data["runs"])
+    dates = sorted({r["date"][:10] for r in data["runs"]})
+    commits = ", ".join(sorted({r["commit"] for r in data["runs"]}))
+    return f"""# 3D static Hertz: what the DEM's contact radius converges to
 
-Written by `benchmarks/hertz3d_diagnostics.py` (1 process; the numbers are in
-[`hertz3d_diagnostics.json`](hertz3d_diagnostics.json)), the runs:
+Made by these commands (1 process; run on {", ".join(dates)}, commit {commits}; the numbers are in
+[`hertz3d_diagnostics.json`](hertz3d_diagnostics.json); `--render` alone rewrites this page from it):
 
+```
 {runs}
+```
 
 The scene of [`hertz3d.md`](hertz3d.md) (R = 0.2 m, h = 0.04 / s, h_c = 0.01 / s at the contact
-point) on more levels s, between and below those of bench_hertz3d.py: the levels close to each
+point) on more levels s, between and below those of hertz3d.py: the levels close to each
 other (0.9, 1, 1.1, ...) show how much a moves with where the facets fall, at nearly the same
 resolution. ``ref`` is the FEM reference of hertz3d.md (s = {ref['scale']:g}, {ref['cells']} cells) at the
 exact load, a = {a_ref:.6e} m.
@@ -304,18 +311,18 @@ part of the error that depends on where the facets fall relative to the edge of 
 
 ## The difference of hertz3d.md, decomposed
 
-The issue's difference, a uniform / a of the finest FEM run - 1 (both raw), is exactly
+The difference of hertz3d.md, a uniform / a of the finest FEM run - 1 (both raw), is exactly
 (1 + systematic) (1 + forces) - 1 with systematic = sqrt(1 + spread) (F / F_ref)^(1/3) - 1 (the
 spread of the uniform measure, and the meshed balls' weights, this run's and the reference's)
 and forces = a barycentre at P / ref - 1 (what the facet forces give):
 
-| s | a uniform - FEM (the issue's) | systematic | forces |
+| s | a uniform - FEM (hertz3d.md's) | systematic | forces |
 |---|---|---|---|
 {decomposition}
 
 ## Conclusion
 
-The DEM's contact radius converges to the FEM's. The issue's difference is the sum of two parts.
+The DEM's contact radius converges to the FEM's. The difference of hertz3d.md is the sum of two parts.
 The systematic part ({", ".join(pct(p[2]) for p in levels)} on the levels of hertz3d.md) is the
 spread of the uniform measure over the triangles, which is not in the DEM's facet forces, less a
 third of the meshed ball's missing weight; both are O(h^2) and the part
@@ -327,7 +334,7 @@ the next, and the sum ({issue}) is not monotone: the criterion fails for that re
 lack of convergence. At the same load, the moment measure of the DEM's facet forces (at the
 barycentres, where the method measures the gaps) differs from the converged FEM by {pct(mean)} on
 average over {len(fine)} levels; on the finest levels, s >= {GROUPS[-1][0]:g}, by {pct(barycentre[-1][2])} (standard deviation
-{100 * barycentre[-1][3]:.3f}%), where the issue's measure is {pct(uniform[-1][2])} above the FEM, nearly all of it the spread.
+{100 * barycentre[-1][3]:.3f}%), where hertz3d.md's measure is {pct(uniform[-1][2])} above the FEM, nearly all of it the spread.
 """
 
 
