@@ -234,7 +234,7 @@ def _contact_summary(c: RigidContact, u, result, path: pathlib.Path, axis=None) 
     areas = geom.facet_areas[own]
     pressure = c.reactions(u) / areas
     # facets held on a kink of the potential (statics.minimise_energy) carry their multiplier
-    pressure[result.pinned] = result.kink_forces[result.pinned] / areas[result.pinned]
+    pressure[result.pinned] = c.statics().own_values(result.kink_forces, result.pinned)[result.pinned] / areas[result.pinned]
     x = geom.facet_centres[own]
     parts = comm.gather((x, pressure, areas, _facet_vertices(geom, own)), root=0)
 
@@ -262,7 +262,7 @@ def _contact_summary(c: RigidContact, u, result, path: pathlib.Path, axis=None) 
         return out
 
     summary = io.call_on_root(comm, figures)
-    summary["kink_facets"] = comm.allreduce(int(result.pinned.sum()), op=MPI.SUM)
+    summary["kink_facets"] = comm.allreduce(len(result.pinned), op=MPI.SUM)
     return summary
 
 
@@ -273,10 +273,10 @@ def _pair_summary(pc: PairContact, u, result) -> dict:
     pairs in contact. The series' ``contact_force_<i>_<j>_*`` columns are the dynamics' outputs,
     which count a pinned pair by the sign its gap rounds to: the summary's are the ones to use."""
     comm = pc.comm
-    forces = pc.pair_forces(pc.patch_values(u), result.contact_pairs) + pc.kink_forces(result.pinned, result.kink_forces)
+    forces = pc.pair_forces(pc.patch_values(u), result.active) + pc.statics().kink_forces(result.pinned, result.kink_forces)
     forces = comm.allreduce(forces, op=MPI.SUM)
     return {"contact_forces": {f"{i}_{j}": forces[k].tolist() for k, (i, j) in enumerate(pc.body_pairs)},
-            "contact_pairs": result.contact_facets, "kink_pairs": len(result.pinned),
+            "contact_pairs": result.in_contact, "kink_pairs": len(result.pinned),
             "gauss_newton_steps": result.gauss_newton_steps}
 
 

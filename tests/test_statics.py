@@ -121,7 +121,7 @@ def _disc_figures(problem, result):
     disc = comm.allreduce(int(body[geom.cell_centres[: dem.n_owned, 1] > 0].max(initial=0)), op=MPI.MAX)
     volumes = geom.cell_volumes[: dem.n_owned]
     load = LOAD * comm.allreduce(volumes[body == disc].sum(), op=MPI.SUM)
-    forces = pc.pair_forces(up, result.contact_pairs) + pc.kink_forces(result.pinned, result.kink_forces)
+    forces = pc.pair_forces(up, result.active) + pc.statics().kink_forces(result.pinned, result.kink_forces)
     forces = comm.allreduce(forces, op=MPI.SUM)[0]
     force = forces if pc.body_pairs[0][0] == disc else -forces
     uy = comm.allreduce(volumes[body == disc] @ result.u.array_r.reshape(-1, 2)[body == disc, 1], op=MPI.SUM)
@@ -129,7 +129,7 @@ def _disc_figures(problem, result):
     # normal force of each touching pair (not pinned) at its disc facet's centre
     L, F = pc.listed, pc.facets_all
     g, w = pc.pair_states(up)
-    c = np.where(np.isin(pc.pair_keys(), result.contact_pairs), w * g, 0.0)
+    c = np.where(np.isin(pc.pair_keys(), result.active), w * g, 0.0)
     normal = np.where(c != 0, -(L.ZT @ (L.Q @ up + pc._q + L.Z @ c)) * w, 0.0)
     x = np.where(F.body[L.i] == disc, F.centre[L.i, 0], F.centre[L.j, 0])
     moments = comm.allreduce(np.array([normal.sum(), normal @ x, normal @ x**2]), op=MPI.SUM)
@@ -192,7 +192,7 @@ def test_disc_on_a_stiff_block_approaches_the_rigid_plane():
 
 def test_pair_contact_hessian_is_the_derivative_of_the_force():
     """On a fixed piece (pairs in contact, overlap configuration), the exact Hessian that
-    ``PairContact.add_hessian`` adds (with ``curvature``) is the derivative of the force of the
+    the statics interface of ``PairContact`` adds (``exact``) is the derivative of the force of the
     piece: central differences of the force along random directions."""
     problem = disc_on_block(MPI.COMM_WORLD, 0.04, width=0.3, height=0.2)
     dem = problem.dem
@@ -201,12 +201,13 @@ def test_pair_contact_hessian_is_the_derivative_of_the_force():
     u = dem.create_vector()
     u.array.reshape(-1, 2)[:, 1] = np.where(owned_centres(dem)[:, 1] > 0, -0.01, 0.0)  # the disc pressed in
     u.array[:] += 1e-4 * rng.standard_normal(u.array.shape)
-    up = pc.prepare(u)[0]
-    active = pc.touching_pairs(up)
+    statics = pc.statics()
+    statics.prepare(u)
+    active = statics.touching(u)
     assert len(active) >= 4
     H = dem.K.copy()
     H.setOption(PETSc.Mat.Option.NEW_NONZERO_ALLOCATION_ERR, False)
-    pc.add_hessian(H, up, active, True)
+    statics.add_hessian(H, u, active, True)
     H.assemble()
     plus, minus, Hv = dem.create_vector(), dem.create_vector(), dem.create_vector()
     for _ in range(3):

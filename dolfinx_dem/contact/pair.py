@@ -93,6 +93,7 @@ from dolfinx_dem import bodies as _bodies
 from dolfinx_dem.conditions import facet_indices
 from dolfinx_dem.contact import candidates
 from dolfinx_dem.kernels import lib, pointer
+from dolfinx_dem.contact.pair_statics import PairStatics
 from dolfinx_dem.contact.patch import PatchScatter
 from dolfinx_dem.errors import InputError, KernelMemoryError, StateError, UnresolvedContactError
 
@@ -300,6 +301,7 @@ class PairContact:
         self.rebuilds = 0  # list builds on this process
         self.exchanges = 0  # exchanges of facets between processes (list rounds that make the ghosts)
         self._scheme_b_rule = np.empty(0, dtype=np.int64)  # keys of pairs under the B rule (own ones)
+        self._statics = None  # the statics interface, made on first use (``statics``)
         self.seconds = 0.0  # processor time of the contact work of the steps (``_timed``)
         self._timing = False  # inside a ``_timed`` method
         self._template = zero = dem.create_vector()  # the layout of the scatters' source vectors
@@ -1034,136 +1036,22 @@ class PairContact:
         scatter and reduction only where some process has a closed pair (collective)."""
         return [sums[-2], self.penetration(up) if sums[-1] > 0 else 0.0, *sums[:-2]]
 
-    # -- statics (statics.minimise_energy) ---------------------------------------------------
     def pair_keys(self) -> np.ndarray:
         """A number for each listed pair that neither the partition nor a list rebuild changes:
         its two facets' global numbers (the smaller first). Statics keys its active sets by it."""
         F, L = self.facets_all, self.listed
         return F.key[L.i].astype(np.int64) * 2**31 + F.key[L.j]
 
-    def touching_pairs(self, up: np.ndarray, below: float = 0.0) -> np.ndarray:
-        """Sorted keys of the pairs with g < ``below`` and w > 0, on every process (collective).
-        Each pair is decided by the owner of its first facet alone, so that every process holds
-        the same set even where g rounds differently on two processes. The keys of the contact
-        zone are gathered, not mesh-sized data."""
-        g, w = self.pair_states(up)
-        mine = (self.listed.i < self.num_own) & (g < below) & (w > 0)
-        return np.sort(np.concatenate(self.comm.allgather(self.pair_keys()[mine])))
-
     def smallest_gap(self, up: np.ndarray) -> float:
         """The smallest gap of the pairs that overlap (w > 0), over all processes (m; inf if none)."""
         g, w = self.pair_states(up)
         return self.comm.allreduce(float(g[w > 0].min(initial=np.inf)), op=MPI.MIN)
 
-    def _piece_derivatives(self, up: np.ndarray, active: np.ndarray):
-        """On the piece ``active`` (sorted keys) at patch values ``up``: the patch-dof gradients
-        of g_p and w_p of the listed pairs ((P, patch) CSR; w and g are affine on a piece), the
-        pairs in the piece (w_p > 0), g_p, w_p and mu_p = z_p . (a + delta_a) (own rows' part)."""
-        L, d = self.listed, self.d
-        g, w, dw = self._state(np.arange(len(L)), *self._pair_displacements(up))
-        on = np.isin(self.pair_keys(), active) & (w > 0)
-        c = np.where(on, w * g, 0.0)
-        mu = np.where(on, L.ZT @ (L.Q @ up + self._q + L.Z @ c), 0.0)
-        # dg/du_j = n = -dg/du_i, dw/du_j = dw = -dw/du_i (facet displacements), then R.
-        P, nf = len(L), len(self.facets_all)
-        rows = np.repeat(np.arange(P), 2 * d)
-        cols = np.concatenate([L.i[:, None] * d + np.arange(d), L.j[:, None] * d + np.arange(d)], axis=1).ravel()
-        Dg = scipy.sparse.csr_matrix((np.concatenate([-L.n, L.n], axis=1).ravel(), (rows, cols)), shape=(P, nf * d))
-        Dw = scipy.sparse.csr_matrix((np.concatenate([-dw, dw], axis=1).ravel(),
-                                      (rows, cols)), shape=(P, nf * d))
-        return (Dg @ self._R).tocsr(), (Dw @ self._R).tocsr(), on, g, w, mu
-
-    def add_hessian(self, H: PETSc.Mat, up: np.ndarray, active: np.ndarray, curvature: bool = False) -> None:
-        """H += d^2 V/du^2 - K on this process's own rows for the piece ``active`` (sorted
-        ``pair_keys``) at patch values ``up`` (collective: the processes' rows add up; ``H`` must
-        accept new nonzeros, the caller assembles it). With J = Q + sum_p z_p grad c_p^T, the
-        Jacobian of the rows a + delta_a (grad c_p = w_p grad g_p + g_p grad w_p, w and g affine on
-        the piece),
-
-            d^2 V/du^2 = J^T J + sum_p mu_p (grad w_p grad g_p^T + grad g_p grad w_p^T),
-
-        mu_p = z_p . (a + delta_a). The Gauss-Newton part J^T J (positive semi-definite) always;
-        the second term, which may make it indefinite, with ``curvature`` (mu_p summed over the
-        own rows: the processes' parts add up)."""
-        Gg, Gw, on, g, w, mu = self._piece_derivatives(up, active)
-        L = self.listed
-        C = scipy.sparse.diags(np.where(on, w, 0.0)) @ Gg + scipy.sparse.diags(np.where(on, g, 0.0)) @ Gw
-        QZC = L.QT @ (L.Z @ C)
-        change = QZC + QZC.T + C.T @ (L.N @ C)
-        if curvature:
-            M = Gw.T @ scipy.sparse.diags(mu) @ Gg
-            change = change + M + M.T
-        self._add_to(H, change)
-
-    def pinned_values(self, up: np.ndarray, active: np.ndarray, keys: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """For the pairs ``keys`` (sorted, held on a contact switch by statics) at patch values
-        ``up`` with the piece ``active``: their gaps g_p and the normal force r_p = -w_p z_p .
-        (a + delta_a) each would carry in contact (the jump of -dV/dg_p across g_p = 0), on every
-        process (collective: g from the owner of the pair's first facet, r summed over rows)."""
-        g, w, _ = self._state(np.arange(len(self.listed)), *self._pair_displacements(up))
-        on = np.isin(self.pair_keys(), active) & (w > 0)
-        L = self.listed
-        m = L.ZT @ (L.Q @ up + self._q + L.Z @ np.where(on, w * g, 0.0))
-        k = np.searchsorted(keys, self.pair_keys())
-        listed = (k < len(keys)) & (keys[np.minimum(k, len(keys) - 1)] == self.pair_keys())
-        decider = listed & (L.i < self.num_own)
-        out = np.zeros((2, len(keys)))
-        out[0, k[decider]] = g[decider]
-        np.add.at(out[1], k[listed], -(w * m)[listed])
-        self.comm.Allreduce(MPI.IN_PLACE, out, op=MPI.SUM)
-        return out[0], out[1]
-
-    def switches_crossed(self, up: np.ndarray, dp: np.ndarray, alpha: float, piece: np.ndarray) -> np.ndarray:
-        """Sorted keys (every process; collective) of the overlapping pairs whose gap, affine
-        along the step u + tau d (patch values ``up``, ``dp``), reaches its switch g = 0 for some
-        tau in [0, 2 alpha], leaving its side: closing if out of ``piece``, opening if in it."""
-        g, w, _ = self._state(np.arange(len(self.listed)), *self._pair_displacements(up))
-        L, d = self.listed, self.d
-        dd = (self._R @ dp).reshape(-1, d)
-        rate = np.einsum("pi,pi->p", dd[L.j] - dd[L.i], L.n)
-        inside = np.isin(self.pair_keys(), piece)
-        with np.errstate(divide="ignore", invalid="ignore"):
-            tau = np.where(rate != 0, -g / rate, np.inf)
-        leaving = np.where(inside, rate > 0, rate < 0)
-        mine = (L.i < self.num_own) & (w > 0) & leaving & (tau >= 0) & (tau <= 2 * alpha)
-        return np.sort(np.concatenate(self.comm.allgather(self.pair_keys()[mine])))
-
-    def kink_forces(self, keys: np.ndarray, forces: np.ndarray) -> np.ndarray:
-        """This process's part (sum over processes) of the force between each pair of
-        ``body_pairs`` (as ``pair_forces``) carried by the pairs ``keys`` that statics holds on
-        their switch g = 0 with the normal contact forces ``forces`` (-mu_p >= 0): -mu_p n on the
-        first facet's body, whose gap gradient is -n for its rigid shift."""
-        L, F = self.listed, self.facets_all
-        k = np.searchsorted(keys, self.pair_keys())
-        mine = (k < len(keys)) & (L.i < self.num_own)
-        mine[mine] = keys[k[mine]] == self.pair_keys()[mine]
-        out = np.zeros((len(self.body_pairs), self.d))
-        body_i, body_j = F.body[L.i[mine]], F.body[L.j[mine]]
-        force_i = -forces[k[mine], None] * L.n[mine]
-        sign = np.where(body_i < body_j, 1.0, -1.0)
-        np.add.at(out, self._body_pair_index[body_i, body_j], sign[:, None] * force_i)
-        return out
-
-    def gap_gradient(self, up: np.ndarray, key: int) -> PETSc.Vec:
-        """grad g_p of the pair ``key`` as a distributed vector (collective: added by the owner
-        of its first facet; g_p is affine in u, its gradient the same everywhere)."""
-        vec = self.dem.create_vector()
-        row = np.zeros(len(self.scatter))
-        p = np.flatnonzero((self.pair_keys() == key) & (self.listed.i < self.num_own))
-        if len(p):
-            Gg = self._piece_derivatives(up, np.zeros(0, dtype=np.int64))[0]
-            row = Gg[p[0]].toarray().ravel()
-        self.scatter.add(row, vec)
-        return vec
-
-    def _add_to(self, H: PETSc.Mat, C) -> None:
-        """H += C, C a (patch, patch) sparse matrix, at the patch's global dofs."""
-        C = scipy.sparse.csr_matrix(C)
-        C.eliminate_zeros()
-        dofs = self.scatter.dofs
-        for i in np.flatnonzero(np.diff(C.indptr)):
-            lo, hi = C.indptr[i], C.indptr[i + 1]
-            H.setValues([int(dofs[i])], dofs[C.indices[lo:hi]], C.data[lo:hi], addv=PETSc.InsertMode.ADD_VALUES)
+    def statics(self) -> PairStatics:
+        """The statics interface (contact/pair_statics.py), made once."""
+        if self._statics is None:
+            self._statics = PairStatics(self)
+        return self._statics
 
     # -- checkpoint (ContactModel) ----------------------------------------------------------------
     def checkpoint_state(self) -> dict[str, np.ndarray]:

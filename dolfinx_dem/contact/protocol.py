@@ -71,6 +71,9 @@ class ContactModel(Protocol):
     def output_values(self, up: np.ndarray, sums: np.ndarray) -> list[float]:
         """The values of ``output_columns`` from the reduced ``output_sums`` (collective)."""
 
+    def statics(self) -> StaticContact:
+        """The model's interface to energy minimisation (statics/), made once."""
+
     def checkpoint_state(self) -> dict[str, np.ndarray]:
         """The model's state that is not a function of u (e.g. the pair list) and its counters,
         this process's arrays (``checkpoint.py``: read back by the same partition only)."""
@@ -78,3 +81,60 @@ class ContactModel(Protocol):
     def restore_state(self, state: Mapping[str, np.ndarray] | None) -> None:
         """Restore ``checkpoint_state`` of the same partition; None (another partition): set the
         state up again from the restored displacements at the next ``prepare``."""
+
+
+@runtime_checkable
+class StaticContact(Protocol):
+    """What energy minimisation (statics/active_set.py) asks of a contact model.
+
+    A *piece* of the potential is a set of candidates in contact (facets on an obstacle, pairs
+    of facets between bodies), a sorted int64 array: the process's own candidates if
+    ``local_pieces`` (each process holds its part; the global order of a set is the processes'
+    parts in rank order), else the same keys on every process. On a piece the potential V is
+    smooth: quadratic if ``quadratic`` (one Newton step minimises it), else the iteration is a
+    damped Newton method on it. Methods that take PETSc vectors are collective."""
+
+    quadratic: bool
+    local_pieces: bool
+    length_scale: float  # (m) the scale of the candidates' gaps (a mesh size): rounding tolerances
+    no_contact_message: str  # the error when nothing is in contact at an iterate
+
+    def prepare(self, u: PETSc.Vec) -> None:
+        """Make the model valid at u (a trial point may move facets far)."""
+
+    def start_piece(self, u: PETSc.Vec) -> np.ndarray:
+        """The piece to start from at u: the candidates closest to contact."""
+
+    def touching(self, u: PETSc.Vec) -> np.ndarray:
+        """The piece of the candidates in contact at u (g < 0)."""
+
+    def add_force(self, u: PETSc.Vec, out: PETSc.Vec, piece: np.ndarray) -> None:
+        """out += the contact force of the piece at u (the exact negative gradient of V_piece - V_free)."""
+
+    def add_hessian(self, H: PETSc.Mat, u: PETSc.Vec, piece: np.ndarray, exact: bool) -> None:
+        """H += the Hessian of V_piece - V_free at u (``exact``: with the curvature terms that may
+        make it indefinite; else its positive semi-definite Gauss-Newton part). H accepts new
+        nonzeros; the caller assembles it."""
+
+    def step_ratio(self, step: PETSc.Vec) -> float:
+        """How far a step may go: the largest motion of a candidate relative to what keeps the
+        model valid (> 1: the caller shortens the step by this factor; 0 if unbounded)."""
+
+    def switches_crossed(self, u: PETSc.Vec, step: PETSc.Vec, alpha: float, piece: np.ndarray) -> np.ndarray:
+        """The candidates whose switch g = 0 the step u + tau step crosses for tau in [0, 2 alpha],
+        leaving their side (closing if out of ``piece``, opening if in it)."""
+
+    def constraint_gradients(self, u: PETSc.Vec, pinned: np.ndarray) -> list[PETSc.Vec]:
+        """grad g of each pinned candidate (their global order), as distributed vectors."""
+
+    def constraint_products(self, u: PETSc.Vec, pinned: np.ndarray, gradients: list[PETSc.Vec],
+                            vectors: list[PETSc.Vec]) -> np.ndarray:
+        """grad g_c . v for the pinned candidates c (rows, global order) and the ``vectors``
+        (columns), every process; ``gradients``: the caller's projected gradients of them."""
+
+    def constraint_gaps(self, u: PETSc.Vec, pinned: np.ndarray) -> np.ndarray:
+        """g_c(u) of the pinned candidates, their global order, every process."""
+
+    def constraint_reactions(self, u: PETSc.Vec, piece: np.ndarray, pinned: np.ndarray) -> np.ndarray:
+        """r_c, the normal force each pinned candidate would carry in contact (the jump of
+        -dV/dg_c across its switch), their global order, every process."""

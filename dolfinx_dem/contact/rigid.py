@@ -36,6 +36,7 @@ from petsc4py import PETSc
 
 from dolfinx_dem.conditions import facet_indices
 from dolfinx_dem.contact import candidates
+from dolfinx_dem.contact.rigid_statics import RigidStatics
 from dolfinx_dem.contact.patch import PatchScatter, negative_part_integral, piecewise_midpoints, scatter_sum
 from dolfinx_dem.errors import InputError
 
@@ -170,6 +171,7 @@ class RigidContact:
         self._grad_weights = geom.facet_area_normals[self.cells, geom.facet_local[self.facets, 0]] / \
             geom.cell_volumes[self.cells, None]
         self.evaluations = 0
+        self._statics = None  # the statics interface, made on first use (``statics``)
 
     # -- patch data ----------------------------------------------------------------------------
     def prepare(self, u: PETSc.Vec, v: PETSc.Vec | None = None, dt: float = 0.0,
@@ -220,7 +222,7 @@ class RigidContact:
             active = self._local_activity(active)
         self.scatter.add(self.force_correction(self.patch_values(u), active), out)
 
-    # -- statics: active sets of the own facets ----------------------------------------------
+    # -- statics: active sets of the own facets (contact/rigid_statics.py) ----------------------
     def _local_activity(self, active: np.ndarray) -> np.ndarray:
         """The activity of all local candidates from that of the own ones (their owners')."""
         table = np.zeros((self.dem.n_owned, self.d + 1))
@@ -230,6 +232,10 @@ class RigidContact:
     def own_gaps(self, u: PETSc.Vec) -> np.ndarray:
         """Gaps of the own candidate facets at u (collective: the patch scatter)."""
         return self.gaps(self.patch_values(u))[: self.num_own]
+
+    def own_gap_rates(self, v: PETSc.Vec) -> np.ndarray:
+        """grad g_f . v of the own candidate facets (the gaps' rates along v; collective)."""
+        return (self._Rn @ self.patch_values(v))[: self.num_own]
 
     def reactions(self, u: PETSc.Vec, active: np.ndarray | None = None) -> np.ndarray:
         """The normal force the obstacle exerts on each own facet (N, or N/m in 2D; 0 out of
@@ -389,6 +395,12 @@ class RigidContact:
         forces, normal, area = sums[:n], sums[n], sums[n + 1]
         gap, x = self.contact_gap(up)
         return [gap, normal / area if area > 0 else 0.0] + ([x] if self.d == 1 else []) + list(forces)
+
+    def statics(self) -> RigidStatics:
+        """The statics interface (contact/rigid_statics.py), made once."""
+        if self._statics is None:
+            self._statics = RigidStatics(self)
+        return self._statics
 
     # -- checkpoint (contact.protocol.ContactModel) ----------------------------------------------------------------
     def checkpoint_state(self) -> dict[str, np.ndarray]:
