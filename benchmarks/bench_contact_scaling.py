@@ -23,7 +23,7 @@ import time
 import numpy as np
 from mpi4py import MPI
 
-from dolfinx_dem import _compat, meshes
+from dolfinx_dem import meshes
 from dolfinx_dem.discretisation import DEMDiscretisation
 from dolfinx_dem.material import ElasticMaterial
 from dolfinx_dem.memm import MEMM
@@ -36,7 +36,7 @@ def measure(n_idle: int, h: float, t_end: float) -> dict:
     idle = [((1.0 + 0.3 * (k % 32), 2.0 + 0.3 * (k // 32)), 0.1) for k in range(n_idle)]
     mesh, _, _ = meshes.create_discs(MPI.COMM_SELF, [((0.14, 2.27), 0.1), ((0.36, 2.27), 0.1)] + idle, h)
     dem = DEMDiscretisation(mesh, SOFT, "B")
-    dem.set_contact_boundary(_compat.exterior_facets(mesh))
+    dem.set_contact_boundary(meshes.exterior_facets(mesh))
     contact = dem.pair_contact
     dt = 0.2 * dem.stable_time_step()
     stepper = MEMM(dem, dt)

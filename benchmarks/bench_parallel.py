@@ -131,7 +131,7 @@ def child_pile(h: float, steps: int, start: float, replays: int) -> dict:
     wall = time.perf_counter()
     mesh, _, _ = meshes.create_discs(comm, discs, h)
     dem = DEMDiscretisation(mesh, ElasticMaterial(E=100.0, nu=0.2, rho=100.0), "B")
-    dem.set_contact_boundary(_compat.exterior_facets(mesh))
+    dem.set_contact_boundary(meshes.exterior_facets(mesh))
     t_setup = comm.allreduce(time.perf_counter() - wall, op=MPI.MAX)
     dt = 0.5 * dem.stable_time_step()
     x = dem.geometry.cell_centres[: dem.n_owned]

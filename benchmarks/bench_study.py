@@ -79,7 +79,7 @@ def _square(comm, n):
 
     material = ElasticMaterial(E=1.0, nu=0.3, rho=1.0)
     mesh = dolfinx.mesh.create_unit_square(comm, n, n, diagonal=dolfinx.mesh.DiagonalType.right)
-    left = _compat.locate_boundary_facets(mesh, lambda x: np.isclose(x[0], 0.0))
+    left = meshes.locate_boundary_facets(mesh, lambda x: np.isclose(x[0], 0.0))
     comm.Barrier()
     rss = _rss_now_bytes()
     wall, cpu = time.perf_counter(), time.process_time()

@@ -23,16 +23,17 @@ def _is_meshtags(obj) -> bool:
 def facet_indices(facets, tag: int | None, what: str, tdim: int) -> np.ndarray:
     """The process-local facet indices (int32) that ``facets`` selects: an array of indices, or a
     DOLFINx MeshTags of dimension tdim - 1 (its facets of value ``tag``; with ``tag`` None it must
-    hold one value on every process, or the choice would be a guess)."""
+    hold one value, or the choice would be a guess). Collective for a MeshTags."""
     if _is_meshtags(facets):
         if facets.dim != tdim - 1:
             raise InputError(f"{what}: the MeshTags tags entities of dimension {facets.dim}, not facets "
                              f"(dimension {tdim - 1})")
         if tag is not None:
             return np.asarray(facets.find(int(tag)), dtype=np.int32)
-        values = np.unique(facets.values)
+        # the values over all processes (a handful of tags): every process decides alike
+        values = sorted(set().union(*facets.mesh.comm.allgather(np.unique(facets.values).tolist())))
         if len(values) > 1:
-            raise InputError(f"{what}: the MeshTags holds the values {values.tolist()}; pass tag=... to select "
+            raise InputError(f"{what}: the MeshTags holds the values {values}; pass tag=... to select "
                              "the facets of one of them")
         return np.asarray(facets.indices, dtype=np.int32)
     if tag is not None:

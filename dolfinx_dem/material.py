@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import numbers
 
 import numpy as np
 from dolfinx_dem.errors import InputError
@@ -29,10 +30,14 @@ class ElasticMaterial:
     eta: float | None = None
 
     def __post_init__(self):
-        for name in ("E", "nu", "rho"):
+        for name in ("E", "nu", "rho", "eta"):
             value = getattr(self, name)
-            if not isinstance(value, (int, float)) or not math.isfinite(value):
-                raise InputError(f"material parameter {name} must be a finite number, got {value!r}")
+            if name == "eta" and value is None:
+                continue
+            if isinstance(value, bool) or not isinstance(value, numbers.Real) or not math.isfinite(value):
+                raise InputError(f"material parameter {name} must be a finite real number, got {value!r} "
+                                 f"({type(value).__name__})")
+            object.__setattr__(self, name, float(value))  # numpy scalars of any kind: stored as floats
         if self.E <= 0:
             raise InputError(f"Young's modulus E must be > 0, got {self.E}")
         if not -1.0 < self.nu < 0.5:
@@ -41,7 +46,7 @@ class ElasticMaterial:
             raise InputError(f"density rho must be > 0, got {self.rho}")
         if self.plane not in ("strain", "stress"):
             raise InputError(f"plane must be 'strain' or 'stress', got {self.plane!r}")
-        if self.eta is not None and not (math.isfinite(self.eta) and self.eta > 0):
+        if self.eta is not None and not self.eta > 0:
             raise InputError(f"stabilisation parameter eta must be > 0, got {self.eta}")
 
     @property

@@ -192,16 +192,18 @@ class MEMM:
     def t(self) -> float:
         return self.t0 + self.n * self.dt
 
-    def initialise(self, u0: PETSc.Vec, v0: PETSc.Vec, t0: float = 0.0) -> Diagnostics:
+    def initialise(self, u0, v0, t0: float = 0.0) -> Diagnostics:
         """Start from u^0, v^0: v^{-1/2} = v^0 - dt/2 M^-1 F(u^0), v^{1/2} = v^0 + dt/2 M^-1 F(u^0),
         and the energy rows y^0 = Q u^0 by a true product. On prescribed bodies u^0 = U(t0) and
-        v^0 is their velocity (``impose``), whatever u0 and v0 hold there."""
+        v^0 is their velocity (``impose``), whatever u0 and v0 hold there. u0 and v0: PETSc vectors
+        of the dof layout, DOLFINx Functions of the mesh (interpolated into DG0) or arrays of the
+        owned values (``DEMDiscretisation.vector``); they are copied."""
         self.t0, self.n = float(t0), 0
         self._patches = []
         f = self._state.impulse  # free until the first step: no vector of the mesh's size more
+        u0, v0 = self.dem.vector(u0), self.dem.vector(v0)
         for contact in self.problem.contacts:
             contact.prepare(u0)
-        u0, v0 = u0.copy(), v0.copy()
         self.dem.prescribed.impose(u0, v0, self.t0, self.dt)  # u = U(t0) and its velocity on prescribed bodies
         self.problem.force(u0, self.t0, f)
         self.force_evaluations += 1

@@ -80,6 +80,17 @@ def _tag_sides(mesh, p0: np.ndarray, p1: np.ndarray):
     return tags
 
 
+def locate_boundary_facets(mesh, marker) -> np.ndarray:
+    """Process-local boundary facets (int32) whose vertices all satisfy ``marker(x)``, x of shape
+    (3, n): what ``DirichletBC``, ``Traction``, ``HalfSpace`` and ``PairContact`` take."""
+    return _compat.locate_boundary_facets(mesh, marker)
+
+
+def exterior_facets(mesh) -> np.ndarray:
+    """Process-local indices (int32) of the facets on the boundary of the domain."""
+    return _compat.exterior_facets(mesh)
+
+
 def create_interval(comm: MPI.Comm, n: int, x0: float, x1: float):
     """Interval [x0, x1] (m) with n >= 1 equal cells; facet tags XMIN (x0) and XMAX (x1)."""
     (n,) = _check_counts(n, 1)

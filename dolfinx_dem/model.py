@@ -71,11 +71,11 @@ def _boundary_facets(mesh, tags, names, boundary, key="dirichlet.boundary") -> n
     """Process-local boundary facets of a scene's ``boundary`` entry: "all", a condition on the
     coordinates, an integer facet tag, or a name of ``names`` (see ``create_mesh``)."""
     if boundary == "all":
-        return _compat.exterior_facets(mesh)
+        return meshes.exterior_facets(mesh)
     if isinstance(boundary, str) and any(op in boundary for op in "<>="):
         # A condition on x, y, z that every vertex of the boundary facet satisfies.
         d = mesh.topology.dim
-        facets = _compat.locate_boundary_facets(
+        facets = meshes.locate_boundary_facets(
             mesh, lambda x: np.asarray(scenes.evaluate_condition(boundary, x[:d], key), dtype=bool))
         if mesh.comm.allreduce(len(facets), op=MPI.SUM) == 0:
             raise SceneError(f"scene key '{key}': boundary condition {boundary!r} selects no facet")

@@ -8,7 +8,7 @@ from petsc4py import PETSc
 import dolfinx.mesh
 from dolfinx.mesh import CellType, DiagonalType
 
-from dolfinx_dem import _compat
+from dolfinx_dem import meshes
 from dolfinx_dem.conditions import DirichletBC, Traction
 from dolfinx_dem.discretisation import DEMDiscretisation
 from dolfinx_dem.material import ElasticMaterial
@@ -36,7 +36,7 @@ def _problem(d, scheme, comm, time_dependent=False, loaded=False, shift=None, tw
         mesh = dolfinx.mesh.create_rectangle(comm, [[0.0, 0.0], [1.5, 1.0]], [4, 3], diagonal=DiagonalType.right)
     else:
         mesh = dolfinx.mesh.create_box(comm, [[0.0, 0.0, 0.0], [1.0, 1.0, 1.5]], [2, 2, 2])
-    left = _compat.locate_boundary_facets(mesh, lambda x: np.isclose(x[0], 0.0))
+    left = meshes.locate_boundary_facets(mesh, lambda x: np.isclose(x[0], 0.0))
     a, b = (np.zeros(d), np.zeros(d)) if shift is None else shift
 
     def g(x, t):
@@ -49,8 +49,8 @@ def _problem(d, scheme, comm, time_dependent=False, loaded=False, shift=None, tw
     material = dict(material=MATERIALS, cell_tags=_material_tags(mesh)) if two else dict(material=MATERIAL)
     if not loaded:
         return DEMDiscretisation(mesh, scheme=scheme, dirichlet=[bc], body_force=body, **material)
-    bottom = _compat.locate_boundary_facets(mesh, lambda x: np.isclose(x[1], 0.0) & (x[0] > 1e-12))
-    right = _compat.locate_boundary_facets(mesh, lambda x: np.isclose(x[0], 1.5 if d == 2 else 1.0))
+    bottom = meshes.locate_boundary_facets(mesh, lambda x: np.isclose(x[1], 0.0) & (x[0] > 1e-12))
+    right = meshes.locate_boundary_facets(mesh, lambda x: np.isclose(x[0], 1.5 if d == 2 else 1.0))
     roller = DirichletBC(bottom, lambda x, t: np.stack([0.0 * x[0] + 0.05] * d) + t * b[:, None],
                          time_dependent=shift is not None, components=[1])
 
@@ -211,7 +211,7 @@ def test_dirichlet_on_interior_facet(square):
     tdim = square.topology.dim
     square.topology.create_connectivity(tdim - 1, tdim)
     num = square.topology.index_map(tdim - 1).size_local
-    interior = np.setdiff1d(np.arange(num, dtype=np.int32), _compat.exterior_facets(square))
+    interior = np.setdiff1d(np.arange(num, dtype=np.int32), meshes.exterior_facets(square))
     assert MPI.COMM_WORLD.allreduce(interior.size) > 0
     with pytest.raises(ValueError, match="interior"):
         DEMDiscretisation(square, MATERIAL, dirichlet=[DirichletBC(interior[:1], [0.0, 0.0])])
@@ -219,7 +219,7 @@ def test_dirichlet_on_interior_facet(square):
 
 @pytest.mark.mpi
 def test_dirichlet_selecting_nothing(square):
-    nothing = _compat.locate_boundary_facets(square, lambda x: x[0] > 5.0)
+    nothing = meshes.locate_boundary_facets(square, lambda x: x[0] > 5.0)
     with pytest.raises(ValueError, match="no facet"):
         DEMDiscretisation(square, MATERIAL, dirichlet=[DirichletBC(nothing, [0.0, 0.0])])
     with pytest.raises(ValueError, match="no facet"):
@@ -228,7 +228,7 @@ def test_dirichlet_selecting_nothing(square):
 
 @pytest.mark.mpi
 def test_dirichlet_bad_value_and_overlap(square):
-    left = _compat.locate_boundary_facets(square, lambda x: np.isclose(x[0], 0.0))
+    left = meshes.locate_boundary_facets(square, lambda x: np.isclose(x[0], 0.0))
     with pytest.raises(ValueError, match="2 components"):
         DEMDiscretisation(square, MATERIAL, dirichlet=[DirichletBC(left, [0.0, 0.0, 0.0])])
     with pytest.raises(ValueError, match="share a facet"):
@@ -286,7 +286,7 @@ def test_operators_are_the_same_on_any_number_of_processes(kind, scheme):
             mesh = dolfinx.mesh.create_unit_cube(comm, 3, 4, 3)
         else:
             mesh = meshes.create_discs(comm, [((0.0, 0.0), 1.0), ((2.5, 0.0), 1.0)], 0.25)[0]
-        left = _compat.locate_boundary_facets(mesh, lambda x: x[0] < -0.9 if kind == "discs" else np.isclose(x[0], 0.0))
+        left = meshes.locate_boundary_facets(mesh, lambda x: x[0] < -0.9 if kind == "discs" else np.isclose(x[0], 0.0))
         material = dict(material=MATERIALS, cell_tags=_material_tags(mesh)) if kind.endswith("two") else \
             dict(material=MATERIAL)
         return DEMDiscretisation(mesh, scheme=scheme, dirichlet=[DirichletBC(left, lambda x, t: 0.01 * x[::-1] ** 2)],
@@ -346,7 +346,7 @@ def test_set_up_keeps_one_copy_of_the_energy_rows():
 
     mesh = dolfinx.mesh.create_rectangle(MPI.COMM_SELF, [[0.0, 0.0], [1.0, 1.0]], [40, 40],
                                          diagonal=DiagonalType.crossed)
-    left = _compat.locate_boundary_facets(mesh, lambda x: np.isclose(x[0], 0.0))
+    left = meshes.locate_boundary_facets(mesh, lambda x: np.isclose(x[0], 0.0))
     dem = DEMDiscretisation(mesh, MATERIAL, dirichlet=[DirichletBC(left, [0.0, 0.0])])
     dem.stable_time_step()
     assert not [k for k, v in vars(dem).items() if isinstance(v, PETSc.Mat)]
@@ -422,8 +422,8 @@ def test_springs_in_series_are_exact():
     x = dolfinx.mesh.compute_midpoints(mesh, 1, cells)[:, 0]
     tags = dolfinx.mesh.meshtags(mesh, 1, cells, np.where(x < 0.4, 1, 2).astype(np.int32))
     materials = {1: ElasticMaterial(E=1.0, nu=0.0, rho=1.0), 2: ElasticMaterial(E=4.0, nu=0.0, rho=3.0, eta=2.0)}
-    left = _compat.locate_boundary_facets(mesh, lambda x: np.isclose(x[0], 0.0))
-    right = _compat.locate_boundary_facets(mesh, lambda x: np.isclose(x[0], 1.0))
+    left = meshes.locate_boundary_facets(mesh, lambda x: np.isclose(x[0], 0.0))
+    right = meshes.locate_boundary_facets(mesh, lambda x: np.isclose(x[0], 1.0))
     dem = DEMDiscretisation(mesh, materials, "A", [DirichletBC(left, [0.0])], tractions=[Traction(right, [sigma])],
                             cell_tags=tags)
     xc = dem.geometry.cell_centres[: dem.n_owned, 0]

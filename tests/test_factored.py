@@ -8,7 +8,7 @@ from petsc4py import PETSc
 
 import dolfinx.mesh
 
-from dolfinx_dem import _compat
+from dolfinx_dem import meshes
 from dolfinx_dem.conditions import DirichletBC
 from dolfinx_dem.discretisation import DEMDiscretisation
 from dolfinx_dem.factored import local_numbering
@@ -32,7 +32,7 @@ def test_local_numbering():
 def test_one_pass_equals_the_two_matmults(alpha):
     comm = MPI.COMM_WORLD
     mesh = dolfinx.mesh.create_rectangle(comm, [[0.0, 0.0], [2.0, 0.5]], [12, 5])
-    left = _compat.locate_boundary_facets(mesh, lambda x: np.isclose(x[0], 0.0))
+    left = meshes.locate_boundary_facets(mesh, lambda x: np.isclose(x[0], 0.0))
     dem = DEMDiscretisation(mesh, MATERIAL, dirichlet=[DirichletBC(left, [0.0, 0.0])])
     K = dem.factored
     rng = np.random.default_rng(comm.rank)

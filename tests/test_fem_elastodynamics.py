@@ -9,13 +9,13 @@ import dolfinx.fem
 import dolfinx.mesh
 import ufl
 
-from dolfinx_dem import _compat, meshes
+from dolfinx_dem import meshes
 from dolfinx_dem.fem.elastodynamics import (FEMCentralDifference, FEMElastodynamics,
                                             first_eigenfrequency)
 
 
 def _facets_at_x(mesh, *x0):
-    return _compat.locate_boundary_facets(
+    return meshes.locate_boundary_facets(
         mesh, lambda x: np.logical_or.reduce([np.isclose(x[0], a) for a in x0])
     )
 

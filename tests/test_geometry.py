@@ -10,7 +10,7 @@ import dolfinx.fem
 import dolfinx.mesh
 from dolfinx.mesh import DiagonalType
 
-from dolfinx_dem import _compat
+from dolfinx_dem import _compat, meshes
 from dolfinx_dem.geometry import compute_geometry, geometry_from_arrays
 
 
@@ -73,7 +73,7 @@ def test_volumes_areas_normals(case):
     mine = np.intersect1d(boundary, geom.facets_of_layers(0))
     found = np.unique(np.concatenate(comm.allgather(geom.facet_global[mine])))
     exterior = np.unique(np.concatenate(comm.allgather(
-        _compat.local_facet_global_indices(mesh, _compat.exterior_facets(mesh)))))
+        _compat.local_facet_global_indices(mesh, meshes.exterior_facets(mesh)))))
     assert np.array_equal(found, exterior)
     areas = dict(zip(geom.facet_global[mine].tolist(), geom.facet_areas[mine].tolist()))
     areas = {k: v for a in comm.allgather(areas) for k, v in a.items()}

@@ -8,7 +8,7 @@ from mpi4py import MPI
 
 import dolfinx.mesh
 
-from dolfinx_dem import _compat, halo
+from dolfinx_dem import _compat, halo, meshes
 from dolfinx_dem.geometry import compute_geometry
 
 
@@ -23,7 +23,7 @@ def test_halo_is_the_vertex_rings_of_the_owned_cells(kind):
     mesh = make(comm)
     V = _compat.create_vector_space(mesh, "DG", 0)
     dofs, start, stop = _compat.dg0_cell_dofs(V)
-    exterior = _compat.exterior_facets(mesh)
+    exterior = meshes.exterior_facets(mesh)
     marks = {"boundary": halo.owned_facet_marks(mesh, exterior, np.full(len(exterior), 7))}
     cells = halo.build_halo(mesh, dofs, (start, stop), marks)
     assert cells.num_owned == stop - start
@@ -72,7 +72,7 @@ def test_halo_is_bounded_on_a_strip():
 @pytest.mark.mpi
 def test_conflicting_facet_markers_are_an_error_on_every_process():
     mesh = dolfinx.mesh.create_unit_square(MPI.COMM_WORLD, 4, 4)
-    exterior = _compat.exterior_facets(mesh)
+    exterior = meshes.exterior_facets(mesh)
     facets = np.concatenate([exterior, exterior])
     values = np.concatenate([np.zeros(len(exterior)), np.ones(len(exterior))]).astype(int)
     with pytest.raises(ValueError, match="two Dirichlet conditions share a facet"):

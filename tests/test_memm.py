@@ -13,7 +13,7 @@ from mpi4py import MPI
 import dolfinx.mesh
 from dolfinx.mesh import DiagonalType
 
-from dolfinx_dem import _compat, meshes
+from dolfinx_dem import meshes
 from dolfinx_dem.conditions import DirichletBC, Traction
 from dolfinx_dem.discretisation import DEMDiscretisation
 from dolfinx_dem.fem.elastodynamics import first_eigenfrequency
@@ -48,7 +48,7 @@ def bending_velocity(x):
 
 
 def clamped_left(mesh, d=2, **kwargs):
-    left = _compat.locate_boundary_facets(mesh, lambda x: np.isclose(x[0], 0.0))
+    left = meshes.locate_boundary_facets(mesh, lambda x: np.isclose(x[0], 0.0))
     return DEMDiscretisation(mesh, MATERIAL, dirichlet=[DirichletBC(left, np.zeros(d))], **kwargs)
 
 
@@ -198,7 +198,7 @@ def test_time_dependent_dirichlet_data(quadrature):
     quadrature nodes; the energies of step() are those of true products."""
     comm = MPI.COMM_WORLD
     mesh = dolfinx.mesh.create_rectangle(comm, [[0.0, 0.0], [2.0, 0.5]], [12, 3])
-    left = _compat.locate_boundary_facets(mesh, lambda x: np.isclose(x[0], 0.0))
+    left = meshes.locate_boundary_facets(mesh, lambda x: np.isclose(x[0], 0.0))
     shaken = DirichletBC(left, lambda x, t: np.stack([0.0 * x[0], 0.01 * np.sin(3.0 * t) + 0.0 * x[0]]),
                          time_dependent=True)
     dem = DEMDiscretisation(mesh, MATERIAL, dirichlet=[shaken], body_force=[0.0, -0.1])
@@ -222,7 +222,7 @@ def _standing_wave_error(N, T=0.5):
     comm = MPI.COMM_WORLD
     mesh = dolfinx.mesh.create_interval(comm, N, [0.0, 1.0])
     dem = DEMDiscretisation(
-        mesh, ElasticMaterial(E=1.0, nu=0.0, rho=1.0), dirichlet=[DirichletBC(_compat.exterior_facets(mesh), [0.0])]
+        mesh, ElasticMaterial(E=1.0, nu=0.0, rho=1.0), dirichlet=[DirichletBC(meshes.exterior_facets(mesh), [0.0])]
     )
     steps = math.ceil(T / (0.5 * dem.stable_time_step()))
     memm = MEMM(DEMProblem(dem), T / steps)
@@ -247,7 +247,7 @@ def test_standing_wave_1d_converges_second_order():
 
 def _dem_first_frequency(n):
     mesh = dolfinx.mesh.create_unit_square(MPI.COMM_SELF, n, n, diagonal=DiagonalType.right)
-    dem = DEMDiscretisation(mesh, MATERIAL, dirichlet=[DirichletBC(_compat.exterior_facets(mesh), [0.0, 0.0])])
+    dem = DEMDiscretisation(mesh, MATERIAL, dirichlet=[DirichletBC(meshes.exterior_facets(mesh), [0.0, 0.0])])
     ai, aj, av = dem.K.getValuesCSR()
     K = scipy.sparse.csr_matrix((av, aj, ai), shape=dem.K.getSize())
     s = scipy.sparse.diags(1.0 / np.sqrt(dem.mass.array))
@@ -262,7 +262,7 @@ def test_first_eigenfrequency_converges_to_fem():
     """Smallest eigenvalue of M^-1 K on a clamped unit square (plane strain) against P2 FEM."""
     fine = dolfinx.mesh.create_unit_square(MPI.COMM_SELF, 24, 24, diagonal=DiagonalType.crossed)
     reference = first_eigenfrequency(fine, 2, MATERIAL.E, MATERIAL.nu, MATERIAL.rho,
-                                     _compat.exterior_facets(fine), n=1)[0]
+                                     meshes.exterior_facets(fine), n=1)[0]
     assert reference == pytest.approx(3.98128, rel=1e-5)  # P2, 64x64 crossed: 3.9812816
     omega = np.array([_dem_first_frequency(n) for n in (4, 8, 16)])
     errors = np.abs(omega - reference) / reference

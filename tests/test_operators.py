@@ -9,7 +9,7 @@ from mpi4py import MPI
 import dolfinx.mesh
 from dolfinx.mesh import DiagonalType
 
-from dolfinx_dem import _compat
+from dolfinx_dem import meshes
 from dolfinx_dem.conditions import DirichletBC
 from dolfinx_dem.discretisation import DEMDiscretisation
 from dolfinx_dem.material import ElasticMaterial
@@ -63,7 +63,7 @@ def test_affine_patch_test(d, scheme):
     rng = np.random.default_rng(7)
     A = rng.uniform(-1, 1, size=(d, d))
     b = rng.uniform(-1, 1, size=d)
-    bc = DirichletBC(_compat.exterior_facets(mesh), lambda x, t: A @ x + b[:, None])
+    bc = DirichletBC(meshes.exterior_facets(mesh), lambda x, t: A @ x + b[:, None])
     dem = DEMDiscretisation(mesh, MATERIAL, scheme=scheme, dirichlet=[bc])
     u = cell_vector(dem, lambda x: x @ A.T + b)
     G = dem.gradient(u, 0.0)
@@ -88,7 +88,7 @@ def _uniaxial_setup(scheme, comm, s=0.02):
     E, nu = MATERIAL.E, MATERIAL.nu
     Ep, nup = E / (1 - nu**2), nu / (1 - nu)  # plane strain
     A = np.array([[s / Ep, 0.0], [0.0, -nup * s / Ep]])
-    ends = _compat.locate_boundary_facets(mesh, lambda x: np.isclose(x[0], 0.0) | np.isclose(x[0], 2.0))
+    ends = meshes.locate_boundary_facets(mesh, lambda x: np.isclose(x[0], 0.0) | np.isclose(x[0], 2.0))
     bc = DirichletBC(ends, lambda x, t: A @ x)
     dem = DEMDiscretisation(mesh, MATERIAL, scheme=scheme, dirichlet=[bc])
     return dem, A, cell_vector(dem, lambda x: x @ A.T)
@@ -211,7 +211,7 @@ def test_stiffness_symmetric_and_parallel_equals_serial(scheme):
 
     def setup(comm):
         mesh = gmsh_disc(comm, 0.25)
-        left = _compat.locate_boundary_facets(mesh, lambda x: x[0] < -0.5)
+        left = meshes.locate_boundary_facets(mesh, lambda x: x[0] < -0.5)
         bc = DirichletBC(left, lambda x, t: np.stack([0.1 * x[1], 0.05 + 0 * x[0]]))
         dem = DEMDiscretisation(mesh, MATERIAL, scheme=scheme, dirichlet=[bc], body_force=[0.3, -1.0])
         u = cell_vector(dem, lambda x: np.stack([np.sin(2 * x[:, 1]), x[:, 0] ** 2], axis=1))
@@ -239,7 +239,7 @@ def test_stiffness_positive_definite_when_clamped(d, scheme):
         2: lambda: dolfinx.mesh.create_unit_square(comm, 4, 4, diagonal=DiagonalType.right),
         3: lambda: dolfinx.mesh.create_unit_cube(comm, 2, 2, 2),
     }[d]()
-    left = _compat.locate_boundary_facets(mesh, lambda x: np.isclose(x[0], 0.0))
+    left = meshes.locate_boundary_facets(mesh, lambda x: np.isclose(x[0], 0.0))
     dem = DEMDiscretisation(mesh, MATERIAL, scheme=scheme, dirichlet=[DirichletBC(left, np.zeros(d))])
     ev = scipy.linalg.eigvalsh(dense_K(dem))
     assert ev[0] > 1e-5 * ev[-1]

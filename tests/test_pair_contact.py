@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 from mpi4py import MPI
 
-from dolfinx_dem import _compat, meshes, model
+from dolfinx_dem import meshes, model
 from dolfinx_dem.discretisation import DEMDiscretisation
 from dolfinx_dem.material import ElasticMaterial
 from dolfinx_dem.memm import MEMM
@@ -23,7 +23,7 @@ def two_discs(h=0.03, comm=MPI.COMM_WORLD, scheme="B"):
     """The two disks of paper §5.3 with their facing halves as contact boundary."""
     mesh, _, tags = meshes.create_discs(comm, [((0.14, 2.27), 0.1), ((0.36, 2.27), 0.1)], h)
     dem = DEMDiscretisation(mesh, SOFT, scheme)
-    facets = _compat.locate_boundary_facets(mesh, lambda x: (x[0] >= 0.14) & (x[0] <= 0.36))
+    facets = meshes.locate_boundary_facets(mesh, lambda x: (x[0] >= 0.14) & (x[0] <= 0.36))
     return dem, facets
 
 
@@ -48,7 +48,7 @@ def two_blocks(comm=MPI.COMM_WORLD, n=6, scheme="B", y0=0.0):
 
     mesh = gmsh_mesh(comm, build)
     dem = DEMDiscretisation(mesh, SOFT, scheme)
-    facets = _compat.locate_boundary_facets(mesh, lambda x: (x[0] > 0.19) & (x[0] < 0.22))
+    facets = meshes.locate_boundary_facets(mesh, lambda x: (x[0] > 0.19) & (x[0] < 0.22))
     return dem, facets
 
 
@@ -243,7 +243,7 @@ def test_the_pair_list_follows_the_bodies_under_every_quadrature(quadrature):
     and the discs passed through each other (left disc still at +0.3 m/s)."""
     mesh, _, _ = meshes.create_discs(MPI.COMM_WORLD, [((0.14, 2.27), 0.1), ((0.46, 2.27), 0.1)], 0.03)
     dem = DEMDiscretisation(mesh, SOFT, "B")
-    problem = DEMProblem(dem, [PairContact(dem, _compat.locate_boundary_facets(mesh, lambda x: (x[0] >= 0.14) & (x[0] <= 0.46)))])
+    problem = DEMProblem(dem, [PairContact(dem, meshes.locate_boundary_facets(mesh, lambda x: (x[0] >= 0.14) & (x[0] <= 0.46)))])
     c = problem.find(PairContact)
     assert c.num_pairs == 0
     dt = 0.2 * dem.stable_time_step()
@@ -306,7 +306,7 @@ def test_bad_contact_input_is_rejected():
     with pytest.raises(ValueError, match="has no facet"):
         PairContact(dem, np.empty(0, dtype=np.int32))
     interior = np.setdiff1d(np.arange(dem.mesh.topology.index_map(1).size_local, dtype=np.int32),
-                            _compat.exterior_facets(dem.mesh))
+                            meshes.exterior_facets(dem.mesh))
     with pytest.raises(ValueError, match="must be boundary facets"):
         PairContact(dem, interior)
     with pytest.raises(ValueError, match="tolerance must be >= 0"):
@@ -315,13 +315,13 @@ def test_bad_contact_input_is_rejected():
         PairContact(dem, facets, skin=0.0)
     with pytest.raises(ValueError, match="overlap at t = 0"):
         overlapping = _two_discs(0.18, 0.1)  # the discs overlap by 0.02 m
-        PairContact(overlapping, _compat.exterior_facets(overlapping.mesh))
+        PairContact(overlapping, meshes.exterior_facets(overlapping.mesh))
     with pytest.raises(ValueError, match="overlap at t = 0: a boundary vertex"):
         inside = _two_discs(0.0, 0.05)  # a small disc inside the first one
-        PairContact(inside, _compat.exterior_facets(inside.mesh))
+        PairContact(inside, meshes.exterior_facets(inside.mesh))
     with pytest.raises(ValueError, match="share the vertex"):
         touching = _discs_sharing_a_vertex()
-        PairContact(touching, _compat.exterior_facets(touching.mesh))
+        PairContact(touching, meshes.exterior_facets(touching.mesh))
 
 
 def _two_discs(x2: float, r2: float):
@@ -385,7 +385,7 @@ def test_self_contact_closes_a_slot():
     results = {}
     for self_contact in (True, False):
         dem = DEMDiscretisation(gmsh_mesh(MPI.COMM_WORLD, build), SOFT, "B")
-        walls = _compat.locate_boundary_facets(dem.mesh, lambda x: (x[0] > 0.14) & (x[0] < 0.16) & (x[1] > 0.05))
+        walls = meshes.locate_boundary_facets(dem.mesh, lambda x: (x[0] > 0.14) & (x[0] < 0.16) & (x[1] > 0.05))
         problem = DEMProblem(dem, [PairContact(dem, walls, self_contact=self_contact)])
         c = problem.find(PairContact)
         dt = 0.2 * dem.stable_time_step()
@@ -410,7 +410,7 @@ def test_rigid_wall_and_contact_between_bodies_together():
     from dolfinx_dem.contact import HalfSpace
 
     dem, facets = two_discs(h=0.03)
-    floor = _compat.locate_boundary_facets(dem.mesh, lambda x: x[1] <= 2.27)
+    floor = meshes.locate_boundary_facets(dem.mesh, lambda x: x[1] <= 2.27)
     problem = DEMProblem(dem, [RigidContact(dem, [HalfSpace([0.0, 2.165], [0.0, 1.0], floor)]), PairContact(dem, facets)])
     assert len(problem.contacts) == 2
     dt = 0.2 * dem.stable_time_step()
@@ -447,7 +447,7 @@ def blocks_on_a_floor(scheme="B"):
     from dolfinx_dem.contact import HalfSpace
 
     dem, facets = two_blocks(scheme=scheme, y0=0.01)
-    bottoms = _compat.locate_boundary_facets(dem.mesh, lambda x: x[1] < 0.02)
+    bottoms = meshes.locate_boundary_facets(dem.mesh, lambda x: x[1] < 0.02)
     problem = DEMProblem(dem, [RigidContact(dem, [HalfSpace([0.0, 0.0], [0.0, 1.0], bottoms)]), PairContact(dem, facets)])
     return problem
 
@@ -559,7 +559,7 @@ def disc_over_block(height: float, comm=MPI.COMM_WORLD, skin: float | None = Non
 
     mesh = gmsh_mesh(comm, build)
     dem = DEMDiscretisation(mesh, ElasticMaterial(E=100.0, nu=0.3, rho=100.0), "A")
-    facets = _compat.locate_boundary_facets(mesh, lambda x: (x[1] <= 0.1 + height) & (x[1] >= -1e-9))
+    facets = meshes.locate_boundary_facets(mesh, lambda x: (x[1] <= 0.1 + height) & (x[1] >= -1e-9))
     return DEMProblem(dem, [PairContact(dem, facets, skin=skin)])
 
 
@@ -717,10 +717,10 @@ def test_a_traction_on_a_contact_facet_is_rejected():
     from dolfinx_dem.conditions import Traction
 
     mesh, _, _ = meshes.create_discs(MPI.COMM_WORLD, [((0.14, 2.27), 0.1), ((0.36, 2.27), 0.1)], 0.05)
-    facets = _compat.locate_boundary_facets(mesh, lambda x: (x[0] >= 0.14) & (x[0] <= 0.36))
+    facets = meshes.locate_boundary_facets(mesh, lambda x: (x[0] >= 0.14) & (x[0] <= 0.36))
     dem = DEMDiscretisation(mesh, SOFT, "A", tractions=[Traction(facets, [0.0, -1.0])])
     with pytest.raises(ValueError, match="contact boundary: contact candidate facets must not carry a traction"):
-        problem = DEMProblem(dem, [PairContact(dem, _compat.exterior_facets(mesh))])
+        problem = DEMProblem(dem, [PairContact(dem, meshes.exterior_facets(mesh))])
 
 
 # -- 3D: tetrahedral bodies, triangular facets ------------------------------------------------
@@ -915,7 +915,7 @@ def two_boxes(comm=MPI.COMM_WORLD, scheme="B"):
 
     mesh = gmsh_mesh(comm, build, gdim=3)
     dem = DEMDiscretisation(mesh, SOFT, scheme)
-    problem = DEMProblem(dem, [PairContact(dem, _compat.locate_boundary_facets(mesh, lambda x: (x[0] > 0.19) & (x[0] < 0.22)))])
+    problem = DEMProblem(dem, [PairContact(dem, meshes.locate_boundary_facets(mesh, lambda x: (x[0] > 0.19) & (x[0] < 0.22)))])
     return problem
 
 
@@ -1142,7 +1142,7 @@ def test_self_contact_closes_a_slot_in_3d():
         gmsh.model.mesh.generate(3)
 
     dem = DEMDiscretisation(gmsh_mesh(MPI.COMM_WORLD, build, gdim=3), SOFT, "B")
-    walls = _compat.locate_boundary_facets(dem.mesh, lambda x: (x[0] > 0.09) & (x[0] < 0.11) & (x[1] > 0.059))
+    walls = meshes.locate_boundary_facets(dem.mesh, lambda x: (x[0] > 0.09) & (x[0] < 0.11) & (x[1] > 0.059))
     problem = DEMProblem(dem, [PairContact(dem, walls, self_contact=True)])
     c = problem.find(PairContact)
     assert c.num_pairs > 0 and c.body_pairs == []
@@ -1175,7 +1175,7 @@ def test_a_list_round_rebuilds_only_the_lists_near_moving_facets():
         centres = [(0.14, 2.27), (0.36, 2.27), (0.14, 1.07), (0.36, 1.07)]
         mesh = meshes.create_discs(comm, [(c, 0.1) for c in centres], 0.04)[0]
         dem = DEMDiscretisation(mesh, SOFT, "B")
-        problem = DEMProblem(dem, [PairContact(dem, _compat.exterior_facets(mesh))])
+        problem = DEMProblem(dem, [PairContact(dem, meshes.exterior_facets(mesh))])
         stepper = MEMM(problem, 0.2 * dem.stable_time_step())
         velocity = lambda x: approach(x) * (x[:, 1] > 1.67)[:, None]  # noqa: E731
         stepper.initialise(dem.create_vector(), cell_vector(dem, velocity))
@@ -1223,7 +1223,7 @@ def test_discs_that_travel_far_between_exchanges_move_as_on_one_process():
     def run(comm):
         mesh = meshes.create_discs(comm, [(c, 0.1) for c in centres], 0.04)[0]
         dem = DEMDiscretisation(mesh, SOFT, "B")
-        problem = DEMProblem(dem, [PairContact(dem, _compat.exterior_facets(mesh))])
+        problem = DEMProblem(dem, [PairContact(dem, meshes.exterior_facets(mesh))])
         stepper = MEMM(problem, 0.2 * dem.stable_time_step())
         stepper.initialise(dem.create_vector(), cell_vector(
             dem, lambda x: np.stack([np.where(x[:, 0] < 0.3, 0.4, np.where(x[:, 0] > 0.9, -0.4, 0.0)),
@@ -1293,7 +1293,7 @@ def test_a_process_knows_only_the_facets_of_other_processes_near_its_own():
     discs = [((np.cos(a), np.sin(a)), 0.1) for a in angles]
     mesh = meshes.create_discs(MPI.COMM_WORLD, discs, 0.03)[0]
     dem = DEMDiscretisation(mesh, SOFT, "B")
-    problem = DEMProblem(dem, [PairContact(dem, _compat.exterior_facets(mesh))])
+    problem = DEMProblem(dem, [PairContact(dem, meshes.exterior_facets(mesh))])
     c = problem.find(PairContact)
     F, nl = c.facets_all, len(c.facets)
     import scipy.spatial

@@ -8,7 +8,7 @@ from petsc4py import PETSc
 import dolfinx.mesh
 from dolfinx.mesh import DiagonalType
 
-from dolfinx_dem import _compat
+from dolfinx_dem import _compat, meshes
 from dolfinx_dem.conditions import DirichletBC
 from dolfinx_dem.discretisation import DEMDiscretisation
 from dolfinx_dem.geometry import compute_geometry, geometry_from_arrays
@@ -141,7 +141,7 @@ def test_multi_neumann_cells_scheme_a():
     corners = np.sort(np.round(corners * 12).astype(int), axis=0)
     assert np.array_equal(corners, [[1, 1], [11, 11]])  # barycentres (1/12, 11/12), (11/12, 1/12)
     # Clamping x = 0 leaves one of them with a single Neumann facet.
-    left = _compat.locate_boundary_facets(mesh, lambda x: np.isclose(x[0], 0.0))
+    left = meshes.locate_boundary_facets(mesh, lambda x: np.isclose(x[0], 0.0))
     dem = DEMDiscretisation(mesh, MATERIAL, scheme="A", dirichlet=[DirichletBC(left, [0.0, 0.0])])
     assert dem.num_multi_neumann_cells == 1
     corners = np.concatenate(MPI.COMM_WORLD.allgather(dem.geometry.cell_centres[dem.multi_neumann_cells]))
@@ -426,7 +426,7 @@ def test_anisotropic_meshes_pass_the_patch_test(n, diagonal):
     mesh = dolfinx.mesh.create_unit_square(MPI.COMM_WORLD, *n, diagonal=getattr(DiagonalType, diagonal))
     A = np.array([[0.3, -1.2], [2.0, 0.1]])
     b = np.array([0.2, -0.3])
-    boundary = _compat.exterior_facets(mesh)
+    boundary = meshes.exterior_facets(mesh)
     dem = DEMDiscretisation(mesh, MATERIAL, "A", [DirichletBC(boundary, lambda x, t: A @ x + b[:, None])])
     u = dem.create_vector()
     xc = dem.geometry.cell_centres[: dem.n_owned]

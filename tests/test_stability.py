@@ -8,7 +8,7 @@ from mpi4py import MPI
 
 import dolfinx.mesh
 
-from dolfinx_dem import _compat, scenes, simulation, stability
+from dolfinx_dem import meshes, scenes, simulation, stability
 from dolfinx_dem.conditions import DirichletBC
 from dolfinx_dem.discretisation import DEMDiscretisation
 from dolfinx_dem.material import ElasticMaterial
@@ -21,7 +21,7 @@ MATERIAL = ElasticMaterial(E=1.0, nu=0.3, rho=1.0)
 
 def clamped_strip(comm, n=16):
     mesh = dolfinx.mesh.create_rectangle(comm, [[0.0, 0.0], [2.0, 0.5]], [n, n // 4])
-    left = _compat.locate_boundary_facets(mesh, lambda x: np.isclose(x[0], 0.0))
+    left = meshes.locate_boundary_facets(mesh, lambda x: np.isclose(x[0], 0.0))
     return DEMDiscretisation(mesh, MATERIAL, dirichlet=[DirichletBC(left, [0.0, 0.0])])
 
 

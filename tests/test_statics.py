@@ -103,10 +103,10 @@ def disc_on_block(comm, h, stiffness=1.0, width=0.12, height=0.04, scheme="A"):
             gmsh.finalize()
     materials = {1: ElasticMaterial(E=E_DISC, nu=0.25, rho=1.0, plane="strain"),
                  2: ElasticMaterial(E=E_DISC * stiffness, nu=0.25, rho=1.0, plane="strain")}
-    bottom = _compat.locate_boundary_facets(mesh, lambda x: np.isclose(x[1], -height))
+    bottom = meshes.locate_boundary_facets(mesh, lambda x: np.isclose(x[1], -height))
     dem = DEMDiscretisation(mesh, materials, scheme, [DirichletBC(bottom, [0.0, 0.0])],
                             body_force=[0.0, -LOAD], cell_tags=cells)
-    facets = _compat.locate_boundary_facets(mesh, lambda x: (x[1] > -height / 2) & (x[1] < 0.05))
+    facets = meshes.locate_boundary_facets(mesh, lambda x: (x[1] > -height / 2) & (x[1] < 0.05))
     return DEMProblem(dem, [PairContact(dem, facets)])
 
 
@@ -177,7 +177,7 @@ def test_disc_on_a_stiff_block_approaches_the_rigid_plane():
     rigid = DEMDiscretisation(mesh, ElasticMaterial(E=E_DISC, nu=0.25, rho=1.0, plane="strain"), "A",
                               body_force=[0.0, -LOAD])
     c = RigidContact(rigid, [HalfSpace([0.0, 0.0], [0.0, 1.0],
-                                       _compat.locate_boundary_facets(mesh, lambda x: x[1] <= R_DISC), 1e-9)])
+                                       meshes.locate_boundary_facets(mesh, lambda x: x[1] <= R_DISC), 1e-9)])
     reference = minimise_energy(DEMProblem(rigid, [c]), fixed_mean=(0,), fixed_rotation=True)
     reactions = c.reactions(reference.u)
     x = rigid.geometry.facet_centres[c.facets[: c.num_own], 0]
@@ -239,7 +239,7 @@ def test_pair_statics_ends_with_an_error_when_it_does_not_converge():
 def test_statics_refuses_obstacles_with_contact_between_bodies():
     mesh, _, _ = meshes.create_discs(MPI.COMM_WORLD, [((0.0, 0.1), 0.1), ((0.25, 0.1), 0.1)], 0.05)
     dem = DEMDiscretisation(mesh, ElasticMaterial(E=100.0, nu=0.2, rho=1.0), "B", body_force=[0.0, -1.0])
-    boundary = _compat.exterior_facets(mesh)
+    boundary = meshes.exterior_facets(mesh)
     problem = DEMProblem(dem, [RigidContact(dem, [HalfSpace([0.0, 0.0], [0.0, 1.0], boundary, tolerance=1e-3)]), PairContact(dem, boundary)])
     with pytest.raises(ValueError, match="rigid obstacles or contact between bodies, not both"):
         minimise_energy(problem, fixed_mean=(0,))

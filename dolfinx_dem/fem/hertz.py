@@ -90,7 +90,7 @@ import dolfinx.fem
 import dolfinx.fem.petsc
 import dolfinx.mesh
 
-from dolfinx_dem import _compat
+from dolfinx_dem import _compat, meshes
 from dolfinx_dem.hertz import (
     HertzAnalytic,
     contact_half_width_fit,
@@ -234,7 +234,7 @@ def _top_displacement(u, R: float) -> tuple[float, float]:
         if not np.isfinite(found):
             raise SolverError("the top of the ball (0, 0, 2R) is in no cell")
         return 2.0 * R, float(found)
-    facets = _owned(mesh, _compat.locate_boundary_facets(mesh, lambda x: x[1] > R))
+    facets = _owned(mesh, meshes.locate_boundary_facets(mesh, lambda x: x[1] > R))
     cells, facet_x, _ = _compat.facet_cell_and_vertices(mesh, facets)
     best = (-np.inf, 0.0)
     for cell, ((x0, y0, _), (x1, y1, _)) in zip(cells, facet_x):
@@ -551,7 +551,7 @@ def solve_hertz(
     # potential contact boundary: the lower half of the circle or sphere (every vertex on it: not
     # the flat symmetry faces of the quarter ball)
     fdim = d - 1
-    contact_facets = np.sort(_compat.locate_boundary_facets(
+    contact_facets = np.sort(meshes.locate_boundary_facets(
         mesh, lambda x: (x[d - 1] < R) & (np.sum((x[:d].T - centre) ** 2, axis=1) >= R**2 * (1 - 1e-9))))
     tags = dolfinx.mesh.meshtags(
         mesh, fdim, contact_facets, np.full(contact_facets.size, _CONTACT, dtype=np.int32)
@@ -607,7 +607,7 @@ def solve_hertz(
     else:  # symmetry: u_x = 0 on x = 0, u_y = 0 on y = 0
         mean_ux, bcs = None, []
         for i in range(2):
-            facets = _compat.locate_boundary_facets(mesh, lambda x, i=i: np.abs(x[i]) <= 1e-10 * R)
+            facets = meshes.locate_boundary_facets(mesh, lambda x, i=i: np.abs(x[i]) <= 1e-10 * R)
             dofs = dolfinx.fem.locate_dofs_topological(V.sub(i), fdim, facets)
             bcs.append(dolfinx.fem.dirichletbc(PETSc.ScalarType(0.0), dofs, V.sub(i)))
     newton = _Newton(
