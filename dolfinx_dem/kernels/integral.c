@@ -314,6 +314,124 @@ void dem_pair_facet_forces(const dem_pairs *pairs, int64_t n, const int64_t *res
   }
 }
 
+/* The own rows the touching pairs p[0..n) touch (numbered through slot by number_columns: n_rows
+ * of them) link the pairs into connected components (two pairs are linked by a common column
+ * of their Z^T rows): union-find, the smaller index the root, the components numbered by first
+ * appearance (label). first (n_rows) and parent (n): work. Returns the number of components. */
+static int64_t components(int64_t n, const int64_t *restrict p, const dem_csr *z, const int32_t *restrict slot,
+                          int64_t n_rows, int64_t *restrict first, int64_t *restrict parent, int64_t *restrict label)
+{
+  const int32_t *restrict z_ptr = z->indptr, *restrict z_idx = z->indices;
+  int64_t n_comp = 0;
+  for (int64_t s = 0; s < n_rows; ++s)
+    first[s] = -1; /* the first pair met in each row */
+  for (int64_t k = 0; k < n; ++k)
+    parent[k] = k;
+  for (int64_t k = 0; k < n; ++k)
+  {
+    int64_t x = find_root(parent, k); /* k's root, kept as the unions below change it */
+    for (int32_t e = z_ptr[p[k]]; e < z_ptr[p[k] + 1]; ++e)
+    {
+      const int32_t r = slot[z_idx[e]];
+      if (first[r] < 0)
+        first[r] = k;
+      if (first[r] == k)
+        continue;
+      const int64_t y = find_root(parent, first[r]);
+      if (x != y)
+      {
+        parent[x > y ? x : y] = x < y ? x : y;
+        x = x < y ? x : y;
+      }
+    }
+  }
+  for (int64_t k = 0; k < n; ++k)
+  {
+    const int64_t root = find_root(parent, k);
+    label[k] = root == k ? n_comp++ : label[root];
+  }
+  return n_comp;
+}
+
+/* The nodes of the touching pairs in dem_pair_force_integral: pair k's are offsets[k] ..
+ * offsets[k + 1] (stride: the most of a pair), at the times ``time`` of its component's pieces
+ * with the quadrature weights ``weight``; there the pair (``entry``), its gap g, overlap w,
+ * dw/du_j (d each) and c = w g^-. */
+typedef struct
+{
+  int64_t *offsets, *entry;
+  double *time, *weight, *g, *w, *dw, *c;
+  int64_t stride;
+} node_set;
+
+/* The rows' term of dem_pair_force_integral: result -= Q^T (Z int c dtau) over the n_rows
+ * touched rows (zc: their Z int c dtau, zero on entry). */
+static void rows_term(int64_t n, const int64_t *restrict p, const dem_csr *z, const int32_t *restrict slot,
+                      int64_t n_rows, const int32_t *restrict rows, const dem_csr *Q, const node_set *nodes,
+                      double *restrict zc, double *restrict result)
+{
+  const int32_t *restrict z_ptr = z->indptr, *restrict z_idx = z->indices;
+  const double *restrict z_val = z->data, *restrict weights = nodes->weight, *restrict c = nodes->c;
+  const int64_t *restrict offsets = nodes->offsets;
+  for (int64_t k = 0; k < n; ++k)
+  {
+    double integral = 0.0;
+    for (int64_t e = offsets[k]; e < offsets[k + 1]; ++e)
+      integral = e == offsets[k] ? weights[e] * c[e] : integral + weights[e] * c[e];
+    for (int32_t e = z_ptr[p[k]]; e < z_ptr[p[k] + 1]; ++e)
+      zc[slot[z_idx[e]]] += z_val[e] * integral;
+  }
+  for (int64_t s = 0; s < n_rows; ++s)
+    for (int32_t e = Q->indptr[rows[s]]; e < Q->indptr[rows[s] + 1]; ++e)
+      result[Q->indices[e]] -= Q->data[e] * zc[s];
+}
+
+/* The pairs' term of dem_pair_force_integral: mu = z_p . a(tau) + z_p . (Z c)(tau) at the nodes
+ * (the pairs of a component share their nodes; za: z_p . a at 0 and its rate, 2 per pair),
+ * where g < 0, times the weights; then the facet forces -mu dc/du (dem_pair_facet_forces) and
+ * result += R^T of them (summed as scipy's R.T @ f, then added). work (n_rows x stride),
+ * facet_force (R's rows) and pairs_term (R's columns): zero on entry; mu: one per node. */
+static void pairs_term(int64_t n, const int64_t *restrict p, const dem_pairs *pairs, const double *restrict za,
+                       const node_set *nodes, double *restrict mu, double *restrict work,
+                       double *restrict facet_force, double *restrict pairs_term, double *restrict result)
+{
+  const int32_t *restrict z_ptr = pairs->z.indptr, *restrict z_idx = pairs->z.indices, *restrict slot = pairs->slot;
+  const double *restrict z_val = pairs->z.data, *restrict g = nodes->g, *restrict c = nodes->c;
+  const int64_t *restrict offsets = nodes->offsets, stride = nodes->stride;
+  for (int64_t k = 0; k < n; ++k)
+  {
+    int64_t lo, hi; /* c and mu only where g < 0: elsewhere c = 0 adds nothing, mu is 0 */
+    closed_range(g + offsets[k], offsets[k + 1] - offsets[k], &lo, &hi);
+    for (int32_t e = z_ptr[p[k]]; e < z_ptr[p[k] + 1]; ++e)
+      for (int64_t x = lo; x < hi; ++x)
+        work[slot[z_idx[e]] * stride + x] += z_val[e] * c[offsets[k] + x];
+  }
+  for (int64_t k = 0; k < n; ++k)
+  {
+    const int64_t m = offsets[k + 1] - offsets[k];
+    int64_t lo, hi;
+    closed_range(g + offsets[k], m, &lo, &hi);
+    for (int64_t x = 0; x < m; ++x)
+      mu[offsets[k] + x] = 0.0;
+    for (int32_t e = z_ptr[p[k]]; e < z_ptr[p[k] + 1]; ++e)
+      for (int64_t x = lo; x < hi; ++x)
+        mu[offsets[k] + x] += z_val[e] * work[slot[z_idx[e]] * stride + x];
+    for (int64_t x = lo; x < hi; ++x)
+    {
+      const int64_t node = offsets[k] + x;
+      const double value = (za[2 * k] + nodes->time[node] * za[2 * k + 1]) + mu[node];
+      mu[node] = value * nodes->weight[node];
+    }
+  }
+  dem_pair_facet_forces(pairs, offsets[n], nodes->entry, mu, g, nodes->w, nodes->dw, facet_force);
+  const dem_csr *R = &pairs->R;
+  for (int64_t r = 0; r < R->n_rows; ++r)
+    for (int32_t e = R->indptr[r]; e < R->indptr[r + 1]; ++e)
+      pairs_term[R->indices[e]] += R->data[e] * facet_force[r];
+  for (int64_t k = 0; k < R->n_cols; ++k)
+    result[k] += pairs_term[k];
+}
+
 /* pair_contact.PairContact.force_integral after its screen, in one call: for the touching pairs
  * p of the flight (flight->touching: facets (i, j), normal, tangents t, reference gap d0,
  * projections si, sj) along its free facet displacements uc + tau vc, 0 <= tau <= dt, the
@@ -347,11 +465,6 @@ int64_t dem_pair_force_integral(const dem_pairs *pairs, const dem_patch *patch, 
   const double *restrict xi = gauss->xi, *restrict wq = gauss->wq;
   const int32_t *restrict z_ptr = pairs->z.indptr, *restrict z_idx = pairs->z.indices;
   const double *restrict z_val = pairs->z.data;
-  const int32_t *restrict q_ptr = patch->Q.indptr, *restrict q_idx = patch->Q.indices;
-  const double *restrict q_val = patch->Q.data;
-  const int32_t *restrict r_ptr = pairs->R.indptr, *restrict r_idx = pairs->R.indices;
-  const double *restrict r_val = pairs->R.data;
-  const int64_t n_facet_rows = pairs->R.n_rows, n_patch = pairs->R.n_cols;
   int32_t *restrict slot = pairs->slot;
   int64_t bound = 0, n_rows = 0, n_comp = 0, n_times = 0, k_max = 0, pieces = 0, stride = 0, status = -1;
   for (int64_t k = 0; k < n; ++k)
@@ -369,42 +482,16 @@ int64_t dem_pair_force_integral(const dem_pairs *pairs, const dem_patch *patch, 
   double *length_own = arena_take(arena, n * n_own, sizeof *length_own);
   double *w_own = arena_take(arena, n * n_own * n_gauss, sizeof *w_own);
   double *dw_own = arena_take(arena, n * n_own * n_gauss * d, sizeof *dw_own);
-  double *facet_force = arena_zeros(arena, n_facet_rows, sizeof *facet_force);
-  double *pairs_term = arena_zeros(arena, n_patch, sizeof *pairs_term);
+  double *facet_force = arena_zeros(arena, pairs->R.n_rows, sizeof *facet_force);
+  double *pairs_sum = arena_zeros(arena, pairs->R.n_cols, sizeof *pairs_sum);
   if (!rows || !first || !parent || !label || !offsets || !a || !za || !tau || !zc || !time_rows || !times ||
-      !start_own || !length_own || !w_own || !dw_own || !g0 || !rate || !facet_force || !pairs_term)
+      !start_own || !length_own || !w_own || !dw_own || !g0 || !rate || !facet_force || !pairs_sum)
     goto done;
 
   /* the own rows the pairs touch (slot: their numbers, by first appearance) and the components
-   * of pairs sharing one (union-find, the smaller index the root; numbered by first appearance) */
+   * of pairs sharing one */
   n_rows = number_columns(n, p, &pairs->z, slot, rows, 0);
-  for (int64_t s = 0; s < n_rows; ++s)
-    first[s] = -1; /* the first pair met in each row */
-  for (int64_t k = 0; k < n; ++k)
-    parent[k] = k;
-  for (int64_t k = 0; k < n; ++k)
-  {
-    int64_t x = find_root(parent, k); /* k's root, kept as the unions below change it */
-    for (int32_t e = z_ptr[p[k]]; e < z_ptr[p[k] + 1]; ++e)
-    {
-      const int32_t r = slot[z_idx[e]];
-      if (first[r] < 0)
-        first[r] = k;
-      if (first[r] == k)
-        continue;
-      const int64_t y = find_root(parent, first[r]);
-      if (x != y)
-      {
-        parent[x > y ? x : y] = x < y ? x : y;
-        x = x < y ? x : y;
-      }
-    }
-  }
-  for (int64_t k = 0; k < n; ++k)
-  {
-    const int64_t root = find_root(parent, k);
-    label[k] = root == k ? n_comp++ : label[root];
-  }
+  n_comp = components(n, p, &pairs->z, slot, n_rows, first, parent, label);
 
   /* a = (Q u + q, Q v) on the touched rows, and z_p . a of each pair */
   rows_apply(n_rows, rows, &patch->Q, up, patch->q, a, flight->vp, a + n_rows);
@@ -458,6 +545,7 @@ int64_t dem_pair_force_integral(const dem_pairs *pairs, const dem_patch *patch, 
   double *dw = arena_take(arena, n_nodes * d, sizeof *dw), *c = arena_take(arena, n_nodes, sizeof *c);
   double *mu = arena_take(arena, n_nodes, sizeof *mu);
   int64_t *entry = arena_take(arena, n_nodes, sizeof *entry);
+  const node_set at = {offsets, entry, nodes, weights, g, w, dw, c, stride};
   double *work = arena_zeros(arena, n_rows * stride, sizeof *work);
   double *cache_x = arena_take(arena, stride, sizeof *cache_x);
   double *cache_basis = arena_take(arena, stride * n_gauss, sizeof *cache_basis);
@@ -508,52 +596,8 @@ int64_t dem_pair_force_integral(const dem_pairs *pairs, const dem_patch *patch, 
   for (int64_t e = 0; e < n_nodes; ++e)
     c[e] = w[e] * (g[e] < 0.0 ? g[e] : 0.0);
 
-  /* the rows' term: result -= Q^T (Z int c dtau), over the touched rows */
-  for (int64_t k = 0; k < n; ++k)
-  {
-    double integral = 0.0;
-    for (int64_t e = offsets[k]; e < offsets[k + 1]; ++e)
-      integral = e == offsets[k] ? weights[e] * c[e] : integral + weights[e] * c[e];
-    for (int32_t e = z_ptr[p[k]]; e < z_ptr[p[k] + 1]; ++e)
-      zc[slot[z_idx[e]]] += z_val[e] * integral;
-  }
-  for (int64_t s = 0; s < n_rows; ++s)
-    for (int32_t e = q_ptr[rows[s]]; e < q_ptr[rows[s] + 1]; ++e)
-      result[q_idx[e]] -= q_val[e] * zc[s];
-
-  /* the pairs' term: mu = z_p . a(tau) + z_p . (Z c)(tau) at the nodes (the pairs of a component
-   * share their nodes), where g < 0, times the weights; then the facet forces */
-  for (int64_t k = 0; k < n; ++k)
-  {
-    int64_t lo, hi; /* c and mu only where g < 0: elsewhere c = 0 adds nothing, mu is 0 */
-    closed_range(g + offsets[k], offsets[k + 1] - offsets[k], &lo, &hi);
-    for (int32_t e = z_ptr[p[k]]; e < z_ptr[p[k] + 1]; ++e)
-      for (int64_t x = lo; x < hi; ++x)
-        work[slot[z_idx[e]] * stride + x] += z_val[e] * c[offsets[k] + x];
-  }
-  for (int64_t k = 0; k < n; ++k)
-  {
-    const int64_t m = offsets[k + 1] - offsets[k];
-    int64_t lo, hi;
-    closed_range(g + offsets[k], m, &lo, &hi);
-    for (int64_t x = 0; x < m; ++x)
-      mu[offsets[k] + x] = 0.0;
-    for (int32_t e = z_ptr[p[k]]; e < z_ptr[p[k] + 1]; ++e)
-      for (int64_t x = lo; x < hi; ++x)
-        mu[offsets[k] + x] += z_val[e] * work[slot[z_idx[e]] * stride + x];
-    for (int64_t x = lo; x < hi; ++x)
-    {
-      const int64_t node = offsets[k] + x;
-      const double value = (za[2 * k] + nodes[node] * za[2 * k + 1]) + mu[node];
-      mu[node] = value * weights[node];
-    }
-  }
-  dem_pair_facet_forces(pairs, n_nodes, entry, mu, g, w, dw, facet_force);
-  for (int64_t r = 0; r < n_facet_rows; ++r)
-    for (int32_t e = r_ptr[r]; e < r_ptr[r + 1]; ++e)
-      pairs_term[r_idx[e]] += r_val[e] * facet_force[r];
-  for (int64_t k = 0; k < n_patch; ++k)
-    result[k] += pairs_term[k];
+  rows_term(n, p, &pairs->z, slot, n_rows, rows, &patch->Q, &at, zc, result);
+  pairs_term(n, p, pairs, za, &at, mu, work, facet_force, pairs_sum, result);
   status = pieces;
 
 done:
