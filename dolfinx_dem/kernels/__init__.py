@@ -50,13 +50,9 @@ class Struct:
     __slots__ = ("c", "arrays", "_keep")
 
     def __init__(self, ctype: str, **fields):
-        self.c = ffi.new(ctype + " *")
+        c = self.c = ffi.new(ctype + " *")
         self.arrays, self._keep = {}, []
-        self.set(**fields)
-
-    def set(self, **fields) -> None:
-        """Sets the given fields (as ``Struct``); the values they replace stay alive too."""
-        c, keep = self.c, self._keep
+        keep = self._keep
         for name, value in fields.items():
             if isinstance(value, np.ndarray):
                 self.arrays[name] = value

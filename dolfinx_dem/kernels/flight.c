@@ -283,9 +283,9 @@ done:
 /* pair_contact._At in one call: the free facet displacements uc = R up + lift (dem_csr_apply);
  * if the list is stale at uc (dem_pair_worst_motion's ratio above 1) returns -2 and nothing
  * more; else the contact state (pair_state), screening only the last flight's candidates if
- * every facet lies within slack / 2 of its end (uc + dt vc of ``last``: end_slack2; state->from_flight = 1;
- * none closed if there are none), every listed pair otherwise (last NULL: no flight). Returns
- * the number of closed pairs, -2 (stale) or -1 (out of memory). */
+ * every facet lies within slack / 2 of its end (uc + dt vc of ``last``; pairs->end_slack2;
+ * state->from_flight = 1; none closed if there are none), every listed pair otherwise (last
+ * NULL: no flight). Returns the number of closed pairs, -2 (stale) or -1 (out of memory). */
 int64_t dem_pair_end_state(const dem_pairs *pairs, const dem_patch *patch, const double *restrict up,
                            const dem_flight *last, dem_arena *work, double *restrict uc, dem_pair_state *state)
 {
