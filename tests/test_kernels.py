@@ -57,6 +57,8 @@ def test_a_struct_keeps_its_arrays_alive_and_refuses_the_wrong_types():
         Struct("dem_pairs", i=np.zeros(2, dtype=np.int32))
     with pytest.raises(ValueError, match="at most 2147483647"):
         csr(np.array([0, 2**31]), np.zeros(0), np.zeros(0), 1)
+    with pytest.raises(ValueError, match="at most 2147483647"):
+        csr(np.array([0, 0]), np.zeros(0), np.zeros(0), 2**31)
     with pytest.raises(TypeError, match="scipy CSR matrix"):
         csr_of(scipy.sparse.csc_matrix(np.eye(2)))
 
