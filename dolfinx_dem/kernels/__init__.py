@@ -71,7 +71,9 @@ class Struct:
 def csr(indptr: np.ndarray, indices: np.ndarray, data: np.ndarray | None, n_cols: int) -> Struct:
     """A ``dem_csr`` over CSR arrays (len(indptr) - 1 rows; data None: a pattern), as int32
     indices and float64 values (converted if they are not: check with ``.arrays``)."""
-    if (len(indptr) and int(indptr[-1]) > _INT32_MAX) or n_cols > _INT32_MAX:
+    if len(indptr) == 0:
+        raise ValueError("a CSR matrix needs indptr[0] = 0 at least")
+    if int(indptr[-1]) > _INT32_MAX or n_cols > _INT32_MAX:
         raise ValueError(f"a CSR matrix of {int(indptr[-1])} entries and {n_cols} columns: the kernels take at most "
                          f"{_INT32_MAX} of each")
     return Struct("dem_csr", indptr=np.ascontiguousarray(indptr, dtype=np.int32),
