@@ -69,7 +69,7 @@ apt:
 $(PYTHON): | apt
 	$(SYSTEM_PYTHON) -m venv --system-site-packages $(VENV)
 
-$(STAMP): pyproject.toml setup.py constraints.txt dolfinx_dem/kernels.c dolfinx_dem/_build_kernels.py | $(PYTHON)
+$(STAMP): pyproject.toml setup.py constraints.txt $(wildcard dolfinx_dem/kernels/*.c dolfinx_dem/kernels/*.h) dolfinx_dem/kernels/_build.py | $(PYTHON)
 	$(PYTHON) -m pip install --disable-pip-version-check -q \
 	  -c constraints.txt --no-build-isolation -e . $(PIP_PACKAGES)
 	@touch $@

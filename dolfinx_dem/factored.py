@@ -1,4 +1,4 @@
-"""The stiffness K = Q^T Q applied in one pass over the rows of Q (compiled kernel, kernels.c).
+"""The stiffness K = Q^T Q applied in one pass over the rows of Q (compiled kernel, kernels/rows.c).
 
 Q = [S; J] (operators.py, eq. (11), (13)) has about half the nonzeros of K, and PETSc applies
 K in factored form as two MatMults, Q then a stored Q^T, reading Q twice. ``FactoredStiffness``
@@ -24,7 +24,7 @@ import numpy as np
 import scipy.sparse
 from petsc4py import PETSc
 
-from dolfinx_dem.kernels import lib, pointer
+from dolfinx_dem.kernels import csr, lib, pointer
 from dolfinx_dem.errors import InputError
 
 
@@ -60,7 +60,7 @@ class FactoredStiffness:
         self.n_rows = int(n_rows)
         self.n_elastic = int(n_elastic)
         self.rowptr, self.cols, self.vals = rows.indptr[: self.n_rows + 1], rows.indices, rows.data
-        self._csr = (pointer(self.rowptr), pointer(self.cols), pointer(self.vals))
+        self.csr = csr(self.rowptr, self.cols, self.vals, self.n_owned + len(self.ghosts))  # the kernels' Q
         self._work = None
 
     def create_vector(self) -> PETSc.Vec:
@@ -89,11 +89,10 @@ class FactoredStiffness:
             raise InputError(f"y needs {self.n_rows} float64 entries")
         px, pz = pointer(self.local_array(x)), pointer(self.local_array(z))
         py, ps, pi, pshift = pointer(y), pointer(sums), pointer(shift_index), pointer(shift)
-        rowptr, cols, vals = self._csr
-        n_rows, n_elastic, kernel = self.n_rows, self.n_elastic, lib.dem_gram_apply
+        Q, n_elastic, kernel = self.csr.c, self.n_elastic, lib.dem_gram_apply
 
         def apply(alpha: float, scale: float):
-            kernel(n_rows, n_elastic, rowptr, cols, vals, px, pi, pshift, py, alpha, scale, pz, ps)
+            kernel(Q, n_elastic, px, pi, pshift, py, alpha, scale, pz, ps)
 
         return apply
 

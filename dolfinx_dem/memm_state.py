@@ -1,4 +1,4 @@
-"""The arrays and compiled kernels of a MEMM step (memm.py, kernels.c).
+"""The arrays and compiled kernels of a MEMM step (memm.py, kernels/rows.c).
 
 ``StepState`` holds the state u, v^{n-1/2}, v^{n+1/2} as PETSc vectors with ghost dofs, the
 homogeneous energy rows y = Q u (stored divided by dt: their increment is then Q v^{n+1/2} with
@@ -20,7 +20,7 @@ import numpy as np
 from mpi4py import MPI
 from petsc4py import PETSc
 
-from dolfinx_dem.kernels import ffi, lib, pointer
+from dolfinx_dem.kernels import Struct, ffi, lib, pointer
 from dolfinx_dem.errors import InputError
 
 _FORWARD = dict(addv=PETSc.InsertMode.INSERT_VALUES, mode=PETSc.ScatterMode.FORWARD)
@@ -85,12 +85,15 @@ class StepState:
                       for x in (self.u, self.v_prev, self.v_next, self._x) if x is not None for z in self._z}
         self._p = {id(v): pointer(v.array) for v in (self.u, self.v_prev, self.v_next, *self._z, self.impulse)}
         self._p[id(None)] = ffi.NULL  # no impulse
-        self._p_mass, self._p_minv, self._p_sums = pointer(self._mass), pointer(self._minv), pointer(self.sums)
-        self._p_body = pointer(self._body)
+        self._p_sums = pointer(self.sums)
         # f . u, the external potential's share, summed by the kernel for a constant f (not 0); a
         # time-dependent f(t) is read at t_{n+1} in ``reduce`` instead
         force = problem.data.external_force.array
-        self._p_body_force = pointer(force) if force.any() and not problem.data.time_dependent else ffi.NULL
+        self._constant_force = bool(force.any()) and not problem.data.time_dependent
+        self._cells = Struct("dem_memm_cells", n_blocks=len(self._mass), bs=d, dt=dt, c=0.5 * dt**2, mass=self._mass,
+                             minv=self._minv, f=force if self._constant_force else None, body=self._body,
+                             sums=self._p_sums + KINETIC, total=self._p_sums + MOMENTUM,
+                             momentum=self._p_sums + MOMENTA)
 
     def restart(self, t0: float):
         """After u, v_prev and v_next are set: the constant loads, and y = Q rel(u) / dt by a true
@@ -117,7 +120,7 @@ class StepState:
         self.sums[KINETIC:EXTERNAL] = [0.125 * np.dot(M, (vp + vn) ** 2), 0.5 * np.dot(M * vp, vn)]
         d = problem.d
         self.sums[MOMENTUM : MOMENTUM + d] = 0.5 * (self._mass @ (vp + vn).reshape(-1, d))
-        if self._p_body_force != ffi.NULL:
+        if self._constant_force:
             self.sums[EXTERNAL] = np.dot(problem.data.external_force.array_r, self.u.array_r)
         if self._body is not None:
             np.add.at(self.sums[MOMENTA:], self._slot[: len(vn)], M * vn)
@@ -167,10 +170,8 @@ class StepState:
             if impulse is not None:
                 force_integral += impulse.array_r[q]
             self.sums[LOAD_POWER] -= self.v_next.array_r[q] @ force_integral
-        lib.dem_memm_update(len(self._mass), self.problem.d, self.dt, 0.5 * self.dt**2, p[id(z_old)], p[id(z_new)],
-                            p[id(impulse)], self._p_mass, self._p_minv, p[id(self.u)], p[id(self.v_next)],
-                            p[id(self.v_prev)], self._p_body_force, 1 if advance else 0, self._p_body,
-                            self._p_sums + MOMENTA, self._p_sums + MOMENTUM, self._p_sums + KINETIC)
+        lib.dem_memm_update(self._cells.c, p[id(z_old)], p[id(z_new)], p[id(impulse)], p[id(self.u)],
+                            p[id(self.v_next)], p[id(self.v_prev)], 1 if advance else 0)
         self.u.stateIncrease()  # written by the kernel: PETSc's cached norms are stale
         self.v_prev.stateIncrease()
         self._ghosts[0].fill(0.0)  # z_old becomes the next accumulator, ghost entries too

@@ -13,7 +13,7 @@ nonnegative matrix at most any weighted row sum: Gershgorin for D^-1 |Kt| D, D =
 Collatz-Wielandt). w = 1 is Gershgorin's bound; w_{k+1} = |Kt| w_k (power iteration on |Kt|)
 gives a non-increasing sequence of bounds towards rho(|Kt|). Starting from the diagonal of Kt
 instead of 1 reaches in two passes what w = 1 reaches in three. The rows of |K| = |Q^T Q| are
-computed from the rows of Q (kernels.c, ``dem_gram_abs_rowsums``) without storing K: for each
+computed from the rows of Q (kernels/rows.c, ``dem_gram_abs_rowsums``) without storing K: for each
 owned dof, the rows of Q through it (the local rows of Q^T), those of other processes sent by
 their owners (neighbours only). The sums run in an order of rows and columns that does not
 depend on the partition, so the bound is the same, to the bit, on any number of processes.
@@ -31,7 +31,7 @@ from petsc4py import PETSc
 
 from dolfinx_dem.factored import FactoredStiffness
 from dolfinx_dem.halo import alltoall
-from dolfinx_dem.kernels import ffi, lib, pointer
+from dolfinx_dem.kernels import Struct, csr, ffi, lib, pointer
 from dolfinx_dem.errors import InputError, SolverError
 
 #: Relative margin added to the computed bound for its rounding: each entry of |K| is a sum of
@@ -85,16 +85,16 @@ def _transposed_blocks(factored: FactoredStiffness):
     the elastic rows and the jump rows are each in the order of their cells, so the rows through
     a block of dofs lie in one range of each (found once from each row's smallest and largest
     owned column); the cells' numbering keeps neighbours close, so the ranges are short."""
-    n, n_rows = factored.n_owned, factored.n_rows
-    rowptr, cols = pointer(factored.rowptr), pointer(factored.cols)
+    n, n_rows, Q = factored.n_owned, factored.n_rows, factored.csr.c
     every_row = np.array([0, n_rows], dtype=np.int64)
     counts = np.empty(n + 1, dtype=np.int32)
-    lib.dem_transpose_pattern(pointer(every_row), 1, rowptr, cols, 0, n, pointer(counts), ffi.NULL)  # entries before each owned dof
+    # the entries before each owned dof
+    lib.dem_transpose_pattern(Q, pointer(every_row), 1, 0, n, pointer(counts), ffi.NULL)
     cuts = np.searchsorted(counts, np.arange(PATTERN_BLOCK, int(counts[-1]), PATTERN_BLOCK), side="right") - 1
     edges = np.unique(np.concatenate([[0], cuts, [n]]))  # block k: owned dofs edges[k] .. edges[k + 1] - 1
     del counts
     lo, hi = np.empty(n_rows, dtype=np.int32), np.empty(n_rows, dtype=np.int32)
-    lib.dem_row_column_range(n_rows, rowptr, cols, n, pointer(lo), pointer(hi))
+    lib.dem_row_column_range(Q, n, pointer(lo), pointer(hi))
     ranges = []
     for a, b in zip(edges[:-1], edges[1:]):
         r = []
@@ -106,7 +106,7 @@ def _transposed_blocks(factored: FactoredStiffness):
     del lo, hi
 
     def block(first: int, last: int, rows_range: np.ndarray):
-        args = (pointer(rows_range), len(rows_range) // 2, rowptr, cols, first, last - first)
+        args = (Q, pointer(rows_range), len(rows_range) // 2, first, last - first)
         ptr = np.empty(last - first + 1, dtype=np.int32)
         lib.dem_transpose_pattern(*args, pointer(ptr), ffi.NULL)
         rows = np.empty(int(ptr[-1]), dtype=np.int32)
@@ -167,10 +167,11 @@ def largest_eigenvalue_bound(factored: FactoredStiffness, row_keys: np.ndarray, 
     x = inverse_mass.duplicate()
     x_reach = PETSc.Vec().createSeq(len(reach), comm=self_comm)
     scatter = PETSc.Scatter().create(x, PETSc.IS().createGeneral(reach, comm=self_comm), x_reach, None)
+    # the rows of Q through the owned dofs: this process's (their pattern by blocks, below), and
+    # those of other processes
     row_keys = np.ascontiguousarray(row_keys)
-    arrays = (pointer(factored.rowptr), pointer(factored.cols), pointer(factored.vals), pointer(row_keys),
-              pointer(qt2_ptr), pointer(qt2_rows), pointer(ptr2), pointer(cols2), pointer(vals2), pointer(keys2))
-    keep = (row_keys, qt2_ptr, qt2_rows, ptr2, cols2, vals2, keys2)  # noqa: F841 (alive for the pointers)
+    other = Struct("dem_row_set", rows=csr(ptr2, cols2, vals2, len(reach)), key=keys2, qt_ptr=qt2_ptr,
+                   qt_rows=qt2_rows)
     s = np.sqrt(inverse_mass.array_r)
     acc = np.zeros(len(reach))  # the kernel's workspace, left zero
     r = np.empty(n)
@@ -178,8 +179,8 @@ def largest_eigenvalue_bound(factored: FactoredStiffness, row_keys: np.ndarray, 
 
     def rowsums(x):
         for first, qt_ptr, qt_rows in blocks():
-            lib.dem_gram_abs_rowsums(first, len(qt_ptr) - 1, pointer(qt_ptr), pointer(qt_rows), *arrays, x,
-                                     pointer(r), pointer(acc))
+            own = Struct("dem_row_set", rows=factored.csr, key=row_keys, qt_ptr=qt_ptr, qt_rows=qt_rows)
+            lib.dem_gram_abs_rowsums(first, len(qt_ptr) - 1, own.c, other.c, x, pointer(r), pointer(acc))
 
     # start from the diagonal of Kt (cheaper than w = 1 for the same bound: 2 passes, not 3)
     rowsums(ffi.NULL)

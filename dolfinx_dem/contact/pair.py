@@ -92,7 +92,7 @@ from petsc4py import PETSc
 from dolfinx_dem import bodies as _bodies
 from dolfinx_dem.conditions import facet_indices
 from dolfinx_dem.contact import candidates
-from dolfinx_dem.kernels import lib, pointer
+from dolfinx_dem.kernels import Struct, arena, csr, csr_of, ffi, lib, pointer
 from dolfinx_dem.contact.pair_statics import PairStatics
 from dolfinx_dem.contact.patch import PatchScatter
 from dolfinx_dem.errors import InputError, KernelMemoryError, StateError, UnresolvedContactError
@@ -252,9 +252,12 @@ class PairContact:
         self._row_dofs, entry_dof = np.unique(dem.columns[self._Q.indices], return_inverse=True)
         self._Q_entry_dof = entry_dof.astype(np.int32)
         self._q = dem.data.row_lift(touched)
-        self._p_q = pointer(self._q)  # the kernels' pointers to arrays that stay, made once (_p_*)
         self._is_elastic_row = (touched < rows.num_elastic).astype(np.int8)
-        self._elastic_row_pointer = pointer(self._is_elastic_row)
+        # the kernels' structs of what stays (``dem_patch``: Q on the patch's first dofs, its
+        # rows' dofs), and their work memory
+        Q = csr(self._Q.indptr, self._Q_entry_dof, self._Q.data, len(self._row_dofs))
+        self._c_patch = Struct("dem_patch", Q=Q, q=self._q, elastic=self._is_elastic_row)
+        self._work = arena()
         an = geom.facet_area_normals[self.cells, geom.facet_local[self.facets, 0]]
         self._grad_weights = an / geom.cell_volumes[self.cells, None]
         # Verlet skins: each facet's own diameter about its barycentre (the length in 2D) unless
@@ -286,7 +289,7 @@ class PairContact:
         self._exchange_drift = self.radius - 0.5 * self.comm.allreduce(float(skins.max(initial=0.0)), op=MPI.MAX)
         self._exchanged = None  # the local facets' free displacements at the last exchange (``_build``)
         self._gauss = _gauss_legendre(d)
-        self._p_gauss = tuple(pointer(x) for x in self._gauss)
+        self._c_gauss = Struct("dem_gauss", n=len(self._gauss[0]), xi=self._gauss[0], wq=self._gauss[1])
 
         # The body pairs (i < j) whose force is an output: both bodies hold candidate facets.
         held = np.bincount(self._facets.body[: self.num_own], minlength=geom.num_bodies).astype(np.int64)
@@ -405,7 +408,7 @@ class PairContact:
         self.facets_all = F
         self._facet_bodies = np.ascontiguousarray(F.body, dtype=np.int64)  # for ``dem_pair_body_forces``
         self._R = R
-        self._Rc = _CSR(R)  # for the compiled products (``free_displacements``)
+        self._Rc = csr_of(R)  # for the compiled products (``free_displacements``)
         self._RT = self._R.T  # CSC: its products sum in the order of R^T as CSR, without the copy
         self._lift = np.ascontiguousarray(F.lift, dtype=np.float64).reshape(-1, self.d)
         self._p_lift = pointer(self._lift)
@@ -461,7 +464,7 @@ class PairContact:
         )
         self._reference = ucF.copy()
         self._half_skin2 = 0.25 * skins**2  # of the known facets
-        self._p_motion = (pointer(self._reference), pointer(self._half_skin2))
+        self._c_pairs = self.listed.struct(self._Rc, self._lift, self._reference, self._half_skin2, self._slack)
         self.rebuilds += 1
 
     def _exchange(self, uc: np.ndarray) -> tuple[_Facets, np.ndarray]:
@@ -698,8 +701,10 @@ class PairContact:
         """Whether a facet known here (local or ghost) with free displacements ``uc`` has moved
         more than half its skin since the last list build (a pair not listed might then touch;
         the compiled ``dem_pair_worst_motion``)."""
+        if len(uc) != self._c_pairs.c.n_facets:
+            raise InputError(f"{len(uc)} free facet displacements for the {self._c_pairs.c.n_facets} known facets")
         ratio = np.zeros(1)
-        lib.dem_pair_worst_motion(len(uc), self.d, pointer(uc), pointer(None), 0.0, *self._p_motion, pointer(ratio))
+        lib.dem_pair_worst_motion(self._c_pairs.c, pointer(uc), pointer(ratio))
         return ratio[0] > 1.0
 
     def _drifted(self, uc: np.ndarray, vc: np.ndarray | None, dt: float) -> bool:
@@ -747,7 +752,7 @@ class PairContact:
         """Free reconstructions u_f = R_f u + lift_f of the known candidate facets (local, then
         ghosts), (n, d), from patch values ``up`` (the compiled ``dem_csr_apply``)."""
         uc = np.empty((len(self._lift), self.d))
-        lib.dem_csr_apply(uc.size, *self._Rc.pointers, pointer(up), self._p_lift, pointer(uc))
+        lib.dem_csr_apply(self._Rc.c, pointer(up), self._p_lift, pointer(uc))
         return uc
 
     def _pair_displacements(self, up: np.ndarray):
@@ -782,19 +787,17 @@ class PairContact:
         separated by the line of a face at some tau (``_separations``: exact, less a margin; one
         pass over the list; ``dem_pair_end_state`` screens a state with it). The screen keeps those
         near closing at the flight's end for the state there (``_At``)."""
-        L, d = self.listed, self.d
-        vc, ratio = np.empty((len(self._lift), d)), np.zeros(1)
-        out, found, counts = np.empty(len(L), np.int8), np.empty((2, len(L)), np.int64), np.zeros(2, np.int64)
-        P = L.pointers
-        k = lib.dem_pair_flight(vc.size, *self._Rc.pointers, pointer(vp), pointer(uc), float(dt),
-                                *self._p_motion, int(screen), len(L), d, P["i"],
-                                P["j"], P["n"], P["t"], P["d0"], P["sep"], L.si.pointers[1], L.sj.pointers[1],
-                                self._slack, pointer(vc), pointer(ratio), pointer(out), pointer(found[0]),
-                                pointer(found[1]), pointer(counts))
-        if counts[0] < 0:
-            return vc, (int(k), float(ratio[0])), None
-        self._end = (L, uc, vc, float(dt), found[1, : counts[1]])
-        return vc, (int(k), float(ratio[0])), found[0, : counts[0]]
+        L, n = self.listed, len(self.listed)
+        if uc.shape != (self._c_pairs.c.n_facets, self.d):
+            raise InputError(f"free facet displacements of shape {uc.shape} for {self._c_pairs.c.n_facets} known facets")
+        flight = Struct("dem_flight", uc=uc, vp=vp, vc=np.empty(uc.shape), dt=float(dt), screen=np.empty(n, np.int8),
+                        touching=np.empty(n, np.int64), candidates=np.empty(n, np.int64))
+        k = lib.dem_pair_flight(self._c_pairs.c, int(screen), flight.c)
+        vc, ratio, found = flight.arrays["vc"], float(flight.c.ratio), flight.c.n_touching
+        if found < 0:
+            return vc, (int(k), ratio), None
+        self._end = (L, flight)  # its candidates, for the state at its end (``_At``)
+        return vc, (int(k), ratio), flight.arrays["touching"][:found]
 
     def _gap(self, p, ui, uj):
         """Gap g of the pairs ``p`` (eq. (22), (30)) for their facets' free displacements ui, uj."""
@@ -828,10 +831,9 @@ class PairContact:
     def _facet_force(self, p, mu, g, w, dw):
         """R^T of the facet forces -mu dc_p/du of the entries (pairs p): dc/du_f' = w n + g dw,
         dc/du_f = -(that)."""
-        L = self.listed
-        P, facet_force = L.pointers, np.zeros(len(self.facets_all) * self.d)
-        lib.dem_pair_facet_forces(len(p), self.d, pointer(p), P["i"], P["j"], P["n"], pointer(mu), pointer(g),
-                                  pointer(w), pointer(dw), pointer(facet_force))  # compiled: ``dem_pair_facet_forces``
+        facet_force = np.zeros(len(self.facets_all) * self.d)
+        lib.dem_pair_facet_forces(self._c_pairs.c, len(p), pointer(p), pointer(mu), pointer(g), pointer(w),
+                                  pointer(dw), pointer(facet_force))  # compiled: ``dem_pair_facet_forces``
         return self._RT @ facet_force
 
     def add(self, correction: np.ndarray, out: PETSc.Vec, scale: float = 1.0) -> None:
@@ -849,7 +851,6 @@ class PairContact:
         d-point Gauss-Legendre on each piece (module docstring), for the patch values up, vp of
         u and v that ``prepare`` returned; returns the number of force evaluations of the pair
         integral with the most pieces (collective)."""
-        L = self.listed
         flight = self._flight
         if flight is None or flight[0] is not up or flight[1] is not vp or flight[2] != dt:
             raise StateError("force_integral needs the patch values that prepare(u, v, dt) returned for this step")
@@ -870,13 +871,12 @@ class PairContact:
             # interpolated at its component's; the rows' term -Q^T Z int c dtau on the own rows the
             # touching pairs' z_p touch (a = Q u + q + tau Q v there: no sliced Q or Z) and the
             # pairs' term -int (z_p . (a + delta_a)) dc_p/du dtau at the facets.
-            xi, wq = self._gauss
-            P = L.pointers
-            pieces = lib.dem_pair_force_integral(
-                len(touching), self.d, pointer(touching), P["i"], P["j"], P["n"], P["t"], P["d0"], *L.si.pointers,
-                *L.sj.pointers, pointer(uc), pointer(vc), float(dt), len(xi), *self._p_gauss,
-                *L.z.pointers, *L.q.pointers, self._p_q, pointer(up), pointer(vp), P["slot"],
-                uc.size, *self._Rc.pointers, len(result), pointer(result))
+            if len(result) != self._Rc.c.n_cols:
+                raise StateError("the force integral's patch and the facets' reconstructions disagree")
+            c_flight = Struct("dem_flight", uc=uc, vp=vp, vc=vc, dt=float(dt), touching=touching,
+                              n_touching=len(touching))
+            pieces = lib.dem_pair_force_integral(self._c_pairs.c, self._c_patch.c, pointer(up), c_flight.c,
+                                                 self._c_gauss.c, self._work, pointer(result))
             if pieces < 0:
                 raise KernelMemoryError("contact between bodies: out of memory in the force integral of a step")
         self.scatter.add_zeroed(out)
@@ -887,11 +887,10 @@ class PairContact:
     def facet_corrections(self, up: np.ndarray) -> np.ndarray:
         """u_f - u_f^free of the local facets (eq. (31), directions of ``_directions``), (n_local, d):
         complete for the own facets (every pair of an own facet is listed here)."""
-        L, F, at = self.listed, self.facets_all, self._at(up)
+        F, at = self.facets_all, self._at(up)
         delta, work = np.zeros((len(F), self.d)), np.zeros((len(F), self.d))  # c = 0 off the closed pairs
-        P = L.pointers
-        lib.dem_pair_facet_corrections(len(at.closed), self.d, pointer(at.closed), P["i"], P["j"], P["e_i"], P["e_j"],
-                                       pointer(at.c), pointer(F.length), len(F), pointer(work), pointer(delta))
+        lib.dem_pair_facet_corrections(self._c_pairs.c, at.kernel_state.c, pointer(F.length), pointer(work),
+                                       pointer(delta))
         return delta[: len(self.facets)]
 
     def gradient_correction(self, up: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -906,12 +905,11 @@ class PairContact:
         facet has one partner covering it exactly; partial overlaps (facets sliding against each
         other) leave a gap of the order of the cell gap times the uncovered fraction. The
         corrections of the partners come from their owners (a scatter over the candidates)."""
-        L, F, at = self.listed, self.facets_all, self._at(up)
+        F, at = self.facets_all, self._at(up)
         uf = at.uc + self._corrections_everywhere(up)
-        weight, mean, P = np.zeros(len(F)), np.zeros(len(F)), L.pointers
-        worst = np.array([lib.dem_pair_penetration(len(at.closed), self.d, pointer(at.closed), P["i"], P["j"], P["n"],
-                                                   pointer(F.centre), pointer(uf), pointer(at.w), self.num_own,
-                                                   pointer(weight), pointer(mean))])  # ``dem_pair_penetration``
+        weight, mean = np.zeros(len(F)), np.zeros(len(F))
+        worst = np.array([lib.dem_pair_penetration(self._c_pairs.c, at.kernel_state.c, pointer(F.centre), pointer(uf),
+                                                   self.num_own, pointer(weight), pointer(mean))])
         self.comm.Allreduce(MPI.IN_PLACE, worst, op=MPI.MAX)
         return float(worst[0])
 
@@ -997,20 +995,18 @@ class PairContact:
         pair held on its switch g = 0 carries its multiplier, ``kink_forces``, instead)."""
         L = self.listed
         if active is None:  # the natural piece: the closed pairs of the step's state
-            at = self._at(up)
-            p, g, w, dw, c, mu = at.closed, at.g, at.w, at.dw, at.c, at.mu
+            state = self._at(up).kernel_state
         else:
             p = np.arange(len(L))
             g, w, dw = self._state(p, *self._pair_displacements(up))
             c = np.where(np.isin(self.pair_keys(), active), w * g, 0.0)
             mu = L.ZT @ (L.Q @ up + self._q + L.Z @ c)
-        out, P = np.zeros((len(self.body_pairs), self.d)), L.pointers
-        if len(p) == 0:
+            state = Struct("dem_pair_state", n=len(p), closed=p, g=g, w=w, dw=dw, c=c, mu=mu)
+        out = np.zeros((len(self.body_pairs), self.d))
+        if state.c.n == 0:
             return out
-        missing = lib.dem_pair_body_forces(len(p), self.d, pointer(p), P["i"], P["j"], P["n"],
-                                           pointer(self._facet_bodies), len(self._body_pair_index),
-                                           pointer(self._body_pair_index), pointer(mu), pointer(g), pointer(w),
-                                           pointer(dw), pointer(c), pointer(out))
+        missing = lib.dem_pair_body_forces(self._c_pairs.c, state.c, pointer(self._facet_bodies),
+                                           len(self._body_pair_index), pointer(self._body_pair_index), pointer(out))
         if missing:  # every body with a candidate facet is in ``body_pairs``: a broken invariant
             raise StateError(f"contact between bodies: {missing} touching pairs join bodies that have no body pair "
                                "(bodies without candidate facets?)")
@@ -1069,7 +1065,7 @@ class PairContact:
         partition). The facets known stay those of the last exchange, and so does its
         reference: the next ``prepare`` exchanges again if the restored displacements are
         farther from it than any step may drift (a resumed run's model exchanged at u = 0)."""
-        self._reference.fill(np.inf)  # in place: ``_p_motion`` points to it
+        self._reference.fill(np.inf)  # in place: the list's struct (``_c_pairs``) points to it
         if state is not None:
             self._scheme_b_rule = np.asarray(state["scheme_b_rule"], dtype=np.int64)
             self.rebuilds, self.evaluations, self.exchanges = (int(x) for x in state["counters"])
@@ -1163,17 +1159,17 @@ class _Simplices:
 
     @staticmethod
     def of(X: np.ndarray) -> _Simplices:
-        """The simplices of vertices X (the compiled ``dem_simplices``; segments: the faces are
+        """The simplices of vertices X (the compiled ``dem_simplices_of``; segments: the faces are
         the vertices, each facing away from the other)."""
         X = np.ascontiguousarray(X, dtype=np.float64)  # the layout of the kernel ``dem_overlap``
         end, m, nu, size = np.empty_like(X), np.empty_like(X), np.empty_like(X), np.empty(X.shape[:2])
-        lib.dem_simplices(len(X), X.shape[1], pointer(X), pointer(end), pointer(m), pointer(nu), pointer(size))
+        lib.dem_simplices_of(len(X), X.shape[1], pointer(X), pointer(end), pointer(m), pointer(nu), pointer(size))
         return _Simplices(X, end, m, nu, size)
 
     @functools.cached_property
-    def pointers(self) -> tuple:
-        """C pointers to X, m, nu, size for the kernels (made once: a pointer costs microseconds)."""
-        return tuple(pointer(getattr(self, f)) for f in ("X", "m", "nu", "size"))
+    def struct(self) -> Struct:
+        """X, m, nu, size for the kernels (``dem_simplices``; made once)."""
+        return Struct("dem_simplices", X=self.X, m=self.m, nu=self.nu, size=self.size)
 
 
 def _project(F: _Facets, f: np.ndarray, origin: np.ndarray, t: np.ndarray) -> np.ndarray:
@@ -1198,8 +1194,7 @@ def _separations(A: _Simplices, B: _Simplices) -> np.ndarray:
     a margin of 1e-9 |m_k| times the pair's size, far above rounding: the screen keeps a pair that
     touches within it (then clipped: its w may be 0), and drops only pairs whose overlap is 0."""
     out = np.empty((len(A.X), 2 * A.X.shape[1]))
-    lib.dem_pair_separations(len(A.X), A.X.shape[1], A.pointers[0], A.pointers[1], B.pointers[0], B.pointers[1],
-                             1e-9, pointer(out))
+    lib.dem_pair_separations(len(A.X), A.X.shape[1], A.struct.c, B.struct.c, 1e-9, pointer(out))
     return out
 
 
@@ -1219,7 +1214,7 @@ def _last(op, a: np.ndarray) -> np.ndarray:
 
 def _overlap(A: _Simplices, B: _Simplices, p: np.ndarray, s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """w = |A_p cap (B_p + s)| and its gradient dw/ds (E, d-1) for the simplex pairs p (E,) and
-    the offsets s (E, d-1): the compiled kernel ``dem_overlap`` (kernels.c).
+    the offsets s (E, d-1): the compiled kernel ``dem_overlap`` (kernels/overlap.c).
 
     The divergence theorem, div x = d - 1 in the plane: w = 1/(d-1) int over the boundary of
     A cap (B + s) of x . nu, whose pieces are the faces of A clipped by B + s and the faces of
@@ -1232,7 +1227,7 @@ def _overlap(A: _Simplices, B: _Simplices, p: np.ndarray, s: np.ndarray) -> tupl
     p = np.ascontiguousarray(p, dtype=np.int64)
     s = np.ascontiguousarray(s, dtype=np.float64)
     w, dw = np.empty(len(p)), np.empty(s.shape)
-    lib.dem_overlap(len(p), s.shape[1], pointer(p), *A.pointers, *B.pointers, pointer(s), pointer(w), pointer(dw))
+    lib.dem_overlap(len(p), s.shape[1], pointer(p), A.struct.c, B.struct.c, pointer(s), pointer(w), pointer(dw))
     return w, dw
 
 
@@ -1305,25 +1300,20 @@ class _Pairs:
         return self.Q.T.tocsr()
 
     @functools.cached_property
-    def pointers(self) -> dict:
-        """C pointers to i, j, n, t, d0, e_i, e_j, sep, slot for the kernels (made once)."""
-        return {name: pointer(getattr(self, name)) for name in ("i", "j", "n", "t", "d0", "e_i", "e_j", "sep", "slot")}
-
-    @functools.cached_property
-    def z(self) -> _CSR:
-        """Z^T (the z_p, one row per pair) for the compiled products over the touching pairs."""
-        return _CSR(self.ZT)
-
-    @functools.cached_property
-    def q(self) -> _CSR:
-        """Q (own rows, patch dofs), for products on the touching pairs' rows only."""
-        return _CSR(self.Q)
-
-    @functools.cached_property
     def slot(self) -> np.ndarray:
         """One int32 per own row, -1 between the calls of ``dem_pair_force_integral`` and
         ``dem_pair_end_state`` (which number the rows their pairs touch through it)."""
         return np.full(self.Q.shape[0], -1, dtype=np.int32)
+
+    def struct(self, R: Struct, lift: np.ndarray, reference: np.ndarray, half_skin2: np.ndarray,
+               slack: float) -> Struct:
+        """The list for the kernels (``dem_pairs``), with its known facets' free reconstructions
+        (R, ``lift``), their free displacements when it was built (``reference``) and half their
+        skins squared, and how far a flight's screen looks beyond its end (``slack``)."""
+        return Struct("dem_pairs", d=self.n.shape[1], n_facets=len(reference), R=R, lift=lift, reference=reference,
+                      half_skin2=half_skin2, slack=slack, end_slack2=(0.5 * slack)**2, n=len(self), i=self.i,
+                      j=self.j, normal=self.n, t=self.t, d0=self.d0, e_i=self.e_i, e_j=self.e_j, sep=self.sep,
+                      si=self.si.struct, sj=self.sj.struct, z=csr_of(self.ZT), slot=self.slot)
 
 
 class _At:
@@ -1345,8 +1335,8 @@ class _At:
 
     @functools.cached_property
     def _state(self) -> tuple:
-        """(uc, moved, candidates, the state or None if moved) in one compiled call
-        (``dem_pair_end_state``): the free facet displacements (``free_displacements``), whether
+        """(uc, moved, candidates, the state or None if moved, the state's struct) in one compiled
+        call (``dem_pair_end_state``): the free facet displacements (``free_displacements``), whether
         the list is stale there (``PairContact._moved``), the last flight's candidates if they
         hold here (bit 1 of its screen: the only pairs that may be closed, when every facet lies
         within half the slack of the flight's end, as at the step's end, where uc = R u^{n+1}
@@ -1354,24 +1344,20 @@ class _At:
         The state computed right away: a step's end needs it for its energy."""
         contact, L, d = self.contact, self.listed, self.contact.d
         end = contact._end if contact._end is not None and contact._end[0] is L else None
-        _, uc0, vc, dt, candidates = end if end is not None else (None, None, None, 0.0, None)
+        flight = None if end is None else end[1]
         n = len(L)
-        uc, ratio, used = np.empty((len(contact._lift), d)), np.zeros(2), np.zeros(1, dtype=np.int32)
-        closed, g, w, c, mu = np.empty(n, dtype=np.int64), np.empty(n), np.empty(n), np.empty(n), np.empty(n)
-        dw, sums = np.empty((n, d)), np.zeros(3)
-        P = L.pointers
-        k = lib.dem_pair_end_state(
-            uc.size, *contact._Rc.pointers, contact._p_lift, pointer(uc), *contact._p_motion, pointer(uc0),
-            pointer(vc), dt, (0.5 * contact._slack)**2,
-            0 if candidates is None else len(candidates), pointer(candidates), pointer(ratio), pointer(used), n, d,
-            P["i"], P["j"], P["n"], P["t"], P["d0"], P["sep"], *L.si.pointers, *L.sj.pointers, *L.z.pointers,
-            *L.q.pointers, contact._p_q, pointer(self.up), contact._elastic_row_pointer, P["slot"],
-            pointer(closed), pointer(g), pointer(w), pointer(dw), pointer(c), pointer(mu), pointer(sums))
+        uc = np.empty((len(contact._lift), d))
+        state = Struct("dem_pair_state", closed=np.empty(n, dtype=np.int64), g=np.empty(n), w=np.empty(n),
+                       dw=np.empty((n, d)), c=np.empty(n), mu=np.empty(n))
+        k = lib.dem_pair_end_state(contact._c_pairs.c, contact._c_patch.c, pointer(self.up),
+                                   ffi.NULL if flight is None else flight.c, contact._work, pointer(uc), state.c)
         if k == -1:
             raise KernelMemoryError("contact between bodies: out of memory in the contact state")
-        state = None if k == -2 else (closed[:k], g[:k], w[:k], dw[:k], c[:k], mu[:k],
-                                      (float(sums[0]), float(sums[1])), float(sums[2]))
-        return uc, k == -2, candidates if used[0] else None, state
+        a, s = state.arrays, state.c
+        values = None if k == -2 else (a["closed"][:k], a["g"][:k], a["w"][:k], a["dw"][:k], a["c"][:k], a["mu"][:k],
+                                       (float(s.energy[0]), float(s.energy[1])), float(s.mu_w))
+        candidates = flight.arrays["candidates"][: flight.c.n_candidates] if s.from_flight else None
+        return uc, k == -2, candidates, values, state
 
     uc = property(lambda self: self._state[0], doc="The free facet displacements (``free_displacements``).")
     moved = property(lambda self: self._state[1], doc="Whether the list is stale here (``PairContact._moved``).")
@@ -1382,6 +1368,13 @@ class _At:
         if self.moved:
             self.contact._check_listed(self.uc)  # raises
         return self._state[3]
+
+    @property
+    def kernel_state(self) -> Struct:
+        """The state for the kernels (``dem_pair_state``; raises where the list is stale)."""
+        if self.moved:
+            self.contact._check_listed(self.uc)  # raises
+        return self._state[4]
 
     closed = property(lambda self: self._values[0])
     g = property(lambda self: self._values[1])
@@ -1395,7 +1388,7 @@ class _At:
 
 class _CSC:
     """A CSC matrix's arrays for the compiled kernel ``dem_pair_rows`` (QF: the own rows touched
-    by the local facets' dofs), with its work arrays."""
+    by the local facets' dofs), with its work arrays (``dem_facet_rows``)."""
 
     def __init__(self, A: scipy.sparse.csc_matrix, d: int):
         self.shape, self.d = A.shape, d
@@ -1406,6 +1399,8 @@ class _CSC:
         self._sums = np.zeros(self.shape[0])  # zero between calls
         self._mark = np.full(self.shape[0], -1, dtype=np.int32)  # -1 between calls
         self._touched = np.empty(2 * self.shape[0], dtype=np.int32)
+        self._struct = Struct("dem_facet_rows", columns=csr(self.indptr, self.indices, self.data, self.shape[0]),
+                              sums=self._sums, mark=self._mark, touched=self._touched)
 
     def pair_rows(self, i, j, e_i, e_j, length) -> scipy.sparse.csr_matrix:
         """Z^T = E^T A^T for the pairs (i, j) of facets (the local ones: those with columns
@@ -1418,20 +1413,8 @@ class _CSC:
         counts = self._facet_counts
         bound = int(counts[i[i < n_local]].sum() + counts[j[j < n_local]].sum())
         indptr, indices, data = np.empty(P + 1, dtype=np.int32), np.empty(bound, dtype=np.int32), np.empty(bound)
-        nnz = lib.dem_pair_rows(P, d, pointer(i), pointer(j), n_local, pointer(e_i), pointer(e_j), pointer(length),
-                                pointer(self.indptr), pointer(self.indices), pointer(self.data), pointer(self._sums),
-                                pointer(self._mark), pointer(self._touched), pointer(indptr), pointer(indices),
-                                pointer(data))
+        nnz = lib.dem_pair_rows(self._struct.c, P, d, pointer(i), pointer(j), pointer(e_i), pointer(e_j),
+                                pointer(length), pointer(indptr), pointer(indices), pointer(data))
         return scipy.sparse.csr_matrix((data[:nnz], indices[:nnz], indptr), shape=(P, self.shape[0]))
 
 
-class _CSR:
-    """A CSR matrix's arrays and their C ``pointers``, for the compiled kernels ``dem_pair_end_state``
-    and ``dem_pair_force_integral`` (products over a few selected rows, the touching pairs' of a
-    list of thousands, without slicing the matrix)."""
-
-    def __init__(self, A: scipy.sparse.csr_matrix):
-        self.indptr = np.ascontiguousarray(A.indptr, dtype=np.int32)
-        self.indices = np.ascontiguousarray(A.indices, dtype=np.int32)
-        self.data = np.ascontiguousarray(A.data, dtype=np.float64)
-        self.pointers = (pointer(self.indptr), pointer(self.indices), pointer(self.data))

@@ -1,0 +1,94 @@
+/* Outputs of the contact between bodies at a contact state (pair_contact.PairContact): the
+ * facet corrections of eq. (31), the forces between bodies and the interpenetration left by the
+ * reconstructions. */
+#include "internal.h"
+
+/* The facet corrections of pair_contact.PairContact.facet_corrections (eq. (31)): for the closed
+ * pairs p of the state (facets (i, j), c_p = w g^-), out[f] = sum over the pairs with i = f of
+ * (c_p / |f|) e_i plus sum over those with j = f of (c_p / |f|) e_j, each sum in the order of
+ * the pairs and the two added last (the bits of two bincounts). length: the known facets'
+ * measures |f|; out and work: n_facets x d, zero on entry. */
+void dem_pair_facet_corrections(const dem_pairs *pairs, const dem_pair_state *state, const double *restrict length,
+                                double *restrict work, double *restrict out)
+{
+  const int32_t d = pairs->d;
+  const int64_t *restrict i = pairs->i, *restrict j = pairs->j, *restrict p = state->closed;
+  const double *restrict e_i = pairs->e_i, *restrict e_j = pairs->e_j, *restrict c = state->c;
+  for (int64_t k = 0; k < state->n; ++k)
+  {
+    const int64_t q = p[k];
+    const double a = c[k] / length[i[q]], b = c[k] / length[j[q]];
+    for (int32_t x = 0; x < d; ++x)
+    {
+      out[i[q] * d + x] += a * e_i[q * d + x];
+      work[j[q] * d + x] += b * e_j[q * d + x];
+    }
+  }
+  for (int64_t f = 0; f < pairs->n_facets * d; ++f)
+    out[f] += work[f];
+}
+
+/* The forces between bodies of pair_contact.PairContact.pair_forces: for the closed pairs p of
+ * the state (facets (i, j), normals) with c_p != 0 whose facets lie on different bodies bi =
+ * body[i], bj = body[j], the force mu_p (w_p n + g_p dw_p) on bi (d components; dw = dw/du_j),
+ * added to out[index[bi n_bodies + bj]] with the sign of the force on the lower-numbered body,
+ * in the order of the pairs (out: body pairs x d, accumulated into). Returns the number of
+ * such pairs whose body pair has no index (< 0: none is added; the caller raises). */
+int64_t dem_pair_body_forces(const dem_pairs *pairs, const dem_pair_state *state, const int64_t *restrict body,
+                             int64_t n_bodies, const int64_t *restrict index, double *restrict out)
+{
+  const int32_t d = pairs->d;
+  const int64_t *restrict i = pairs->i, *restrict j = pairs->j, *restrict p = state->closed;
+  const double *restrict normal = pairs->normal, *restrict mu = state->mu, *restrict g = state->g;
+  const double *restrict w = state->w, *restrict dw = state->dw, *restrict c = state->c;
+  int64_t missing = 0;
+  for (int64_t k = 0; k < state->n; ++k)
+  {
+    const int64_t q = p[k], bi = body[i[q]], bj = body[j[q]];
+    if (c[k] == 0.0 || bi == bj)
+      continue;
+    const int64_t at = index[bi * n_bodies + bj];
+    if (at < 0)
+    {
+      ++missing;
+      continue;
+    }
+    const double sign = bi < bj ? 1.0 : -1.0;
+    for (int32_t x = 0; x < d; ++x)
+      out[at * d + x] += sign * (mu[k] * (w[k] * normal[q * d + x] + g[k] * dw[k * d + x]));
+  }
+  return missing;
+}
+
+/* pair_contact.PairContact.penetration after the scatter of the facet corrections: for the
+ * closed pairs p of the state (facets (i, j), normals) with w_p > 0, the reconstructed gap
+ * (x_j + u_j - x_i - u_i) . n (centre: the known facets' barycentres x, uf: their reconstructions
+ * u, n_facets x d), and for each of the first n_own facets touched the overlap-weighted mean of
+ * its pairs' gaps; returns the largest of their negatives, or 0. weight and mean: n_facets, zero
+ * on entry (work). */
+double dem_pair_penetration(const dem_pairs *pairs, const dem_pair_state *state, const double *restrict centre,
+                            const double *restrict uf, int64_t n_own, double *restrict weight, double *restrict mean)
+{
+  const int32_t d = pairs->d;
+  const int64_t *restrict i = pairs->i, *restrict j = pairs->j, *restrict p = state->closed;
+  const double *restrict normal = pairs->normal, *restrict w = state->w;
+  for (int64_t k = 0; k < state->n; ++k)
+  {
+    if (!(w[k] > 0))
+      continue;
+    const int64_t q = p[k];
+    double gap = 0.0;
+    for (int32_t x = 0; x < d; ++x)
+      gap += ((centre[j[q] * d + x] + uf[j[q] * d + x]) - centre[i[q] * d + x] - uf[i[q] * d + x]) *
+             normal[q * d + x];
+    weight[i[q]] += w[k];
+    weight[j[q]] += w[k];
+    mean[i[q]] += w[k] * gap;
+    mean[j[q]] += w[k] * gap;
+  }
+  double worst = 0.0;
+  for (int64_t f = 0; f < n_own; ++f)
+    if (weight[f] > 0 && -mean[f] / weight[f] > worst)
+      worst = -mean[f] / weight[f];
+  return worst;
+}
