@@ -8,7 +8,7 @@
 #
 # `make setup` is idempotent and takes a few seconds once everything is done:
 # apt-get only runs if dpkg reports a package missing, and pip only runs when
-# pyproject.toml, constraints.txt or the C kernels (dolfinx_dem/kernels.c, built by cffi at
+# pyproject.toml, constraints.txt or the C kernels (dolfinx_dem/kernels/, built by cffi at
 # install) are newer than .venv/.installed.
 
 SHELL := /bin/bash
