@@ -29,7 +29,7 @@ APT_PACKAGES := \
 	python3-setuptools python3-wheel openmpi-bin ca-certificates gcc \
 	libgl1 libegl1 libegl-mesa0 libgl1-mesa-dri
 
-PIP_PACKAGES := pyvista imageio
+PIP_PACKAGES := pyvista imageio ruff==0.17.6
 
 export OMPI_ALLOW_RUN_AS_ROOT=1
 export OMPI_ALLOW_RUN_AS_ROOT_CONFIRM=1
@@ -38,7 +38,7 @@ export OMPI_ALLOW_RUN_AS_ROOT_CONFIRM=1
 export OMPI_MCA_btl_vader_single_copy_mechanism=none
 export PYVISTA_OFF_SCREEN=true
 
-.PHONY: setup apt verify test demo bench validate clean
+.PHONY: setup apt verify lint test test-fast demo bench validate clean
 
 setup: $(STAMP) verify
 
@@ -80,19 +80,34 @@ verify: | $(STAMP)
 	  echo "error: recreate it with: rm -rf $(VENV) && make setup" >&2; exit 1; }
 
 # --- tests --------------------------------------------------------------------
-# Serial run of the whole suite, then the tests marked `mpi` under mpirun on each
-# process count of MPI_NP (2 and 3: an odd count finds what 2 hides).
-# pytest exit code 5 (nothing collected) is only tolerated when there are no
-# mpi-marked tests at all; any other failure is propagated.
+# `make test`: the linter, then the whole suite serially, then the tests marked `mpi` under
+# mpirun on each process count of MPI_NP (2 and 3: an odd count finds what 2 hides).
+# `make test-fast`: the same without the end-to-end tests marked `slow` (scene runs, demos,
+# studies), under 2 minutes. pytest exit code 5 (nothing collected) is only tolerated when
+# there are no mpi-marked tests at all; any other failure is propagated.
+lint: setup
+	$(PYTHON) -m ruff check .
+
 test: export OMP_NUM_THREADS = 1
-test: setup
-	$(PYTHON) -m pytest -q $(PYTEST_ARGS) tests
-	@$(PYTHON) -m pytest -q -m mpi --collect-only -p no:cacheprovider tests >/dev/null 2>&1; rc=$$?; \
+test: lint
+	$(MAKE) --no-print-directory pytest MARKS=
+
+test-fast: export OMP_NUM_THREADS = 1
+test-fast: lint
+	$(MAKE) --no-print-directory pytest MARKS="not slow" MPI_NP=2
+
+MARKS ?=
+AND_MARKS = $(if $(MARKS), and ($(MARKS)),)
+.PHONY: pytest
+pytest: export OMP_NUM_THREADS = 1
+pytest:
+	$(PYTHON) -m pytest -q $(if $(MARKS),-m "$(MARKS)") $(PYTEST_ARGS) tests
+	@$(PYTHON) -m pytest -q -m "mpi$(AND_MARKS)" --collect-only -p no:cacheprovider tests >/dev/null 2>&1; rc=$$?; \
 	if [ $$rc -eq 5 ]; then echo "No tests marked 'mpi': skipping the mpirun run."; exit 0; \
 	elif [ $$rc -ne 0 ]; then echo "error: collecting mpi tests failed (exit $$rc)" >&2; exit $$rc; fi; \
 	for np in $(MPI_NP); do \
-	  echo "mpirun -n $$np --oversubscribe $(PYTHON) -m pytest -q -m mpi -p no:cacheprovider $(PYTEST_ARGS) tests"; \
-	  mpirun -n $$np --oversubscribe $(PYTHON) -m pytest -q -m mpi -p no:cacheprovider $(PYTEST_ARGS) tests || exit $$?; \
+	  echo "mpirun -n $$np --oversubscribe $(PYTHON) -m pytest -q -m 'mpi$(AND_MARKS)' -p no:cacheprovider $(PYTEST_ARGS) tests"; \
+	  mpirun -n $$np --oversubscribe $(PYTHON) -m pytest -q -m "mpi$(AND_MARKS)" -p no:cacheprovider $(PYTEST_ARGS) tests || exit $$?; \
 	done
 
 # --- demo / benchmarks / validation ----------------------------------------------

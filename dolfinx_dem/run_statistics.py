@@ -35,11 +35,10 @@ class Statistics:
         return self.drift / self.scale if self.scale > 0 else 0.0
 
 
-#: The default of ``contact.max_penetration`` (candidate facets' mean sizes). Measured over whole
-#: runs: two-balls 0.27, cradle 0.33, ball-drop 0.05, two-disks 0.09, billiard 0.10,
-#: indentation 0.09; two-balls with the stabilisation of the paper (eta = E) on a uniform mesh of
-#: h = 0.02 m passes 0.5 at t = 0.21 s, where its facets start to slide into each other's holes,
-#: and reaches 3.2 by 0.4 s; with its eta = 10 E it stays at 0.30 (docs/validation/contact3d.md).
+#: The default of ``contact.max_penetration`` (candidate facets' mean sizes): above every built-in
+#: scene's largest penetration over its whole run, below what a contact surface that does not hold
+#: reaches (facets sliding into each other's holes on fine 3D meshes with eta = E; the figures are
+#: in docs/validation/contact3d.md).
 MAX_PENETRATION = 0.5
 
 

@@ -7,9 +7,8 @@ after every import (``import gmsh`` resets SIGINT to the default action, which k
 at once), and put back at every check if something replaced them. A second signal while the
 first is being handled stops the process at once (KeyboardInterrupt).
 
-Cost. Looking at the handlers costs ~15 us (``signal.getsignal``, measured), and agreeing under
-MPI one reduction (~100 us measured on 2 oversubscribed processes): 11-25 % of a 0.3-4 ms step
-of bar-impact or cantilever when done at every step. So the check runs every ``k`` steps, ``k``
+Cost. Looking at the handlers (``signal.getsignal``) and agreeing under MPI (one reduction) cost a
+sizeable part of a short step if done at every step. So the check runs every ``k`` steps, ``k``
 adapted so that checks are about ``interval`` (0.05 s) of wall time apart; under MPI, rank 0's
 ``k`` and the flags travel in one non-blocking reduction (``MPI_Iallreduce``, completed at the
 next check), so that every process checks at the same steps and stops at the same one, with
@@ -18,7 +17,7 @@ under MPI), or after the step in progress if one step takes longer.
 
 Open MPI's ``mpirun`` does not pass SIGINT or SIGTERM on: on either it sends the processes
 SIGCONT, SIGTERM after ``odls_base_sigkill_timeout`` seconds (default 1) and SIGKILL as long after
-that (measured); the run must reach its checkpoint within that time (raise it with
+that; the run must reach its checkpoint within that time (raise it with
 ``OMPI_MCA_odls_base_sigkill_timeout=30`` for large runs), and ``mpirun`` itself then exits with
 1 whatever the processes return. A signal sent to the processes themselves (``kill`` of their
 ids, a batch system such as SLURM) gives every process and ``mpirun`` the exit status 130.
