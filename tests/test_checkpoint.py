@@ -59,6 +59,7 @@ def xdmf_times(path):
     return [float(t) for t in re.findall(r'<Time Value="([^"]+)"', text)]
 
 
+@pytest.mark.slow
 @pytest.mark.mpi
 @pytest.mark.parametrize("name", sorted(SCENES))
 def test_a_stopped_run_resumes_bit_identical(name, tempdir, monkeypatch):
@@ -114,6 +115,7 @@ def _series(path):
     return np.genfromtxt(path, delimiter=",", names=True)
 
 
+@pytest.mark.slow
 @pytest.mark.skip_in_parallel
 @pytest.mark.parametrize("name", sorted(SCENES))
 def test_a_run_stopped_on_one_process_resumes_on_two(name, tmp_path, monkeypatch):
@@ -128,6 +130,7 @@ def test_a_run_stopped_on_one_process_resumes_on_two(name, tmp_path, monkeypatch
     assert json.loads((tmp_path / "parts" / "summary.json").read_text())["processes"] == 2
 
 
+@pytest.mark.slow
 @pytest.mark.skip_in_parallel
 def test_a_run_stopped_on_two_processes_resumes_on_one(tmp_path):
     """SIGTERM to both processes at some step of a 1200-step bar-impact run, resumed serially."""
@@ -145,6 +148,7 @@ def test_a_run_stopped_on_two_processes_resumes_on_one(tmp_path):
     _close(_series(tmp_path / "full" / "series.csv"), _series(tmp_path / "parts" / "series.csv"))
 
 
+@pytest.mark.slow
 @pytest.mark.skip_in_parallel
 def test_a_killed_run_resumes_from_its_last_checkpoint_bit_identical(tmp_path):
     """kill -9 after some checkpoints: the rows and output times written after the last one
@@ -177,6 +181,7 @@ def test_a_killed_run_resumes_from_its_last_checkpoint_bit_identical(tmp_path):
     assert not (out / "INCOMPLETE").exists() and not (out / ".solution.xdmf").exists()
 
 
+@pytest.mark.slow
 @pytest.mark.skip_in_parallel
 def test_the_checkpoint_format(tmp_path):
     scene = scenes.load("two-disks", {"mesh.h": 0.03, "time": {"end": 0.05, "dt": 0.0025}})
@@ -199,6 +204,7 @@ def test_the_checkpoint_format(tmp_path):
     assert checkpoint.scene_hash(scenes.override(scene, {"material.E": 101.0})) != header["scene_hash"]
 
 
+@pytest.mark.slow
 @pytest.mark.skip_in_parallel
 def test_resume_errors_name_the_problem(tmp_path, capsys):
     """Every refusal of ``resume``, through the command line: exit 2, one clear line, and
@@ -259,6 +265,7 @@ def test_an_unstable_run_has_no_checkpoint_and_a_static_run_cannot_resume(tmp_pa
     assert io.INCOMPLETE in {p.name for p in (tmp_path / "u").iterdir()}
 
 
+@pytest.mark.slow
 @pytest.mark.skip_in_parallel
 def test_resume_refuses_a_changed_mesh_file(tmp_path, capsys):
     """A scene of mesh type "file" is hashed with the file's content."""

@@ -134,6 +134,7 @@ def test_scheme_a_contact_changes_the_traction_on_the_obstacle_normal_only_along
         assert np.abs(tangential[0]).max() > 0.05 * np.abs(free).max()
 
 
+@pytest.mark.slow
 @pytest.mark.mpi
 @pytest.mark.parametrize("scheme", ["A", "B"])
 def test_bar_impact_conserves_the_pseudo_energy_through_the_impact(scheme):
@@ -183,6 +184,7 @@ def test_bar_impact_conserves_the_pseudo_energy_through_the_impact(scheme):
     assert stepper.force_evaluations <= 560 + 1 + 4
 
 
+@pytest.mark.slow
 @pytest.mark.mpi
 @pytest.mark.parametrize("scheme", ["A", "B"])
 def test_refreshing_the_energy_rows_through_the_impact(scheme):

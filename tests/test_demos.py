@@ -52,6 +52,9 @@ MPI_ENV = {
 }
 TIMEOUT = 600  # s
 
+# each test runs a demo (serially or under mpirun) or reads what a demo wrote
+pytestmark = pytest.mark.slow
+
 
 def _environment(extra):
     """This process's environment without the variables of its own MPI (singleton) start-up,

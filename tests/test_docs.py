@@ -71,6 +71,7 @@ def test_the_built_in_scenes_and_top_level_keys_are_all_documented():
     assert {k for k in scenes.SCHEMA if f"`{k}`" not in top} == set()
 
 
+@pytest.mark.slow
 def test_every_summary_key_and_series_column_is_documented(tmp_path):
     documented = set(re.findall(r"`([a-z_<>]+)`", SCENES_MD))
     keys, columns = set(), set()
@@ -136,6 +137,7 @@ def test_every_figure_and_json_of_the_result_pages_is_named_by_a_page():
 
 @pytest.mark.parametrize("script, page", [("hertz3d.py", "hertz3d.md"),
                                           ("hertz3d_diagnostics.py", "hertz3d_diagnostics.md")])
+@pytest.mark.slow
 def test_the_hertz3d_pages_are_their_json_rendered(script, page, tmp_path):
     validation = ROOT / "docs" / "validation"
     for name in ("hertz3d.json", "hertz3d_diagnostics.json"):

@@ -42,6 +42,7 @@ def test_newmark_conserves_energy_cantilever():
     assert solver.t == pytest.approx(2.0)
 
 
+@pytest.mark.slow
 @pytest.mark.mpi
 def test_eigenfrequency_clamped_free_bar():
     mesh = dolfinx.mesh.create_interval(MPI.COMM_WORLD, 20, [0.0, 1.0])
@@ -64,6 +65,7 @@ def test_eigenfrequency_cantilever_beam_euler_bernoulli():
     assert abs(omega[0] / omega_eb - 1.0) < 0.03
 
 
+@pytest.mark.slow
 @pytest.mark.mpi
 def test_standing_wave_second_order_in_time():
     L, E, rho, T = 1.0, 1.0, 1.0, 0.5
@@ -165,6 +167,7 @@ def test_central_difference_modified_energy_conserved():
     assert 1e-4 < np.max(np.abs(np.array(mechanical) - mech0)) / mech0 < 0.1
 
 
+@pytest.mark.slow
 def test_central_difference_stability_limit_1d_bar():
     """Clamped-clamped uniform P1 bar, lumped mass: lambda_max(m^-1 K) = 4 c^2/h^2 sin^2((n-1) pi/2n)."""
     n, L, E, rho = 10, 2.0, 4.0, 1.0

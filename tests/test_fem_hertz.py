@@ -197,6 +197,7 @@ def test_parallel_matches_serial(coarse, tempdir):
         assert (tempdir / "hertz.xdmf").is_file()
 
 
+@pytest.mark.slow
 @pytest.mark.skip_in_parallel
 def test_p1_converges():
     res = solve_hertz(MPI.COMM_WORLD, H_COARSE, degree=1)

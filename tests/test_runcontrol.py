@@ -42,6 +42,7 @@ def _check_interrupted(out, processes, signal_name):
     return summary
 
 
+@pytest.mark.slow
 @pytest.mark.skip_in_parallel
 @pytest.mark.parametrize("signum", [signal.SIGINT, signal.SIGTERM])
 def test_a_signal_stops_a_serial_run_cleanly(signum, tmp_path):
@@ -60,6 +61,7 @@ def test_a_signal_stops_a_serial_run_cleanly(signum, tmp_path):
     assert shown.startswith(f"INTERRUPTED: the run stopped at step {summary['n_steps']}")
 
 
+@pytest.mark.slow
 @pytest.mark.skip_in_parallel
 @pytest.mark.parametrize("signum", [signal.SIGINT, signal.SIGTERM])
 def test_a_signal_to_the_processes_stops_an_mpi_run_cleanly(signum, tmp_path):
@@ -78,6 +80,7 @@ def test_a_signal_to_the_processes_stops_an_mpi_run_cleanly(signum, tmp_path):
     _check_interrupted(out, 2, signal.Signals(signum).name)
 
 
+@pytest.mark.slow
 @pytest.mark.skip_in_parallel
 def test_ctrl_c_on_mpirun_writes_the_checkpoint(tmp_path):
     """Open MPI's mpirun answers SIGINT with SIGCONT, then SIGTERM to the processes one second
@@ -93,6 +96,7 @@ def test_ctrl_c_on_mpirun_writes_the_checkpoint(tmp_path):
     _check_interrupted(out, 2, "SIGTERM")
 
 
+@pytest.mark.slow
 @pytest.mark.skip_in_parallel
 def test_a_killed_run_reads_back_up_to_its_last_output(tmp_path):
     """kill -9: no handler runs. Before, solution.h5 failed to open (H5Fopen: incorrect metadata

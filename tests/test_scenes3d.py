@@ -32,6 +32,7 @@ def test_closed_pairs_state_is_the_full_state_where_gaps_are_negative():
     assert not wc[~closed].any() and not dwc[~closed].any()
 
 
+@pytest.mark.slow
 def test_two_balls_conserve_energy_and_momentum_through_first_contact(tmp_path):
     """Coarse two-balls, the steps through the first contact: 0.02 m between the spheres closing
     at 0.6 m/s, a little more between the polyhedra (their facets' gaps along the pair normals
@@ -49,6 +50,7 @@ def test_two_balls_conserve_energy_and_momentum_through_first_contact(tmp_path):
         assert column in header
 
 
+@pytest.mark.slow
 def test_two_balls_first_contact_within_a_step_and_no_sinking(tmp_path):
     """The scene as shipped (refined at the contact point, eta = 10 E), through the deepest
     interpenetration (0.29 s): the first contact within one step of the spheres' 0.02 / 0.6 s,
@@ -118,6 +120,7 @@ def test_contact_skin_is_a_scene_key():
     assert problem.find(PairContact).skin == 0.05
 
 
+@pytest.mark.slow
 def test_contact_surfaces_interpenetrating_beyond_the_limit_stop_the_run(tmp_path, capsys):
     """Contact surfaces that interpenetrate by more than ``contact.max_penetration`` candidate
     facet sizes stop the run with a clear error (the command exits 1), the summary says

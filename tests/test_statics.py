@@ -42,6 +42,7 @@ def test_bar_resting_on_an_obstacle(scheme):
     assert order > 0.9, (errors, order)
 
 
+@pytest.mark.slow
 @pytest.mark.mpi
 def test_hertz_disc_equilibrium_and_symmetry(tempdir):
     scene = scenes.load("hertz", {"mesh.h": 0.02})
@@ -160,6 +161,7 @@ def test_disc_resting_on_an_elastic_block():
         assert other[3] == results[0][3]
 
 
+@pytest.mark.slow
 def test_disc_on_a_stiff_block_approaches_the_rigid_plane():
     """With the block 1e4 times stiffer than the disc, contact between bodies approaches the
     statics of the same disc on the rigid plane y = 0 (obstacle contact, scene hertz). Measured
@@ -301,6 +303,7 @@ def test_bad_ball_scenes_are_rejected_before_the_run(overrides, message, tmp_pat
     assert not (tmp_path / "out").exists()
 
 
+@pytest.mark.slow
 @pytest.mark.mpi
 def test_scheme_b_minimum_on_a_kink(tempdir):
     """Scheme B on the Hertz disc at h = 0.013 (measured: one facet): the minimum of the
