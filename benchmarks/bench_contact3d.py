@@ -45,7 +45,7 @@ def idle_balls(n_idle: int, h: float, t0: float, t1: float) -> dict:
     scene = scenes.load("two-balls", {"mesh.h": h, "mesh.refine_h": h, "material.eta": 100.0, "mesh.balls": balls,
                                       "contact.boundary": ["all"], "time.end": t1})
     run = DynamicRun(scene, MPI.COMM_SELF, quiet=True)
-    stepper, contact = run.stepper, run.dem.pair_contact
+    stepper, contact = run.stepper, run.pairs
     while stepper.t < t0:
         stepper.step()
     steps = (run.n_steps - stepper.n) // 3
@@ -55,7 +55,7 @@ def idle_balls(n_idle: int, h: float, t0: float, t1: float) -> dict:
         start = time.process_time()
         for _ in range(steps):
             stepper.step()
-            g, w = contact.pair_states(contact.patch_values(stepper.u))
+            g, w = contact.outputs.pair_states(contact.patch_values(stepper.u))
             touching.append(int(((g < 0) & (w > 0)).sum()))
         chunks.append((time.process_time() - start, contact.seconds))
     total, seconds = min(chunks, key=lambda c: c[1])

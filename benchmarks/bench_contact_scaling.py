@@ -23,10 +23,7 @@ import time
 import numpy as np
 from mpi4py import MPI
 
-from dolfinx_dem import meshes
-from dolfinx_dem.discretisation import DEMDiscretisation
-from dolfinx_dem.material import ElasticMaterial
-from dolfinx_dem.memm import MEMM
+from dolfinx_dem import MEMM, DEMDiscretisation, DEMProblem, ElasticMaterial, PairContact, meshes
 
 SOFT = ElasticMaterial(E=100.0, nu=0.2, rho=100.0)
 
@@ -36,10 +33,9 @@ def measure(n_idle: int, h: float, t_end: float) -> dict:
     idle = [((1.0 + 0.3 * (k % 32), 2.0 + 0.3 * (k // 32)), 0.1) for k in range(n_idle)]
     mesh, _, _ = meshes.create_discs(MPI.COMM_SELF, [((0.14, 2.27), 0.1), ((0.36, 2.27), 0.1)] + idle, h)
     dem = DEMDiscretisation(mesh, SOFT, "B")
-    dem.set_contact_boundary(meshes.exterior_facets(mesh))
-    contact = dem.pair_contact
+    contact = PairContact(dem, meshes.exterior_facets(mesh))
     dt = 0.2 * dem.stable_time_step()
-    stepper = MEMM(dem, dt)
+    stepper = MEMM(DEMProblem(dem, [contact]), dt)
     v0 = dem.create_vector()
     x = dem.geometry.cell_centres
     v0.array.reshape(-1, 2)[:, 0] = np.where(x[:, 0] < 0.25, 0.3, np.where(x[:, 0] < 0.5, -0.3, 0.0))

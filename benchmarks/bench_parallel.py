@@ -71,11 +71,7 @@ def child_scaling(cells: int, dim: int, steps: int) -> dict:
     import numpy as np
     from mpi4py import MPI
 
-    from dolfinx_dem import meshes
-    from dolfinx_dem.conditions import DirichletBC
-    from dolfinx_dem.discretisation import DEMDiscretisation
-    from dolfinx_dem.material import ElasticMaterial
-    from dolfinx_dem.memm import MEMM
+    from dolfinx_dem import MEMM, DEMDiscretisation, DEMProblem, DirichletBC, ElasticMaterial, meshes
 
     comm = MPI.COMM_WORLD
     baseline = _rss_mb()
@@ -98,7 +94,7 @@ def child_scaling(cells: int, dim: int, steps: int) -> dict:
     wall = time.perf_counter()
     dt = 0.5 * dem.stable_time_step()
     t_stable = comm.allreduce(time.perf_counter() - wall, op=MPI.MAX)
-    memm = MEMM(dem, dt)
+    memm = MEMM(DEMProblem(dem), dt)
     memm.initialise(dem.create_vector(), dem.create_vector())
     times = []
     for _ in range(steps):
@@ -119,10 +115,7 @@ def child_pile(h: float, steps: int, start: float, replays: int) -> dict:
     import numpy as np
     from mpi4py import MPI
 
-    from dolfinx_dem import _compat, meshes
-    from dolfinx_dem.discretisation import DEMDiscretisation
-    from dolfinx_dem.material import ElasticMaterial
-    from dolfinx_dem.memm import MEMM
+    from dolfinx_dem import MEMM, DEMDiscretisation, DEMProblem, ElasticMaterial, PairContact, meshes
 
     comm = MPI.COMM_WORLD
     r, gap = 0.1, 0.002
@@ -131,18 +124,17 @@ def child_pile(h: float, steps: int, start: float, replays: int) -> dict:
     wall = time.perf_counter()
     mesh, _, _ = meshes.create_discs(comm, discs, h)
     dem = DEMDiscretisation(mesh, ElasticMaterial(E=100.0, nu=0.2, rho=100.0), "B")
-    dem.set_contact_boundary(meshes.exterior_facets(mesh))
+    contact = PairContact(dem, meshes.exterior_facets(mesh))
     t_setup = comm.allreduce(time.perf_counter() - wall, op=MPI.MAX)
     dt = 0.5 * dem.stable_time_step()
     x = dem.geometry.cell_centres[: dem.n_owned]
     v0 = dem.create_vector()
     v0.array[:] = (-0.5 * (x - centre)).ravel()
-    memm = MEMM(dem, dt)
+    memm = MEMM(DEMProblem(dem, [contact]), dt)
     memm.initialise(dem.create_vector(), v0)
-    contact = dem.pair_contact
 
     def touching() -> int:  # each touching pair counted by both owners of its facets
-        g, w = contact.pair_states(contact.patch_values(memm.u))
+        g, w = contact.outputs.pair_states(contact.patch_values(memm.u))
         return comm.allreduce(int(((g < 0) & (w > 0)).sum()), op=MPI.SUM)
 
     for _ in range(int(start / dt) + 1):

@@ -152,10 +152,12 @@ def run_dem_runner(method, n, dt, t_end, workdir, name="bar-impact", allow_unsta
     return summary, series, error
 
 
-def tip_probe(dem):
+def tip_probe(problem):
     """The tip position x_f + u_f of the bar's contact facet (as ``simulation.contact_values``,
     without the gap search and the contact pressure it also computes), for the bare loop."""
-    c = dem.contact
+    from dolfinx_dem import RigidContact
+
+    dem, c = problem.dem, problem.find(RigidContact)
     x_tip = float(dem.geometry.facet_centres[c.facets[0], 0])
     return lambda u: x_tip + float(c.facet_displacements(c.patch_values(u))[0, 0])
 
@@ -168,13 +170,14 @@ def run_dem_loop(method, n, dt, t_end):
 
     t0 = time.perf_counter()
     scene = _dem_scene(method, n, dt, t_end)
-    dem = simulation.build(scene, MPI.COMM_WORLD)
+    problem = simulation.build(scene, MPI.COMM_WORLD)
+    dem = problem.dem
     n_steps = round(t_end / dt)
-    stepper = memm.MEMM(dem, dt)
+    stepper = memm.MEMM(problem, dt)
     u0, v0 = dem.create_vector(), dem.create_vector()
     v0.array[:] = V0
     stepper.initialise(u0, v0)
-    probe = tip_probe(dem)
+    probe = tip_probe(problem)
     tip = np.empty(n_steps + 1)
     tip[0] = probe(stepper.u)
     t1 = time.perf_counter()
@@ -194,21 +197,24 @@ def dem_step_breakdown(method, n, repeats=200) -> dict:
     from dolfinx_dem import memm, simulation
 
     dt = CFL * (L / n) / C
-    dem = simulation.build(_dem_scene(method, n, dt, 2.0), MPI.COMM_WORLD)
-    stepper = memm.MEMM(dem, dt)
+    from dolfinx_dem import RigidContact
+
+    problem = simulation.build(_dem_scene(method, n, dt, 2.0), MPI.COMM_WORLD)
+    dem = problem.dem
+    stepper = memm.MEMM(problem, dt)
     u0, v0 = dem.create_vector(), dem.create_vector()
     v0.array[:] = V0
     stepper.initialise(u0, v0)
     for _ in range(round(0.6 / dt)):  # into the contact phase
         stepper.step()
     f = dem.create_vector()
-    c = dem.contact
-    probe = tip_probe(dem)
+    c = problem.find(RigidContact)
+    probe = tip_probe(problem)
     parts = {
         "step": stepper.step,
         "impulse": stepper.impulse,  # the contact force integral, split at events
         "contact_energy": lambda: c.energy_correction(c.patch_values(stepper.u)),
-        "elastic_force": lambda: dem.force(stepper.u, stepper.t, f, contact=False),  # by true products
+        "elastic_force": lambda: dem.force(stepper.u, stepper.t, f),  # without contact, by true products
         "tip_probe": lambda: probe(stepper.u),
     }
     times = {k: [] for k in parts}
@@ -301,7 +307,7 @@ def stability_sweep(cfls, workdir, log, n=100, t_end=2.0, dem=True) -> dict:
     dx = L / n
     out = {"n": n, "t_end": t_end, "cfl_limit": {m: signorini.stability_limit_cfl(m, n) for m in FEM}, "runs": {}}
     if dem:  # the DEM's true limit (SLEPc) next to the bound that time.cfl uses, in CFL units
-        d = simulation.build(_dem_scene("dem-A", n, 0.25 / n, t_end), MPI.COMM_WORLD)
+        d = simulation.build(_dem_scene("dem-A", n, 0.25 / n, t_end), MPI.COMM_WORLD).dem
         out["cfl_limit"]["dem-A"] = C * d.stable_time_step("eigenvalue") / dx
         out["cfl_bound_dem-A"] = C * d.stable_time_step() / dx
     for method in FEM + (("dem-A",) if dem else ()):

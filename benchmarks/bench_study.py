@@ -72,10 +72,7 @@ def _square(comm, n):
 
     import dolfinx.mesh
 
-    from dolfinx_dem import _compat
-    from dolfinx_dem.conditions import DirichletBC
-    from dolfinx_dem.discretisation import DEMDiscretisation
-    from dolfinx_dem.material import ElasticMaterial
+    from dolfinx_dem import DEMDiscretisation, DirichletBC, ElasticMaterial, meshes
 
     material = ElasticMaterial(E=1.0, nu=0.3, rho=1.0)
     mesh = dolfinx.mesh.create_unit_square(comm, n, n, diagonal=dolfinx.mesh.DiagonalType.right)
@@ -104,7 +101,7 @@ def measure_size(n: int, rounds: int) -> dict:
     """Serial set-up, memory and per-evaluation costs for 2 n^2 cells (run in a fresh process)."""
     from mpi4py import MPI
 
-    from dolfinx_dem.memm import MEMM
+    from dolfinx_dem import MEMM, DEMProblem
 
     dem, c, setup = _square(MPI.COMM_WORLD, n)
     u = _smooth_state(dem)
@@ -117,7 +114,7 @@ def measure_size(n: int, rounds: int) -> dict:
         stable["dt_eigenvalue"] = dem.stable_time_step("eigenvalue")
         stable["eigenvalue_seconds"] = time.perf_counter() - wall
         stable["lambda_bound_over_lambda_max"] = (stable["dt_eigenvalue"] / dt_bound) ** 2
-    memm = MEMM(dem, 0.3 / (n * c))  # the limit measured on n = 71 is 0.61 / (n c)
+    memm = MEMM(DEMProblem(dem), 0.3 / (n * c))  # the limit measured on n = 71 is 0.61 / (n c)
     memm.initialise(u, dem.create_vector())
     K, Q = dem.K, dem.assemble_Q()  # built after the memory measurement: time stepping needs neither
     out, a = dem.create_vector(), Q.createVecLeft()
@@ -158,11 +155,11 @@ def measure_mpi(n: int, batches: int, steps: int) -> dict | None:
     reference: its speed-up is what a bandwidth-bound step can reach) in the same batches."""
     from mpi4py import MPI
 
-    from dolfinx_dem.memm import MEMM
+    from dolfinx_dem import MEMM, DEMProblem
 
     comm = MPI.COMM_WORLD
     dem, c, setup = _square(comm, n)
-    memm = MEMM(dem, 0.3 / (n * c))
+    memm = MEMM(DEMProblem(dem), 0.3 / (n * c))
     memm.initialise(_smooth_state(dem), dem.create_vector())
     out = dem.create_vector()
     per_step, per_force, cpu_step, per_matmult = [], [], [], []
@@ -212,12 +209,12 @@ def bar_impact_step(n: int = 800, repeats: int = 300) -> dict:
     dt = 0.75 * (length / n) / speed  # CFL 0.75, as in bench_signorini
     scene = scenes.load("bar-impact", overrides={"method": "dem-A", "mesh.n": n, "time.dt": dt, "time.end": 2.0,
                                                   "output.every": 10**6})
-    dem = simulation.build(scene, MPI.COMM_WORLD)
-    stepper = memm.MEMM(dem, dt)
+    problem = simulation.build(scene, MPI.COMM_WORLD)
+    dem, contact = problem.dem, problem.contacts[0]  # the rigid obstacle
+    stepper = memm.MEMM(problem, dt)
     u0, v0 = dem.create_vector(), dem.create_vector()
     v0.array[:] = -10.0
     stepper.initialise(u0, v0)
-    contact = dem.contact
 
     def timed(fn, count):
         times = []
@@ -244,8 +241,9 @@ def bar_impact_step(n: int = 800, repeats: int = 300) -> dict:
     result.update(phase("contact"))
     # the same bar clamped at both ends, no contact: the MEMM step alone
     clamped = scenes.load("bar-wave", overrides={"mesh.n": n, "time.end": 1.0})
-    dem = simulation.build(clamped, MPI.COMM_WORLD)
-    stepper = memm.MEMM(dem, 0.5 * dem.stable_time_step())
+    problem = simulation.build(clamped, MPI.COMM_WORLD)
+    dem = problem.dem
+    stepper = memm.MEMM(problem, 0.5 * dem.stable_time_step())
     stepper.initialise(dem.create_vector(), v0.copy())
     result["clamped_no_contact_step_seconds"], result["clamped_no_contact_step_seconds_median"] = timed(stepper.step,
                                                                                                       repeats)
@@ -264,7 +262,7 @@ def bound_tightness(names) -> dict:
 
     out = {}
     for name in names:
-        dem = simulation.build(scenes.load(name), MPI.COMM_WORLD)
+        dem = simulation.build(scenes.load(name), MPI.COMM_WORLD).dem
         wall = time.perf_counter()
         bound = dem.stable_time_step()
         t_bound = time.perf_counter() - wall
@@ -284,30 +282,32 @@ def residual_refresh(steps: int) -> dict:
     import numpy as np
     from mpi4py import MPI
 
-    from dolfinx_dem import scenes, simulation
-    from dolfinx_dem.memm import MEMM
+    from dolfinx_dem import MEMM, DEMProblem, scenes, simulation
 
     comm = MPI.COMM_WORLD
     cases = {}
-    dem = simulation.build(scenes.load("cantilever"), comm)
+    problem = simulation.build(scenes.load("cantilever"), comm)
+    dem = problem.dem
     x = dem.geometry.cell_centres[: dem.n_owned]
     v0 = dem.create_vector()
     v0.array[:] = np.stack([0.1 * x[:, 1], x[:, 0] ** 2], axis=1).ravel()
-    cases["cantilever"] = (dem, 0.5 * dem.stable_time_step(), dem.create_vector(), v0, steps)
+    cases["cantilever"] = (problem, 0.5 * dem.stable_time_step(), dem.create_vector(), v0, steps)
     dem, c, _ = _square(comm, 71)
-    cases["unit square, 1e4 cells"] = (dem, 0.3 / (71 * c), _smooth_state(dem), dem.create_vector(), steps)
+    cases["unit square, 1e4 cells"] = (DEMProblem(dem), 0.3 / (71 * c), _smooth_state(dem), dem.create_vector(), steps)
     dt = 0.75 * (10.0 / 800) / 30.0
-    dem = simulation.build(scenes.load("bar-impact", overrides={"mesh.n": 800, "time.dt": dt, "time.end": 2.0}), comm)
-    v0 = dem.create_vector()
+    problem = simulation.build(scenes.load("bar-impact", overrides={"mesh.n": 800, "time.dt": dt, "time.end": 2.0}),
+                               comm)
+    v0 = problem.create_vector()
     v0.array[:] = -10.0
-    cases["bar-impact (800 cells, contact, free body)"] = (dem, dt, dem.create_vector(), v0, round(2.0 / dt))
+    cases["bar-impact (800 cells, contact, free body)"] = (problem, dt, problem.create_vector(), v0, round(2.0 / dt))
     out = {}
-    for name, (dem, dt, u0, v0, n_steps) in cases.items():
+    for name, (problem, dt, u0, v0, n_steps) in cases.items():
+        dem = problem.dem
         Q = dem.assemble_Q()
         a = Q.createVecLeft()
         rows = {}
         for refresh in (0, 1000, 100):
-            memm = MEMM(dem, dt, refresh_every=refresh)
+            memm = MEMM(problem, dt, refresh_every=refresh)
             first = memm.initialise(u0, v0)
             drift, mechanical, distance = 0.0, first.mechanical, 0.0
             for k in range(n_steps):
@@ -315,7 +315,7 @@ def residual_refresh(steps: int) -> dict:
                 drift = max(drift, abs(diag.pseudo_energy - first.pseudo_energy))
                 mechanical = max(mechanical, diag.mechanical)
                 if (k + 1) % max(1, n_steps // 20) == 0:
-                    Q.mult(dem.relative_displacement(memm.u), a)
+                    Q.mult(dem.bodies.relative_displacement(memm.u), a)
                     scale = comm.allreduce(np.abs(a.array).max(), op=MPI.MAX)
                     gap = comm.allreduce(np.abs(memm.energy_rows() - a.array).max(), op=MPI.MAX)
                     if scale > 1e-10:  # a body in free flight has no deformation to compare with

@@ -177,10 +177,10 @@ def build_dem(mesh, left, right):
 
 def start_dem(dem, cfl: float, growth_limit: float = GROWTH_LIMIT, method: str = "bound"):
     """MEMM at dt = cfl * dem.stable_time_step(method), started from u(0), v(0) = 0."""
-    from dolfinx_dem.memm import MEMM
+    from dolfinx_dem import MEMM, DEMProblem
 
     dt_stable = dem.stable_time_step(method)
-    memm = MEMM(dem, cfl * dt_stable, growth_limit=growth_limit)
+    memm = MEMM(DEMProblem(dem), cfl * dt_stable, growth_limit=growth_limit)
     u0 = dem.create_vector()
     u0.array[:] = exact(dem.geometry.cell_centres[: dem.n_owned], 0.0).ravel()
     return memm, dt_stable, memm.initialise(u0, dem.create_vector())

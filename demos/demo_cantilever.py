@@ -158,7 +158,8 @@ def dem_eigenfrequencies(dem, n=1):
     return np.sqrt(stability.eigenvalues(dem.K, dem.inverse_mass, n))
 
 
-dem = simulation.build(scene, comm).dem
+problem = simulation.build(scene, comm)  # the DEMProblem of the scene (no contact here)
+dem = problem.dem
 omega_dem = float(dem_eigenfrequencies(dem)[0])
 # -
 
@@ -177,7 +178,7 @@ if PETSc.Sys.hasExternalPackage("mumps"):
     ksp.getPC().setFactorSolverType("mumps")
 ksp.solve(F0, u_static)
 ksp.destroy()
-static_deflection_dem_solve = -float(simulation.Probes(dem, scene["probes"]).values(u_static, 0.0)[0])
+static_deflection_dem_solve = -float(simulation.Probes(problem, scene["probes"]).values(u_static, 0.0)[0])
 # -
 
 # ## The finite element reference

@@ -20,7 +20,7 @@ from dolfinx_dem.contact import HalfSpace, PairContact, RigidContact
 from dolfinx_dem.discretisation import DEMDiscretisation
 from dolfinx_dem.material import ElasticMaterial
 from dolfinx_dem.problem import DEMProblem
-from dolfinx_dem.errors import SceneError
+from dolfinx_dem.errors import InputError, SceneError
 
 SERIES_COLUMNS = ("t", "kinetic", "elastic", "stabilisation", "external", "pseudo_energy")
 
@@ -225,6 +225,9 @@ class Probes:
     with the contact-aware cell gradients of the problem."""
 
     def __init__(self, problem: DEMProblem, specs):
+        if not isinstance(problem, DEMProblem):
+            raise InputError(f"Probes read a DEMProblem, got {type(problem).__name__} (wrap a discretisation as "
+                             "DEMProblem(dem))")
         self.problem = problem
         dem = problem.dem
         self.names = [p["name"] for p in specs]

@@ -73,7 +73,7 @@ class PairContactStatistics:
         contact = self.contact
         if self.first_contact is None:
             if self.previous is not None:
-                tau = contact.touch_time(self.previous, stepper.u, stepper.dt)
+                tau = contact.outputs.touch_time(self.previous, stepper.u, stepper.dt)
                 if tau is not None:
                     self.first_contact = t - stepper.dt + tau
             self.previous = stepper.u.copy()
@@ -111,7 +111,7 @@ class PairContactStatistics:
         c = self.contact
         comm = c.comm
         out = {
-            "contact_candidate_facets": c.num_facets,
+            "contact_candidate_facets": c.pair_list.num_facets,
             "contact_pairs_listed": c.num_pairs,
             "contact_list_rebuilds": comm.allreduce(c.rebuilds, op=MPI.MAX),  # the busiest process
             "contact_exchanges": c.exchanges,  # the same on every process

@@ -273,7 +273,7 @@ def _pair_summary(pc: PairContact, u, result) -> dict:
     pairs in contact. The series' ``contact_force_<i>_<j>_*`` columns are the dynamics' outputs,
     which count a pinned pair by the sign its gap rounds to: the summary's are the ones to use."""
     comm = pc.comm
-    forces = pc.pair_forces(pc.patch_values(u), result.active) + pc.statics().kink_forces(result.pinned, result.kink_forces)
+    forces = pc.outputs.pair_forces(pc.patch_values(u), result.active) + pc.statics().kink_forces(result.pinned, result.kink_forces)
     forces = comm.allreduce(forces, op=MPI.SUM)
     return {"contact_forces": {f"{i}_{j}": forces[k].tolist() for k, (i, j) in enumerate(pc.body_pairs)},
             "contact_pairs": result.in_contact, "kink_pairs": len(result.pinned),

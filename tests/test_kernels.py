@@ -185,10 +185,10 @@ def test_separations_and_csr_products_are_their_formulas():
     """dem_pair_separations: for each face k of A (then of B) the smallest m_k . (Y_b - X_k) over
     the other's vertices, less margin |m_k| times the largest |coordinate|; dem_csr_apply: R x +
     lift."""
-    from dolfinx_dem.contact.pair import _Simplices
+    from dolfinx_dem.contact.overlap import Simplices
 
     rng = np.random.default_rng(5)
-    A, B = _Simplices.of(rng.standard_normal((6, 3, 2))), _Simplices.of(rng.standard_normal((6, 3, 2)))
+    A, B = Simplices.of(rng.standard_normal((6, 3, 2))), Simplices.of(rng.standard_normal((6, 3, 2)))
     out = np.empty((6, 6))
     lib.dem_pair_separations(6, 3, A.struct.c, B.struct.c, 1e-3, pointer(out))
     size = np.maximum(np.abs(A.X).max(axis=(1, 2)), np.abs(B.X).max(axis=(1, 2)))

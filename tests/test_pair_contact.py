@@ -2,6 +2,7 @@
 including the sliding force F^G, exact conservation through impacts by event splitting,
 momentum, non-penetration of matching facets, and bad input."""
 
+import dataclasses
 import json
 
 import numpy as np
@@ -63,7 +64,7 @@ def test_force_is_the_gradient_of_the_energy_in_contact(scheme):
     u = cell_vector(dem, lambda x: approach(x, 0.013) + 1e-3 * rng.standard_normal(x.shape))
     c.prepare(u)
     up = c.patch_values(u)
-    gap, overlap = c.pair_states(up)
+    gap, overlap = c.outputs.pair_states(up)
     overlap = overlap[gap < 0]
     lengths = c.facets_all.length[c.listed.i[gap < 0]]
     assert (overlap > 0).sum() >= 4 and ((overlap > 0) & (overlap < lengths)).any()
@@ -95,7 +96,7 @@ def test_facet_corrections_are_the_reconstruction_the_energy_uses(scheme):
     u = cell_vector(dem, lambda x: approach(x, 0.013) + 1e-3 * rng.standard_normal(x.shape))
     c.prepare(u)
     up = c.patch_values(u)
-    delta = c.facet_corrections(up)
+    delta = c.outputs.facet_corrections(up)
     assert np.abs(delta).max() > 1e-4
     Q, QF = dem.rows.Q, dem.rows.QF
     dofs = (c.facets[:, None] * 2 + np.arange(2)).ravel()
@@ -142,13 +143,13 @@ def test_two_discs_collide_and_separate_with_exact_energy_and_momentum(scheme):
         lefts.append(left)
         forces.append(model.contact_values(problem, stepper.u)[2:4])
         momentum_change = max(momentum_change, np.abs(p).max() / p_scale)
-        if contact_time is None and c.touching(c.patch_values(stepper.u)):
+        if contact_time is None and c.outputs.touching(c.patch_values(stepper.u)):
             contact_time = diag.t
     assert drift < 1e-13
     assert momentum_change < 1e-13
     assert 0.02 / 0.6 <= contact_time <= 0.02 / 0.6 + 0.004 + dt  # + the polygonal boundary's gap
     assert left[0] < -0.5 * p_scale / 2  # the left disc moves left again
-    assert not c.touching(c.patch_values(stepper.u))
+    assert not c.outputs.touching(c.patch_values(stepper.u))
     assert dem.comm.allreduce(stepper.max_step_evaluations, op=MPI.MAX) >= 5  # events split some steps
     forces, lefts = np.array(forces), np.array(lefts)
     peak = np.abs(forces[:, 0]).max()
@@ -192,10 +193,10 @@ def test_a_touching_pair_between_bodies_without_a_body_pair_is_an_error():
     c = problem.find(PairContact)
     u = cell_vector(dem, lambda x: approach(x, 0.015))  # the discs 0.01 m into each other
     up, _ = c.prepare(u)
-    assert np.abs(c.pair_forces(up)).max() > 0
-    c._body_pair_index[:] = -1
+    assert np.abs(c.outputs.pair_forces(up)).max() > 0
+    c.body_pair_index[:] = -1
     with pytest.raises(RuntimeError, match="join bodies that have no body pair"):
-        c.pair_forces(up)
+        c.outputs.pair_forces(up)
 
 @pytest.mark.mpi
 @pytest.mark.parametrize("scheme", ["A", "B"])
@@ -228,11 +229,11 @@ def test_matching_facets_close_the_gap_exactly(scheme):
     c = problem.find(PairContact)
     u = cell_vector(dem, lambda x: np.where(x[:, :1] < 0.205, [[0.008, 0.0]], [[-0.008, 0.0]]))
     up = c.patch_values(u)
-    gap, overlap = c.pair_states(up)
+    gap, overlap = c.outputs.pair_states(up)
     assert np.allclose(gap[(gap < 0) & (overlap > 0)], -0.006)
-    assert c.penetration(up) < 1e-15
+    assert c.outputs.penetration(up) < 1e-15
     if scheme == "B":
-        assert np.abs(np.abs(c.facet_corrections(up)[:, 0]) - 0.003).max() < 1e-15
+        assert np.abs(np.abs(c.outputs.facet_corrections(up)[:, 0]) - 0.003).max() < 1e-15
 
 
 @pytest.mark.parametrize("quadrature", ["midpoint", pytest.param("gauss-legendre-2", marks=pytest.mark.mpi)])
@@ -252,7 +253,7 @@ def test_the_pair_list_follows_the_bodies_under_every_quadrature(quadrature):
     touched = False
     for _ in range(int(0.6 / dt)):
         stepper.step()
-        touched |= c.touching(c.patch_values(stepper.u))
+        touched |= c.outputs.touching(c.patch_values(stepper.u))
     assert touched and c.rebuilds > 2
     mass = dem.mass.array_r.reshape(-1, 2)[:, 0]
     left = (dem.geometry.cell_centres[: dem.n_owned, 0] < 0.3)
@@ -294,8 +295,8 @@ def test_blocks_collide_with_exact_energy_and_bounded_penetration():
         diag = stepper.step()
         drift = max(drift, abs(diag.pseudo_energy - first.pseudo_energy) / first.mechanical)
         up = c.patch_values(stepper.u)
-        deepest = min(deepest, dem.comm.allreduce(c.pair_states(up)[0].min(initial=np.inf), op=MPI.MIN))
-        penetration = max(penetration, c.penetration(up))
+        deepest = min(deepest, dem.comm.allreduce(c.outputs.pair_states(up)[0].min(initial=np.inf), op=MPI.MIN))
+        penetration = max(penetration, c.outputs.penetration(up))
     assert deepest < -1e-3  # the cell gaps do go negative: the contact is active
     assert penetration < 0.3 * -deepest
     assert drift < 1e-13
@@ -397,7 +398,7 @@ def test_self_contact_closes_a_slot():
         for _ in range(int(0.2 / dt)):
             diag = stepper.step()
             drift = max(drift, abs(diag.pseudo_energy - first.pseudo_energy) / first.mechanical)
-            touched |= c.touching(c.patch_values(stepper.u))
+            touched |= c.outputs.touching(c.patch_values(stepper.u))
         results[self_contact] = (c.num_pairs, touched, drift)
     assert results[True][0] > 0 and results[True][1] and results[True][2] < 1e-13
     assert results[False][0] == 0 and not results[False][1]
@@ -427,7 +428,7 @@ def test_rigid_wall_and_contact_between_bodies_together():
         diag = stepper.step()
         drift = max(drift, abs(diag.pseudo_energy - first.pseudo_energy) / first.mechanical)
         on_floor = dem.comm.allreduce(bool((wall.gaps(wall.patch_values(stepper.u)) < 0).any()), op=MPI.LOR)
-        if on_floor and pair.touching(pair.patch_values(stepper.u)):
+        if on_floor and pair.outputs.touching(pair.patch_values(stepper.u)):
             both += 1
             # the pair forces cancel: the obstacle's force is the sum of all contact forces
             values = dict(zip(columns, model.contact_values(problem, stepper.u)))
@@ -462,7 +463,7 @@ def _corrections_of_both_models(problem, u):
     r, p = problem.find(RigidContact), problem.find(PairContact)
     up = r.patch_values(u)
     return (rows(r.facets, -np.minimum(r.gaps(up), 0.0)[:, None] * r.directions),
-            rows(p.facets, p.facet_corrections(p.patch_values(u))))
+            rows(p.facets, p.outputs.facet_corrections(p.patch_values(u))))
 
 
 @pytest.mark.skip_in_parallel
@@ -522,7 +523,10 @@ def test_blocks_pushed_together_on_a_floor_conserve_the_pseudo_energy():
         drift = max(drift, abs(diag.pseudo_energy - first.pseudo_energy) / first.mechanical)
         lowest = min(lowest, diag.elastic + diag.stabilisation)
         on_floor = rigid.cells[rigid.gaps(rigid.patch_values(stepper.u)) < 0]
-        touching = pair.touching_cells(pair.patch_values(stepper.u))
+        g, w = pair.outputs.pair_states(pair.patch_values(stepper.u))
+        on = (g < 0) & (w > 0)
+        facets = np.concatenate([pair.listed.i[on], pair.listed.j[on]])
+        touching = pair.cells[facets[facets < len(pair.facets)]]  # local cells in a touching pair
         both += dem.comm.allreduce(len(np.intersect1d(on_floor, touching)) > 0, op=MPI.LOR)
     assert both > 5  # steps in which a cell has a facet of each model in contact (measured: 15 of 20)
     assert drift < 1e-13
@@ -673,11 +677,11 @@ def test_a_step_without_a_touching_pair_anywhere_adds_nothing():
         u = cell_vector(dem, lambda x: approach(x) * shift)
         out = dem.create_vector()
         up, vp = c.prepare(u, v, dt)
-        assert c._flight[5] == (not touching)  # the same on every process
+        assert c._flight.quiet == (not touching)  # the same on every process
         evaluations = c.force_integral(up, vp, dt, out)
         assert dem.comm.allreduce(evaluations, op=MPI.MAX) > 0 if touching else evaluations == 0
         assert (out.norm() > 0) == touching
-        closed = dem.comm.allreduce(c.closed_count(c.patch_values(u)), op=MPI.SUM)
+        closed = dem.comm.allreduce(c.outputs.closed_count(c.patch_values(u)), op=MPI.SUM)
         penetration = model.contact_values(problem, u)[1]
         assert (closed > 0) == touching and (penetration > 0) == touching
 
@@ -765,19 +769,19 @@ UNIT = np.array([[0.0, 0.0], [1.0, 0.0], [0.0, 1.0]])
     (-UNIT + [1.0, 1.0], [0.0, 0.0], "touching"),  # along the hypotenuse
 ])
 def test_overlap_of_triangles_and_its_gradient(B, s, kind):
-    """w = |A cap (B + s)| (boundary clipping, ``pair_contact._overlap``) against Sutherland-Hodgman
+    """w = |A cap (B + s)| (boundary clipping, ``overlap.overlap``) against Sutherland-Hodgman
     clipping in every configuration, and its gradient against central differences where w is
     smooth; touching triangles have w = 0 exactly. (At kinks, events split the steps.)"""
-    from dolfinx_dem.contact.pair import _overlap, _Simplices
+    from dolfinx_dem.contact.overlap import Simplices, overlap
 
     A, B, s = UNIT[None], np.asarray(B, float)[None], np.asarray(s, float)[None]
     pair = np.zeros(1, dtype=np.int64)
-    w, dw = _overlap(_Simplices.of(A), _Simplices.of(B), pair, s)
+    w, dw = overlap(Simplices.of(A), Simplices.of(B), pair, s)
     assert w[0] == pytest.approx(_clipped_area(A[0], B[0] + s[0]), abs=1e-15)
     if kind == "smooth":
         h = 1e-6
-        fd = [(_overlap(_Simplices.of(A), _Simplices.of(B), pair, s + h * e)[0][0]
-               - _overlap(_Simplices.of(A), _Simplices.of(B), pair, s - h * e)[0][0]) / (2 * h) for e in np.eye(2)]
+        fd = [(overlap(Simplices.of(A), Simplices.of(B), pair, s + h * e)[0][0]
+               - overlap(Simplices.of(A), Simplices.of(B), pair, s - h * e)[0][0]) / (2 * h) for e in np.eye(2)]
         assert np.abs(dw[0] - fd).max() < 1e-9
     if kind == "touching":
         assert w[0] == 0.0 and not dw.any()
@@ -789,7 +793,7 @@ def test_pair_rows_are_the_product_of_the_directions_and_the_facet_columns():
     E^T @ QF^T with sorted indices: the exact zeros of cancelling entries dropped, pairs with a
     ghost facet (no columns here) taking their local facet's columns only."""
     import scipy.sparse
-    from dolfinx_dem.contact.pair import _CSC
+    from dolfinx_dem.contact.facets import FacetRows
 
     rng = np.random.default_rng(3)
     d, n_local, n_known, rows = 2, 60, 80, 150
@@ -809,7 +813,7 @@ def test_pair_rows_are_the_product_of_the_directions_and_the_facet_columns():
     i[:2], j[:2] = [1, 2], [2, 1]
     e_i[:2], e_j[:2] = [[1.0, 0.5], [1.0, 0.5]], [[-1.0, -0.5], [-1.0, -0.5]]
 
-    ZT = _CSC(QF, d).pair_rows(i, j, e_i, e_j, length)
+    ZT = FacetRows(QF, d).pair_rows(i, j, e_i, e_j, length)
     pairs, dofs, vals = [], [], []
     for side, e in ((i, e_i), (j, e_j)):
         mine = side < n_local
@@ -853,18 +857,18 @@ def test_piecewise_midpoints_cut_each_row_at_its_sorted_times():
 def test_overlap_of_random_triangles():
     """Random triangles of both orientations: area against clipping, gradient against central
     differences."""
-    from dolfinx_dem.contact.pair import _overlap, _Simplices
+    from dolfinx_dem.contact.overlap import Simplices, overlap
 
     rng = np.random.default_rng(0)
     A, B = rng.random((400, 3, 2)), rng.random((400, 3, 2)) - 0.3
     s = 0.3 * rng.standard_normal((400, 2))
     pairs = np.arange(400)
-    w, dw = _overlap(_Simplices.of(A), _Simplices.of(B), pairs, s)
+    w, dw = overlap(Simplices.of(A), Simplices.of(B), pairs, s)
     reference = [_clipped_area(A[k], B[k] + s[k]) for k in range(len(A))]
     assert np.abs(w - reference).max() < 1e-14 and (w > 0).sum() > 100
     h = 1e-7
-    fd = np.stack([(_overlap(_Simplices.of(A), _Simplices.of(B), pairs, s + h * e)[0]
-                    - _overlap(_Simplices.of(A), _Simplices.of(B), pairs, s - h * e)[0]) / (2 * h)
+    fd = np.stack([(overlap(Simplices.of(A), Simplices.of(B), pairs, s + h * e)[0]
+                    - overlap(Simplices.of(A), Simplices.of(B), pairs, s - h * e)[0]) / (2 * h)
                    for e in np.eye(2)], axis=1)
     assert np.abs(dw - fd).max() < 1e-7
 
@@ -872,18 +876,18 @@ def test_overlap_of_random_triangles():
 @pytest.mark.parametrize("d", [2, 3])
 def test_projected_simplices_by_their_formulas(d):
     """The compiled projection of facets on their pairs' planes (``_project``) and the simplices
-    made of them (``_Simplices.of``) against their formulas in numpy, on random facets and planes:
+    made of them (``Simplices.of``) against their formulas in numpy, on random facets and planes:
     vertices, faces' ends, outward normals (both orientations in 3D), unit normals and sizes."""
     import types
 
-    from dolfinx_dem.contact.pair import _project, _Simplices
+    from dolfinx_dem.contact.overlap import Simplices, project
 
     rng = np.random.default_rng(d)
     F = types.SimpleNamespace(ends=rng.random((50, d, d)) - 0.5, centre=rng.random((50, d)))
     i, j, t = rng.integers(0, 50, 300), rng.integers(0, 50, 300), rng.random((300, d - 1, d)) - 0.5
     X = np.einsum("pkx,pax->pka", F.ends[j] - F.centre[i][:, None], t)
-    assert np.allclose(_project(F, j, i, t), X, rtol=0, atol=1e-15)
-    S = _Simplices.of(X)
+    assert np.allclose(project(F, j, i, t), X, rtol=0, atol=1e-15)
+    S = Simplices.of(X)
     if d == 2:  # the faces are the vertices, each facing away from the other
         end, m, size = X, X - X[:, ::-1], np.ones((300, 2))
     else:
@@ -937,7 +941,7 @@ def test_force_is_the_gradient_of_the_energy_in_contact_in_3d(scheme):
     u = cell_vector(dem, lambda x: oblique(x, 0.043) + 1e-3 * rng.standard_normal(x.shape))
     c.prepare(u)
     up = c.patch_values(u)
-    gap, overlap = c.pair_states(up)
+    gap, overlap = c.outputs.pair_states(up)
     on = (gap < 0) & (overlap > 0)
     areas = np.minimum(c.facets_all.length[c.listed.i], c.facets_all.length[c.listed.j])
     assert on.sum() >= 20 and (overlap[on] < 0.99 * areas[on]).sum() >= 10
@@ -979,24 +983,24 @@ def _cubes_impact(comm, steps):
         diag = stepper.step()
         drift = max(drift, abs(diag.pseudo_energy - first.pseudo_energy) / first.mechanical)
     p, p_left = momenta()
-    force = comm.allreduce(c.pair_forces(c.patch_values(stepper.u)), op=MPI.SUM)[0]
+    force = comm.allreduce(c.outputs.pair_forces(c.patch_values(stepper.u)), op=MPI.SUM)[0]
     return drift, np.abs(p - p0).max(), p_left, force, comm.allreduce(stepper.max_step_evaluations, op=MPI.MAX)
 
 
 def test_the_compiled_contact_state_is_its_definition_by_sparse_products():
-    """``_At``, the contact state in one compiled call (``dem_pair_end_state``), against its definition
+    """``PairState``, the contact state in one compiled call (``dem_pair_end_state``), against its definition
     by numpy and scipy: its closed pairs hold every touching pair (g < 0, w > 0), and there g, w,
-    dw/du_j (``_state``), c = w g^-, mu_p = z_p . (Q u + q + Z c) and the energy change
+    dw/du_j (``gaps_and_overlaps``), c = w g^-, mu_p = z_p . (Q u + q + Z c) and the energy change
     sum (a delta + delta^2 / 2) of the own rows, elastic and stabilisation rows apart."""
     problem = two_boxes(MPI.COMM_SELF)
     dem = problem.dem
     c = problem.find(PairContact)
     u = cell_vector(dem, lambda x: oblique(x, 0.01))  # the cubes 0.01 m into each other
     up, _ = c.prepare(u)
-    at, L = c._at(up), c.listed
+    at, L = c.state(up).pairs, c.listed
     p, uc = at.closed, c.free_displacements(up)
-    g, w, dw = c._state(p, uc[L.i[p]], uc[L.j[p]])
-    g_all, w_all = c.pair_states(up)
+    g, w, dw = c.gaps_and_overlaps(p, uc[L.i[p]], uc[L.j[p]])
+    g_all, w_all = c.outputs.pair_states(up)
     touching = np.flatnonzero((g_all < 0) & (w_all > 0))
     assert len(touching) > 20 and np.isin(touching, p).all()
     assert np.array_equal(at.g, g)
@@ -1004,10 +1008,10 @@ def test_the_compiled_contact_state_is_its_definition_by_sparse_products():
     assert np.array_equal(at.c, at.w * np.minimum(at.g, 0.0))
     full = np.zeros(len(L))
     full[p] = at.c
-    a, delta = L.Q @ up + c._q, L.Z @ full
+    a, delta = L.Q @ up + c.row_lift, L.Z @ full
     mu = (L.ZT @ (a + delta))[p]
     assert np.abs(at.mu - mu).max() <= 1e-12 * np.abs(mu).max()
-    change, elastic = a * delta + 0.5 * delta**2, c._is_elastic_row.astype(bool)
+    change, elastic = a * delta + 0.5 * delta**2, c._c_patch.arrays["elastic"].astype(bool)
     expected = np.array([change[elastic].sum(), change[~elastic].sum()])
     assert np.abs(np.array(at.energy) - expected).max() <= 1e-12 * np.abs(expected).max()
     assert expected[0] > 0 and expected[1] > 0
@@ -1064,22 +1068,22 @@ def test_the_screen_keeps_every_pair_that_touches_during_a_flight_and_few_others
     dt = 0.02
     up, vp = c.prepare(u, v, dt)
     uc = c.free_displacements(up)
-    vc, _, screened = c._free_flight(uc, vp, dt)
+    vc, _, screened = c.free_flight(uc, vp, dt)
     L, touched = c.listed, np.zeros(len(c.listed), dtype=bool)
     for tau in np.linspace(0.0, dt, 801):
         x = uc + tau * vc
-        g, w, _ = c._state(np.arange(len(L)), x[L.i], x[L.j])
+        g, w, _ = c.gaps_and_overlaps(np.arange(len(L)), x[L.i], x[L.j])
         touched |= (g < 0) & (w > 0)
     assert touched.sum() > 20 and np.isin(np.flatnonzero(touched), screened).all()
     assert len(screened) <= 1.02 * touched.sum()  # measured: 131 screened, 131 touching
 
 
 def test_the_state_at_a_steps_end_screens_the_flights_candidates_only_where_they_hold():
-    """The contact state at the end of a flight (``_At``) screens only the pairs that the
-    flight's screen found near closing there (``_At.candidates``): bit-identical to the state
+    """The contact state at the end of a flight (``PairState``) screens only the pairs that the
+    flight's screen found near closing there (``PairState.candidates``): bit-identical to the state
     that screens every listed pair; at a displacement away from the flight's end it screens
     every pair again."""
-    from dolfinx_dem.contact.pair import _At
+    from dolfinx_dem.contact.events import PairState
 
     problem = two_boxes(MPI.COMM_SELF)
 
@@ -1094,15 +1098,13 @@ def test_the_state_at_a_steps_end_screens_the_flights_candidates_only_where_they
     far.axpy(0.5 * dt, v)
     for x, reused in ((end, True), (far, False)):
         up = c.patch_values(x)
-        at = _At(c, up)
+        at = PairState(c.pair_list, c._c_patch, c._work, c._end, up)
         assert not at.moved and (at.candidates is not None) == reused
         assert np.array_equal(at.uc, c.free_displacements(up))
         if reused:
             assert 0 < len(at.candidates) < len(c.listed) / 4
-        state = at._values
-        flight, c._end = c._end, None  # no candidates: every pair screened
-        full = _At(c, up)._values
-        c._end = flight
+        state = dataclasses.astuple(at.pairs)
+        full = dataclasses.astuple(PairState(c.pair_list, c._c_patch, c._work, None, up).pairs)  # every pair screened
         assert len(state[0]) > 20
         for a, b in zip(state, full):
             assert np.array_equal(np.asarray(a), np.asarray(b))
@@ -1159,7 +1161,7 @@ def test_self_contact_closes_a_slot_in_3d():
     for _ in range(int(0.03 / dt)):
         diag = stepper.step()
         drift = max(drift, abs(diag.pseudo_energy - first.pseudo_energy) / first.mechanical)
-        touched += c.touching(c.patch_values(stepper.u))
+        touched += c.outputs.touching(c.patch_values(stepper.u))
     assert touched >= 5 and drift < 1e-12
 
 
@@ -1238,8 +1240,8 @@ def test_discs_that_travel_far_between_exchanges_move_as_on_one_process():
     assert serial_c.exchanges == 0
     if comm.size > 1:
         assert c.exchanges >= 3 and comm.allreduce(c.rebuilds, op=MPI.MAX) > c.exchanges
-    assert c.exchange_radius < 0.25
-    touched = comm.allreduce(c.touching(c.patch_values(stepper.u)), op=MPI.LOR)
+    assert c.pair_list.exchange_radius < 0.25
+    touched = comm.allreduce(c.outputs.touching(c.patch_values(stepper.u)), op=MPI.LOR)
     import scipy.spatial
 
     x = dem.geometry.cell_centres[: dem.n_owned]
@@ -1278,7 +1280,7 @@ def test_a_restored_state_steps_as_the_first_time():
     c.restore_state(contact_state)
     again = [stepper.step().pseudo_energy for _ in range(10)]
     assert again == first and np.array_equal(stepper.u.array_r, u_first)
-    assert c.touching(c.patch_values(stepper.u))
+    assert c.outputs.touching(c.patch_values(stepper.u))
     assert c.exchanges == exchanges  # restored with the counters, and no exchange since
 
 
@@ -1299,8 +1301,8 @@ def test_a_process_knows_only_the_facets_of_other_processes_near_its_own():
     import scipy.spatial
 
     distance = scipy.spatial.cKDTree(F.centre[:nl]).query(F.centre[nl:])[0] if nl else np.full(len(F) - nl, np.inf)
-    assert c.exchange_radius < 0.5
-    far = MPI.COMM_WORLD.allreduce(int((distance > c.exchange_radius).sum()), op=MPI.SUM)  # on every process
+    assert c.pair_list.exchange_radius < 0.5
+    far = MPI.COMM_WORLD.allreduce(int((distance > c.pair_list.exchange_radius).sum()), op=MPI.SUM)  # on every process
     assert far == 0
     assert c.num_pairs == 0  # no facing facets of two discs are near each other
 
@@ -1328,7 +1330,7 @@ def test_bisection_groups_nearby_facets_for_the_list_round_summaries():
     """``_bisection`` (the boxes a list round gathers from each process): a permutation into
     at most k groups of equal size (to one point), each group's box much smaller than the
     whole; ``_box`` bounds its points column by column, and is empty without points."""
-    from dolfinx_dem.contact.pair import _bisection, _box
+    from dolfinx_dem.contact.pair_list import _bisection, _box
 
     angle = np.linspace(0.0, 2.0 * np.pi, 1001)[:-1]
     x = np.column_stack([np.cos(angle), np.sin(angle)]) + 0.01 * np.random.default_rng(3).random((1000, 2))

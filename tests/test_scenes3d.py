@@ -22,9 +22,9 @@ def test_closed_pairs_state_is_the_full_state_where_gaps_are_negative():
                                              np.zeros(len(x))], axis=1))
     c.prepare(u)
     p = np.arange(c.num_pairs)
-    ui, uj = c._pair_displacements(c.patch_values(u))
-    g, w, dw = c._state(p, ui, uj)
-    gc, wc, dwc = c._state(p, ui, uj, closed=True)
+    ui, uj = c.pair_displacements(c.patch_values(u))
+    g, w, dw = c.gaps_and_overlaps(p, ui, uj)
+    gc, wc, dwc = c.gaps_and_overlaps(p, ui, uj, closed=True)
     closed = g < 0
     assert (closed & (w > 0)).sum() > 10
     assert np.array_equal(gc, g)
@@ -39,7 +39,7 @@ def test_two_balls_conserve_energy_and_momentum_through_first_contact(tmp_path):
     at t = 0, at least the gap of the spheres, set the bounds)."""
     scene = scenes.load("two-balls", {"mesh.h": 0.06, "time.end": 0.05, "time.cfl": 0.5})
     c = model.build(scene, MPI.COMM_SELF).find(PairContact)
-    gap = c.smallest_gap(c.patch_values(c.dem.create_vector()))
+    gap = c.outputs.smallest_gap(c.patch_values(c.dem.create_vector()))
     assert 0.02 < gap < 0.03
     summary = simulation.run(scene, tmp_path, MPI.COMM_SELF, quiet=True)
     assert gap / 0.6 <= summary["first_contact_time"] < 0.03 / 0.6
@@ -79,7 +79,7 @@ def test_ball_drop_acts_with_the_floor_and_the_ball_in_the_same_steps():
         diag = stepper.step()
         drift = max(drift, abs(diag.pseudo_energy - first.pseudo_energy) / max(first.mechanical, diag.mechanical))
         floor = (run.obstacles.gaps(run.obstacles.patch_values(stepper.u)) < 0).any()
-        both += bool(floor and run.pairs.touching(run.pairs.patch_values(stepper.u)))
+        both += bool(floor and run.pairs.outputs.touching(run.pairs.patch_values(stepper.u)))
     assert both >= 3
     assert drift <= 1e-12
 

@@ -122,16 +122,16 @@ def _disc_figures(problem, result):
     disc = comm.allreduce(int(body[geom.cell_centres[: dem.n_owned, 1] > 0].max(initial=0)), op=MPI.MAX)
     volumes = geom.cell_volumes[: dem.n_owned]
     load = LOAD * comm.allreduce(volumes[body == disc].sum(), op=MPI.SUM)
-    forces = pc.pair_forces(up, result.active) + pc.statics().kink_forces(result.pinned, result.kink_forces)
+    forces = pc.outputs.pair_forces(up, result.active) + pc.statics().kink_forces(result.pinned, result.kink_forces)
     forces = comm.allreduce(forces, op=MPI.SUM)[0]
     force = forces if pc.body_pairs[0][0] == disc else -forces
     uy = comm.allreduce(volumes[body == disc] @ result.u.array_r.reshape(-1, 2)[body == disc, 1], op=MPI.SUM)
     uy /= comm.allreduce(volumes[body == disc].sum(), op=MPI.SUM)
     # normal force of each touching pair (not pinned) at its disc facet's centre
     L, F = pc.listed, pc.facets_all
-    g, w = pc.pair_states(up)
+    g, w = pc.outputs.pair_states(up)
     c = np.where(np.isin(pc.pair_keys(), result.active), w * g, 0.0)
-    normal = np.where(c != 0, -(L.ZT @ (L.Q @ up + pc._q + L.Z @ c)) * w, 0.0)
+    normal = np.where(c != 0, -(L.ZT @ (L.Q @ up + pc.row_lift + L.Z @ c)) * w, 0.0)
     x = np.where(F.body[L.i] == disc, F.centre[L.i, 0], F.centre[L.j, 0])
     moments = comm.allreduce(np.array([normal.sum(), normal @ x, normal @ x**2]), op=MPI.SUM)
     half_width = 2 * np.sqrt(moments[2] / moments[0] - (moments[1] / moments[0]) ** 2)

@@ -23,6 +23,7 @@ from dolfinx_dem.conditions import DirichletBC, Traction
 from dolfinx_dem.discretisation import DEMDiscretisation
 from dolfinx_dem.material import ElasticMaterial
 from dolfinx_dem.memm import MEMM
+from dolfinx_dem.problem import DEMProblem
 
 L, E, RHO, SIGMA, PERIODS, CFL = 1.0, 1.0, 1.0, 0.01, 2, 0.5
 
@@ -41,7 +42,7 @@ def run(n: int, scheme: str = "A") -> dict:
                             tractions=[Traction(tags.find(meshes.XMAX), [SIGMA])])
     end = PERIODS * 4 * L / np.sqrt(E / RHO)
     steps = int(np.ceil(end / (CFL * dem.stable_time_step())))
-    stepper = MEMM(dem, end / steps)
+    stepper = MEMM(DEMProblem(dem), end / steps)
     first = stepper.initialise(dem.create_vector(), dem.create_vector())
     last = np.flatnonzero(np.isclose(dem.geometry.cell_centres[: dem.n_owned, 0], L - L / (2 * n)))
 

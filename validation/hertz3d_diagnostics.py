@@ -63,15 +63,17 @@ def moments(vertices, centres, force, axis):
 def dem_level(scale: float) -> dict:
     scene = scenes.load("hertz3d", {"method": "dem-A", "mesh.h": H / scale, "mesh.refine_h": H_CONTACT / scale})
     comm = MPI.COMM_SELF
-    dem = model.build(scene, comm)
-    top = model.Probes(dem, [{"name": "top", "point": _top_point(dem), "component": 2}])
+    problem = model.build(scene, comm)
+    dem, (c,) = problem.dem, problem.contacts  # the rigid plane
+    top = model.Probes(problem, [{"name": "top", "point": _top_point(dem), "component": 2}])
     cpu = time.process_time()
-    result = minimise_energy(dem)
+    result = minimise_energy(problem)
     cpu = time.process_time() - cpu
-    u, c, geom = result.u, dem.contact, dem.geometry
+    u, geom = result.u, dem.geometry
     own = c.facets[: c.num_own]
     force = c.reactions(u)
-    force[result.pinned] = result.kink_forces[result.pinned]
+    # facets held on a kink of the potential carry their multiplier
+    force[result.pinned] = c.statics().own_values(result.kink_forces, result.pinned)[result.pinned]
     touching = force > 0
     vertices, centres, areas = _facet_vertices(geom, own), geom.facet_centres[own], geom.facet_areas[own]
     axis = (scene["obstacles"][0]["point"], scene["obstacles"][0]["normal"])
@@ -82,9 +84,11 @@ def dem_level(scale: float) -> dict:
     total = float(force.sum())
     a_u, a_p, spread = moments(vertices[touching], centres[touching], force[touching], axis)
     # kink facets: a_uniform with each one's force at the ends of its admissible interval [0, r_f]
-    r_kink = c.reactions(u, result.pinned | (c.own_gaps(u) < 0))
+    active = c.own_gaps(u) < 0
+    active[result.pinned] = True  # (the pinned facets: indices of own facets)
+    r_kink = c.reactions(u, active)
     kinks = []
-    for k in np.flatnonzero(result.pinned):
+    for k in result.pinned:
         ends = []
         for value in (0.0, r_kink[k]):
             trial = force.copy()

@@ -55,7 +55,7 @@ def run(h: float, speed: float, curve_every: int, method: str) -> dict:
     dem, stepper = r.dem, r.stepper
 
     def force() -> float:  # -reaction_disc_y: the block pushed down counts positive
-        return -float(dem.prescribed_values(stepper.u, stepper.t)[0, 0, 1])
+        return -float(r.problem.prescribed_values(stepper.u, stepper.t)[0, 0, 1])
 
     targets = {d: (d + GAP) / speed for d in INDENTATIONS}
     slack = 1e-9 * r.dt
@@ -90,12 +90,13 @@ def static(h: float, method: str) -> dict:
     for key in ("time", "output"):
         del s[key]
     s["statics"] = {}
-    dem = model.build(scenes.override(s), MPI.COMM_WORLD)
+    problem = model.build(scenes.override(s), MPI.COMM_WORLD)
+    dem = problem.dem
     rows = {}
     for d in INDENTATIONS:
         t = d + GAP
-        result = minimise_energy(dem, t=t)
-        disc = dem.prescribed_values(result.u, t, result.force)[0, 0, 1]  # the kinks' multipliers included
+        result = minimise_energy(problem, t=t)
+        disc = problem.prescribed_values(result.u, t, result.force)[0, 0, 1]  # the kinks' multipliers included
         base = float(dem.reactions(result.u, t).ravel()[1])
         rows[str(d)] = {"force": -float(disc), "base_reaction_y": base, "balance": (base + disc) / base,
                         "iterations": result.iterations, "gradient_reduction": result.gradient_reduction,

@@ -33,6 +33,7 @@ from dolfinx_dem.conditions import DirichletBC, Traction
 from dolfinx_dem.discretisation import DEMDiscretisation
 from dolfinx_dem.material import CellMaterials, ElasticMaterial
 from dolfinx_dem.memm import MEMM
+from dolfinx_dem.problem import DEMProblem
 
 MATERIALS = {1: ElasticMaterial(E=1.0, nu=0.0, rho=1.0), 2: ElasticMaterial(E=4.0, nu=0.0, rho=1.0)}
 Z1, Z2 = (np.sqrt(m.rho * m.E) for m in MATERIALS.values())
@@ -64,7 +65,7 @@ def static(comm, n, scheme):
     ksp.setType("preonly")
     ksp.getPC().setType("lu")
     u = dem.create_vector()
-    ksp.solve(dem.load(0.0), u)
+    ksp.solve(dem.data.load(0.0), u)
     ksp.destroy()
     stress = dem.stress(u, 0.0)[:, 0, 0]
     G = dem.gradient(u, 0.0)[:, 0, 0]
@@ -109,7 +110,7 @@ def dynamic(comm, n, scheme):
     u0.array[:] = np.trapz(prim[idx], s[idx], axis=1) / h
     v0.array[:] = -np.trapz(du[idx], s[idx], axis=1) / h
     steps = int(np.ceil(T_END / (CFL * dem.stable_time_step())))
-    stepper = MEMM(dem, T_END / steps)
+    stepper = MEMM(DEMProblem(dem), T_END / steps)
     first = stepper.initialise(u0, v0)
     drift, scale = 0.0, first.mechanical
     for _ in range(steps):

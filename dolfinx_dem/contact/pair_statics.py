@@ -49,7 +49,7 @@ class PairStatics:
         which only contact holds; or the pairs in contact at the start, where a prescribed body
         held at U(t) penetrates another."""
         up = self.contact.patch_values(u)
-        active = self.touching_pairs(up, max(0.0, self.contact.smallest_gap(up) + 1e-9 * self.length_scale))
+        active = self.touching_pairs(up, max(0.0, self.contact.outputs.smallest_gap(up) + 1e-9 * self.length_scale))
         if len(active) == 0:
             raise StaticsError("no pair of contact candidate facets faces another: contact between bodies cannot "
                                "hold them (check the contact boundary)")
@@ -68,7 +68,7 @@ class PairStatics:
         """No facet may move more than half its skin in one step: the pairs it would meet are then
         all in the list built at u, and a long step (a piece that holds a body weakly, e.g. by a
         pair of small overlap) cannot carry one body through another."""
-        return self.contact.motion_ratio(self.contact.patch_values(step))
+        return self.contact.pair_list.motion_ratio(self.contact.patch_values(step))
 
     def switches_crossed(self, u: PETSc.Vec, step: PETSc.Vec, alpha: float, piece: np.ndarray) -> np.ndarray:
         up = self.contact.prepare(u)[0]  # the line search may have rebuilt the list elsewhere
@@ -92,7 +92,7 @@ class PairStatics:
         Each pair is decided by the owner of its first facet alone, so that every process holds
         the same set even where g rounds differently on two processes. The keys of the contact
         zone are gathered, not mesh-sized data."""
-        g, w = self.contact.pair_states(up)
+        g, w = self.contact.outputs.pair_states(up)
         mine = (self.contact.listed.i < self.contact.num_own) & (g < below) & (w > 0)
         return np.sort(np.concatenate(self.contact.comm.allgather(self.contact.pair_keys()[mine])))
 
@@ -101,10 +101,10 @@ class PairStatics:
         of g_p and w_p of the listed pairs ((P, patch) CSR; w and g are affine on a piece), the
         pairs in the piece (w_p > 0), g_p, w_p and mu_p = z_p . (a + delta_a) (own rows' part)."""
         L, d = self.contact.listed, self.contact.d
-        g, w, dw = self.contact._state(np.arange(len(L)), *self.contact._pair_displacements(up))
+        g, w, dw = self.contact.gaps_and_overlaps(np.arange(len(L)), *self.contact.pair_displacements(up))
         on = np.isin(self.contact.pair_keys(), active) & (w > 0)
         c = np.where(on, w * g, 0.0)
-        mu = np.where(on, L.ZT @ (L.Q @ up + self.contact._q + L.Z @ c), 0.0)
+        mu = np.where(on, L.ZT @ (L.Q @ up + self.contact.row_lift + L.Z @ c), 0.0)
         # dg/du_j = n = -dg/du_i, dw/du_j = dw = -dw/du_i (facet displacements), then R.
         P, nf = len(L), len(self.contact.facets_all)
         rows = np.repeat(np.arange(P), 2 * d)
@@ -112,7 +112,7 @@ class PairStatics:
         Dg = scipy.sparse.csr_matrix((np.concatenate([-L.n, L.n], axis=1).ravel(), (rows, cols)), shape=(P, nf * d))
         Dw = scipy.sparse.csr_matrix((np.concatenate([-dw, dw], axis=1).ravel(),
                                       (rows, cols)), shape=(P, nf * d))
-        return (Dg @ self.contact._R).tocsr(), (Dw @ self.contact._R).tocsr(), on, g, w, mu
+        return (Dg @ self.contact.pair_list.R).tocsr(), (Dw @ self.contact.pair_list.R).tocsr(), on, g, w, mu
 
     def _add_piece_hessian(self, H: PETSc.Mat, up: np.ndarray, active: np.ndarray, curvature: bool = False) -> None:
         """H += d^2 V/du^2 - K on this process's own rows for the piece ``active`` (sorted
@@ -141,10 +141,10 @@ class PairStatics:
         ``up`` with the piece ``active``: their gaps g_p and the normal force r_p = -w_p z_p .
         (a + delta_a) each would carry in contact (the jump of -dV/dg_p across g_p = 0), on every
         process (collective: g from the owner of the pair's first facet, r summed over rows)."""
-        g, w, _ = self.contact._state(np.arange(len(self.contact.listed)), *self.contact._pair_displacements(up))
+        g, w, _ = self.contact.gaps_and_overlaps(np.arange(len(self.contact.listed)), *self.contact.pair_displacements(up))
         on = np.isin(self.contact.pair_keys(), active) & (w > 0)
         L = self.contact.listed
-        m = L.ZT @ (L.Q @ up + self.contact._q + L.Z @ np.where(on, w * g, 0.0))
+        m = L.ZT @ (L.Q @ up + self.contact.row_lift + L.Z @ np.where(on, w * g, 0.0))
         k = np.searchsorted(keys, self.contact.pair_keys())
         listed = (k < len(keys)) & (keys[np.minimum(k, len(keys) - 1)] == self.contact.pair_keys())
         decider = listed & (L.i < self.contact.num_own)
@@ -158,9 +158,9 @@ class PairStatics:
         """Sorted keys (every process; collective) of the overlapping pairs whose gap, affine
         along the step u + tau d (patch values ``up``, ``dp``), reaches its switch g = 0 for some
         tau in [0, 2 alpha], leaving its side: closing if out of ``piece``, opening if in it."""
-        g, w, _ = self.contact._state(np.arange(len(self.contact.listed)), *self.contact._pair_displacements(up))
+        g, w, _ = self.contact.gaps_and_overlaps(np.arange(len(self.contact.listed)), *self.contact.pair_displacements(up))
         L, d = self.contact.listed, self.contact.d
-        dd = (self.contact._R @ dp).reshape(-1, d)
+        dd = (self.contact.pair_list.R @ dp).reshape(-1, d)
         rate = np.einsum("pi,pi->p", dd[L.j] - dd[L.i], L.n)
         inside = np.isin(self.contact.pair_keys(), piece)
         with np.errstate(divide="ignore", invalid="ignore"):
@@ -182,7 +182,7 @@ class PairStatics:
         body_i, body_j = F.body[L.i[mine]], F.body[L.j[mine]]
         force_i = -forces[k[mine], None] * L.n[mine]
         sign = np.where(body_i < body_j, 1.0, -1.0)
-        np.add.at(out, self.contact._body_pair_index[body_i, body_j], sign[:, None] * force_i)
+        np.add.at(out, self.contact.body_pair_index[body_i, body_j], sign[:, None] * force_i)
         return out
 
     def gap_gradient(self, up: np.ndarray, key: int) -> PETSc.Vec:

@@ -1,0 +1,164 @@
+"""The state of the contact between bodies at one displacement, a step's free flight and its
+events, and the exact force integral (paper §4; pair.py): the closed pairs with their gaps,
+overlaps and multipliers, the screen of a flight, and the force integral split at the events and
+integrated by Gauss-Legendre on each piece.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import functools
+
+import numpy as np
+
+from dolfinx_dem.contact.pair_list import Pairs, PairList
+from dolfinx_dem.errors import InputError, KernelMemoryError
+from dolfinx_dem.kernels import Struct, ffi, lib, pointer
+
+
+def gauss_legendre(d: int) -> tuple[np.ndarray, np.ndarray]:
+    """d-point Gauss-Legendre nodes and weights on [0, 1]: exact to degree 2 d - 1, the degree
+    of a pair's force term between events in dimension d (w of degree d - 1 in tau, c_p and
+    z_p . (a + delta_a) of degree d, dc_p/du of degree d - 1)."""
+    x, weights = np.polynomial.legendre.leggauss(d)
+    return 0.5 + 0.5 * x, 0.5 * weights
+
+
+@dataclasses.dataclass(frozen=True)
+class Flight:
+    """The free flight u + tau v, 0 <= tau <= dt, that ``PairContact.prepare`` checked valid for
+    a step: the patch values ``up``, ``vp`` of u and v, the free facet velocities ``vc``, the
+    screened pairs that may touch during it (``touching``) and whether no pair touches anywhere
+    (``quiet``: the force integral adds nothing on any process)."""
+
+    up: np.ndarray
+    vp: np.ndarray
+    dt: float
+    vc: np.ndarray
+    touching: np.ndarray
+    quiet: bool
+
+
+@dataclasses.dataclass(frozen=True)
+class ScreenedFlight:
+    """The last flight's screen (``dem_flight``: its candidates, the pairs near closing at its
+    end) and the list it screened: the state at the flight's end reads its candidates only."""
+
+    pairs: Pairs
+    flight: Struct
+
+
+@dataclasses.dataclass(frozen=True)
+class ClosedPairs:
+    """The listed pairs ``closed`` whose c_p = w_p g_p^- may not vanish (g_p < 0, projections not
+    apart), their gap g, overlap w, dw/du_j, c = w g^- and mu_p = z_p . (a + delta) (own rows'
+    part), the energy change of the own rows (elastic, stabilisation) and the sum of mu_p w_p."""
+
+    closed: np.ndarray
+    g: np.ndarray
+    w: np.ndarray
+    dw: np.ndarray
+    c: np.ndarray
+    mu: np.ndarray
+    energy: tuple[float, float]
+    mu_w: float
+
+
+class PairState:
+    """The contact state at one displacement (patch values ``up``), on first use, in one compiled
+    call (``dem_pair_end_state``): the free facet displacements ``uc``, whether the list is stale
+    there (``moved``), and, if it is not, the ``ClosedPairs``. The energy of a step's end, the
+    outputs there and the next step's flight share it (``PairContact.state``).
+
+    The state reads the last flight's candidates if they hold here (bit 1 of its screen: the only
+    pairs that may be closed, when every facet lies within half the slack of the flight's end, as
+    at the step's end, where uc = R u^{n+1} and the flight's end uc^n + dt vc differ by rounding);
+    else every listed pair is screened."""
+
+    def __init__(self, pair_list: PairList, patch: Struct, work, end: ScreenedFlight | None, up: np.ndarray):
+        # a read-only array (MEMM's shared patch values) is kept as it is: ``PairContact.state``
+        # then knows it by identity; another is copied, since its caller may change it
+        self.pair_list, self.listed, self._patch, self._work = pair_list, pair_list.pairs, patch, work
+        self._flight = end.flight if end is not None and end.pairs is self.listed else None
+        self.up = up if not up.flags.writeable else up.copy()
+
+    @functools.cached_property
+    def _computed(self) -> tuple:
+        """(uc, moved, candidates, ClosedPairs or None if moved, the kernels' struct), computed
+        right away: a step's end needs it for its energy."""
+        L, d, flight = self.listed, self.pair_list.d, self._flight
+        n = len(L)
+        uc = np.empty((len(self.pair_list.lift), d))
+        state = Struct("dem_pair_state", closed=np.empty(n, dtype=np.int64), g=np.empty(n), w=np.empty(n),
+                       dw=np.empty((n, d)), c=np.empty(n), mu=np.empty(n))
+        k = lib.dem_pair_end_state(self.pair_list.c_pairs.c, self._patch.c, pointer(self.up),
+                                   ffi.NULL if flight is None else flight.c, self._work, pointer(uc), state.c)
+        if k == -1:
+            raise KernelMemoryError("contact between bodies: out of memory in the contact state")
+        a, s = state.arrays, state.c
+        closed = None if k == -2 else ClosedPairs(a["closed"][:k], a["g"][:k], a["w"][:k], a["dw"][:k], a["c"][:k],
+                                                  a["mu"][:k], (float(s.energy[0]), float(s.energy[1])),
+                                                  float(s.mu_w))
+        candidates = flight.arrays["candidates"][: flight.c.n_candidates] if s.from_flight else None
+        return uc, k == -2, candidates, closed, state
+
+    uc = property(lambda self: self._computed[0], doc="The free facet displacements (``free_displacements``).")
+    moved = property(lambda self: self._computed[1], doc="Whether the list is stale here (``PairList.moved``).")
+    candidates = property(lambda self: self._computed[2], doc="The pairs screened (None: every listed pair).")
+
+    @functools.cached_property
+    def pairs(self) -> ClosedPairs:
+        """The closed pairs (raises, caching nothing, where the list is stale)."""
+        if self.moved:
+            self.pair_list.check_listed(self.uc)  # raises
+        return self._computed[3]
+
+    @property
+    def kernel_state(self) -> Struct:
+        """The state for the kernels (``dem_pair_state``; raises where the list is stale)."""
+        if self.moved:
+            self.pair_list.check_listed(self.uc)  # raises
+        return self._computed[4]
+
+
+def screen_flight(pair_list: PairList, uc: np.ndarray, vp: np.ndarray, dt: float,
+                  screen: bool = True) -> tuple[np.ndarray, int, float, np.ndarray | None, Struct]:
+    """A step's free flight uc + tau vc, 0 <= tau <= dt, from the free facet displacements
+    ``uc`` (known facets' rows) and the patch values ``vp`` of the velocity, in one compiled
+    call (``dem_pair_flight``): the free facet velocities vc = R_f v, (n, d); the known facet
+    that moves farthest from where the list was built, at the flight's end, relative to half
+    its skin: its index k (-1 if none) and (|motion| / (s/2))^2; and, if ``screen`` and that
+    ratio is at most 1 (else None), the screen: the listed pairs whose c_p = w_p g_p^- may
+    not vanish during the flight, their gap negative at an end and their projections not
+    separated by the line of a face at some tau (``overlap.separations``: exact, less a margin;
+    one pass over the list; ``dem_pair_end_state`` screens a state with it); and the flight's
+    struct, whose screen keeps those near closing at its end for the state there."""
+    n, c_pairs = len(pair_list.pairs), pair_list.c_pairs
+    if uc.shape != (c_pairs.c.n_facets, pair_list.d):
+        raise InputError(f"free facet displacements of shape {uc.shape} for {c_pairs.c.n_facets} known facets")
+    flight = Struct("dem_flight", uc=uc, vp=vp, vc=np.empty(uc.shape), dt=float(dt), screen=np.empty(n, np.int8),
+                    touching=np.empty(n, np.int64), candidates=np.empty(n, np.int64))
+    k = lib.dem_pair_flight(c_pairs.c, int(screen), flight.c)
+    vc, ratio, found = flight.arrays["vc"], float(flight.c.ratio), flight.c.n_touching
+    return vc, int(k), ratio, (None if found < 0 else flight.arrays["touching"][:found]), flight
+
+
+def integrate_flight(pair_list: PairList, patch: Struct, gauss: Struct, work, up: np.ndarray, vp: np.ndarray,
+                     uc: np.ndarray, vc: np.ndarray, dt: float, touching: np.ndarray, result: np.ndarray) -> int:
+    """result += int_0^dt (F - F_free)(u + tau v) dtau at the patch dofs, for the screened pairs
+    ``touching`` of the flight of free facet displacements uc + tau vc (patch values up + tau vp),
+    in one compiled call (``dem_pair_force_integral``); returns the pieces of the pair integral
+    with the most pieces. Each touching pair's events (its gap's and its overlap's kinks); the
+    pairs sharing an own row (N_pp' != 0) integrated on common pieces, those cut by the events of
+    their connected component of that relation (an impact in another component does not split
+    them), where every c_p is a polynomial of degree d and each pair's force term one of degree
+    2 d - 1: the d-point rule ``gauss`` is exact; a pair's overlap clipped at the nodes of its own
+    pieces only and interpolated at its component's; the rows' term -Q^T Z int c dtau on the own
+    rows the touching pairs' z_p touch (a = Q u + q + tau Q v there: no sliced Q or Z) and the
+    pairs' term -int (z_p . (a + delta_a)) dc_p/du dtau at the facets."""
+    c_flight = Struct("dem_flight", uc=uc, vp=vp, vc=vc, dt=float(dt), touching=touching, n_touching=len(touching))
+    pieces = lib.dem_pair_force_integral(pair_list.c_pairs.c, patch.c, pointer(up), c_flight.c, gauss.c, work,
+                                         pointer(result))
+    if pieces < 0:
+        raise KernelMemoryError("contact between bodies: out of memory in the force integral of a step")
+    return pieces
