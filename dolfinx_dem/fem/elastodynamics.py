@@ -35,129 +35,13 @@ import dolfinx.mesh
 
 from dolfinx_dem import _compat
 from dolfinx_dem.errors import InputError, SolverError
+from dolfinx_dem.fem.common import (check_degree, check_facets, check_material, check_positive, check_simplex_mesh,
+                                    clamped_bc, configure_lu, evaluate_at_points, lu_solver, stiffness_and_mass)
 
 __all__ = ["FEMCentralDifference", "FEMElastodynamics", "evaluate_at_points", "first_eigenfrequency"]
 
 VectorField = typing.Callable[[np.ndarray], npt.ArrayLike]
 """A callable ``x -> values``, x of shape (gdim, n) in m, values of shape (gdim, n)."""
-
-_SIMPLICES = (
-    dolfinx.mesh.CellType.interval,
-    dolfinx.mesh.CellType.triangle,
-    dolfinx.mesh.CellType.tetrahedron,
-)
-
-
-# --- validation ---------------------------------------------------------------------------------
-
-
-def _check_mesh(mesh) -> None:
-    if mesh.topology.cell_type not in _SIMPLICES:
-        raise InputError(f"mesh must be a simplex mesh, got cell type {mesh.topology.cell_type}")
-    if mesh.geometry.dim != mesh.topology.dim:
-        raise InputError(
-            f"mesh must have geometric dimension equal to its topological dimension, got "
-            f"gdim={mesh.geometry.dim}, tdim={mesh.topology.dim}"
-        )
-
-
-def _check_degree(degree) -> int:
-    is_int = isinstance(degree, (int, np.integer)) and not isinstance(degree, bool)
-    if not is_int or degree not in (1, 2):
-        raise InputError(f"degree must be 1 or 2 (Lagrange), got {degree!r}")
-    return int(degree)
-
-
-def _check_positive(name: str, value) -> float:
-    value = float(value)
-    if not (np.isfinite(value) and value > 0.0):
-        raise InputError(f"{name} must be finite and > 0, got {value!r}")
-    return value
-
-
-def _check_material(E, nu, rho) -> tuple[float, float, float]:
-    E = _check_positive("E (Young's modulus)", E)
-    rho = _check_positive("rho (density)", rho)
-    nu = float(nu)
-    if not (-1.0 < nu < 0.5):
-        raise InputError(f"nu (Poisson's ratio) must satisfy -1 < nu < 0.5, got {nu!r}")
-    return E, nu, rho
-
-
-def _check_facets(mesh, clamped_facets) -> np.ndarray:
-    facets = np.asarray(clamped_facets)
-    if facets.ndim != 1 or (facets.size > 0 and not np.issubdtype(facets.dtype, np.integer)):
-        raise InputError("clamped_facets must be a 1D array of process-local facet indices")
-    fdim = mesh.topology.dim - 1
-    mesh.topology.create_entities(fdim)
-    imap = mesh.topology.index_map(fdim)
-    num_facets = imap.size_local + imap.num_ghosts
-    if facets.size > 0 and (facets.min() < 0 or facets.max() >= num_facets):
-        raise InputError(
-            f"clamped_facets must be process-local facet indices in [0, {num_facets}), got "
-            f"values in [{facets.min()}, {facets.max()}]"
-        )
-    return facets.astype(np.int32)
-
-
-# --- forms and solvers --------------------------------------------------------------------------
-
-
-def _lame(E: float, nu: float, plane_stress: bool, gdim: int) -> tuple[float, float]:
-    """Lamé parameters (lambda, mu) in Pa; plane stress uses the reduced lambda in 2D."""
-    mu = E / (2.0 * (1.0 + nu))
-    lmbda = E * nu / ((1.0 + nu) * (1.0 - 2.0 * nu))
-    if gdim == 2 and plane_stress:
-        lmbda = 2.0 * lmbda * mu / (lmbda + 2.0 * mu)
-    return lmbda, mu
-
-
-def _stiffness_and_mass(V, E: float, nu: float, rho: float, plane_stress: bool):
-    """UFL bilinear forms of the stiffness K (N/m) and the consistent mass M (kg)."""
-    gdim = V.mesh.geometry.dim
-    u, w = ufl.TrialFunction(V), ufl.TestFunction(V)
-
-    def eps(z):
-        return ufl.sym(ufl.grad(z))
-
-    if gdim == 1:
-        sigma = E * eps(u)
-    else:
-        lmbda, mu = _lame(E, nu, plane_stress, gdim)
-        sigma = lmbda * ufl.tr(eps(u)) * ufl.Identity(gdim) + 2.0 * mu * eps(u)
-    k = ufl.inner(sigma, eps(w)) * ufl.dx
-    m = rho * ufl.inner(u, w) * ufl.dx
-    return k, m
-
-
-def _clamped_bc(V, facets: np.ndarray):
-    mesh = V.mesh
-    fdim = mesh.topology.dim - 1
-    mesh.topology.create_connectivity(fdim, mesh.topology.dim)
-    dofs = dolfinx.fem.locate_dofs_topological(V, fdim, facets)
-    zero = np.zeros(mesh.geometry.dim, dtype=PETSc.ScalarType)
-    return dolfinx.fem.dirichletbc(zero, dofs, V)
-
-
-def _configure_lu(ksp: PETSc.KSP) -> None:
-    """Direct solve: one LU factorization (MUMPS if PETSc has it; needed in parallel)."""
-    ksp.setType(PETSc.KSP.Type.PREONLY)
-    pc = ksp.getPC()
-    pc.setType(PETSc.PC.Type.LU)
-    if PETSc.Sys.hasExternalPackage("mumps"):
-        pc.setFactorSolverType("mumps")
-
-
-def _lu_solver(comm: MPI.Comm, A: PETSc.Mat) -> PETSc.KSP:
-    ksp = PETSc.KSP().create(comm)
-    ksp.setOperators(A)
-    _configure_lu(ksp)
-    ksp.setUp()
-    return ksp
-
-
-# --- time integration ---------------------------------------------------------------------------
-
 
 class _FEMSolver:
     """Set-up shared by the time integrators: checks, space, fields, clamp, forms, body force.
@@ -170,10 +54,10 @@ class _FEMSolver:
 
     def __init__(self, mesh, degree, E, nu, rho, clamped_facets, body_force, initial_displacement,
                  initial_velocity, plane_stress):
-        _check_mesh(mesh)
-        degree = _check_degree(degree)
-        E, nu, rho = _check_material(E, nu, rho)
-        facets = _check_facets(mesh, clamped_facets)
+        check_simplex_mesh(mesh)
+        degree = check_degree(degree)
+        E, nu, rho = check_material(E, nu, rho)
+        facets = check_facets(mesh, clamped_facets)
         gdim = mesh.geometry.dim
         if body_force is not None:
             body_force = np.asarray(body_force, dtype=PETSc.ScalarType)
@@ -187,8 +71,8 @@ class _FEMSolver:
         self.u = dolfinx.fem.Function(self.V, name="displacement")
         self.v = dolfinx.fem.Function(self.V, name="velocity")
         self.a = dolfinx.fem.Function(self.V, name="acceleration")
-        self._bcs = [_clamped_bc(self.V, facets)]
-        self._k, self._m = _stiffness_and_mass(self.V, E, nu, rho, plane_stress)
+        self._bcs = [clamped_bc(self.V, facets)]
+        self._k, self._m = stiffness_and_mass(self.V, E, nu, rho, plane_stress)
 
         u_vec = _compat.petsc_vec(self.u)
         self._F = None
@@ -285,7 +169,7 @@ class FEMElastodynamics(_FEMSolver):
         initial_velocity: typing.Optional[VectorField] = None,
         plane_stress: bool = False,
     ):
-        self.dt = _check_positive("dt (time step)", dt)
+        self.dt = check_positive("dt (time step)", dt)
         super().__init__(mesh, degree, E, nu, rho, clamped_facets, body_force,
                          initial_displacement, initial_velocity, plane_stress)
         dt = self.dt
@@ -300,7 +184,7 @@ class FEMElastodynamics(_FEMSolver):
             dolfinx.fem.form(k + self._c0 * m), bcs=self._bcs, diagonal=1.0
         )
         A.assemble()
-        self._solver = _lu_solver(self.comm, A)
+        self._solver = lu_solver(self.comm, A)
         self._u_old = self._work.copy()
         if initial_displacement is not None or self._F is not None:
             self._initial_acceleration()
@@ -312,7 +196,7 @@ class FEMElastodynamics(_FEMSolver):
         """Solve ``M a_0 = F - K u_0`` with a_0 = 0 on the clamped dofs."""
         Mbc = dolfinx.fem.petsc.assemble_matrix(dolfinx.fem.form(self._m), bcs=self._bcs, diagonal=1.0)
         Mbc.assemble()
-        solver = _lu_solver(self.comm, Mbc)
+        solver = lu_solver(self.comm, Mbc)
         a_vec = _compat.petsc_vec(self.a)
         solver.solve(self._residual(self._b), a_vec)
         a_vec.ghostUpdate(addv=PETSc.InsertMode.INSERT, mode=PETSc.ScatterMode.FORWARD)
@@ -396,7 +280,7 @@ class FEMCentralDifference(_FEMSolver):
     ):
         if (dt is None) == (cfl is None):
             raise InputError("give exactly one of dt (time step) and cfl (fraction of dt_stable)")
-        step = _check_positive("dt (time step)" if cfl is None else "cfl", dt if cfl is None else cfl)
+        step = check_positive("dt (time step)" if cfl is None else "cfl", dt if cfl is None else cfl)
         super().__init__(mesh, 1, E, nu, rho, clamped_facets, body_force,
                          initial_displacement, initial_velocity, plane_stress)
         # K with the clamped rows and columns zeroed: u stays 0 there, and 1/2 u.K u is unchanged.
@@ -501,48 +385,6 @@ def _vector_field(field: VectorField, gdim: int, name: str):
     return wrapped
 
 
-def evaluate_at_points(function, points: npt.ArrayLike) -> np.ndarray:
-    """Values of a (vector) Function at points, gathered on every rank (collective).
-
-    Args:
-        function: A DOLFINx Function on a mesh with geometric dimension gdim.
-        points: Shape (n, gdim) (or (gdim,) for one point).
-
-    Returns:
-        Shape (n, value_size); each value comes from the lowest rank that holds the point.
-    """
-    mesh = function.function_space.mesh
-    comm = mesh.comm
-    gdim = mesh.geometry.dim
-    pts = np.asarray(points, dtype=np.float64)
-    if pts.ndim == 1 and pts.shape[0] == gdim:
-        pts = pts[None, :]
-    if pts.ndim != 2 or pts.shape[1] != gdim:
-        raise InputError(f"points must have shape (n, {gdim}), got {np.shape(points)}")
-    n = pts.shape[0]
-    x = np.zeros((n, 3), dtype=np.float64)
-    x[:, :gdim] = pts
-
-    cells = _compat.colliding_cells(mesh, x)
-    found = cells >= 0
-    owner = np.where(found, comm.rank, comm.size).astype(np.int32)
-    comm.Allreduce(MPI.IN_PLACE, owner, op=MPI.MIN)
-    if np.any(owner == comm.size):
-        missing = pts[owner == comm.size]
-        raise InputError(f"points outside the mesh: {missing.tolist()}")
-
-    value_size = function.function_space.dofmap.index_map_bs
-    values = np.zeros((n, value_size), dtype=np.float64)
-    mine = owner == comm.rank
-    if np.any(mine):
-        values[mine] = np.real(function.eval(x[mine], cells[mine])).reshape(-1, value_size)
-    comm.Allreduce(MPI.IN_PLACE, values, op=MPI.SUM)
-    return values
-
-
-# --- eigenfrequencies ---------------------------------------------------------------------------
-
-
 def first_eigenfrequency(
     mesh,
     degree: int,
@@ -570,10 +412,10 @@ def first_eigenfrequency(
     """
     from slepc4py import SLEPc
 
-    _check_mesh(mesh)
-    degree = _check_degree(degree)
-    E, nu, rho = _check_material(E, nu, rho)
-    facets = _check_facets(mesh, clamped_facets)
+    check_simplex_mesh(mesh)
+    degree = check_degree(degree)
+    E, nu, rho = check_material(E, nu, rho)
+    facets = check_facets(mesh, clamped_facets)
     if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or n < 1:
         raise InputError(f"n (number of frequencies) must be an integer >= 1, got {n!r}")
     comm = mesh.comm
@@ -581,8 +423,8 @@ def first_eigenfrequency(
         raise InputError("clamped_facets is empty on every rank: the free body has zero modes")
 
     V = _compat.create_vector_space(mesh, "Lagrange", degree)
-    bcs = [_clamped_bc(V, facets)]
-    k, m = _stiffness_and_mass(V, E, nu, rho, plane_stress)
+    bcs = [clamped_bc(V, facets)]
+    k, m = stiffness_and_mass(V, E, nu, rho, plane_stress)
     K = dolfinx.fem.petsc.assemble_matrix(dolfinx.fem.form(k), bcs=bcs, diagonal=1.0)
     K.assemble()
     M = dolfinx.fem.petsc.assemble_matrix(dolfinx.fem.form(m), bcs=bcs, diagonal=0.0)
@@ -598,7 +440,7 @@ def first_eigenfrequency(
     st = eps.getST()
     st.setType(SLEPc.ST.Type.SINVERT)
     st.setShift(0.0)
-    _configure_lu(st.getKSP())
+    configure_lu(st.getKSP())
     eps.solve()
 
     lam = np.array([eps.getEigenvalue(i).real for i in range(eps.getConverged())])

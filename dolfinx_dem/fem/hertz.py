@@ -101,6 +101,10 @@ from dolfinx_dem.hertz import (
     hertz_analytic_3d,
 )
 from dolfinx_dem.errors import InputError, SolverError
+from dolfinx_dem.fem.nitsche import (MeanUx, NewtonSolver, assembled_norm, sample_contact,
+                                     top_displacement)
+from dolfinx_dem.fem.common import (check_degree, check_elastic, check_int, check_positive, gather_sorted, global_min,
+                                    lame, owned_facets)
 
 __all__ = [
     "HertzAnalytic",
@@ -112,37 +116,6 @@ __all__ = [
 ]
 
 _CONTACT = 1  # facet tag of the potential contact boundary (lower half of the disc)
-
-
-# --- validation ---------------------------------------------------------------------------------
-
-
-def _check_positive(name: str, value) -> float:
-    value = float(value)
-    if not (np.isfinite(value) and value > 0.0):
-        raise InputError(f"{name} must be finite and > 0, got {value!r}")
-    return value
-
-
-def _check_material(E, nu) -> tuple[float, float]:
-    E = _check_positive("E (Young's modulus)", E)
-    nu = float(nu)
-    if not (-1.0 < nu < 0.5):
-        raise InputError(f"nu (Poisson's ratio) must satisfy -1 < nu < 0.5, got {nu!r}")
-    return E, nu
-
-
-def _check_degree(degree) -> int:
-    is_int = isinstance(degree, (int, np.integer)) and not isinstance(degree, bool)
-    if not is_int or degree not in (1, 2):
-        raise InputError(f"degree must be 1 or 2 (Lagrange), got {degree!r}")
-    return int(degree)
-
-
-def _check_int(name: str, value, minimum: int) -> int:
-    if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < minimum:
-        raise InputError(f"{name} must be an integer >= {minimum}, got {value!r}")
-    return int(value)
 
 
 # --- result -------------------------------------------------------------------------------------
@@ -209,245 +182,6 @@ class HertzResult:
 # --- the solver ---------------------------------------------------------------------------------
 
 
-def _lame(E: float, nu: float) -> tuple[float, float]:
-    """Lamé parameters (lambda, mu) in Pa (3D, and plane strain in 2D)."""
-    return E * nu / ((1.0 + nu) * (1.0 - 2.0 * nu)), E / (2.0 * (1.0 + nu))
-
-
-def _global_min(comm, values: np.ndarray) -> float:
-    local = float(np.min(values)) if values.size > 0 else np.inf
-    return comm.allreduce(local, op=MPI.MIN)
-
-
-def _top_displacement(u, R: float) -> tuple[float, float]:
-    """(y_top, u_y) at the top of the mesh at x = 0 (m): on the polygon, not the circle.
-
-    2D: evaluated in the cell of the owned boundary facet that crosses x = 0 (no point
-    location). 3D: at the pole (0, 0, 2R), a vertex of the mesh (``create_balls``).
-    """
-    mesh = u.function_space.mesh
-    if mesh.topology.dim == 3:
-        point = np.array([[0.0, 0.0, 2.0 * R]])
-        cell = _compat.colliding_cells(mesh, point)
-        value = np.real(u.eval(point, cell)).reshape(-1)[2] if cell[0] >= 0 else -np.inf
-        found = mesh.comm.allreduce(value, op=MPI.MAX)  # any process holding the pole
-        if not np.isfinite(found):
-            raise SolverError("the top of the ball (0, 0, 2R) is in no cell")
-        return 2.0 * R, float(found)
-    facets = _owned(mesh, meshes.locate_boundary_facets(mesh, lambda x: x[1] > R))
-    cells, facet_x, _ = _compat.facet_cell_and_vertices(mesh, facets)
-    best = (-np.inf, 0.0)
-    for cell, ((x0, y0, _), (x1, y1, _)) in zip(cells, facet_x):
-        if min(x0, x1) <= 0.0 <= max(x0, x1) and x0 != x1:
-            y = y0 + (y1 - y0) * (0.0 - x0) / (x1 - x0)
-            if y > best[0]:
-                point = np.array([[0.0, y, 0.0]])
-                value = np.real(u.eval(point, np.array([cell], dtype=np.int32))).reshape(-1)
-                best = (y, float(value[1]))
-    return mesh.comm.allreduce(best, op=MPI.MAX)
-
-
-def _owned(mesh, facets: np.ndarray) -> np.ndarray:
-    return facets[facets < mesh.topology.index_map(mesh.topology.dim - 1).size_local]
-
-
-def _sample_contact(u, sigma_h, facets, y_plane, gamma0, E, samples_per_facet, R, exact_gap):
-    """(x, lambda, p, g) at equispaced interior points of the given owned boundary facets.
-
-    Same quantities as in the forms: p = e_y . sigma_h n, g the gap, lambda = [p - gamma g]_+
-    with gamma = gamma0 E / h_K (h_K the largest vertex distance of the facet's cell, as
-    ufl.CellDiameter on an affine simplex).
-    """
-    if facets.size == 0:
-        empty = np.zeros(0)
-        return empty, empty, empty, empty
-    mesh = u.function_space.mesh
-    cells, facet_x, cell_x = _compat.facet_cell_and_vertices(mesh, facets)
-    s = (np.arange(samples_per_facet) + 0.5) / samples_per_facet
-    points = facet_x[:, :1, :] + s[None, :, None] * (facet_x[:, 1:2, :] - facet_x[:, :1, :])
-    points = points.reshape(-1, 3)
-    point_cells = np.repeat(cells, samples_per_facet)
-    # outward unit normal of each facet, and the cell diameter (max vertex distance)
-    t = facet_x[:, 1, :2] - facet_x[:, 0, :2]
-    normal = np.stack([t[:, 1], -t[:, 0]], axis=1) / np.linalg.norm(t, axis=1)[:, None]
-    inward = cell_x[:, :, :2].mean(axis=1) - facet_x[:, :, :2].mean(axis=1)
-    normal *= -np.sign(np.sum(normal * inward, axis=1))[:, None]
-    diffs = cell_x[:, :, None, :2] - cell_x[:, None, :, :2]
-    h_cell = np.sqrt(np.max(np.sum(diffs**2, axis=-1), axis=(1, 2)))
-
-    u_val = np.real(u.eval(points, point_cells)).reshape(-1, 2)
-    sig = np.real(sigma_h.eval(points, point_cells)).reshape(-1, 2, 2)
-    n_pt = np.repeat(normal, samples_per_facet, axis=0)
-    p = np.einsum("ij,ij->i", sig[:, 1, :], n_pt)  # e_y . sigma n
-    if exact_gap:
-        g = R - np.sqrt(np.clip(R**2 - points[:, 0] ** 2, 0.0, None)) + u_val[:, 1]
-    else:
-        g = points[:, 1] + u_val[:, 1] - y_plane
-    gamma = gamma0 * E / np.repeat(h_cell, samples_per_facet)
-    lam = np.maximum(p - gamma * g, 0.0)
-    return points[:, 0].copy(), lam, p, g
-
-
-def _gather_sorted(comm, *arrays):
-    gathered = [np.concatenate(comm.allgather(a)) for a in arrays]
-    order = np.argsort(gathered[0], kind="stable")
-    return [a[order] for a in gathered]
-
-
-class _MeanUx:
-    """The constraint "mass-weighted mean of u_x = 0" (uniform density: area-weighted).
-
-    ``m . u = integral of u_x dx`` with ``m_i = integral of phi_i . e_x dx``; ``e_x`` holds the
-    coefficients of the constant field (1, 0), the null vector of the Jacobian.
-    """
-
-    def __init__(self, V):
-        v = ufl.TestFunction(V)
-        self.m = dolfinx.fem.petsc.assemble_vector(dolfinx.fem.form(v[0] * ufl.dx))
-        self.m.ghostUpdate(addv=PETSc.InsertMode.ADD, mode=PETSc.ScatterMode.REVERSE)
-        self._e_x_function = dolfinx.fem.Function(V)
-        self._e_x_function.interpolate(lambda x: np.stack([np.ones(x.shape[1]), np.zeros(x.shape[1])]))
-        self.e_x = _compat.petsc_vec(self._e_x_function)
-        self.area = self.m.dot(self.e_x)
-
-    def mean(self, vec: PETSc.Vec) -> float:
-        """Mean x-component (m) of the field with coefficients ``vec``."""
-        return self.m.dot(vec) / self.area
-
-    def remove(self, vec: PETSc.Vec) -> None:
-        """Subtract the mean x-translation from ``vec`` (owned entries; ghosts untouched)."""
-        vec.axpy(-self.mean(vec), self.e_x)
-
-
-def _rigid_motions(V) -> PETSc.NullSpace:
-    """The rigid motions of the vector space V (3 in 2D, 6 in 3D) as an orthonormal PETSc
-    NullSpace, the near null space of elasticity for the AMG."""
-    d = V.mesh.geometry.dim
-    modes = [lambda x, i=i: np.stack([np.full(x.shape[1], float(i == k)) for k in range(d)]) for i in range(d)]
-    for i, j in ((0, 1), (1, 2), (2, 0))[: 1 if d == 2 else 3]:  # rotation in the (x_i, x_j) plane
-        modes.append(lambda x, i=i, j=j: np.stack([-x[j] if k == i else x[i] if k == j else 0.0 * x[0]
-                                                   for k in range(d)]))
-    vectors = []
-    for mode in modes:
-        w = dolfinx.fem.Function(V)
-        w.interpolate(mode)
-        vec = _compat.petsc_vec(w).copy()
-        for other in vectors:  # Gram-Schmidt
-            vec.axpy(-vec.dot(other), other)
-        vec.normalize()
-        vectors.append(vec)
-    return PETSc.NullSpace().create(vectors=vectors, comm=V.mesh.comm)
-
-
-class _Newton:
-    """DOLFINx's NewtonSolver with MUMPS LU and updates free of the mean x-translation.
-
-    The Jacobian is singular (its null vector is e_x). ``method`` makes the linear solves well
-    posed:
-
-    * "regularise": solve with ``J + eps M_x``, ``M_x`` the mass matrix of the x-components
-      (``(du_x, v_x)``, eps = ``regularisation`` in Pa/m^2). The residual is unchanged, so the
-      converged solution is exact; every update satisfies ``m . du = 0`` exactly (e_x is a left
-      null vector of J and ``M_x e_x = m``), and Newton's convergence is slowed by a factor
-      ~ eps / (smallest nonzero eigenvalue of J relative to M) only.
-    * "nullspace": e_x as a PETSc MatNullSpace of J and MUMPS with null-pivot detection
-      (ICNTL(24) = 1). MUMPS's default threshold does not always see the (round-off) null pivot.
-
-    In both cases the update is projected onto zero mean u_x. With ``mean_ux=None`` (3D: the
-    symmetry conditions ``bcs`` fix the horizontal motions) J is nonsingular: GMRES + GAMG.
-    """
-
-    _METHODS = ("regularise", "nullspace")
-
-    def __init__(self, comm, F, u, mean_ux, rtol, atol, max_it, method, regularisation, bcs=()):
-        V = u.function_space
-        du, v = ufl.TrialFunction(V), ufl.TestFunction(V)
-        J = ufl.derivative(F, u, du)
-        options = {"ksp_type": "preonly", "pc_type": "lu", "pc_factor_mat_solver_type": "mumps"}
-        if mean_ux is None:
-            # 3D: the LU's fill makes MUMPS minutes slow from ~40k dofs (300 s against 36 s at
-            # 40k). GMRES, not CG: on coarse meshes the Nitsche term -theta/gamma (p(du), p(v))
-            # makes J slightly indefinite (CG stopped with an indefinite matrix at h = 0.06 m).
-            # Smoothed aggregation AMG with the rigid motions as near null space; updates to
-            # 1e-10 relative residual keep Newton's convergence.
-            method = None
-            options = {"ksp_type": "gmres", "pc_type": "gamg", "ksp_rtol": 1e-10, "ksp_max_it": 5000}
-        elif method == "regularise":
-            J = J + regularisation * du[0] * v[0] * ufl.dx
-        else:
-            options["mat_mumps_icntl_24"] = 1
-        self.solver, self._problem = _compat.newton_solver(comm, F, u, J, bcs)
-        # DOLFINx 0.5's "residual" criterion divides by the first update's norm, not by the first
-        # residual's; the incremental criterion ||du_k|| <= rtol ||du_1|| is used instead (the
-        # caller checks the final residual).
-        self.solver.convergence_criterion = "incremental"
-        self.solver.rtol = rtol
-        self.solver.atol = atol
-        self.solver.max_it = max_it
-        self.solver.error_on_nonconvergence = False
-
-        self._null_space = self._near_null_space = None
-        if mean_ux is None:
-            self._near_null_space = _rigid_motions(V)
-            self.solver.A.setNearNullSpace(self._near_null_space)
-        if method == "nullspace":
-            e_x = self.solver.A.createVecRight()
-            e_x.array[:] = mean_ux.e_x.array_r[: e_x.getLocalSize()]
-            e_x.normalize()
-            self._null_space = PETSc.NullSpace().create(vectors=[e_x], comm=comm)
-            self.solver.A.setNullSpace(self._null_space)
-
-        # MUMPS reads its options when the factor is created (first solve): keep them till close()
-        self.ksp = self.solver.krylov_solver
-        self._prefix = f"dolfinx_dem_hertz_{id(self)}_"
-        self.ksp.setOptionsPrefix(self._prefix)
-        self._options = options
-        database = PETSc.Options()
-        for key, value in options.items():
-            database[self._prefix + key] = value
-        self.ksp.setFromOptions()
-
-        if mean_ux is not None:
-            def update(_solver, dx: PETSc.Vec, x: PETSc.Vec) -> None:
-                mean_ux.remove(dx)  # the update keeps the mean of u_x (zero) unchanged
-                x.axpy(-1.0, dx)
-
-            self.solver.set_update(update)
-
-    def solve(self, u) -> tuple[int, bool]:
-        result = self.solver.solve(u)
-        if self.ksp.getConvergedReason() < 0:
-            raise SolverError(f"the linear solve of the last Newton iteration failed (KSP reason "
-                               f"{self.ksp.getConvergedReason()})")
-        return result
-
-    def null_pivots(self) -> int:
-        """Null pivots MUMPS detected in the last factorisation (0 unless "nullspace")."""
-        if self._null_space is None:
-            return 0
-        return int(self.ksp.getPC().getFactorMatrix().getMumpsInfog(28))
-
-    def close(self) -> None:
-        database = PETSc.Options()
-        for key in self._options:
-            database.delValue(self._prefix + key)
-        if self._null_space is not None:
-            self._null_space.destroy()
-        if self._near_null_space is not None:
-            self._near_null_space.destroy()
-
-
-def _assembled_norm(form, bcs=()) -> float:
-    """Euclidean norm of the assembled vector, without the entries of the Dirichlet dofs (there
-    the residual is the reaction)."""
-    vec = dolfinx.fem.petsc.assemble_vector(dolfinx.fem.form(form))
-    vec.ghostUpdate(addv=PETSc.InsertMode.ADD, mode=PETSc.ScatterMode.REVERSE)
-    dolfinx.fem.petsc.set_bc(vec, list(bcs), scale=0.0)
-    norm = vec.norm()
-    vec.destroy()
-    return norm
-
-
 def solve_hertz(
     comm: MPI.Comm,
     h: float,
@@ -509,31 +243,31 @@ def solve_hertz(
     from dolfinx_dem.meshes import create_balls, create_discs
 
     t_start = time.perf_counter()
-    h = _check_positive("h (mesh size)", h)
-    degree = _check_degree(degree)
-    R = _check_positive("R (radius)", R)
+    h = check_positive("h (mesh size)", h)
+    degree = check_degree(degree)
+    R = check_positive("R (radius)", R)
     if h >= R:
         raise InputError(f"h (mesh size) must be smaller than R, got h={h}, R={R}")
-    E, nu = _check_material(E, nu)
-    f = _check_positive("body_force", body_force)
-    gamma0 = _check_positive("gamma0 (Nitsche parameter)", gamma0)
+    E, nu = check_elastic(E, nu)
+    f = check_positive("body_force", body_force)
+    gamma0 = check_positive("gamma0 (Nitsche parameter)", gamma0)
     theta = float(theta)
     if not -1.0 <= theta <= 1.0:
         raise InputError(f"theta must be in [-1, 1] (1, 0, -1 are the usual variants), got {theta}")
-    if singular_method not in _Newton._METHODS:
+    if singular_method not in NewtonSolver._METHODS:
         raise InputError(
-            f"singular_method must be one of {', '.join(_Newton._METHODS)}, got {singular_method!r}"
+            f"singular_method must be one of {', '.join(NewtonSolver._METHODS)}, got {singular_method!r}"
         )
-    regularisation = _check_positive("regularisation", regularisation)
-    load_steps = _check_int("load_steps", load_steps, 1)
-    max_it = _check_int("max_it", max_it, 1)
-    samples_per_facet = _check_int("samples_per_facet", samples_per_facet, 1)
-    rtol = _check_positive("rtol", rtol)
+    regularisation = check_positive("regularisation", regularisation)
+    load_steps = check_int("load_steps", load_steps, 1)
+    max_it = check_int("max_it", max_it, 1)
+    samples_per_facet = check_int("samples_per_facet", samples_per_facet, 1)
+    rtol = check_positive("rtol", rtol)
     if not 0.0 < fit_fraction < 1.0:
         raise InputError(f"fit_fraction must be in (0, 1), got {fit_fraction!r}")
     if quadrature_degree is None:
         quadrature_degree = 4 * degree
-    quadrature_degree = _check_int("quadrature_degree", quadrature_degree, 1)
+    quadrature_degree = check_int("quadrature_degree", quadrature_degree, 1)
     if dim not in (2, 3):
         raise InputError(f"dim must be 2 (disc) or 3 (quarter ball), got {dim!r}")
     d = dim
@@ -563,13 +297,13 @@ def solve_hertz(
         subdomain_id=_CONTACT,
         metadata={"quadrature_degree": quadrature_degree},
     )
-    y_plane = 0.0 if exact_gap else _global_min(comm, mesh.geometry.x[:, d - 1])
+    y_plane = 0.0 if exact_gap else global_min(comm, mesh.geometry.x[:, d - 1])
 
     # Nitsche residual (module docstring)
     V = _compat.create_vector_space(mesh, "Lagrange", degree)
     u = dolfinx.fem.Function(V, name="displacement")
     v = ufl.TestFunction(V)
-    lmbda, mu = _lame(E, nu)
+    lmbda, mu = lame(E, nu)
 
     def eps(w):
         return ufl.sym(ufl.grad(w))
@@ -603,14 +337,14 @@ def solve_hertz(
     )
 
     if d == 2:
-        mean_ux, bcs = _MeanUx(V), []
+        mean_ux, bcs = MeanUx(V), []
     else:  # symmetry: u_x = 0 on x = 0, u_y = 0 on y = 0
         mean_ux, bcs = None, []
         for i in range(2):
             facets = meshes.locate_boundary_facets(mesh, lambda x, i=i: np.abs(x[i]) <= 1e-10 * R)
             dofs = dolfinx.fem.locate_dofs_topological(V.sub(i), fdim, facets)
             bcs.append(dolfinx.fem.dirichletbc(PETSc.ScalarType(0.0), dofs, V.sub(i)))
-    newton = _Newton(
+    newton = NewtonSolver(
         comm, F, u, mean_ux, rtol, 1e-14 * R, max_it, singular_method, regularisation * E / R**2, bcs
     )
     t_setup = time.perf_counter()
@@ -639,7 +373,7 @@ def solve_hertz(
     t_solve = time.perf_counter()
 
     # --- postprocessing
-    residual = _assembled_norm(F, bcs) / _assembled_norm(load_form, bcs)
+    residual = assembled_norm(F, bcs) / assembled_norm(load_form, bcs)
 
     def integral(expr) -> float:
         return comm.allreduce(dolfinx.fem.assemble_scalar(dolfinx.fem.form(expr)), op=MPI.SUM)
@@ -651,11 +385,11 @@ def solve_hertz(
         W = _compat.create_tensor_space(mesh, "DG", degree - 1)
         sigma_h = dolfinx.fem.Function(W)
         _compat.interpolate_expression(sigma_h, sigma(u))  # exact: sigma(u_h) is in DG(degree-1)
-        samples = _sample_contact(
-            u, sigma_h, _owned(mesh, contact_facets), y_plane, gamma0, E, samples_per_facet, R,
+        samples = sample_contact(
+            u, sigma_h, owned_facets(mesh, contact_facets), y_plane, gamma0, E, samples_per_facet, R,
             exact_gap,
         )
-        xs, lam, p, g = _gather_sorted(comm, *samples)
+        xs, lam, p, g = gather_sorted(comm, *samples)
         traction_in_contact = np.where(lam > 0.0, p, 0.0)
         a_fit, p0_fit, fit_centre = contact_half_width_fit(xs, traction_in_contact, fit_fraction)
         a_fit_multiplier = contact_half_width_fit(xs, lam, fit_fraction)[0]
@@ -670,7 +404,7 @@ def solve_hertz(
         a_fit = p0_fit = fit_centre = a_fit_multiplier = a_moment = moment_centre = a_moment_traction = nan
         a_radius = contact_radius_moments(contact_force, integral(multiplier * r2 * ds_c))
     applied = f * integral(dolfinx.fem.Constant(mesh, PETSc.ScalarType(1.0)) * ufl.dx)
-    _, u_top = _top_displacement(u, R)
+    _, u_top = top_displacement(u, R)
     t_end = time.perf_counter()
 
     times = {

@@ -85,7 +85,7 @@ from petsc4py import PETSc
 import dolfinx.fem
 
 from dolfinx_dem import _compat
-from dolfinx_dem.fem.hertz import _check_int, _check_material, _check_positive, _gather_sorted, _lame, _owned
+from dolfinx_dem.fem.common import check_degree, check_elastic, check_int, check_positive, gather_sorted, lame, owned_facets
 from dolfinx_dem.hertz import contact_half_width_fit, contact_half_width_last, contact_half_width_moments
 from dolfinx_dem.errors import InputError, SolverError
 
@@ -111,7 +111,7 @@ def create_indentation_mesh(comm: MPI.Comm, h: float):
 
     from dolfinx_dem.meshes import _mesh_from_gmsh
 
-    h = _check_positive("h (mesh size)", h)
+    h = check_positive("h (mesh size)", h)
     if h > FINE_BOX[1] / 2:
         raise InputError(f"h (mesh size) must be <= {FINE_BOX[1] / 2} m (the refined zone), got {h}")
 
@@ -201,7 +201,7 @@ class _Indentation:
         self.V = V
         self.u = dolfinx.fem.Function(V, name="displacement")
         u, v = self.u, ufl.TestFunction(V)
-        lmbda, mu = _lame(E, nu)
+        lmbda, mu = lame(E, nu)
 
         def eps(w):
             return ufl.sym(ufl.grad(w))
@@ -262,7 +262,7 @@ class _Indentation:
         """(x, lambda, p, g) at equispaced interior points of the owned top facets (gathered)."""
         sigma_h = dolfinx.fem.Function(self.W)
         _compat.interpolate_expression(sigma_h, self.sigma(self.u))  # exact: sigma(u_h) in DG(k-1)
-        facets = _owned(self.mesh, self.top_facets)
+        facets = owned_facets(self.mesh, self.top_facets)
         cells, facet_x, cell_x = _compat.facet_cell_and_vertices(self.mesh, facets)
         s = (np.arange(samples_per_facet) + 0.5) / samples_per_facet
         points = (facet_x[:, :1, :] + s[None, :, None] * (facet_x[:, 1:2, :] - facet_x[:, :1, :])).reshape(-1, 3)
@@ -277,11 +277,11 @@ class _Indentation:
         p = np.einsum("ij,ij->i", normal, sig[:, :, 1])  # nu . sigma e_y (n = e_y on the top)
         g = distance - self.R
         lam = np.maximum(p - self.gamma0 * self.E / h_cell * g, 0.0)
-        return _gather_sorted(self.comm, points[:, 0].copy(), lam, p, g)
+        return gather_sorted(self.comm, points[:, 0].copy(), lam, p, g)
 
 
 def _check_deltas(deltas, R: float) -> list[float]:
-    values = [_check_positive("delta (indentation)", d) for d in np.atleast_1d(deltas)]
+    values = [check_positive("delta (indentation)", d) for d in np.atleast_1d(deltas)]
     if len(values) == 0:
         raise InputError("deltas must hold at least one indentation")
     if any(b <= a for a, b in zip(values, values[1:])):
@@ -332,20 +332,19 @@ def solve_indentation(
     Raises:
         ValueError: bad input. RuntimeError: Newton did not converge, or no contact.
     """
-    from dolfinx_dem.fem.hertz import _check_degree
 
-    R = _check_positive("R (radius)", R)
+    R = check_positive("R (radius)", R)
     deltas = _check_deltas(deltas, R)
-    degree = _check_degree(degree)
-    E, nu = _check_material(E, nu)
-    gamma0 = _check_positive("gamma0 (Nitsche parameter)", gamma0)
+    degree = check_degree(degree)
+    E, nu = check_elastic(E, nu)
+    gamma0 = check_positive("gamma0 (Nitsche parameter)", gamma0)
     theta = float(theta)
     if not -1.0 <= theta <= 1.0:
         raise InputError(f"theta must be in [-1, 1] (1, 0, -1 are the usual variants), got {theta}")
-    rtol = _check_positive("rtol", rtol)
-    max_it = _check_int("max_it", max_it, 1)
-    samples_per_facet = _check_int("samples_per_facet", samples_per_facet, 1)
-    quadrature_degree = _check_int("quadrature_degree", 4 * degree if quadrature_degree is None
+    rtol = check_positive("rtol", rtol)
+    max_it = check_int("max_it", max_it, 1)
+    samples_per_facet = check_int("samples_per_facet", samples_per_facet, 1)
+    quadrature_degree = check_int("quadrature_degree", 4 * degree if quadrature_degree is None
                                    else quadrature_degree, 1)
     problem = _Indentation(comm, h, degree, R, E, nu, gamma0, theta, rtol, max_it, quadrature_degree)
     E_star = E / (1.0 - nu**2)
