@@ -60,7 +60,7 @@ def idle_balls(n_idle: int, h: float, t0: float, t1: float) -> dict:
         chunks.append((time.process_time() - start, contact.seconds))
     total, seconds = min(chunks, key=lambda c: c[1])
     return {"idle_balls": n_idle, "cells": run.dem.geometry.num_cells_global,
-            "contact_candidate_facets": contact.num_facets, "pairs_listed": contact.num_pairs,
+            "contact_candidate_facets": contact.pair_list.num_facets, "pairs_listed": contact.num_pairs,
             "touching_pairs_mean": float(np.mean(touching)), "steps_per_chunk": steps,
             "contact_ms_per_step": 1e3 * seconds / steps, "step_ms": 1e3 * total / steps}
 

@@ -46,7 +46,6 @@ import tempfile
 import time
 
 import numpy as np
-
 from work_precision import time_to_error  # benchmarks/ is on sys.path when a script runs
 
 ROOT = pathlib.Path(__file__).resolve().parent.parent
@@ -298,11 +297,10 @@ def time_to_error_table(conv, targets) -> dict:
 
 
 def stability_sweep(cfls, workdir, log, n=100, t_end=2.0, dem=True) -> dict:
-    from dolfinx_dem.fem import signorini
-
     from mpi4py import MPI
 
     from dolfinx_dem import simulation
+    from dolfinx_dem.fem import signorini
 
     dx = L / n
     out = {"n": n, "t_end": t_end, "cfl_limit": {m: signorini.stability_limit_cfl(m, n) for m in FEM}, "runs": {}}
@@ -330,7 +328,7 @@ def stability_sweep(cfls, workdir, log, n=100, t_end=2.0, dem=True) -> dict:
                        tip_l2=m["tip_l2"] if row["stable"] else None)
             rows.append(row)
             log(f"stability {method:16s} CFL {row['cfl']:.4f}: "
-                f"{'stable' if row['stable'] else 'FAILED at t = %.4g' % row['stopped_at_t']}, "
+                f"{'stable' if row['stable'] else 'FAILED at t = {:.4g}'.format(row['stopped_at_t'])}, "
                 f"energy error {row['energy_rel_error_max']:.2e}")
         out["runs"][method] = rows
         ok = [r["cfl"] for r in rows if r["stable"]]
@@ -350,7 +348,7 @@ def penalty_sweep(ns, penalties, log) -> dict:
             m.update(n=n, kappa=r.penalty_parameter, wall_time_s=r.wall_time_s)
             rows.append(m)
         out["runs"][f"{pen:g}"] = rows
-        finals = ", ".join("%+.1e" % r["energy_rel_error_final"] for r in rows)
+        finals = ", ".join("{:+.1e}".format(r["energy_rel_error_final"]) for r in rows)
         log(f"penalty {pen:g} E/h: tip L2 {[round(r['tip_l2'], 5) for r in rows]}, final energy [{finals}]")
     return out
 
@@ -630,7 +628,7 @@ def markdown(results, command) -> str:
     all_cfl = sorted({r["cfl_requested"] for rows in stab["runs"].values() for r in rows})
     for cfl in all_cfl:
         cells = []
-        for m, rows in stab["runs"].items():
+        for rows in stab["runs"].values():
             r = next((r for r in rows if r["cfl_requested"] == cfl), None)
             if r is None:
                 cells.append("")

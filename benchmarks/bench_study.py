@@ -68,9 +68,8 @@ def _peak_rss_bytes() -> int:
 
 def _square(comm, n):
     """The benchmark problem: unit square, 2 n^2 cells, clamped on x = 0, scheme A, and a stable MEMM."""
-    import numpy as np
-
     import dolfinx.mesh
+    import numpy as np
 
     from dolfinx_dem import DEMDiscretisation, DirichletBC, ElasticMaterial, meshes
 
@@ -465,7 +464,7 @@ def main(argv=None) -> dict:
 
     sizes = QUICK_SIZES if args.quick else SIZES
     growth = []
-    for label, n in sizes.items():
+    for _label, n in sizes.items():
         rounds = 10 if n > 500 else 30
         load = os.getloadavg()[0]
         growth.append(_child(["--child-size", str(n), "--rounds", str(rounds)]))

@@ -75,10 +75,8 @@ import pathlib  # noqa: E402
 import platform  # noqa: E402
 import time  # noqa: E402
 
-from mpi4py import MPI  # noqa: E402
-
 import numpy as np  # noqa: E402
-
+from mpi4py import MPI  # noqa: E402
 from work_precision import time_to_error  # noqa: E402  (benchmarks/ is on sys.path when a script runs)
 
 ROOT = pathlib.Path(__file__).resolve().parent.parent

@@ -63,11 +63,10 @@ import os
 import pathlib
 import time
 
-from mpi4py import MPI
-from petsc4py import PETSc
-
 import matplotlib
 import numpy as np
+from mpi4py import MPI
+from petsc4py import PETSc
 
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402

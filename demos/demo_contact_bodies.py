@@ -55,10 +55,9 @@ import json
 import os
 import pathlib
 
+import matplotlib.figure
 import numpy as np
 from mpi4py import MPI
-
-import matplotlib.figure
 
 from dolfinx_dem import scenes, simulation
 

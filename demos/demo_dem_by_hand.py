@@ -50,17 +50,15 @@
 import os
 import pathlib
 
+import matplotlib
 from mpi4py import MPI
 
-import matplotlib
-
 matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402
-import numpy as np  # noqa: E402
-
 import dolfinx.fem  # noqa: E402
 import dolfinx.io  # noqa: E402
 import dolfinx.mesh  # noqa: E402
+import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
 
 import dolfinx_dem  # noqa: E402
 from dolfinx_dem.fem.elastodynamics import FEMElastodynamics  # noqa: E402

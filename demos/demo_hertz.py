@@ -111,10 +111,9 @@ import pathlib
 import shutil
 import time
 
-from mpi4py import MPI
-
 import matplotlib
 import numpy as np
+from mpi4py import MPI
 
 matplotlib.use("Agg")
 import matplotlib.image  # noqa: E402
@@ -628,7 +627,7 @@ if comm.rank == 0:
     if not QUICK:
         validation = pathlib.Path(__file__).resolve().parent.parent / "docs" / "validation"
         validation.mkdir(parents=True, exist_ok=True)
-        for name, path in figures.items():
+        for path in figures.values():
             shutil.copyfile(path, validation / path.name)
         with open(validation / "hertz.json", "w") as f:
             json.dump(numbers, f, indent=2)

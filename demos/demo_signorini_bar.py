@@ -107,10 +107,9 @@ import os
 import pathlib
 import time
 
-from mpi4py import MPI
-
 import matplotlib
 import numpy as np
+from mpi4py import MPI
 
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402

@@ -10,15 +10,14 @@ from __future__ import annotations
 
 from typing import NamedTuple
 
-import numpy as np
-
 import dolfinx
 import dolfinx.cpp
 import dolfinx.fem
 import dolfinx.io
 import dolfinx.mesh
-from dolfinx_dem.errors import InputError
+import numpy as np
 
+from dolfinx_dem.errors import InputError
 
 #: glibc's mallopt parameters (malloc.h) and the values ``restore_malloc_mmap`` sets.
 _M_MMAP_THRESHOLD, _M_MMAP_MAX = -3, -4

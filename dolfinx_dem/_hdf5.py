@@ -15,6 +15,7 @@ import ctypes
 import pathlib
 import re
 from collections.abc import Iterable
+
 from dolfinx_dem.errors import OutputError
 
 _H5F_ACC_RDWR = 1

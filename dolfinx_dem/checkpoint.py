@@ -42,8 +42,8 @@ from collections.abc import Mapping
 import numpy as np
 from mpi4py import MPI
 
-from dolfinx_dem.io import call_on_root
 from dolfinx_dem.errors import CheckpointError
+from dolfinx_dem.io import call_on_root
 
 FORMAT = 4  # 2: per-process local files (the recurrence, contact states); no shared file; 3: MEMM work;
 # 4: the pair contact's exchange counter

@@ -16,6 +16,7 @@ import sys
 import time
 
 from mpi4py import MPI
+
 from dolfinx_dem.errors import DEMError, InputError, InstabilityError, SceneError, UnresolvedContactError
 
 #: Exit status of a run stopped by SIGINT or SIGTERM (128 + SIGINT, as shells report Ctrl-C).
@@ -103,7 +104,6 @@ def _run(args) -> int:
 
 
 def _resume(args) -> int:
-    from dolfinx_dem import scenes
 
     comm = MPI.COMM_WORLD
     try:

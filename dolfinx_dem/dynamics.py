@@ -34,10 +34,10 @@ from mpi4py import MPI
 from dolfinx_dem import _compat, checkpoint, io, model, plotting, runcontrol, scenes
 from dolfinx_dem.contact import PairContact, RigidContact
 from dolfinx_dem.discretisation import DEMDiscretisation
+from dolfinx_dem.errors import CheckpointError, InputError, InstabilityError, UnresolvedContactError
 from dolfinx_dem.memm import MEMM
 from dolfinx_dem.problem import DEMProblem
 from dolfinx_dem.run_statistics import MAX_PENETRATION, PairContactStatistics, Statistics, peak_rss_mb
-from dolfinx_dem.errors import CheckpointError, InputError, InstabilityError, UnresolvedContactError
 
 
 class DynamicRun:
@@ -122,12 +122,21 @@ class DynamicRun:
         # the evaluation counters differ between processes (contact work is split per process):
         # this process's own on the same partition, else the largest of the writing run's
         counters = local["memm_counters"] if local else (m["force_evaluations"], m["max_step_evaluations"])
-        self.stepper.restore(*(vectors[name].ravel() for name in checkpoint.VECTORS), m["t0"], m["n"], m["budget"],
-                             m["work"], m["data_potential"], *counters, local and {name: local[name] for name in ("y", "z", "means")})
+        self.stepper.restore(
+            *(vectors[name].ravel() for name in checkpoint.VECTORS),
+            m["t0"],
+            m["n"],
+            m["budget"],
+            m["work"],
+            m["data_potential"],
+            *counters,
+            local and {name: local[name] for name in ("y", "z", "means")},
+        )
         for k, contact in enumerate(self.problem.contacts):
             prefix = f"contact{k}_"
-            contact.restore_state(local and {name[len(prefix):]: a for name, a in local.items()
-                                             if name.startswith(prefix)})
+            contact.restore_state(
+                local and {name[len(prefix) :]: a for name, a in local.items() if name.startswith(prefix)}
+            )
         self.stats = Statistics(**header["statistics"])
         self.stats.resumes += 1
         self.pair_stats.restore(header["pair_statistics"], self.stepper)
@@ -143,8 +152,10 @@ class DynamicRun:
                 # Under mpirun, SIGKILL follows SIGTERM within a second or so: the summary and the
                 # note before the pictures (the summary is written again after them).
                 io.write_summary(directory / "summary.json", self.comm, self._summary(status, error))
-                note = (f"interrupted by {interrupts.name} at step {self.stepper.n} (t = {self.stepper.t:.9g}); "
-                        f"outputs closed and checkpoint written; continue with: dolfinx-dem resume {directory}")
+                note = (
+                    f"interrupted by {interrupts.name} at step {self.stepper.n} (t = {self.stepper.t:.9g}); "
+                    f"outputs closed and checkpoint written; continue with: dolfinx-dem resume {directory}"
+                )
                 output.keep_incomplete(note)
                 if self.comm.rank == 0 and not self.quiet:
                     print(f"dolfinx-dem: {note}", file=sys.stderr, flush=True)
@@ -158,10 +169,14 @@ class DynamicRun:
     def _integrate(self, directory: pathlib.Path, interrupts: runcontrol.Interrupts):
         """The step loop with its outputs; returns (status, error)."""
         resumed = self.resumed
-        with io.SeriesWriter(self.comm, directory / "series.csv", self.columns,
-                             append_at=resumed and resumed["series_bytes"]) as self.series, \
-                io.SolutionWriter(self.comm, directory, self.dem.mesh,
-                                  resume_writes=resumed and resumed["xdmf_writes"]) as self.solution:
+        with (
+            io.SeriesWriter(
+                self.comm, directory / "series.csv", self.columns, append_at=resumed and resumed["series_bytes"]
+            ) as self.series,
+            io.SolutionWriter(
+                self.comm, directory, self.dem.mesh, resume_writes=resumed and resumed["xdmf_writes"]
+            ) as self.solution,
+        ):
             if resumed is None:
                 self._record(self.first, False)
             progress = runcontrol.Progress(self.comm, self.n_steps, self.quiet, first=self.stepper.n)
@@ -202,10 +217,21 @@ class DynamicRun:
             self.stats.min_gap = min(self.stats.min_gap, contact[self._gap_column])
         if diag.step % self.series_every == 0 or force_fields:
             work = [diag.work, diag.balance] if self.work_columns else []
-            self.series.write([diag.t, diag.kinetic, diag.elastic, diag.stabilisation, diag.external,
-                               diag.pseudo_energy, *work, *dem.reactions(stepper.u, diag.t).ravel(),
-                               *model.prescribed_values(self.problem, stepper.u, diag.t), *contact,
-                               *self.probes.values(stepper.u, diag.t)])
+            self.series.write(
+                [
+                    diag.t,
+                    diag.kinetic,
+                    diag.elastic,
+                    diag.stabilisation,
+                    diag.external,
+                    diag.pseudo_energy,
+                    *work,
+                    *dem.reactions(stepper.u, diag.t).ravel(),
+                    *model.prescribed_values(self.problem, stepper.u, diag.t),
+                    *contact,
+                    *self.probes.values(stepper.u, diag.t),
+                ]
+            )
         if diag.step % self.every == 0 or force_fields:
             self.solution.write(diag.t, fields(self.problem, stepper))
 
@@ -217,20 +243,35 @@ class DynamicRun:
             "version": checkpoint.package_version(),
             "scene_hash": checkpoint.scene_hash(self.scene),
             "scene": self.scene,
-            "step": stepper.n, "t": stepper.t, "dt": self.dt,
-            "memm": {k: state[k] for k in ("t0", "n", "budget", "work", "data_potential")} | {
-                k: self.comm.allreduce(state[k], op=MPI.MAX) for k in ("force_evaluations", "max_step_evaluations")},
+            "step": stepper.n,
+            "t": stepper.t,
+            "dt": self.dt,
+            "memm": {k: state[k] for k in ("t0", "n", "budget", "work", "data_potential")}
+            | {k: self.comm.allreduce(state[k], op=MPI.MAX) for k in ("force_evaluations", "max_step_evaluations")},
             "statistics": dataclasses.asdict(self.stats) | {"wall_seconds": self._wall_seconds()},
             "pair_statistics": self.pair_stats.state(),
-            "every": self.every, "series_every": self.series_every, "checkpoint_every": self.checkpoint_every,
-            "series_bytes": self.series.position(), "xdmf_writes": self.solution.writes,
+            "every": self.every,
+            "series_every": self.series_every,
+            "checkpoint_every": self.checkpoint_every,
+            "series_bytes": self.series.position(),
+            "xdmf_writes": self.solution.writes,
         }
-        local = state["recurrence"] | {f"contact{k}_{name}": a for k, c in enumerate(self.problem.contacts)
-                                       for name, a in c.checkpoint_state().items()}
+        local = state["recurrence"] | {
+            f"contact{k}_{name}": a
+            for k, c in enumerate(self.problem.contacts)
+            for name, a in c.checkpoint_state().items()
+        }
         local["memm_counters"] = np.array([state["force_evaluations"], state["max_step_evaluations"]], dtype=np.int64)
         vectors = {name: state[name].array_r.reshape(-1, dem.d) for name in checkpoint.VECTORS}
-        checkpoint.write(directory, self.comm, header, _compat.owned_original_cells(dem.V),
-                         dem.geometry.cell_centres[: dem.n_owned], vectors, local)
+        checkpoint.write(
+            directory,
+            self.comm,
+            header,
+            _compat.owned_original_cells(dem.V),
+            dem.geometry.cell_centres[: dem.n_owned],
+            vectors,
+            local,
+        )
 
     def _wall_seconds(self) -> float:
         """Wall time of the run so far, the earlier parts of a resumed run included."""
@@ -242,19 +283,42 @@ class DynamicRun:
         obstacles = [(ob["point"], ob["normal"]) for ob in self.scene.get("obstacles", [])]
         u = stepper.u.array_r.reshape(-1, dem.d)
         if dem.d == 1:
-            plotting.plot_bar(dem.mesh, u, self.problem.stress(stepper.u, stepper.t)[:, 0, 0], directory / "final.png",
-                              stepper.t, obstacles)
+            plotting.plot_bar(
+                dem.mesh,
+                u,
+                self.problem.stress(stepper.u, stepper.t)[:, 0, 0],
+                directory / "final.png",
+                stepper.t,
+                obstacles,
+            )
         else:
-            plotting.plot_cell_field(dem.mesh, u, self.problem.von_mises(stepper.u, stepper.t), directory / "final.png",
-                                     "von Mises stress (Pa)", scale, obstacles, model.prescribed_cells(dem))
+            plotting.plot_cell_field(
+                dem.mesh,
+                u,
+                self.problem.von_mises(stepper.u, stepper.t),
+                directory / "final.png",
+                "von Mises stress (Pa)",
+                scale,
+                obstacles,
+                model.prescribed_cells(dem),
+            )
         if animation and output.get("animation") and not plotting.too_large(dem.mesh):
             if dem.d == 1:
-                io.call_on_root(self.comm, plotting.animate_bar, directory / "solution.xdmf",
-                                directory / "animation.gif", obstacles)
+                io.call_on_root(
+                    self.comm, plotting.animate_bar, directory / "solution.xdmf", directory / "animation.gif", obstacles
+                )
             else:
-                io.call_on_root(self.comm, plotting.animate_solution, directory / "solution.xdmf",
-                                directory / "animation.gif", "von_mises", "von Mises stress (Pa)", scale, obstacles,
-                                dem.prescribed.body_numbers + 1)  # the ``body`` field is 1-based
+                io.call_on_root(
+                    self.comm,
+                    plotting.animate_solution,
+                    directory / "solution.xdmf",
+                    directory / "animation.gif",
+                    "von_mises",
+                    "von Mises stress (Pa)",
+                    scale,
+                    obstacles,
+                    dem.prescribed.body_numbers + 1,
+                )  # the ``body`` field is 1-based
 
     def _summary(self, status: str, error: InstabilityError | UnresolvedContactError | None) -> dict:
         dem, stepper, stats = self.dem, self.stepper, self.stats
@@ -338,12 +402,20 @@ def scene_instability(error: InstabilityError, time_spec: Mapping) -> Instabilit
         suggested = end / math.ceil(end / (cfl / time_spec["cfl"] * error.dt))
     else:
         suggested = dividing_time_step(end, min(error.suggested_dt, 0.5 * error.dt))
-        advice = (f"set time.dt = {suggested!r} ({round(end / suggested)} steps to time.end = {end:g}; "
-                  f"MEMM suggests at most {error.suggested_dt:.4g}, half the stability limit "
-                  "2/sqrt(lambda_max(M^-1 K)) of the elastic operator), or replace time.dt by time.cfl = 0.5")
-    return InstabilityError(f"MEMM is unstable at step {error.step} (t = {error.t:.6g}, dt = {error.dt:.6g}): "
-                            f"{error.reason}. Reduce the time step: {advice}",
-                            error.step, error.t, error.dt, suggested, error.reason)
+        advice = (
+            f"set time.dt = {suggested!r} ({round(end / suggested)} steps to time.end = {end:g}; "
+            f"MEMM suggests at most {error.suggested_dt:.4g}, half the stability limit "
+            "2/sqrt(lambda_max(M^-1 K)) of the elastic operator), or replace time.dt by time.cfl = 0.5"
+        )
+    return InstabilityError(
+        f"MEMM is unstable at step {error.step} (t = {error.t:.6g}, dt = {error.dt:.6g}): "
+        f"{error.reason}. Reduce the time step: {advice}",
+        error.step,
+        error.t,
+        error.dt,
+        suggested,
+        error.reason,
+    )
 
 
 def fields(problem: DEMProblem, stepper: MEMM) -> dict:

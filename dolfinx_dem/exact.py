@@ -72,6 +72,7 @@ import math
 import warnings
 
 import numpy as np
+
 from dolfinx_dem.errors import InputError
 
 __all__ = [

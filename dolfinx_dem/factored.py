@@ -24,8 +24,8 @@ import numpy as np
 import scipy.sparse
 from petsc4py import PETSc
 
-from dolfinx_dem.kernels import csr, lib, pointer
 from dolfinx_dem.errors import InputError
+from dolfinx_dem.kernels import csr, lib, pointer
 
 
 def local_numbering(ids: np.ndarray, start: int, stop: int) -> tuple[np.ndarray, np.ndarray]:

@@ -19,8 +19,8 @@ import typing
 
 import numpy as np
 import numpy.typing as npt
-from dolfinx_dem.errors import InputError
 
+from dolfinx_dem.errors import InputError
 
 # --- analytic Hertz solution --------------------------------------------------------------------
 

@@ -46,11 +46,11 @@ import traceback
 import xml.etree.ElementTree as ElementTree
 from collections.abc import Callable, Mapping, Sequence
 
+import dolfinx.fem
+import dolfinx.io
 import numpy as np
 from mpi4py import MPI
 
-import dolfinx.fem
-import dolfinx.io
 from dolfinx_dem.errors import InputError, MissingFileError, OutputFolderError
 
 INCOMPLETE = "INCOMPLETE"
@@ -313,7 +313,7 @@ class SeriesWriter:
                 raise InputError(f"row has {len(values)} values for {len(self.columns)} columns")
         values = [float(v) for v in values]
         if self._file is not None:
-            self._file.write(",".join("%.17g" % v for v in values) + "\n")
+            self._file.write(",".join("%.17g" % v for v in values) + "\n")  # noqa: UP031 (the series' format)
             self._rows += 1
             if self._rows % self._flush_every == 0:
                 self._file.flush()

@@ -7,6 +7,7 @@ import math
 import numbers
 
 import numpy as np
+
 from dolfinx_dem.errors import InputError
 
 

@@ -53,9 +53,22 @@ import numpy as np
 from mpi4py import MPI
 from petsc4py import PETSc
 
-from dolfinx_dem.memm_state import (CONTACT_J, CONTACT_S, DATA_POTENTIAL, EXTERNAL, KINETIC, LIFT_J, LIFT_S,
-                                    LOAD_POWER, MOMENTUM, PSEUDO, ROWS_J, ROWS_S, StepState)
 from dolfinx_dem.errors import InputError, InstabilityError, StateError
+from dolfinx_dem.memm_state import (
+    CONTACT_J,
+    CONTACT_S,
+    DATA_POTENTIAL,
+    EXTERNAL,
+    KINETIC,
+    LIFT_J,
+    LIFT_S,
+    LOAD_POWER,
+    MOMENTUM,
+    PSEUDO,
+    ROWS_J,
+    ROWS_S,
+    StepState,
+)
 from dolfinx_dem.problem import DEMProblem
 
 #: Default number of steps between true products for the energy rows (see the module docstring

@@ -20,8 +20,8 @@ import numpy as np
 from mpi4py import MPI
 from petsc4py import PETSc
 
-from dolfinx_dem.kernels import Struct, ffi, lib, pointer
 from dolfinx_dem.errors import InputError
+from dolfinx_dem.kernels import Struct, ffi, lib, pointer
 
 _FORWARD = dict(addv=PETSc.InsertMode.INSERT_VALUES, mode=PETSc.ScatterMode.FORWARD)
 _REVERSE = dict(addv=PETSc.InsertMode.ADD_VALUES, mode=PETSc.ScatterMode.REVERSE)

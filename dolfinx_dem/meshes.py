@@ -24,16 +24,15 @@ import pathlib
 import xml.etree.ElementTree as ElementTree
 from collections.abc import Callable, Sequence
 
-import numpy as np
-from mpi4py import MPI
-
 import dolfinx.io
 import dolfinx.mesh
 import gmsh
+import numpy as np
+from mpi4py import MPI
 
 from dolfinx_dem import _compat
-from dolfinx_dem.io import call_on_root
 from dolfinx_dem.errors import InputError, MissingFileError
+from dolfinx_dem.io import call_on_root
 
 XMIN, XMAX, YMIN, YMAX, ZMIN, ZMAX = 1, 2, 3, 4, 5, 6
 SIDE_NAMES = {"xmin": XMIN, "xmax": XMAX, "ymin": YMIN, "ymax": YMAX, "zmin": ZMIN, "zmax": ZMAX}

@@ -18,22 +18,29 @@ from dolfinx_dem import _compat, meshes, scenes
 from dolfinx_dem.conditions import DirichletBC, PrescribedBody, Traction
 from dolfinx_dem.contact import HalfSpace, PairContact, RigidContact
 from dolfinx_dem.discretisation import DEMDiscretisation
+from dolfinx_dem.errors import InputError, SceneError
 from dolfinx_dem.material import ElasticMaterial
 from dolfinx_dem.problem import DEMProblem
-from dolfinx_dem.errors import InputError, SceneError
 
 SERIES_COLUMNS = ("t", "kinetic", "elastic", "stabilisation", "external", "pseudo_energy")
 
 
 def create_mesh(comm: MPI.Comm, spec: Mapping):
     """(mesh, cell_tags, facet_tags, names) from the scene's mesh table (``cell_tags``: None for
-    the generated interval, rectangle and box meshes, the body numbers for discs and balls); ``names`` maps the boundary names
-    the mesh defines to facet tags: the side names of the generated interval, rectangle and box
-    meshes (``scenes.SIDES`` for the mesh's dimension), a gmsh file's physical-group names, none
-    for discs, balls and XDMF files."""
+    the generated interval, rectangle and box meshes, the body numbers for discs and balls);
+    ``names`` maps the boundary names the mesh defines to facet tags: the side names of the
+    generated interval, rectangle and box meshes (``scenes.SIDES`` for the mesh's dimension), a
+    gmsh file's physical-group names, none for discs, balls and XDMF files."""
     kind = spec["type"]
-    required = {"interval": ("x0", "x1", "n"), "rectangle": ("p0", "p1", "n"), "box": ("p0", "p1", "n"),
-                "disc": ("centre", "radius", "h"), "discs": ("h",), "balls": ("h",), "file": ("path",)}[kind]
+    required = {
+        "interval": ("x0", "x1", "n"),
+        "rectangle": ("p0", "p1", "n"),
+        "box": ("p0", "p1", "n"),
+        "disc": ("centre", "radius", "h"),
+        "discs": ("h",),
+        "balls": ("h",),
+        "file": ("path",),
+    }[kind]
     for key in required:
         if key not in spec:
             raise SceneError(f"scene key 'mesh.{key}' is missing for a mesh of type {kind!r}")
@@ -41,7 +48,9 @@ def create_mesh(comm: MPI.Comm, spec: Mapping):
     if kind == "interval":
         mesh, cell_tags, tags = meshes.create_interval(comm, spec["n"], spec["x0"], spec["x1"])
     elif kind == "rectangle":
-        mesh, cell_tags, tags = meshes.create_rectangle(comm, spec["p0"], spec["p1"], spec["n"], spec.get("diagonal", "right"))
+        mesh, cell_tags, tags = meshes.create_rectangle(
+            comm, spec["p0"], spec["p1"], spec["n"], spec.get("diagonal", "right")
+        )
     elif kind == "box":
         mesh, cell_tags, tags = meshes.create_box(comm, spec["p0"], spec["p1"], spec["n"])
     elif kind == "disc":
@@ -56,8 +65,9 @@ def create_mesh(comm: MPI.Comm, spec: Mapping):
         create = meshes.create_discs if kind == "discs" else meshes.create_balls
         try:
             blocks = spec.get("rectangles" if kind == "discs" else "boxes", [])
-            mesh, cell_tags, tags = create(comm, [(c[:d], c[d]) for c in spec.get(kind, [])], spec["h"], frame,
-                                           spec.get("cut"), refine, blocks)
+            mesh, cell_tags, tags = create(
+                comm, [(c[:d], c[d]) for c in spec.get(kind, [])], spec["h"], frame, spec.get("cut"), refine, blocks
+            )
         except ValueError as err:
             raise SceneError(f"scene table 'mesh': {err}") from None
     else:
@@ -76,7 +86,8 @@ def _boundary_facets(mesh, tags, names, boundary, key="dirichlet.boundary") -> n
         # A condition on x, y, z that every vertex of the boundary facet satisfies.
         d = mesh.topology.dim
         facets = meshes.locate_boundary_facets(
-            mesh, lambda x: np.asarray(scenes.evaluate_condition(boundary, x[:d], key), dtype=bool))
+            mesh, lambda x: np.asarray(scenes.evaluate_condition(boundary, x[:d], key), dtype=bool)
+        )
         if mesh.comm.allreduce(len(facets), op=MPI.SUM) == 0:
             raise SceneError(f"scene key '{key}': boundary condition {boundary!r} selects no facet")
         return facets
@@ -85,13 +96,20 @@ def _boundary_facets(mesh, tags, names, boundary, key="dirichlet.boundary") -> n
     elif names.get(boundary) is not None:
         tag = names[boundary]
     else:
-        what = "ambiguous boundary (it names several facet groups of the mesh file)" if boundary in names \
+        what = (
+            "ambiguous boundary (it names several facet groups of the mesh file)"
+            if boundary in names
             else "unknown boundary"
-        known = f"one of this mesh's names: {', '.join(sorted(names))}" if names else \
-            "no name: this mesh defines none (side names belong to the interval, rectangle and box meshes)"
+        )
+        known = (
+            f"one of this mesh's names: {', '.join(sorted(names))}"
+            if names
+            else "no name: this mesh defines none (side names belong to the interval, rectangle and box meshes)"
+        )
         raise SceneError(
             f"scene key '{key}': {what} {boundary!r} (use 'all', an integer facet tag, a condition "
-            f"such as 'y <= 0.2', or {known})")
+            f"such as 'y <= 0.2', or {known})"
+        )
     if tags is None:
         raise SceneError(f"the mesh has no facet tags, so boundary {boundary!r} cannot be found")
     facets = tags.find(tag)
@@ -106,26 +124,44 @@ def build(scene: Mapping, comm: MPI.Comm = MPI.COMM_WORLD) -> DEMProblem:
     scene = scenes.validate(scene, mesh.topology.dim)
     material = scenes.materials(scene)
     d = mesh.topology.dim
-    prescribed = [PrescribedBody(b["tag"], b.get("velocity"), None if "velocity" in b else (
-        lambda t, e=b["displacement"], key=f"prescribed[{i}].displacement":
-        scenes.evaluate_field(e, np.zeros((d, 1)), t, key)[:, 0]), b.get("name"))
-        for i, b in enumerate(scene.get("prescribed", []))]
+    prescribed = [
+        PrescribedBody(
+            b["tag"],
+            b.get("velocity"),
+            None
+            if "velocity" in b
+            else (
+                lambda t, e=b["displacement"], key=f"prescribed[{i}].displacement": scenes.evaluate_field(
+                    e, np.zeros((d, 1)), t, key
+                )[:, 0]
+            ),
+            b.get("name"),
+        )
+        for i, b in enumerate(scene.get("prescribed", []))
+    ]
     for key in ("materials", "prescribed"):
         if key in scene and cell_tags is None:
-            raise SceneError(f"scene key '{key}' selects cells by tag, and this mesh has no cell tags (use "
-                             "a mesh of type 'discs' or a mesh file with cell tags)")
+            raise SceneError(
+                f"scene key '{key}' selects cells by tag, and this mesh has no cell tags (use "
+                "a mesh of type 'discs' or a mesh file with cell tags)"
+            )
     if isinstance(material, ElasticMaterial) and not prescribed:
         cell_tags = None
 
     def data(section, i, bc):
         value = bc.get("value", [0.0] * mesh.topology.dim)
-        field = (lambda x, t, v=value, key=f"{section}[{i}].value": scenes.evaluate_field(v, x, t, key)) \
-            if isinstance(value[0], str) else value
+        field = (
+            (lambda x, t, v=value, key=f"{section}[{i}].value": scenes.evaluate_field(v, x, t, key))
+            if isinstance(value[0], str)
+            else value
+        )
         facets = _boundary_facets(mesh, tags, names, bc.get("boundary", "all"), f"{section}[{i}].boundary")
         return facets, field, bc.get("time_dependent", False)
 
-    dirichlet = [DirichletBC(*data("dirichlet", i, bc), bc.get("components"), bc.get("name"))
-                 for i, bc in enumerate(scene.get("dirichlet", []))]
+    dirichlet = [
+        DirichletBC(*data("dirichlet", i, bc), bc.get("components"), bc.get("name"))
+        for i, bc in enumerate(scene.get("dirichlet", []))
+    ]
     tractions = [Traction(*data("tractions", i, bc)) for i, bc in enumerate(scene.get("tractions", []))]
     loads = scene.get("loads", {})
     body_force = loads.get("body_force")
@@ -135,14 +171,27 @@ def build(scene: Mapping, comm: MPI.Comm = MPI.COMM_WORLD) -> DEMProblem:
     dem = DEMDiscretisation(mesh, material, scheme, dirichlet, body_force, tractions, cell_tags, prescribed)
     contacts = []
     if scene.get("obstacles"):
-        contacts.append(RigidContact(dem, [
-            HalfSpace(ob["point"], ob["normal"], _boundary_facets(mesh, tags, names, ob["boundary"],
-                                                                  f"obstacles[{k}].boundary"), ob.get("tolerance", 0.0))
-            for k, ob in enumerate(scene["obstacles"])]))
+        contacts.append(
+            RigidContact(
+                dem,
+                [
+                    HalfSpace(
+                        ob["point"],
+                        ob["normal"],
+                        _boundary_facets(mesh, tags, names, ob["boundary"], f"obstacles[{k}].boundary"),
+                        ob.get("tolerance", 0.0),
+                    )
+                    for k, ob in enumerate(scene["obstacles"])
+                ],
+            )
+        )
     if "contact" in scene:
         c = scene["contact"]
-        facets = np.unique(np.concatenate([_boundary_facets(mesh, tags, names, b, f"contact.boundary[{k}]")
-                                           for k, b in enumerate(c["boundary"])]))
+        facets = np.unique(
+            np.concatenate(
+                [_boundary_facets(mesh, tags, names, b, f"contact.boundary[{k}]") for k, b in enumerate(c["boundary"])]
+            )
+        )
         contacts.append(PairContact(dem, facets, c.get("self_contact", False), c.get("skin"), c.get("tolerance", 0.0)))
     return DEMProblem(dem, contacts)
 
@@ -150,8 +199,11 @@ def build(scene: Mapping, comm: MPI.Comm = MPI.COMM_WORLD) -> DEMProblem:
 def reaction_columns(dem: DEMDiscretisation) -> tuple[str, ...]:
     """Series columns ``reaction_<i>_<x|y|z>`` of the Dirichlet conditions' reactions
     (``DEMDiscretisation.reactions``), i the condition's ``name`` or its index."""
-    return tuple(f"reaction_{i if bc.name is None else bc.name}_{'xyz'[k]}"
-                 for i, bc in enumerate(dem.data.dirichlet_conditions) for k in range(dem.d))
+    return tuple(
+        f"reaction_{i if bc.name is None else bc.name}_{'xyz'[k]}"
+        for i, bc in enumerate(dem.data.dirichlet_conditions)
+        for k in range(dem.d)
+    )
 
 
 def prescribed_columns(dem: DEMDiscretisation) -> tuple[str, ...]:
@@ -164,7 +216,8 @@ def prescribed_columns(dem: DEMDiscretisation) -> tuple[str, ...]:
     names = [first + i if body.name is None else body.name for i, body in enumerate(dem.prescribed)]
     xyz = "xyz"[: dem.d]
     return tuple(f"reaction_{n}_{c}" for n in names for c in xyz) + tuple(
-        f"prescribed_{n}_displacement_{c}" for n in names for c in xyz)
+        f"prescribed_{n}_displacement_{c}" for n in names for c in xyz
+    )
 
 
 def prescribed_values(problem: DEMProblem, u, t: float, force=None) -> np.ndarray:
@@ -226,8 +279,9 @@ class Probes:
 
     def __init__(self, problem: DEMProblem, specs):
         if not isinstance(problem, DEMProblem):
-            raise InputError(f"Probes read a DEMProblem, got {type(problem).__name__} (wrap a discretisation as "
-                             "DEMProblem(dem))")
+            raise InputError(
+                f"Probes read a DEMProblem, got {type(problem).__name__} (wrap a discretisation as DEMProblem(dem))"
+            )
         self.problem = problem
         dem = problem.dem
         self.names = [p["name"] for p in specs]

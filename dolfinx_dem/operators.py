@@ -25,10 +25,10 @@ import itertools
 import numpy as np
 import scipy.sparse
 
+from dolfinx_dem.errors import InputError
 from dolfinx_dem.geometry import MeshGeometry
 from dolfinx_dem.material import CellMaterials, ElasticMaterial
 from dolfinx_dem.reconstruction import Reconstruction
-from dolfinx_dem.errors import InputError
 
 
 def mandel(d: int) -> np.ndarray:

@@ -4,9 +4,9 @@
 gathering the owned cells of every rank, the colour bar and the time in a column of their own
 beside the body, rigid obstacles (half-spaces) as grey bands bounded by a dark line (2D) or plane
 (3D); ``plot_bar`` draws a 1D bar as matplotlib line plots of its displacement and stress, its
-obstacles as walls, and ``animate_bar`` animates it in the same layout; ``plot_series`` draws a ``series.csv``. Matplotlib draws on its Agg canvas (no
-display, no global pyplot state). Pictures gather on rank 0 only meshes of at most
-``PICTURE_MAX_CELLS`` cells.
+obstacles as walls, and ``animate_bar`` animates it in the same layout; ``plot_series`` draws a
+``series.csv``. Matplotlib draws on its Agg canvas (no display, no global pyplot state).
+Pictures gather on rank 0 only meshes of at most ``PICTURE_MAX_CELLS`` cells.
 """
 
 from __future__ import annotations
@@ -15,12 +15,11 @@ import math
 import pathlib
 from collections.abc import Sequence
 
-import numpy as np
-from mpi4py import MPI
-
 import imageio
 import matplotlib.figure
+import numpy as np
 from matplotlib.backends.backend_agg import FigureCanvasAgg
+from mpi4py import MPI
 
 from dolfinx_dem import _compat
 from dolfinx_dem.errors import InputError, MissingFileError
@@ -58,8 +57,7 @@ def _gather_cells(mesh, displacement: np.ndarray | None, values: np.ndarray):
         displacement = np.asarray(displacement, dtype=np.float64)
         if displacement.shape != (n, gdim):
             raise InputError(
-                f"displacement must have shape ({n}, {gdim}) (owned cells, gdim), "
-                f"got {displacement.shape}"
+                f"displacement must have shape ({n}, {gdim}) (owned cells, gdim), got {displacement.shape}"
             )
     row = dofs - start  # row of each owned cell (process-local cell order)
     nodes, x = _compat.owned_cell_nodes(mesh)
@@ -170,15 +168,19 @@ def plot_bar(
     points, cells, sigma, u_points = gathered
     position = points[:, 0] + u_points[:, 0]
     figure = matplotlib.figure.Figure(figsize=(8.0, 7.0))
-    _draw_bar(figure, points[cells, 0], position, u_cells[2], sigma, _span(position, points[:, 0], obstacles), t,
-              obstacles)
+    _draw_bar(
+        figure, points[cells, 0], position, u_cells[2], sigma, _span(position, points[:, 0], obstacles), t, obstacles
+    )
     figure.tight_layout()
     figure.savefig(str(filename), dpi=120)
     return str(filename)
 
 
-def animate_bar(xdmf: str | pathlib.Path, filename: str | pathlib.Path,
-                obstacles: Sequence[tuple[Sequence[float], Sequence[float]]] = ()) -> int:
+def animate_bar(
+    xdmf: str | pathlib.Path,
+    filename: str | pathlib.Path,
+    obstacles: Sequence[tuple[Sequence[float], Sequence[float]]] = (),
+) -> int:
     """An animated GIF of a 1D ``solution.xdmf``, one frame per output time in the layout of
     ``plot_bar`` (the bar's position with the obstacles, its displacement and its stress
     ``stress_xx`` along x), with the axes' limits of the whole run, 800 x 640 pixels.
@@ -197,8 +199,15 @@ def animate_bar(xdmf: str | pathlib.Path, filename: str | pathlib.Path,
         grid.cell_data["u"] = blocks["displacement"].cell_data["displacement"].reshape(grid.n_cells, -1)[:, 0]
         u_points = grid.cell_data_to_point_data().point_data["u"]  # mean of the cells around each node
         x = grid.points[:, 0]
-        frames.append((t, x[grid.cell_connectivity.reshape(-1, 2)], grid.cell_data["u"].copy(),
-                       grid.cell_data["stress_xx"].copy(), x + u_points))
+        frames.append(
+            (
+                t,
+                x[grid.cell_connectivity.reshape(-1, 2)],
+                grid.cell_data["u"].copy(),
+                grid.cell_data["stress_xx"].copy(),
+                x + u_points,
+            )
+        )
     span = _span(np.concatenate([f[4] for f in frames]), frames[0][1].ravel(), obstacles)
     limits = [_limits(np.concatenate([f[k] for f in frames])) for k in (2, 3)]
     figure = matplotlib.figure.Figure(figsize=(8.0, 6.4), dpi=100)
@@ -231,8 +240,16 @@ def _limits(values: np.ndarray) -> tuple[float, float]:
     return low - margin, high + margin
 
 
-def _draw_bar(figure, x_cells: np.ndarray, position: np.ndarray, u: np.ndarray, sigma: np.ndarray,
-              span: tuple[float, float], t: float, obstacles) -> list:
+def _draw_bar(
+    figure,
+    x_cells: np.ndarray,
+    position: np.ndarray,
+    u: np.ndarray,
+    sigma: np.ndarray,
+    span: tuple[float, float],
+    t: float,
+    obstacles,
+) -> list:
     """Draw ``plot_bar``'s three axes on ``figure``: the bar from the smallest to the largest of
     ``position`` (x + u at the nodes) with the ``obstacles`` over the x range ``span``, and the
     cell displacement ``u`` (N,) and stress ``sigma`` (N,) as steps over the cells ``x_cells``
@@ -261,10 +278,15 @@ def _draw_bar(figure, x_cells: np.ndarray, position: np.ndarray, u: np.ndarray, 
     return [ax0, ax1, ax2]
 
 
-def animate_solution(xdmf: str | pathlib.Path, filename: str | pathlib.Path, field: str, title: str,
-                     scale: float = 1.0,
-                     obstacles: Sequence[tuple[Sequence[float], Sequence[float]]] = (),
-                     rigid_bodies: Sequence[int] = ()) -> int:
+def animate_solution(
+    xdmf: str | pathlib.Path,
+    filename: str | pathlib.Path,
+    field: str,
+    title: str,
+    scale: float = 1.0,
+    obstacles: Sequence[tuple[Sequence[float], Sequence[float]]] = (),
+    rigid_bodies: Sequence[int] = (),
+) -> int:
     """An animated GIF of the cell field ``field`` of a ``solution.xdmf`` (``io.SolutionWriter``)
     on the mesh deformed by ``scale`` times its ``displacement``, one frame per output time, with
     the ``obstacles`` of ``plot_cell_field``; the cells whose ``body`` field is in
@@ -292,8 +314,9 @@ def animate_solution(xdmf: str | pathlib.Path, filename: str | pathlib.Path, fie
             grid.cell_data[title][np.isin(blocks["body"].cell_data["body"], rigid_bodies)] = np.nan
         flat = 2 if np.ptp(grid.points[:, 2]) == 0 else 3
         if k == 0:
-            obstacles = _check_obstacles(obstacles, np.flatnonzero(np.ptp(grid.points, axis=0) > 0).max(initial=0) + 1
-                                         if flat == 2 else 3)
+            obstacles = _check_obstacles(
+                obstacles, np.flatnonzero(np.ptp(grid.points, axis=0) > 0).max(initial=0) + 1 if flat == 2 else 3
+            )
         _show(plotter, grid, title, flat, obstacles, name="body", reset=k == 0)
         plotter.subplot(0, 1)
         plotter.add_text(f"t = {t:.4g} s", position="upper_left", font_size=12, color="black", name="time")
@@ -322,9 +345,7 @@ def _grid(mesh, displacement, values, title: str, scale: float):
         points[:, :gdim] += scale * u_points
     num_cells, k = cells.shape
     connectivity = np.hstack([np.full((num_cells, 1), k), cells]).reshape(-1)
-    grid = pyvista.UnstructuredGrid(
-        connectivity, np.full(num_cells, _VTK_SIMPLEX[tdim], dtype=np.uint8), points
-    )
+    grid = pyvista.UnstructuredGrid(connectivity, np.full(num_cells, _VTK_SIMPLEX[tdim], dtype=np.uint8), points)
     grid.cell_data[title] = cell_values
     return grid
 
@@ -334,8 +355,12 @@ def _check_obstacles(obstacles, gdim: int) -> list[tuple[np.ndarray, np.ndarray]
     out = []
     for k, (point, normal) in enumerate(obstacles):
         p, n = np.asarray(point, dtype=float), np.asarray(normal, dtype=float)
-        if p.shape != (gdim,) or n.shape != (gdim,) or not (np.isfinite(p).all() and np.isfinite(n).all()) \
-                or not np.linalg.norm(n) > 0:
+        if (
+            p.shape != (gdim,)
+            or n.shape != (gdim,)
+            or not (np.isfinite(p).all() and np.isfinite(n).all())
+            or not np.linalg.norm(n) > 0
+        ):
             raise InputError(f"obstacle {k}: point and normal need {gdim} finite numbers, the normal nonzero")
         out.append((p, n / np.linalg.norm(n)))
     return out
@@ -344,8 +369,7 @@ def _check_obstacles(obstacles, gdim: int) -> list[tuple[np.ndarray, np.ndarray]
 def _plotter(window_size: tuple[int, int]):
     """An off-screen plotter with the body on the left and a narrow column on the right for the
     colour bar and the time, so that neither covers the body."""
-    return pyvista.Plotter(off_screen=True, window_size=window_size, shape=(1, 2), col_weights=[3, 1],
-                           border=False)
+    return pyvista.Plotter(off_screen=True, window_size=window_size, shape=(1, 2), col_weights=[3, 1], border=False)
 
 
 def _obstacle_meshes(obstacles, bounds: np.ndarray, gdim: int) -> tuple[list, np.ndarray]:
@@ -366,8 +390,9 @@ def _obstacle_meshes(obstacles, bounds: np.ndarray, gdim: int) -> tuple[list, np
         else:
             tangent = np.array([-n3[1], n3[0], 0.0])
             a, b = foot - size * tangent, foot + size * tangent
-            shapes.append((pyvista.Rectangle([a, b, b - size * n3]),
-                           {"color": "grey", "opacity": 0.35, "lighting": False}))
+            shapes.append(
+                (pyvista.Rectangle([a, b, b - size * n3]), {"color": "grey", "opacity": 0.35, "lighting": False})
+            )
             shapes.append((pyvista.Line(a, b), {"color": "black", "line_width": 4}))
     return shapes, np.reshape(feet, (-1, 3))
 
@@ -397,14 +422,22 @@ def _show(plotter, grid, title: str, gdim: int, obstacles=(), name: str | None =
         plotter.reset_camera(bounds=np.column_stack([view.min(axis=0), view.max(axis=0)]).ravel())
     plotter.subplot(0, 1)
     plotter.set_background("white")
-    plotter.add_scalar_bar(title, mapper=actor.mapper, color="black", vertical=True, position_x=0.2,
-                           position_y=0.08, width=0.4, height=0.75, title_font_size=12, label_font_size=12)
+    plotter.add_scalar_bar(
+        title,
+        mapper=actor.mapper,
+        color="black",
+        vertical=True,
+        position_x=0.2,
+        position_y=0.08,
+        width=0.4,
+        height=0.75,
+        title_font_size=12,
+        label_font_size=12,
+    )
     plotter.subplot(0, 0)
 
 
-def plot_series(
-    csv_path: str | pathlib.Path, columns: Sequence[str], filename: str | pathlib.Path
-) -> str:
+def plot_series(csv_path: str | pathlib.Path, columns: Sequence[str], filename: str | pathlib.Path) -> str:
     """Line plots of ``columns`` of a ``series.csv`` against its column ``t`` (s), one per axes.
 
     Serial (for ``dolfinx-dem show``). Returns ``str(filename)``.

@@ -13,9 +13,9 @@ import numpy as np
 from mpi4py import MPI
 
 from dolfinx_dem.contact import PairContact
+from dolfinx_dem.errors import UnresolvedContactError
 from dolfinx_dem.memm import MEMM
 from dolfinx_dem.problem import DEMProblem
-from dolfinx_dem.errors import UnresolvedContactError
 
 
 @dataclasses.dataclass
@@ -90,14 +90,20 @@ class PairContactStatistics:
                 "results from here on would be wrong; raise "
                 "contact.max_penetration only to look at them")
         if self.free:
-            self.momentum_change = max(self.momentum_change, *(abs(p - p0) for p, p0 in zip(momentum.tolist(), self.p0)))
+            self.momentum_change = max(
+                self.momentum_change, *(abs(p - p0) for p, p0 in zip(momentum.tolist(), self.p0))
+            )
 
     def state(self) -> dict:
         """The running figures for a checkpoint (``previous`` follows from the state u)."""
-        return {"first_contact": self.first_contact, "penetration": self.penetration,
-                "momentum_change": self.momentum_change, "p_scale": self.p_scale,
-                "output_seconds": self.output_seconds,
-                "p0": self.p0}
+        return {
+            "first_contact": self.first_contact,
+            "penetration": self.penetration,
+            "momentum_change": self.momentum_change,
+            "p_scale": self.p_scale,
+            "output_seconds": self.output_seconds,
+            "p0": self.p0,
+        }
 
     def restore(self, state: Mapping, stepper: MEMM):
         self.first_contact, self.penetration = state["first_contact"], state["penetration"]
@@ -122,8 +128,12 @@ class PairContactStatistics:
             # all contact work of the steps, outputs included, over the steps and those outputs
             "contact_seconds": comm.allreduce(c.seconds + self.output_seconds, op=MPI.MAX),
             "contact_output_seconds": comm.allreduce(self.output_seconds, op=MPI.MAX),
-            "contact_fraction": comm.allreduce((c.seconds + self.output_seconds) / (stepping_seconds + self.output_seconds)
-                                               if stepping_seconds > 0 else 0.0, op=MPI.MAX),
+            "contact_fraction": comm.allreduce(
+                (c.seconds + self.output_seconds) / (stepping_seconds + self.output_seconds)
+                if stepping_seconds > 0
+                else 0.0,
+                op=MPI.MAX,
+            ),
         }
         if self.free:
             out["momentum_rel_change"] = self.momentum_change / self.p_scale if self.p_scale > 0 else 0.0

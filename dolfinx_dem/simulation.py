@@ -26,9 +26,9 @@ from mpi4py import MPI
 
 from dolfinx_dem import io
 from dolfinx_dem.dynamics import DynamicRun
+from dolfinx_dem.errors import InputError
 from dolfinx_dem.model import Probes, build, contact_columns, contact_values  # noqa: F401 (public API)
 from dolfinx_dem.static_simulation import StaticRun
-from dolfinx_dem.errors import InputError
 
 
 def run(scene: Mapping, out: str | pathlib.Path, comm: MPI.Comm = MPI.COMM_WORLD, quiet: bool = False,

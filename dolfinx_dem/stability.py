@@ -29,10 +29,10 @@ import numpy as np
 from mpi4py import MPI
 from petsc4py import PETSc
 
+from dolfinx_dem.errors import InputError, SolverError
 from dolfinx_dem.factored import FactoredStiffness
 from dolfinx_dem.halo import alltoall
 from dolfinx_dem.kernels import Struct, csr, ffi, lib, pointer
-from dolfinx_dem.errors import InputError, SolverError
 
 #: Relative margin added to the computed bound for its rounding: each entry of |K| is a sum of
 #: a few tens of products, so the computed row sums are within ~1e-14 of the exact ones.
@@ -195,15 +195,17 @@ def largest_eigenvalue_bound(factored: FactoredStiffness, row_keys: np.ndarray, 
         local = np.divide(b, w, out=w).max() if n else 0.0  # w is replaced below
         bound = min(bound, comm.allreduce(local, op=MPI.MAX))
         top = comm.allreduce(b.max() if n else 0.0, op=MPI.MAX)
-        w = np.maximum(np.divide(b, top, out=w), np.finfo(float).tiny, out=w)  # a dof without stiffness keeps a positive weight
+        # a dof without stiffness keeps a positive weight
+        w = np.maximum(np.divide(b, top, out=w), np.finfo(float).tiny, out=w)
     x.destroy()
     x_reach.destroy()
     scatter.destroy()
     return float(bound) * (1.0 + ROUNDING_MARGIN)
 
 
-def eigenvalues(K: PETSc.Mat, inverse_mass: PETSc.Vec, n: int = 1, largest: bool = False,
-                rtol: float = 1e-10) -> np.ndarray:
+def eigenvalues(
+    K: PETSc.Mat, inverse_mass: PETSc.Vec, n: int = 1, largest: bool = False, rtol: float = 1e-10
+) -> np.ndarray:
     """The n largest or smallest eigenvalues omega^2 of M^-1 K (rad^2/s^2), ascending, for the
     stiffness K and the inverse lumped mass M^-1 (a vector).
 

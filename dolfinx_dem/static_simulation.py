@@ -34,11 +34,11 @@ from collections.abc import Mapping
 import numpy as np
 from mpi4py import MPI
 
-from dolfinx_dem import hertz, io, model, plotting, scenes
+from dolfinx_dem import hertz, io, model, plotting
 from dolfinx_dem.contact import PairContact, RigidContact
+from dolfinx_dem.errors import SceneError
 from dolfinx_dem.run_statistics import peak_rss_mb
 from dolfinx_dem.statics import minimise_energy
-from dolfinx_dem.errors import SceneError
 
 
 def _top_point(dem) -> list[float]:
@@ -140,7 +140,8 @@ class StaticRun:
         }
         if reactions.size or prescribed.size:  # the force each Dirichlet condition and prescribed body exerts
             names = model.reaction_columns(dem) + model.prescribed_columns(dem)[: prescribed.size // 2]
-            summary["reactions"] = dict(zip(names, reactions.ravel().tolist() + prescribed[: prescribed.size // 2].tolist()))
+            values = reactions.ravel().tolist() + prescribed[: prescribed.size // 2].tolist()
+            summary["reactions"] = dict(zip(names, values))
         if self.pairs is not None:
             summary.update(_pair_summary(self.pairs, u, result))
         obstacles = [(ob["point"], ob["normal"]) for ob in scene.get("obstacles", [])]
@@ -148,12 +149,25 @@ class StaticRun:
             axis = obstacles[0] if dem.d == 3 and len(obstacles) == 1 else None
             summary.update(_contact_summary(self.obstacles, u, result, directory / "contact_pressure.csv", axis))
         if dem.d == 1:
-            plotting.plot_bar(dem.mesh, u.array_r.reshape(-1, 1), problem.stress(u, t)[:, 0, 0], directory / "final.png",
-                              0.0, obstacles)
+            plotting.plot_bar(
+                dem.mesh,
+                u.array_r.reshape(-1, 1),
+                problem.stress(u, t)[:, 0, 0],
+                directory / "final.png",
+                0.0,
+                obstacles,
+            )
         else:
-            plotting.plot_cell_field(dem.mesh, u.array_r.reshape(-1, dem.d), problem.von_mises(u, t),
-                                     directory / "final.png", "von Mises stress (Pa)",
-                                     scene.get("output", {}).get("picture_scale", 1.0), obstacles, model.prescribed_cells(dem))
+            plotting.plot_cell_field(
+                dem.mesh,
+                u.array_r.reshape(-1, dem.d),
+                problem.von_mises(u, t),
+                directory / "final.png",
+                "von Mises stress (Pa)",
+                scene.get("output", {}).get("picture_scale", 1.0),
+                obstacles,
+                model.prescribed_cells(dem),
+            )
         return summary
 
     def _run_fem(self, directory) -> dict:
@@ -181,22 +195,31 @@ class StaticRun:
             "processes": comm.size,
         }
         if result.dim == 2:
-            _write_pressure(directory / "contact_pressure.csv", comm, result.contact_x[:, None],
-                            result.traction_pressure)
-            summary.update({
-                "contact_half_width": result.contact_half_width_moment,
-                "contact_half_width_fit": result.contact_half_width,
-                "contact_half_width_traction_moment": result.contact_half_width_moment_traction,
-                "contact_half_width_last": result.contact_half_width_last,
-                "max_contact_pressure": result.max_contact_pressure,
-                "fitted_max_pressure": result.fit_peak_pressure,
-            })
+            _write_pressure(
+                directory / "contact_pressure.csv", comm, result.contact_x[:, None], result.traction_pressure
+            )
+            summary.update(
+                {
+                    "contact_half_width": result.contact_half_width_moment,
+                    "contact_half_width_fit": result.contact_half_width,
+                    "contact_half_width_traction_moment": result.contact_half_width_moment_traction,
+                    "contact_half_width_last": result.contact_half_width_last,
+                    "max_contact_pressure": result.max_contact_pressure,
+                    "fitted_max_pressure": result.fit_peak_pressure,
+                }
+            )
         else:
             summary["contact_radius"] = result.contact_radius
         displacement, von_mises = _fem_cell_fields(result.u, m["E"], m["nu"])
-        plotting.plot_cell_field(result.mesh, displacement, von_mises, directory / "final.png",
-                                 "von Mises stress (Pa)", scene.get("output", {}).get("picture_scale", 1.0),
-                                 [(ob["point"], ob["normal"]) for ob in scene.get("obstacles", [])])
+        plotting.plot_cell_field(
+            result.mesh,
+            displacement,
+            von_mises,
+            directory / "final.png",
+            "von Mises stress (Pa)",
+            scene.get("output", {}).get("picture_scale", 1.0),
+            [(ob["point"], ob["normal"]) for ob in scene.get("obstacles", [])],
+        )
         return summary
 
 
@@ -208,8 +231,13 @@ def _fem_problem(scene: Mapping) -> dict:
     horizontal, f = force[:-1], -force[-1]
     if mesh["type"] == "disc" and mesh["centre"] == [0.0, mesh["radius"]]:
         R, dim = mesh["radius"], 2
-    elif (mesh["type"] == "balls" and len(mesh["balls"]) == 1 and mesh["balls"][0][:3] == [0.0, 0.0, mesh["balls"][0][3]]
-          and mesh.get("cut") == ["x", "y"] and "frame" not in mesh):
+    elif (
+        mesh["type"] == "balls"
+        and len(mesh["balls"]) == 1
+        and mesh["balls"][0][:3] == [0.0, 0.0, mesh["balls"][0][3]]
+        and mesh.get("cut") == ["x", "y"]
+        and "frame" not in mesh
+    ):
         R, dim = mesh["balls"][0][3], 3
     else:
         R = dim = None
@@ -218,7 +246,8 @@ def _fem_problem(scene: Mapping) -> dict:
         raise SceneError(
             "method 'fem-P2' solves the Hertz problems only: a 'disc' mesh centred at (0, radius) on the plane "
             "y = 0, or a 'balls' mesh of one ball centred at (0, 0, radius) with cut = ['x', 'y'] on the plane "
-            "z = 0, with a downward 'loads.body_force' (and refinement, if any, at the origin)")
+            "z = 0, with a downward 'loads.body_force' (and refinement, if any, at the origin)"
+        )
     refine = (mesh["refine_h"], mesh["refine_radius"]) if "refine_point" in mesh else None
     return {"R": R, "body_force": f, "dim": dim, "refine": refine}
 
@@ -234,7 +263,9 @@ def _contact_summary(c: RigidContact, u, result, path: pathlib.Path, axis=None) 
     areas = geom.facet_areas[own]
     pressure = c.reactions(u) / areas
     # facets held on a kink of the potential (statics.minimise_energy) carry their multiplier
-    pressure[result.pinned] = c.statics().own_values(result.kink_forces, result.pinned)[result.pinned] / areas[result.pinned]
+    pressure[result.pinned] = (
+        c.statics().own_values(result.kink_forces, result.pinned)[result.pinned] / areas[result.pinned]
+    )
     x = geom.facet_centres[own]
     parts = comm.gather((x, pressure, areas, _facet_vertices(geom, own)), root=0)
 
@@ -242,23 +273,28 @@ def _contact_summary(c: RigidContact, u, result, path: pathlib.Path, axis=None) 
         x, p, areas, vertices = (np.concatenate(a) for a in zip(*parts))
         _write_pressure(path, comm, x, p)
         touching = p > 0
-        out = {"max_contact_pressure": float(p.max()),
-               "contact_facets": int(touching.sum()),
-               "contact_force": float((p * areas).sum())}
+        out = {
+            "max_contact_pressure": float(p.max()),
+            "contact_facets": int(touching.sum()),
+            "contact_force": float((p * areas).sum()),
+        }
         if dem.d <= 2:
             out["contact_half_width_last"] = hertz.contact_half_width_last(x[:, 0], p)
         if dem.d == 2 and touching.sum() >= 3:
-            moments = hertz.facet_pressure_moments(vertices[..., 0].min(axis=1), vertices[..., 0].max(axis=1),
-                                                   p * areas)
+            moments = hertz.facet_pressure_moments(
+                vertices[..., 0].min(axis=1), vertices[..., 0].max(axis=1), p * areas
+            )
             out["contact_half_width"] = hertz.contact_half_width_moments(*moments)[0]
             a, p0, _ = hertz.contact_half_width_fit(x[:, 0], p)
             out["contact_half_width_fit"], out["fitted_max_pressure"] = a, p0
         if axis is not None and touching.sum() >= 3:
             forces = (p * areas)[touching]
             out["contact_radius"] = hertz.contact_radius_moments(
-                *hertz.triangle_pressure_moments(vertices[touching], forces, *axis))
+                *hertz.triangle_pressure_moments(vertices[touching], forces, *axis)
+            )
             out["contact_radius_barycentre"] = hertz.contact_radius_moments(
-                *hertz.point_force_moments(x[touching], forces, *axis))
+                *hertz.point_force_moments(x[touching], forces, *axis)
+            )
         return out
 
     summary = io.call_on_root(comm, figures)
@@ -273,11 +309,16 @@ def _pair_summary(pc: PairContact, u, result) -> dict:
     pairs in contact. The series' ``contact_force_<i>_<j>_*`` columns are the dynamics' outputs,
     which count a pinned pair by the sign its gap rounds to: the summary's are the ones to use."""
     comm = pc.comm
-    forces = pc.outputs.pair_forces(pc.patch_values(u), result.active) + pc.statics().kink_forces(result.pinned, result.kink_forces)
+    forces = pc.outputs.pair_forces(pc.patch_values(u), result.active) + pc.statics().kink_forces(
+        result.pinned, result.kink_forces
+    )
     forces = comm.allreduce(forces, op=MPI.SUM)
-    return {"contact_forces": {f"{i}_{j}": forces[k].tolist() for k, (i, j) in enumerate(pc.body_pairs)},
-            "contact_pairs": result.in_contact, "kink_pairs": len(result.pinned),
-            "gauss_newton_steps": result.gauss_newton_steps}
+    return {
+        "contact_forces": {f"{i}_{j}": forces[k].tolist() for k, (i, j) in enumerate(pc.body_pairs)},
+        "contact_pairs": result.in_contact,
+        "kink_pairs": len(result.pinned),
+        "gauss_newton_steps": result.gauss_newton_steps,
+    }
 
 
 def _fem_cell_fields(u, E: float, nu: float):

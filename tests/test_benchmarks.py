@@ -14,6 +14,9 @@ import pytest
 ROOT = pathlib.Path(__file__).resolve().parent.parent
 VALIDATION = ROOT / "docs" / "validation"
 
+# each test runs a study (quick mode) in a process of its own
+pytestmark = pytest.mark.slow
+
 
 def _quick(script, *args, timeout=300):
     """Run ``script`` (a path from the repository root) with ``--quick`` and ``args``."""

@@ -22,10 +22,10 @@ import subprocess
 
 import numpy as np
 import pytest
+from helpers import CLI, children, mpi_env, series_rows, wait_for
 from mpi4py import MPI
 
 from dolfinx_dem import checkpoint, cli, io, model, runcontrol, scenes, simulation
-from helpers import CLI, children, mpi_env, series_rows, wait_for
 
 #: scene -> (overrides, number of steps)
 SCENES = {

@@ -3,6 +3,7 @@ conservation through impacts by event splitting, non-penetration, and bad input.
 
 import numpy as np
 import pytest
+from helpers import cell_vector, owned_centres
 from mpi4py import MPI
 
 from dolfinx_dem import exact, meshes, model
@@ -11,7 +12,6 @@ from dolfinx_dem.discretisation import DEMDiscretisation
 from dolfinx_dem.material import ElasticMaterial
 from dolfinx_dem.memm import MEMM
 from dolfinx_dem.problem import DEMProblem
-from helpers import cell_vector, owned_centres
 
 BAR = ElasticMaterial(E=900.0, nu=0.0, rho=1.0)
 PLATE = ElasticMaterial(E=100.0, nu=0.3, rho=1.0)

@@ -37,10 +37,9 @@ import shutil
 import subprocess
 import sys
 
+import numpy as np
 import pytest
 from mpi4py import MPI
-
-import numpy as np
 
 DEMO_DIR = pathlib.Path(__file__).resolve().parent.parent / "demos"
 DEMOS = sorted(DEMO_DIR.glob("demo_*.py"))

@@ -1,12 +1,11 @@
 """DEMDiscretisation: forces are the exact gradient of the potential (eq. (15)-(17)); bad inputs."""
 
+import dolfinx.mesh
 import numpy as np
 import pytest
+from dolfinx.mesh import CellType, DiagonalType
 from mpi4py import MPI
 from petsc4py import PETSc
-
-import dolfinx.mesh
-from dolfinx.mesh import CellType, DiagonalType
 
 from dolfinx_dem import meshes
 from dolfinx_dem.conditions import DirichletBC, Traction

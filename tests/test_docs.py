@@ -83,8 +83,14 @@ def test_every_summary_key_and_series_column_is_documented(tmp_path):
     assert keys - documented == set()
     assert {"contact_pressure", "contact_force_obstacle0_x", "contact_force_0_1_y", "reaction_0_x"} <= columns
     # per obstacle k, body pair i < j and Dirichlet condition i: documented as patterns
-    patterns = {re.sub(r"^reaction_\d+_", "reaction_<i>_",
-                       re.sub(r"_(\d+)_(\d+)_", "_<i>_<j>_", re.sub(r"obstacle\d+", "obstacle<k>", c))) for c in columns}
+    patterns = {
+        re.sub(
+            r"^reaction_\d+_",
+            "reaction_<i>_",
+            re.sub(r"_(\d+)_(\d+)_", "_<i>_<j>_", re.sub(r"obstacle\d+", "obstacle<k>", c)),
+        )
+        for c in columns
+    }
     suffixes = {re.sub(r"_[xyz]$", "_x", c) for c in patterns if "<" in c}  # `..._x`, `_y`, `_z`
     assert ({c for c in patterns if "<" not in c} | suffixes) - documented == set()
 
@@ -106,8 +112,9 @@ def test_theory_describes_what_is_implemented():
 
 def _documents():
     """The project's markdown documents: docs/ (recursively), the READMEs, the changelog."""
-    return sorted([*(ROOT / "docs").rglob("*.md"), ROOT / "README.md", ROOT / "CHANGELOG.md",
-                   ROOT / "demos" / "README.md"])
+    return sorted(
+        [*(ROOT / "docs").rglob("*.md"), ROOT / "README.md", ROOT / "CHANGELOG.md", ROOT / "demos" / "README.md"]
+    )
 
 
 def test_every_link_of_the_documents_resolves():
@@ -135,16 +142,22 @@ def test_every_figure_and_json_of_the_result_pages_is_named_by_a_page():
     assert [p.name for p in files if p.name not in pages] == []
 
 
-@pytest.mark.parametrize("script, page", [("hertz3d.py", "hertz3d.md"),
-                                          ("hertz3d_diagnostics.py", "hertz3d_diagnostics.md")])
+@pytest.mark.parametrize(
+    "script, page", [("hertz3d.py", "hertz3d.md"), ("hertz3d_diagnostics.py", "hertz3d_diagnostics.md")]
+)
 @pytest.mark.slow
 def test_the_hertz3d_pages_are_their_json_rendered(script, page, tmp_path):
     validation = ROOT / "docs" / "validation"
     for name in ("hertz3d.json", "hertz3d_diagnostics.json"):
         shutil.copy(validation / name, tmp_path / name)
     out = tmp_path / page.replace(".md", ".json")
-    proc = subprocess.run([sys.executable, str(ROOT / "validation" / script), "--render", "--out", str(out)],
-                          capture_output=True, text=True, timeout=120, cwd=ROOT)
+    proc = subprocess.run(
+        [sys.executable, str(ROOT / "validation" / script), "--render", "--out", str(out)],
+        capture_output=True,
+        text=True,
+        timeout=120,
+        cwd=ROOT,
+    )
     assert proc.returncode == 0, proc.stderr
     assert out.with_suffix(".md").read_text() == (validation / page).read_text()
 
@@ -152,7 +165,7 @@ def test_the_hertz3d_pages_are_their_json_rendered(script, page, tmp_path):
 def _row(text: str, section: str, first: str) -> list:
     """The cells after the first of the first table row after the heading ``section`` that starts
     with ``| first |``, bold removed."""
-    lines = text[text.index(f"\n{section}\n"):].splitlines()
+    lines = text[text.index(f"\n{section}\n") :].splitlines()
     line = next(line for line in lines if line.startswith(f"| {first} |"))
     return [c.strip() for c in line.replace("**", "").strip("|").split("|")][1:]
 
@@ -182,8 +195,15 @@ def test_the_benchmark_pages_quote_their_json():
         assert _quotes(cells[2], r["lambda_bound_over_lambda_max"]), cells
         assert _quotes(cells[3], r["dt_bound_over_dt_eigenvalue"]), cells
     for run, r in results["residual_refresh"].items():
-        first = next(c for c in ("`cantilever`", "unit square, 1e4 cells, smooth u0",
-                                 "`bar-impact`, 800 cells (free body, contact)") if c.strip("`")[:9] in run)
+        first = next(
+            c
+            for c in (
+                "`cantilever`",
+                "unit square, 1e4 cells, smooth u0",
+                "`bar-impact`, 800 cells (free body, contact)",
+            )
+            if c.strip("`")[:9] in run
+        )
         cells = _row(readme, "### Drift of the pseudo-energy with and without the refresh (`residual_refresh`)", first)
         for column, key in ((1, "pseudo_energy_drift"), (2, "energy_rows_distance")):
             quoted = cells[column].split(" / ")

@@ -1,12 +1,11 @@
 """K = Q^T Q in one pass over the rows of Q (factored.py): the same products as PETSc's two
 MatMults, on any number of processes, and the local numbering of owned and ghost dofs."""
 
+import dolfinx.mesh
 import numpy as np
 import pytest
 from mpi4py import MPI
 from petsc4py import PETSc
-
-import dolfinx.mesh
 
 from dolfinx_dem import meshes
 from dolfinx_dem.conditions import DirichletBC

@@ -1,17 +1,15 @@
 """The DOLFINx FEM elastodynamics references (implicit Newmark, explicit central differences with
 lumped mass): energy conservation, eigenfrequencies, convergence, stability limit."""
 
-import numpy as np
-import pytest
-from mpi4py import MPI
-
 import dolfinx.fem
 import dolfinx.mesh
+import numpy as np
+import pytest
 import ufl
+from mpi4py import MPI
 
 from dolfinx_dem import meshes
-from dolfinx_dem.fem.elastodynamics import (FEMCentralDifference, FEMElastodynamics,
-                                            first_eigenfrequency)
+from dolfinx_dem.fem.elastodynamics import FEMCentralDifference, FEMElastodynamics, first_eigenfrequency
 
 
 def _facets_at_x(mesh, *x0):

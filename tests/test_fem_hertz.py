@@ -5,12 +5,11 @@ the fine mesh (h = 1.5e-3 m, P2, gamma0 = 20, theta = 1): top vertical displacem
 -1.3892e-2 m, contact half-width 0.976 of Hertz's.
 """
 
+import dolfinx.fem
 import numpy as np
 import pytest
 import ufl
 from mpi4py import MPI
-
-import dolfinx.fem
 
 from dolfinx_dem.fem.elastodynamics import evaluate_at_points
 from dolfinx_dem.fem.hertz import (

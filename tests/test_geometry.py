@@ -2,16 +2,15 @@
 
 import math
 
-import numpy as np
-import pytest
-from mpi4py import MPI
-
 import dolfinx.fem
 import dolfinx.mesh
+import numpy as np
+import pytest
 from dolfinx.mesh import DiagonalType
+from mpi4py import MPI
 
 from dolfinx_dem import _compat, meshes
-from dolfinx_dem.geometry import compute_geometry, geometry_from_arrays
+from dolfinx_dem.geometry import compute_geometry
 
 
 def _geometry(mesh):

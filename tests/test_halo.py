@@ -1,12 +1,11 @@
 """The halo of a process (halo.py): owned cells plus three vertex-neighbour layers, built by a
 rendezvous on vertex owners; nothing of global size on any process."""
 
+import dolfinx.mesh
 import numpy as np
 import pytest
 import scipy.sparse
 from mpi4py import MPI
-
-import dolfinx.mesh
 
 from dolfinx_dem import _compat, halo, meshes
 from dolfinx_dem.geometry import compute_geometry

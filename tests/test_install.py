@@ -46,4 +46,7 @@ def test_make_test_runs_the_mpi_tests_on_2_and_3_processes():
     root = Path(__file__).resolve().parents[1]
     dry = subprocess.run(["make", "-n", "test"], cwd=root, capture_output=True, text=True, check=True).stdout
     assert "for np in 2 3; do" in dry
-    assert "mpirun -n $np --oversubscribe" in dry and "-m pytest -q -m mpi" in dry
+    assert "mpirun -n $np --oversubscribe" in dry and '-m pytest -q -m "mpi" ' in dry
+    assert "ruff check ." in dry  # the linter first
+    fast = subprocess.run(["make", "-n", "test-fast"], cwd=root, capture_output=True, text=True, check=True).stdout
+    assert "for np in 2; do" in fast and '-m pytest -q -m "not slow"' in fast and '-m "mpi and (not slow)"' in fast

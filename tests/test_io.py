@@ -3,12 +3,11 @@ import math
 import pathlib
 import xml.etree.ElementTree as ElementTree
 
+import dolfinx.fem
+import dolfinx.io
 import numpy as np
 import pytest
 from mpi4py import MPI
-
-import dolfinx.fem
-import dolfinx.io
 
 from dolfinx_dem import _compat, io, meshes
 

@@ -3,25 +3,24 @@ convergence against exact and FEM solutions, and the a-posteriori stability moni
 
 import math
 
+import dolfinx.mesh
 import numpy as np
 import pytest
 import scipy.linalg
 import scipy.sparse
 import scipy.sparse.linalg
-from mpi4py import MPI
-
-import dolfinx.mesh
 from dolfinx.mesh import DiagonalType
+from helpers import cell_vector, gmsh_mesh, owned_centres
+from mpi4py import MPI
 
 from dolfinx_dem import meshes
 from dolfinx_dem.conditions import DirichletBC, Traction
 from dolfinx_dem.discretisation import DEMDiscretisation
+from dolfinx_dem.errors import InstabilityError
 from dolfinx_dem.fem.elastodynamics import first_eigenfrequency
 from dolfinx_dem.material import ElasticMaterial
-from dolfinx_dem.errors import InstabilityError
 from dolfinx_dem.memm import MEMM
 from dolfinx_dem.problem import DEMProblem
-from helpers import cell_vector, gmsh_mesh, owned_centres
 
 MATERIAL = ElasticMaterial(E=1.0, nu=0.3, rho=1.0)
 
@@ -209,7 +208,8 @@ def test_time_dependent_dirichlet_data(quadrature):
         diag = memm.step()
         true = memm.diagnostics()
         scale = max(scale, true.mechanical)
-        worst = max(worst, *(abs(getattr(diag, k) - getattr(true, k)) for k in ("elastic", "stabilisation", "external")))
+        parts = ("elastic", "stabilisation", "external")
+        worst = max(worst, *(abs(getattr(diag, k) - getattr(true, k)) for k in parts))
     assert scale > 1e-6  # the shaking does work
     assert worst <= 1e-12 * scale, worst / scale
 
@@ -261,8 +261,9 @@ def _dem_first_frequency(n):
 def test_first_eigenfrequency_converges_to_fem():
     """Smallest eigenvalue of M^-1 K on a clamped unit square (plane strain) against P2 FEM."""
     fine = dolfinx.mesh.create_unit_square(MPI.COMM_SELF, 24, 24, diagonal=DiagonalType.crossed)
-    reference = first_eigenfrequency(fine, 2, MATERIAL.E, MATERIAL.nu, MATERIAL.rho,
-                                     meshes.exterior_facets(fine), n=1)[0]
+    reference = first_eigenfrequency(fine, 2, MATERIAL.E, MATERIAL.nu, MATERIAL.rho, meshes.exterior_facets(fine), n=1)[
+        0
+    ]
     assert reference == pytest.approx(3.98128, rel=1e-5)  # P2, 64x64 crossed: 3.9812816
     omega = np.array([_dem_first_frequency(n) for n in (4, 8, 16)])
     errors = np.abs(omega - reference) / reference
@@ -282,8 +283,10 @@ def cantilever():
     free = clamped_left(mesh)
     gravity = clamped_left(mesh, body_force=[0.0, -0.1])
     # the true limit (SLEPc): the monitor must trip just above it, not above the bound's step
-    return {"free": (free, free.stable_time_step("eigenvalue")),
-            "gravity": (gravity, gravity.stable_time_step("eigenvalue"))}
+    return {
+        "free": (free, free.stable_time_step("eigenvalue")),
+        "gravity": (gravity, gravity.stable_time_step("eigenvalue")),
+    }
 
 
 @pytest.mark.mpi
@@ -370,12 +373,18 @@ def test_energy_balance_with_tractions_and_rollers(scheme, time_dependent):
     suddenly applied: with a constant traction the pseudo-energy is conserved to rounding; with
     t(t) = t0 (1 + sin 3t) the balance E^n - W^n is (memm.py: W counts the data's work)."""
     mesh, _, tags = meshes.create_rectangle(MPI.COMM_WORLD, [0.0, 0.0], [2.0, 1.0], [6, 3], "crossed")
-    bcs = [DirichletBC(tags.find(meshes.XMIN), [0.0, 0.0], components=[0]),
-           DirichletBC(tags.find(meshes.YMIN), [0.0, 0.0], components=[1])]
-    value = (lambda x, t: np.stack([0.7 * (1 + np.sin(3 * t)) + 0 * x[0], 0.2 * x[1] * np.cos(t)])) \
-        if time_dependent else [0.7, 0.1]
-    dem = DEMDiscretisation(mesh, MATERIAL, scheme, bcs,
-                            tractions=[Traction(tags.find(meshes.XMAX), value, time_dependent)])
+    bcs = [
+        DirichletBC(tags.find(meshes.XMIN), [0.0, 0.0], components=[0]),
+        DirichletBC(tags.find(meshes.YMIN), [0.0, 0.0], components=[1]),
+    ]
+    value = (
+        (lambda x, t: np.stack([0.7 * (1 + np.sin(3 * t)) + 0 * x[0], 0.2 * x[1] * np.cos(t)]))
+        if time_dependent
+        else [0.7, 0.1]
+    )
+    dem = DEMDiscretisation(
+        mesh, MATERIAL, scheme, bcs, tractions=[Traction(tags.find(meshes.XMAX), value, time_dependent)]
+    )
     stepper = MEMM(DEMProblem(dem), 0.5 * dem.stable_time_step())
     first = stepper.initialise(dem.create_vector(), dem.create_vector())
     balance, scale = [], 0.0
@@ -400,8 +409,9 @@ def test_pseudo_energy_conserved_with_two_materials(scheme):
     x = dolfinx.mesh.compute_midpoints(mesh, 2, cells)[:, 0]
     cell_tags = dolfinx.mesh.meshtags(mesh, 2, cells, np.where(x < 1.0, 1, 2).astype(np.int32))
     materials = {1: MATERIAL, 2: ElasticMaterial(E=8.0, nu=0.2, rho=0.25, eta=24.0)}
-    dem = DEMDiscretisation(mesh, materials, scheme, [DirichletBC(tags.find(meshes.XMIN), [0.0, 0.0])],
-                            cell_tags=cell_tags)
+    dem = DEMDiscretisation(
+        mesh, materials, scheme, [DirichletBC(tags.find(meshes.XMIN), [0.0, 0.0])], cell_tags=cell_tags
+    )
     memm = MEMM(DEMProblem(dem), 0.5 * dem.stable_time_step())
     first = memm.initialise(dem.create_vector(), cell_vector(dem, bending_velocity))
     drift = scale = 0.0

@@ -1,12 +1,11 @@
 import math
 import pathlib
 
+import dolfinx.io
+import gmsh
 import numpy as np
 import pytest
 from mpi4py import MPI
-
-import dolfinx.io
-import gmsh
 
 from dolfinx_dem import _compat, meshes
 

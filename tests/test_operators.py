@@ -1,19 +1,18 @@
 """DEM gradient, energies and stiffness (paper §3.2-3.4): patch tests, rigid motions, spectrum of K."""
 
+import dolfinx.mesh
 import numpy as np
 import pytest
 import scipy.linalg
 import scipy.sparse
-from mpi4py import MPI
-
-import dolfinx.mesh
 from dolfinx.mesh import DiagonalType
+from helpers import cell_vector, gmsh_mesh, owned_centres
+from mpi4py import MPI
 
 from dolfinx_dem import meshes
 from dolfinx_dem.conditions import DirichletBC
 from dolfinx_dem.discretisation import DEMDiscretisation
 from dolfinx_dem.material import ElasticMaterial
-from helpers import cell_vector, gmsh_mesh, owned_centres
 
 MATERIAL = ElasticMaterial(E=3.0, nu=0.3, rho=1.0)
 

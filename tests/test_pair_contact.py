@@ -7,15 +7,15 @@ import json
 
 import numpy as np
 import pytest
+from helpers import cell_vector, gmsh_mesh
 from mpi4py import MPI
 
 from dolfinx_dem import meshes, model
+from dolfinx_dem.contact import PairContact, RigidContact
 from dolfinx_dem.discretisation import DEMDiscretisation
 from dolfinx_dem.material import ElasticMaterial
 from dolfinx_dem.memm import MEMM
-from dolfinx_dem.contact import PairContact, RigidContact
 from dolfinx_dem.problem import DEMProblem
-from helpers import cell_vector, gmsh_mesh
 
 SOFT = ElasticMaterial(E=100.0, nu=0.2, rho=100.0)
 
@@ -134,7 +134,7 @@ def test_two_discs_collide_and_separate_with_exact_energy_and_momentum(scheme):
         return p, left
 
     p_scale = momentum()[1][0] * 2
-    drift, momentum_change, contact_time, split = 0.0, 0.0, None, 0
+    drift, momentum_change, contact_time = 0.0, 0.0, None
     lefts, forces = [momentum()[1]], [model.contact_values(problem, stepper.u)[2:4]]
     for _ in range(int(0.6 / dt)):
         diag = stepper.step()
@@ -244,7 +244,8 @@ def test_the_pair_list_follows_the_bodies_under_every_quadrature(quadrature):
     and the discs passed through each other (left disc still at +0.3 m/s)."""
     mesh, _, _ = meshes.create_discs(MPI.COMM_WORLD, [((0.14, 2.27), 0.1), ((0.46, 2.27), 0.1)], 0.03)
     dem = DEMDiscretisation(mesh, SOFT, "B")
-    problem = DEMProblem(dem, [PairContact(dem, meshes.locate_boundary_facets(mesh, lambda x: (x[0] >= 0.14) & (x[0] <= 0.46)))])
+    facing = meshes.locate_boundary_facets(mesh, lambda x: (x[0] >= 0.14) & (x[0] <= 0.46))
+    problem = DEMProblem(dem, [PairContact(dem, facing)])
     c = problem.find(PairContact)
     assert c.num_pairs == 0
     dt = 0.2 * dem.stable_time_step()
@@ -256,7 +257,7 @@ def test_the_pair_list_follows_the_bodies_under_every_quadrature(quadrature):
         touched |= c.outputs.touching(c.patch_values(stepper.u))
     assert touched and c.rebuilds > 2
     mass = dem.mass.array_r.reshape(-1, 2)[:, 0]
-    left = (dem.geometry.cell_centres[: dem.n_owned, 0] < 0.3)
+    left = dem.geometry.cell_centres[: dem.n_owned, 0] < 0.3
     v = 0.5 * (stepper.v_prev.array_r + stepper.v_next.array_r).reshape(-1, 2)[:, 0]
     p_left = dem.comm.allreduce(float((mass * v)[left].sum()), op=MPI.SUM)
     m_left = dem.comm.allreduce(float(mass[left].sum()), op=MPI.SUM)
@@ -306,8 +307,9 @@ def test_bad_contact_input_is_rejected():
     dem, facets = two_discs(h=0.05)
     with pytest.raises(ValueError, match="has no facet"):
         PairContact(dem, np.empty(0, dtype=np.int32))
-    interior = np.setdiff1d(np.arange(dem.mesh.topology.index_map(1).size_local, dtype=np.int32),
-                            meshes.exterior_facets(dem.mesh))
+    interior = np.setdiff1d(
+        np.arange(dem.mesh.topology.index_map(1).size_local, dtype=np.int32), meshes.exterior_facets(dem.mesh)
+    )
     with pytest.raises(ValueError, match="must be boundary facets"):
         PairContact(dem, interior)
     with pytest.raises(ValueError, match="tolerance must be >= 0"):
@@ -355,12 +357,15 @@ def _discs_sharing_a_vertex():
     return DEMDiscretisation(gmsh_mesh(MPI.COMM_WORLD, build), SOFT, "B")
 
 
-@pytest.mark.parametrize("overrides, message", [
-    ({"contact.boundary": [7]}, "tag 7.* has no facet"),
-    ({"mesh.frame": [0.0, 2.0, 0.5, 2.5]}, "go together"),
-    ({"mesh.frame": [0.0, 2.2, 0.5, 2.5], "mesh.frame_width": 0.1}, "not strictly inside"),
-    ({"mesh.discs": [[0.14, 2.27, 0.1], [0.3, 2.27, 0.1]]}, "overlap"),
-])
+@pytest.mark.parametrize(
+    "overrides, message",
+    [
+        ({"contact.boundary": [7]}, "tag 7.* has no facet"),
+        ({"mesh.frame": [0.0, 2.0, 0.5, 2.5]}, "go together"),
+        ({"mesh.frame": [0.0, 2.2, 0.5, 2.5], "mesh.frame_width": 0.1}, "not strictly inside"),
+        ({"mesh.discs": [[0.14, 2.27, 0.1], [0.3, 2.27, 0.1]]}, "overlap"),
+    ],
+)
 def test_bad_contact_scenes_are_rejected_before_the_run(overrides, message, tmp_path):
     from dolfinx_dem import scenes, simulation
 
@@ -391,8 +396,9 @@ def test_self_contact_closes_a_slot():
         c = problem.find(PairContact)
         dt = 0.2 * dem.stable_time_step()
         stepper = MEMM(problem, dt)
-        v = cell_vector(dem, lambda x: np.stack([np.where(x[:, 0] < 0.15, 0.2, -0.2) * x[:, 1] / 0.2,
-                                                  np.zeros(len(x))], axis=1))
+        v = cell_vector(
+            dem, lambda x: np.stack([np.where(x[:, 0] < 0.15, 0.2, -0.2) * x[:, 1] / 0.2, np.zeros(len(x))], axis=1)
+        )
         first = stepper.initialise(dem.create_vector(), v)
         touched, drift = False, 0.0
         for _ in range(int(0.2 / dt)):
@@ -412,7 +418,9 @@ def test_rigid_wall_and_contact_between_bodies_together():
 
     dem, facets = two_discs(h=0.03)
     floor = meshes.locate_boundary_facets(dem.mesh, lambda x: x[1] <= 2.27)
-    problem = DEMProblem(dem, [RigidContact(dem, [HalfSpace([0.0, 2.165], [0.0, 1.0], floor)]), PairContact(dem, facets)])
+    problem = DEMProblem(
+        dem, [RigidContact(dem, [HalfSpace([0.0, 2.165], [0.0, 1.0], floor)]), PairContact(dem, facets)]
+    )
     assert len(problem.contacts) == 2
     dt = 0.2 * dem.stable_time_step()
     stepper = MEMM(problem, dt)
@@ -420,9 +428,18 @@ def test_rigid_wall_and_contact_between_bodies_together():
     first = stepper.initialise(dem.create_vector(), v)
     pair, wall = problem.find(PairContact), problem.find(RigidContact)
     columns = model.contact_columns(problem)
-    assert columns == ("contact_gap", "contact_pressure", "contact_force_obstacle0_x", "contact_force_obstacle0_y",
-                       "contact_force", "penetration", "contact_force_0_1_x", "contact_force_0_1_y",
-                       "momentum_x", "momentum_y")
+    assert columns == (
+        "contact_gap",
+        "contact_pressure",
+        "contact_force_obstacle0_x",
+        "contact_force_obstacle0_y",
+        "contact_force",
+        "penetration",
+        "contact_force_0_1_x",
+        "contact_force_0_1_y",
+        "momentum_x",
+        "momentum_y",
+    )
     both, drift, F, free = 0, 0.0, dem.create_vector(), dem.create_vector()
     for _ in range(int(0.2 / dt)):
         diag = stepper.step()
@@ -449,7 +466,9 @@ def blocks_on_a_floor(scheme="B"):
 
     dem, facets = two_blocks(scheme=scheme, y0=0.01)
     bottoms = meshes.locate_boundary_facets(dem.mesh, lambda x: x[1] < 0.02)
-    problem = DEMProblem(dem, [RigidContact(dem, [HalfSpace([0.0, 0.0], [0.0, 1.0], bottoms)]), PairContact(dem, facets)])
+    problem = DEMProblem(
+        dem, [RigidContact(dem, [HalfSpace([0.0, 0.0], [0.0, 1.0], bottoms)]), PairContact(dem, facets)]
+    )
     return problem
 
 
@@ -462,8 +481,10 @@ def _corrections_of_both_models(problem, u):
 
     r, p = problem.find(RigidContact), problem.find(PairContact)
     up = r.patch_values(u)
-    return (rows(r.facets, -np.minimum(r.gaps(up), 0.0)[:, None] * r.directions),
-            rows(p.facets, p.outputs.facet_corrections(p.patch_values(u))))
+    return (
+        rows(r.facets, -np.minimum(r.gaps(up), 0.0)[:, None] * r.directions),
+        rows(p.facets, p.outputs.facet_corrections(p.patch_values(u))),
+    )
 
 
 @pytest.mark.skip_in_parallel
@@ -479,8 +500,12 @@ def test_rigid_and_pair_contact_on_shared_rows_is_the_sum_of_both_energy_changes
     rng = np.random.default_rng(2)
     # The blocks pushed into each other and into the floor, offset vertically (facet ends apart,
     # off the kinks of the overlaps) and with a little strain.
-    u = cell_vector(dem, lambda x: np.where(x[:, :1] < 0.205, [[0.008, -0.012]], [[-0.008, -0.0135]])
-                    + 1e-4 * rng.standard_normal(x.shape))
+    u = cell_vector(
+        dem,
+        lambda x: (
+            np.where(x[:, :1] < 0.205, [[0.008, -0.012]], [[-0.008, -0.0135]]) + 1e-4 * rng.standard_normal(x.shape)
+        ),
+    )
     problem.find(PairContact).prepare(u)
     a = dem.rows.Q @ u.array
     d_rigid, d_pair = _corrections_of_both_models(problem, u)
@@ -573,7 +598,6 @@ def test_scheme_a_directions_where_eq_23_24_are_well_posed():
     the other pairs use the scheme B rule (e = +-n/2) and are counted. (A skin of the block's
     facet size lists pairs far round the disc: the per-facet default does not.)"""
     problem = disc_over_block(0.01, skin=0.1)
-    dem = problem.dem
     c = problem.find(PairContact)
     L, F = c.listed, c.facets_all
     cos_i = np.einsum("pi,pi->p", L.n, F.normal[L.i])
@@ -600,8 +624,9 @@ def test_scheme_a_contact_runs_through_pairs_without_a_compliant_solution():
     assert c.num_pairs == 0 and c.scheme_b_pairs == 0
     dt = 0.3 * dem.stable_time_step()
     stepper = MEMM(problem, dt)
-    first = stepper.initialise(dem.create_vector(),
-                               cell_vector(dem, lambda x: np.where(x[:, 1:] > 0.0, [[0.0, -0.5]], [[0.0, 0.0]])))
+    first = stepper.initialise(
+        dem.create_vector(), cell_vector(dem, lambda x: np.where(x[:, 1:] > 0.0, [[0.0, -0.5]], [[0.0, 0.0]]))
+    )
     drift = 0.0
     for _ in range(int(0.6 / dt)):
         diag = stepper.step()
@@ -638,12 +663,15 @@ def test_a_run_reports_the_pairs_that_use_the_scheme_b_rule(tmp_path, capsys):
         'method = "dem-A"\n[mesh]\ntype = "file"\npath = "disc_block.msh"\n'
         "[material]\nE = 100.0\nnu = 0.3\nrho = 100.0\n"
         '[contact]\nboundary = ["(y <= 0.22) & (y >= -1e-9)"]\n'
-        '[initial]\nvelocity = ["0", "where(y > 0, -0.5, 0)"]\n[time]\nend = 0.4\ncfl = 0.3\n')
+        '[initial]\nvelocity = ["0", "where(y > 0, -0.5, 0)"]\n[time]\nend = 0.4\ncfl = 0.3\n'
+    )
     assert cli.main(["run", str(tmp_path / "scene.toml"), "--out", str(tmp_path / "out")]) == 0
     summary = json.loads((tmp_path / "out" / "summary.json").read_text())
     assert summary["contact_pairs_scheme_b_rule"] > 0 and summary["pseudo_energy_rel_drift"] < 1e-13
-    assert f"note: {summary['contact_pairs_scheme_b_rule']} pairs of scheme A facets used the scheme B" in \
-        capsys.readouterr().out
+    assert (
+        f"note: {summary['contact_pairs_scheme_b_rule']} pairs of scheme A facets used the scheme B"
+        in capsys.readouterr().out
+    )
 
 
 def test_force_integral_refuses_patch_values_prepare_did_not_return():
@@ -674,7 +702,7 @@ def test_a_step_without_a_touching_pair_anywhere_adds_nothing():
     c, dt = problem.find(PairContact), 1e-3
     v = cell_vector(dem, approach)
     for shift, touching in ((0.0, False), (0.04, True)):  # the gap is 0.02 m; 0.04 s at +-0.3 m/s close it
-        u = cell_vector(dem, lambda x: approach(x) * shift)
+        u = cell_vector(dem, lambda x, shift=shift: approach(x) * shift)
         out = dem.create_vector()
         up, vp = c.prepare(u, v, dt)
         assert c._flight.quiet == (not touching)  # the same on every process
@@ -703,15 +731,13 @@ def test_both_contact_models_satisfy_the_contact_model_protocol():
     from dolfinx_dem.contact import ContactModel
 
     problem = blocks_on_a_floor()
-
-    dem = problem.dem
     members = [m for m in vars(ContactModel) if not m.startswith("_") and callable(getattr(ContactModel, m))]
     assert {"checkpoint_state", "restore_state", "prepare", "force_integral", "add", "add_force"} <= set(members)
-    for model in problem.contacts:
-        assert isinstance(model, ContactModel)
+    for contact in problem.contacts:
+        assert isinstance(contact, ContactModel)
         for name in members:
             expected = list(inspect.signature(getattr(ContactModel, name)).parameters)[1:]
-            assert list(inspect.signature(getattr(model, name)).parameters) == expected, (model, name)
+            assert list(inspect.signature(getattr(contact, name)).parameters) == expected, (contact, name)
 
 
 @pytest.mark.mpi
@@ -724,13 +750,15 @@ def test_a_traction_on_a_contact_facet_is_rejected():
     facets = meshes.locate_boundary_facets(mesh, lambda x: (x[0] >= 0.14) & (x[0] <= 0.36))
     dem = DEMDiscretisation(mesh, SOFT, "A", tractions=[Traction(facets, [0.0, -1.0])])
     with pytest.raises(ValueError, match="contact boundary: contact candidate facets must not carry a traction"):
-        problem = DEMProblem(dem, [PairContact(dem, meshes.exterior_facets(mesh))])
+        DEMProblem(dem, [PairContact(dem, meshes.exterior_facets(mesh))])
 
 
 # -- 3D: tetrahedral bodies, triangular facets ------------------------------------------------
 
+
 def _clipped_area(P, Q):
     """|P cap Q| of two triangles (3, 2) by Sutherland-Hodgman clipping (the reference)."""
+
     def ccw(T):
         a, b = T[1] - T[0], T[2] - T[0]
         return T if a[0] * b[1] - a[1] * b[0] > 0 else T[::-1]
@@ -756,18 +784,21 @@ def _clipped_area(P, Q):
 UNIT = np.array([[0.0, 0.0], [1.0, 0.0], [0.0, 1.0]])
 
 
-@pytest.mark.parametrize("B, s, kind", [
-    ([[0.2, 0.3], [1.5, -0.2], [1.5, 0.5]], [0.0, 0.0], "smooth"),  # a vertex of each inside the other
-    (-UNIT + [0.7, 0.7], [0.0, 0.0], "smooth"),  # edges crossing: a hexagon
-    (UNIT * 0.3, [0.1, 0.2], "smooth"),  # B inside A
-    (UNIT * 3.0, [-1.0, -0.5], "smooth"),  # A inside B
-    (UNIT + [0.3, -0.8], [0.05, 0.1], "smooth"),  # partial overlap, a vertex of B inside A
-    (UNIT, [2.0, 0.3], "smooth"),  # disjoint
-    (UNIT, [0.0, 0.0], "kink"),  # identical: every edge on an edge of the other
-    (UNIT[::-1], [0.5, 0.0], "kink"),  # an edge on an edge of the other, B clockwise
-    (UNIT, [1.0, 0.0], "touching"),  # at a vertex
-    (-UNIT + [1.0, 1.0], [0.0, 0.0], "touching"),  # along the hypotenuse
-])
+@pytest.mark.parametrize(
+    "B, s, kind",
+    [
+        ([[0.2, 0.3], [1.5, -0.2], [1.5, 0.5]], [0.0, 0.0], "smooth"),  # a vertex of each inside the other
+        (-UNIT + [0.7, 0.7], [0.0, 0.0], "smooth"),  # edges crossing: a hexagon
+        (UNIT * 0.3, [0.1, 0.2], "smooth"),  # B inside A
+        (UNIT * 3.0, [-1.0, -0.5], "smooth"),  # A inside B
+        (UNIT + [0.3, -0.8], [0.05, 0.1], "smooth"),  # partial overlap, a vertex of B inside A
+        (UNIT, [2.0, 0.3], "smooth"),  # disjoint
+        (UNIT, [0.0, 0.0], "kink"),  # identical: every edge on an edge of the other
+        (UNIT[::-1], [0.5, 0.0], "kink"),  # an edge on an edge of the other, B clockwise
+        (UNIT, [1.0, 0.0], "touching"),  # at a vertex
+        (-UNIT + [1.0, 1.0], [0.0, 0.0], "touching"),  # along the hypotenuse
+    ],
+)
 def test_overlap_of_triangles_and_its_gradient(B, s, kind):
     """w = |A cap (B + s)| (boundary clipping, ``overlap.overlap``) against Sutherland-Hodgman
     clipping in every configuration, and its gradient against central differences where w is
@@ -780,8 +811,14 @@ def test_overlap_of_triangles_and_its_gradient(B, s, kind):
     assert w[0] == pytest.approx(_clipped_area(A[0], B[0] + s[0]), abs=1e-15)
     if kind == "smooth":
         h = 1e-6
-        fd = [(overlap(Simplices.of(A), Simplices.of(B), pair, s + h * e)[0][0]
-               - overlap(Simplices.of(A), Simplices.of(B), pair, s - h * e)[0][0]) / (2 * h) for e in np.eye(2)]
+        fd = [
+            (
+                overlap(Simplices.of(A), Simplices.of(B), pair, s + h * e)[0][0]
+                - overlap(Simplices.of(A), Simplices.of(B), pair, s - h * e)[0][0]
+            )
+            / (2 * h)
+            for e in np.eye(2)
+        ]
         assert np.abs(dw[0] - fd).max() < 1e-9
     if kind == "touching":
         assert w[0] == 0.0 and not dw.any()
@@ -793,6 +830,7 @@ def test_pair_rows_are_the_product_of_the_directions_and_the_facet_columns():
     E^T @ QF^T with sorted indices: the exact zeros of cancelling entries dropped, pairs with a
     ghost facet (no columns here) taking their local facet's columns only."""
     import scipy.sparse
+
     from dolfinx_dem.contact.facets import FacetRows
 
     rng = np.random.default_rng(3)
@@ -807,7 +845,7 @@ def test_pair_rows_are_the_product_of_the_directions_and_the_facet_columns():
     # two pairs whose columns cancel exactly: one facet twice with opposite directions is not a
     # pair, so take two facets with equal columns and opposite e / |f|
     QF = QF.tolil()
-    QF[:, 2 * d: 3 * d] = QF[:, 1 * d: 2 * d]
+    QF[:, 2 * d : 3 * d] = QF[:, 1 * d : 2 * d]
     QF = QF.tocsc()
     length[1] = length[2] = 1.0
     i[:2], j[:2] = [1, 2], [2, 1]
@@ -820,8 +858,9 @@ def test_pair_rows_are_the_product_of_the_directions_and_the_facet_columns():
         dofs.append((side[mine, None] * d + np.arange(d)).ravel())
         pairs.append(np.repeat(np.flatnonzero(mine), d))
         vals.append((e[mine] / length[side[mine], None]).ravel())
-    ET = scipy.sparse.csr_matrix((np.concatenate(vals), (np.concatenate(pairs), np.concatenate(dofs))),
-                                 shape=(P, n_local * d))
+    ET = scipy.sparse.csr_matrix(
+        (np.concatenate(vals), (np.concatenate(pairs), np.concatenate(dofs))), shape=(P, n_local * d)
+    )
     expected = ET @ QF.T
     expected.sort_indices()
     assert ZT.has_sorted_indices and (ZT.data != 0).all()
@@ -867,9 +906,17 @@ def test_overlap_of_random_triangles():
     reference = [_clipped_area(A[k], B[k] + s[k]) for k in range(len(A))]
     assert np.abs(w - reference).max() < 1e-14 and (w > 0).sum() > 100
     h = 1e-7
-    fd = np.stack([(overlap(Simplices.of(A), Simplices.of(B), pairs, s + h * e)[0]
-                    - overlap(Simplices.of(A), Simplices.of(B), pairs, s - h * e)[0]) / (2 * h)
-                   for e in np.eye(2)], axis=1)
+    fd = np.stack(
+        [
+            (
+                overlap(Simplices.of(A), Simplices.of(B), pairs, s + h * e)[0]
+                - overlap(Simplices.of(A), Simplices.of(B), pairs, s - h * e)[0]
+            )
+            / (2 * h)
+            for e in np.eye(2)
+        ],
+        axis=1,
+    )
     assert np.abs(dw - fd).max() < 1e-7
 
 
@@ -919,7 +966,9 @@ def two_boxes(comm=MPI.COMM_WORLD, scheme="B"):
 
     mesh = gmsh_mesh(comm, build, gdim=3)
     dem = DEMDiscretisation(mesh, SOFT, scheme)
-    problem = DEMProblem(dem, [PairContact(dem, meshes.locate_boundary_facets(mesh, lambda x: (x[0] > 0.19) & (x[0] < 0.22)))])
+    problem = DEMProblem(
+        dem, [PairContact(dem, meshes.locate_boundary_facets(mesh, lambda x: (x[0] > 0.19) & (x[0] < 0.22)))]
+    )
     return problem
 
 
@@ -1190,7 +1239,9 @@ def test_a_list_round_rebuilds_only_the_lists_near_moving_facets():
         assert moving.any() or c.rebuilds == 1  # a process that knows no moving facet never rebuilt
         assert not moving.any() or c.rebuilds > 3
         # rounds between exchanges rebuild the list from the facets known
-        assert c.exchanges == 0 if comm.size == 1 else 1 <= c.exchanges and (not moving.any() or c.rebuilds > c.exchanges)
+        assert (
+            c.exchanges == 0 if comm.size == 1 else 1 <= c.exchanges and (not moving.any() or c.rebuilds > c.exchanges)
+        )
         x = dem.geometry.cell_centres[: dem.n_owned]
         return dem, stepper, c, x
 
@@ -1227,9 +1278,15 @@ def test_discs_that_travel_far_between_exchanges_move_as_on_one_process():
         dem = DEMDiscretisation(mesh, SOFT, "B")
         problem = DEMProblem(dem, [PairContact(dem, meshes.exterior_facets(mesh))])
         stepper = MEMM(problem, 0.2 * dem.stable_time_step())
-        stepper.initialise(dem.create_vector(), cell_vector(
-            dem, lambda x: np.stack([np.where(x[:, 0] < 0.3, 0.4, np.where(x[:, 0] > 0.9, -0.4, 0.0)),
-                                     np.zeros(len(x))], axis=1)))
+        stepper.initialise(
+            dem.create_vector(),
+            cell_vector(
+                dem,
+                lambda x: np.stack(
+                    [np.where(x[:, 0] < 0.3, 0.4, np.where(x[:, 0] > 0.9, -0.4, 0.0)), np.zeros(len(x))], axis=1
+                ),
+            ),
+        )
         for _ in range(320):  # 0.89 s: contact from 0.65 s
             stepper.step()
         return dem, stepper, problem.find(PairContact)
@@ -1269,8 +1326,10 @@ def test_a_restored_state_steps_as_the_first_time():
         stepper.step()
     saved = stepper.state()
     vectors = {k: saved[k].array_r.copy() for k in ("u", "v_prev", "v_next")}
-    scalars = {k: saved[k] for k in ("t0", "n", "budget", "work", "data_potential", "force_evaluations",
-                                     "max_step_evaluations")}
+    scalars = {
+        k: saved[k]
+        for k in ("t0", "n", "budget", "work", "data_potential", "force_evaluations", "max_step_evaluations")
+    }
     recurrence, contact_state = saved["recurrence"], c.checkpoint_state()
     first, exchanges = [], c.exchanges
     for _ in range(10):

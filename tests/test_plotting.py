@@ -1,12 +1,11 @@
 import pathlib
 import struct
 
+import dolfinx.fem
+import dolfinx.mesh
 import numpy as np
 import pytest
 from mpi4py import MPI
-
-import dolfinx.fem
-import dolfinx.mesh
 
 from dolfinx_dem import _compat, meshes, plotting
 

@@ -12,9 +12,8 @@ from mpi4py import MPI
 from dolfinx_dem import dynamics, io, meshes, model, scenes, statics
 from dolfinx_dem.conditions import DirichletBC, PrescribedBody, Traction
 from dolfinx_dem.discretisation import DEMDiscretisation
-from dolfinx_dem.problem import DEMProblem
-from dolfinx_dem.contact import PairContact
 from dolfinx_dem.material import ElasticMaterial
+from dolfinx_dem.problem import DEMProblem
 
 
 def indentation(**prescribed) -> dict:
@@ -49,20 +48,27 @@ def run(scene, comm=MPI.COMM_WORLD, check=None):
 
 def disc_values(r, name="u"):
     """The values of ``name`` (a stepper vector) on the disc's owned cells, (n, 2)."""
-    cells = r.dem.geometry.cell_bodies[: r.dem.n_owned] == 1  # the disc is body 1 (the block's first barycentre is left of it)
+    cells = (
+        r.dem.geometry.cell_bodies[: r.dem.n_owned] == 1
+    )  # the disc is body 1 (the block's first barycentre is left of it)
     return getattr(r.stepper, name).array_r.reshape(-1, 2)[cells]
 
 
-@pytest.mark.parametrize("prescribed", [{"velocity": [0.0, -1.0]},
-                                        {"displacement": ["0.02 * sin(100 * t)", "-0.5 * t - 30 * t**2"]}])
+@pytest.mark.parametrize(
+    "prescribed", [{"velocity": [0.0, -1.0]}, {"displacement": ["0.02 * sin(100 * t)", "-0.5 * t - 30 * t**2"]}]
+)
 def test_the_work_of_a_prescribed_body_balances_the_energy_through_contact(prescribed):
     """E^n - W^n is constant to rounding while the disc indents the block (events split steps);
     the disc's dofs follow U(t) exactly; the run is declared not conservative."""
-    U = (lambda t: np.array([0.0, -t])) if "velocity" in prescribed else \
-        (lambda t: np.array([0.02 * np.sin(100 * t), -0.5 * t - 30 * t**2]))
+    U = (
+        (lambda t: np.array([0.0, -t]))
+        if "velocity" in prescribed
+        else (lambda t: np.array([0.02 * np.sin(100 * t), -0.5 * t - 30 * t**2]))
+    )
     follow = []
-    r, balances, values = run(indentation(**prescribed),
-                              check=lambda r: follow.append(np.abs(disc_values(r) - U(r.stepper.t)).max(initial=0)))
+    r, balances, values = run(
+        indentation(**prescribed), check=lambda r: follow.append(np.abs(disc_values(r) - U(r.stepper.t)).max(initial=0))
+    )
     assert not r.conservative and r.columns[6:8] == ("work", "balance")
     assert np.abs(balances - balances[0]).max() < 1e-12  # measured 2e-15 (velocity), 5e-15 (displacement)
     assert r.dem.comm.allreduce(r.stepper.max_step_evaluations, op=MPI.MAX) >= 3  # contact events
@@ -100,14 +106,18 @@ def test_a_prescribed_body_is_rigid_at_its_contact_facets():
     r, _, _ = run(indentation())
     pc = r.pairs
     up = pc.patch_values(r.stepper.u)
-    delta = pc.facet_corrections(up)
+    delta = pc.outputs.facet_corrections(up)
     on_disc = pc.facets_all.body[: len(pc.facets)] == 1
     assert r.dem.comm.allreduce(float(np.abs(delta[on_disc]).max(initial=0)), op=MPI.MAX) == 0.0
     assert r.dem.comm.allreduce(float(np.abs(delta[~on_disc]).max(initial=0)), op=MPI.MAX) > 1e-4
     L = pc.listed
     assert np.all(np.where(pc.facets_all.body[L.i] == 1, np.abs(L.e_i).max(axis=1), np.abs(L.e_j).max(axis=1)) == 0)
-    assert np.allclose(np.where(pc.facets_all.body[L.i] == 1, L.e_j.T, L.e_i.T).T,
-                       np.where(pc.facets_all.body[L.i] == 1, -1, 1)[:, None] * L.n, rtol=0, atol=0)
+    assert np.allclose(
+        np.where(pc.facets_all.body[L.i] == 1, L.e_j.T, L.e_i.T).T,
+        np.where(pc.facets_all.body[L.i] == 1, -1, 1)[:, None] * L.n,
+        rtol=0,
+        atol=0,
+    )
 
 
 def test_a_free_block_pushed_by_a_prescribed_disc_balances_its_energy():
@@ -124,8 +134,9 @@ def test_the_indentation_scene_writes_a_force_indentation_curve(tmp_path):
     columns, the disc's displacement is U(t) and the summary says it is not conservative."""
     from dolfinx_dem import simulation
 
-    scene = scenes.load("indentation", {"mesh.h": 0.06, "mesh.discs": [[0.0, 0.2005, 0.2]], "time.end": 0.006,
-                                        "output.every": 1000})
+    scene = scenes.load(
+        "indentation", {"mesh.h": 0.06, "mesh.discs": [[0.0, 0.2005, 0.2]], "time.end": 0.006, "output.every": 1000}
+    )
     summary = simulation.run(scene, tmp_path / "out", MPI.COMM_SELF, quiet=True)
     assert not summary["conservative"] and summary["pseudo_energy_rel_drift"] < 1e-12
     assert "momentum_rel_change" not in summary
@@ -143,8 +154,13 @@ def test_unnamed_reactions_are_numbered_after_the_dirichlet_conditions():
     problem = model.build(scenes.validate(scene))
     dem = problem.dem
     assert model.reaction_columns(dem) + model.prescribed_columns(dem) == (
-        "reaction_0_x", "reaction_0_y", "reaction_1_x", "reaction_1_y",
-        "prescribed_1_displacement_x", "prescribed_1_displacement_y")
+        "reaction_0_x",
+        "reaction_0_y",
+        "reaction_1_x",
+        "reaction_1_y",
+        "prescribed_1_displacement_x",
+        "prescribed_1_displacement_y",
+    )
 
 
 @pytest.mark.mpi
@@ -170,21 +186,30 @@ def _rectangle_tags(comm, tag_of_cell):
 MATERIAL = ElasticMaterial(E=1e4, nu=0.3, rho=1.0)
 
 
-@pytest.mark.parametrize("overrides, message", [
-    ({"prescribed": [{"velocity": [0.0, -1.0]}]}, r"'prescribed\[0\].tag' is missing"),
-    ({"prescribed": [{"tag": 1}]}, "exactly one of 'velocity' and 'displacement'"),
-    ({"prescribed": [{"tag": 1, "velocity": [0.0, -1.0], "displacement": ["0", "-t"]}]}, "exactly one of"),
-    ({"prescribed": [{"tag": 1, "velocity": [0.0, -1.0, 0.0]}]}, r"'prescribed\[0\].velocity' must be a list of 2"),
-    ({"prescribed": [{"tag": 1, "displacement": ["-t"]}]}, r"'prescribed\[0\].displacement' must be a list of 2"),
-    ({"prescribed": [{"tag": 1, "displacement": ["0", "-x * t"]}]}, r"unknown names \['x'\]"),
-    ({"prescribed": [{"tag": 1, "velocity": [0.0, -1.0], "name": "base"}]}, "must be unique together"),
-    ({"prescribed": [{"tag": 1, "velocity": [0.0, -1.0], "name": "a-b"}]}, "letters, digits and underscores"),
-    ({"prescribed": [{"tag": 7, "velocity": [0.0, -1.0]}]}, "selects no cell"),
-    ({"dirichlet": [{"boundary": "y >= 0.2"}]}, "prescribed body carries a Dirichlet condition"),
-    ({"tractions": [{"boundary": "y >= 0.2", "value": [0.0, 1.0]}]}, "prescribed body carries a traction"),
-    ({"mesh": {"type": "discs", "rectangles": [[0, 0, 1, 1], [1, 1, 2, 2]], "h": 0.5}, "contact": {"boundary": ["all"]},
-      "dirichlet": []}, "not a whole body: bodies share the vertex"),
-])
+@pytest.mark.parametrize(
+    "overrides, message",
+    [
+        ({"prescribed": [{"velocity": [0.0, -1.0]}]}, r"'prescribed\[0\].tag' is missing"),
+        ({"prescribed": [{"tag": 1}]}, "exactly one of 'velocity' and 'displacement'"),
+        ({"prescribed": [{"tag": 1, "velocity": [0.0, -1.0], "displacement": ["0", "-t"]}]}, "exactly one of"),
+        ({"prescribed": [{"tag": 1, "velocity": [0.0, -1.0, 0.0]}]}, r"'prescribed\[0\].velocity' must be a list of 2"),
+        ({"prescribed": [{"tag": 1, "displacement": ["-t"]}]}, r"'prescribed\[0\].displacement' must be a list of 2"),
+        ({"prescribed": [{"tag": 1, "displacement": ["0", "-x * t"]}]}, r"unknown names \['x'\]"),
+        ({"prescribed": [{"tag": 1, "velocity": [0.0, -1.0], "name": "base"}]}, "must be unique together"),
+        ({"prescribed": [{"tag": 1, "velocity": [0.0, -1.0], "name": "a-b"}]}, "letters, digits and underscores"),
+        ({"prescribed": [{"tag": 7, "velocity": [0.0, -1.0]}]}, "selects no cell"),
+        ({"dirichlet": [{"boundary": "y >= 0.2"}]}, "prescribed body carries a Dirichlet condition"),
+        ({"tractions": [{"boundary": "y >= 0.2", "value": [0.0, 1.0]}]}, "prescribed body carries a traction"),
+        (
+            {
+                "mesh": {"type": "discs", "rectangles": [[0, 0, 1, 1], [1, 1, 2, 2]], "h": 0.5},
+                "contact": {"boundary": ["all"]},
+                "dirichlet": [],
+            },
+            "not a whole body: bodies share the vertex",
+        ),
+    ],
+)
 def test_bad_prescribed_scenes_are_rejected_before_the_run(overrides, message):
     scene = indentation() | overrides
     with pytest.raises(ValueError, match=message):
@@ -197,9 +222,11 @@ def test_bad_prescribed_bodies_are_rejected_by_the_discretisation():
     with pytest.raises(ValueError, match="not a whole body: it shares facets"):
         DEMDiscretisation(mesh, MATERIAL, "B", cell_tags=tags, prescribed=[PrescribedBody(1, velocity=[0.0, 1.0])])
     mesh, tags, facet_tags = _rectangle_tags(comm, lambda c: np.ones_like(c))
-    for body, message in [(PrescribedBody(1), "exactly one of velocity and displacement"),
-                          (PrescribedBody(1, [0.0, 1.0], lambda t: [0.0, t]), "exactly one of"),
-                          (PrescribedBody(1, velocity=[1.0]), "velocity must have 2 components")]:
+    for body, message in [
+        (PrescribedBody(1), "exactly one of velocity and displacement"),
+        (PrescribedBody(1, [0.0, 1.0], lambda t: [0.0, t]), "exactly one of"),
+        (PrescribedBody(1, velocity=[1.0]), "velocity must have 2 components"),
+    ]:
         with pytest.raises(ValueError, match=message):
             DEMDiscretisation(mesh, MATERIAL, "B", cell_tags=tags, prescribed=[body])
     with pytest.raises(ValueError, match="prescribed body 1 .cell tag 1. overlaps another prescribed body"):
@@ -208,19 +235,36 @@ def test_bad_prescribed_bodies_are_rejected_by_the_discretisation():
         DEMDiscretisation(mesh, MATERIAL, "B", prescribed=[PrescribedBody(1, velocity=[0.0, 1.0])])
     top = facet_tags.find(meshes.YMAX)
     with pytest.raises(ValueError, match="carries a Dirichlet condition"):
-        DEMDiscretisation(mesh, MATERIAL, "B", [DirichletBC(top, [0.0, 0.0])], cell_tags=tags,
-                          prescribed=[PrescribedBody(1, velocity=[0.0, 1.0])])
+        DEMDiscretisation(
+            mesh,
+            MATERIAL,
+            "B",
+            [DirichletBC(top, [0.0, 0.0])],
+            cell_tags=tags,
+            prescribed=[PrescribedBody(1, velocity=[0.0, 1.0])],
+        )
     with pytest.raises(ValueError, match="carries a traction"):
-        DEMDiscretisation(mesh, MATERIAL, "B", tractions=[Traction(top, [0.0, 1.0])], cell_tags=tags,
-                          prescribed=[PrescribedBody(1, velocity=[0.0, 1.0])])
+        DEMDiscretisation(
+            mesh,
+            MATERIAL,
+            "B",
+            tractions=[Traction(top, [0.0, 1.0])],
+            cell_tags=tags,
+            prescribed=[PrescribedBody(1, velocity=[0.0, 1.0])],
+        )
     dem = DEMDiscretisation(mesh, MATERIAL, "B", cell_tags=tags, prescribed=[PrescribedBody(1, velocity=[0.0, 1.0])])
     with pytest.raises(ValueError, match="the load time t must be finite"):
         statics.minimise_energy(DEMProblem(dem), t=np.nan)
     box, _, _ = meshes.create_box(comm, [0.0, 0.0, 0.0], [1.0, 1.0, 1.0], [1, 1, 1])
     cells = np.arange(box.topology.index_map(3).size_local, dtype=np.int32)
     with pytest.raises(ValueError, match="implemented in 2D, not 3D"):
-        DEMDiscretisation(box, MATERIAL, "B", cell_tags=types.SimpleNamespace(indices=cells, values=cells * 0 + 1),
-                          prescribed=[PrescribedBody(1, velocity=[0.0, 0.0, 1.0])])
+        DEMDiscretisation(
+            box,
+            MATERIAL,
+            "B",
+            cell_tags=types.SimpleNamespace(indices=cells, values=cells * 0 + 1),
+            prescribed=[PrescribedBody(1, velocity=[0.0, 0.0, 1.0])],
+        )
 
 
 def static_indentation(t: float) -> dict:
@@ -261,7 +305,8 @@ def test_a_static_scene_with_a_prescribed_disc_reports_its_reaction(tmp_path):
     from dolfinx_dem.static_simulation import StaticRun
 
     summary = StaticRun(scenes.validate(static_indentation(0.0105)), MPI.COMM_SELF).run(
-        io.OutputDirectory(tmp_path / "out", MPI.COMM_SELF))
+        io.OutputDirectory(tmp_path / "out", MPI.COMM_SELF)
+    )
     reactions = summary["reactions"]
     assert summary["time"] == 0.0105 and reactions["reaction_disc_y"] < 0
     assert abs(reactions["reaction_disc_y"] + reactions["reaction_base_y"]) < 1e-8 * reactions["reaction_base_y"]

@@ -4,15 +4,14 @@ Functions) and refuses misuse with clear errors."""
 
 import inspect
 
+import dolfinx.fem
 import numpy as np
 import pytest
+from helpers import cell_vector
 from mpi4py import MPI
-
-import dolfinx.fem
 
 import dolfinx_dem
 from dolfinx_dem import errors, meshes
-from helpers import cell_vector
 
 PLATE = dolfinx_dem.ElasticMaterial(E=100.0, nu=0.3, rho=1.0)
 
@@ -94,11 +93,15 @@ def test_conditions_take_meshtags_and_their_tags():
         u = cell_vector(dem, lambda x: 0.01 * x ** 2) if u is None else u
         reactions.append(dem.reactions(u, 0.0))
     assert np.array_equal(reactions[0], reactions[1]) and np.abs(reactions[0]).max() > 0
-    with pytest.raises(dolfinx_dem.InputError, match=r"Dirichlet condition 0: the MeshTags holds the values \[1, 2, 3, 4\]"):
+    with pytest.raises(
+        dolfinx_dem.InputError, match=r"Dirichlet condition 0: the MeshTags holds the values \[1, 2, 3, 4\]"
+    ):
         dolfinx_dem.DEMDiscretisation(mesh, PLATE, "A", [dolfinx_dem.DirichletBC(tags, [0.0, 0.0])])
     with pytest.raises(dolfinx_dem.InputError, match="tag=1 selects among the values of a MeshTags"):
         dolfinx_dem.DEMDiscretisation(mesh, PLATE, "A", [dolfinx_dem.DirichletBC(tags.find(1), [0.0, 0.0], tag=1)])
-    with pytest.raises(dolfinx_dem.InputError, match="facets must be a 1D array of facet indices or a DOLFINx MeshTags"):
+    with pytest.raises(
+        dolfinx_dem.InputError, match="facets must be a 1D array of facet indices or a DOLFINx MeshTags"
+    ):
         dolfinx_dem.DEMDiscretisation(mesh, PLATE, "A", [dolfinx_dem.DirichletBC(np.array([0.5, 1.5]), [0.0, 0.0])])
     dem = dolfinx_dem.DEMDiscretisation(mesh, PLATE, "A", [dolfinx_dem.DirichletBC(tags, [0, 0], tag=meshes.XMIN)])
     floor = dolfinx_dem.RigidContact(dem, [dolfinx_dem.HalfSpace([0.0, -0.1], [0.0, 1.0], tags, tag=meshes.YMIN)])
@@ -117,9 +120,11 @@ def test_initial_states_are_dolfinx_functions_vectors_or_arrays():
     def field(x):
         return np.stack([0.01 * x[0] + 0.03 * x[1], -0.02 * x[0]])  # affine: a P1 field holds it exactly
 
-    P1 = dolfinx.fem.Function(dolfinx.fem.VectorFunctionSpace(mesh, ("Lagrange", 1))
-                              if hasattr(dolfinx.fem, "VectorFunctionSpace")
-                              else dolfinx.fem.functionspace(mesh, ("Lagrange", 1, (2,))))
+    P1 = dolfinx.fem.Function(
+        dolfinx.fem.VectorFunctionSpace(mesh, ("Lagrange", 1))
+        if hasattr(dolfinx.fem, "VectorFunctionSpace")
+        else dolfinx.fem.functionspace(mesh, ("Lagrange", 1, (2,)))
+    )
     P1.interpolate(field)
     DG0 = dolfinx.fem.Function(dem.V)
     DG0.interpolate(field)

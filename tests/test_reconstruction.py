@@ -1,19 +1,18 @@
 """Facet reconstruction (paper eq. (6)-(7), scheme A eq. (19)-(21), scheme B)."""
 
+import dolfinx.mesh
 import numpy as np
 import pytest
+from dolfinx.mesh import DiagonalType
 from mpi4py import MPI
 from petsc4py import PETSc
 
-import dolfinx.mesh
-from dolfinx.mesh import DiagonalType
-
 from dolfinx_dem import _compat, meshes
 from dolfinx_dem.conditions import DirichletBC
+from dolfinx_dem.contact.patch import PatchScatter
 from dolfinx_dem.discretisation import DEMDiscretisation
 from dolfinx_dem.geometry import compute_geometry, geometry_from_arrays
 from dolfinx_dem.material import CellMaterials, ElasticMaterial
-from dolfinx_dem.contact.patch import PatchScatter
 from dolfinx_dem.reconstruction import compute_interior_stencils, compute_reconstruction
 
 MATERIAL = ElasticMaterial(E=1.0, nu=0.3, rho=1.0)

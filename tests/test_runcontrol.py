@@ -13,14 +13,13 @@ import os
 import signal
 import subprocess
 
+import dolfinx.io
 import numpy as np
 import pytest
+from helpers import CLI, children, mpi_env, read_solution, series_rows, wait_for
 from mpi4py import MPI
 
-import dolfinx.io
-
 from dolfinx_dem import cli, runcontrol
-from helpers import CLI, children, mpi_env, read_solution, series_rows, wait_for
 
 LONG_RUN = ["run", "bar-impact", "--set", "time.end=400.0", "--set", "output.every=20"]
 

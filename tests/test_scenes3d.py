@@ -2,14 +2,14 @@
 keeps its refinement at the contact point and its eta = 10 E: at h = 0.06 m, 691 cells)."""
 
 import json
+
 import numpy as np
 import pytest
+from helpers import cell_vector
 from mpi4py import MPI
 
 from dolfinx_dem import model, scenes, simulation
 from dolfinx_dem.contact import PairContact
-from dolfinx_dem.contact import RigidContact
-from helpers import cell_vector
 
 
 def test_closed_pairs_state_is_the_full_state_where_gaps_are_negative():
@@ -73,7 +73,7 @@ def test_ball_drop_acts_with_the_floor_and_the_ball_in_the_same_steps():
     scene = scenes.load("ball-drop", {"mesh.h": 0.07, "time.end": 0.06, "time.cfl": 0.5,
                                       "initial.velocity": ["0", "0", "where(z > 0.045, -0.5, 0.0)"]})
     run = DynamicRun(scene, MPI.COMM_SELF, quiet=True)
-    stepper, dem = run.stepper, run.dem
+    stepper = run.stepper
     first, both, drift = run.first, 0, 0.0
     for _ in range(run.n_steps):
         diag = stepper.step()
@@ -116,7 +116,6 @@ def test_contact_skin_is_a_scene_key():
     with pytest.raises(scenes.SceneError, match="contact.skin' must be > 0"):
         scenes.load("two-balls", {"mesh.h": 0.06, "contact.skin": 0.0})
     problem = model.build(scenes.load("two-balls", {"mesh.h": 0.06, "contact.skin": 0.05}), MPI.COMM_SELF)
-    dem = problem.dem
     assert problem.find(PairContact).skin == 0.05
 
 
@@ -144,7 +143,8 @@ def test_contact_surfaces_interpenetrating_beyond_the_limit_stop_the_run(tmp_pat
     default = json.loads((tmp_path / "default" / "summary.json").read_text())
     assert default["status"] == "completed" and 0.05 < default["max_penetration_over_facet_size"] < 0.5
     # with the limit lifted, balls at 3 m/s go deeper than the pair list radius: the same stop
-    fast = ["--set", 'initial.velocity=["where(x < 0.25, 3.0, -3.0)", "0", "0"]', "--set", "contact.max_penetration=100"]
+    fast = ["--set", 'initial.velocity=["where(x < 0.25, 3.0, -3.0)", "0", "0"]',
+            "--set", "contact.max_penetration=100"]
     assert cli.main(["run", "two-balls", *coarse, *fast, "--quiet", "--out", str(tmp_path / "deep")]) == 1
     deep = json.loads((tmp_path / "deep" / "summary.json").read_text())
     assert deep["status"] == "unresolved" and "deeper than the pair list radius" in deep["error"]

@@ -322,16 +322,27 @@ def test_a_moving_boundary_is_reported_as_not_conservative(tmp_path):
 def test_an_error_on_one_process_only_aborts_instead_of_hanging(tmp_path):
     script = tmp_path / "one.py"
     script.write_text(
-        "import sys\nfrom mpi4py import MPI\nfrom dolfinx_dem import cli, simulation\nfrom dolfinx_dem.errors import InputError\n\n"
+        "import sys\nfrom mpi4py import MPI\nfrom dolfinx_dem import cli, simulation\n"
+        "from dolfinx_dem.errors import InputError\n\n"
         "def run(*args, **kwargs):\n"
         "    if MPI.COMM_WORLD.rank == 1:\n"
         "        raise InputError('found on process 1 only')\n"
         "    MPI.COMM_WORLD.barrier()  # the others wait in a collective\n\n"
         "simulation.run = run\n"
-        f"sys.exit(cli.main(['run', 'bar-wave', '--out', '{tmp_path / 'out'}', '--quiet']))\n")
-    env = dict(os.environ, OMPI_ALLOW_RUN_AS_ROOT="1", OMPI_ALLOW_RUN_AS_ROOT_CONFIRM="1",
-               OMPI_MCA_btl_vader_single_copy_mechanism="none")
-    r = subprocess.run(["mpirun", "-n", "2", "--oversubscribe", sys.executable, str(script)], capture_output=True,
-                       text=True, env=env, timeout=300)
+        f"sys.exit(cli.main(['run', 'bar-wave', '--out', '{tmp_path / 'out'}', '--quiet']))\n"
+    )
+    env = dict(
+        os.environ,
+        OMPI_ALLOW_RUN_AS_ROOT="1",
+        OMPI_ALLOW_RUN_AS_ROOT_CONFIRM="1",
+        OMPI_MCA_btl_vader_single_copy_mechanism="none",
+    )
+    r = subprocess.run(
+        ["mpirun", "-n", "2", "--oversubscribe", sys.executable, str(script)],
+        capture_output=True,
+        text=True,
+        env=env,
+        timeout=300,
+    )
     assert r.returncode != 0
     assert "dolfinx-dem: error on process 1 only: found on process 1 only" in r.stderr

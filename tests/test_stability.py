@@ -2,11 +2,11 @@
 bound, close to SLEPc's value, the same to the bit on any number of processes, and stable at
 cfl = 1 (the monitor's trip just above the true limit is in test_memm.py)."""
 
+import dolfinx.mesh
 import numpy as np
 import pytest
+from helpers import cell_vector
 from mpi4py import MPI
-
-import dolfinx.mesh
 
 from dolfinx_dem import meshes, scenes, simulation, stability
 from dolfinx_dem.conditions import DirichletBC
@@ -14,7 +14,6 @@ from dolfinx_dem.discretisation import DEMDiscretisation
 from dolfinx_dem.material import ElasticMaterial
 from dolfinx_dem.memm import MEMM
 from dolfinx_dem.problem import DEMProblem
-from helpers import cell_vector
 
 MATERIAL = ElasticMaterial(E=1.0, nu=0.3, rho=1.0)
 

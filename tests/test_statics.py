@@ -5,18 +5,18 @@ import pathlib
 
 import numpy as np
 import pytest
+from helpers import owned_centres
 from mpi4py import MPI
 from petsc4py import PETSc
 
 from dolfinx_dem import _compat, io, meshes, model, scenes, simulation, static_simulation
 from dolfinx_dem.conditions import DirichletBC, Traction
-from dolfinx_dem.discretisation import DEMDiscretisation
-from dolfinx_dem.material import ElasticMaterial
-from dolfinx_dem.errors import StaticsError
-from dolfinx_dem.statics import minimise_energy
-from dolfinx_dem.problem import DEMProblem
 from dolfinx_dem.contact import HalfSpace, PairContact, RigidContact
-from helpers import owned_centres
+from dolfinx_dem.discretisation import DEMDiscretisation
+from dolfinx_dem.errors import StaticsError
+from dolfinx_dem.material import ElasticMaterial
+from dolfinx_dem.problem import DEMProblem
+from dolfinx_dem.statics import minimise_energy
 
 
 @pytest.mark.parametrize("scheme", ["A", "B"])
@@ -148,7 +148,6 @@ def test_disc_resting_on_an_elastic_block():
     results = []
     for comm in [MPI.COMM_WORLD] + ([MPI.COMM_SELF] if MPI.COMM_WORLD.size > 1 else []):
         problem = disc_on_block(comm, 0.04, width=0.3, height=0.2)
-        dem = problem.dem
         result = minimise_energy(problem, fixed_mean=(0,), fixed_rotation=True)
         assert result.gradient_reduction < 1e-10
         assert len(result.pinned) == 1 and result.kink_forces[0] > 0  # the kink this mesh has
@@ -169,7 +168,6 @@ def test_disc_on_a_stiff_block_approaches_the_rigid_plane():
     (moment measure of the normal forces at the disc facets' centres) by -1.4 %."""
     comm = MPI.COMM_WORLD
     problem = disc_on_block(comm, 0.02, stiffness=1e4)
-    dem = problem.dem
     result = minimise_energy(problem, fixed_mean=(0,), fixed_rotation=True)
     assert result.gradient_reduction < 1e-10
     disc, load, force, uy, half_width = _disc_figures(problem, result)
@@ -231,7 +229,6 @@ def test_pair_statics_ends_with_an_error_when_it_does_not_converge():
     """Not converged in the iterations allowed: a StaticsError naming the gradient reduction
     reached, never a result."""
     problem = disc_on_block(MPI.COMM_WORLD, 0.04)
-    dem = problem.dem
     with pytest.raises(StaticsError, match=r"no convergence in 2 iterations \(gradient reduction"):
         minimise_energy(problem, fixed_mean=(0,), fixed_rotation=True, max_iterations=2)
     with pytest.raises(ValueError, match="gradient_rtol"):
@@ -242,13 +239,15 @@ def test_statics_refuses_obstacles_with_contact_between_bodies():
     mesh, _, _ = meshes.create_discs(MPI.COMM_WORLD, [((0.0, 0.1), 0.1), ((0.25, 0.1), 0.1)], 0.05)
     dem = DEMDiscretisation(mesh, ElasticMaterial(E=100.0, nu=0.2, rho=1.0), "B", body_force=[0.0, -1.0])
     boundary = meshes.exterior_facets(mesh)
-    problem = DEMProblem(dem, [RigidContact(dem, [HalfSpace([0.0, 0.0], [0.0, 1.0], boundary, tolerance=1e-3)]), PairContact(dem, boundary)])
+    floor = RigidContact(dem, [HalfSpace([0.0, 0.0], [0.0, 1.0], boundary, tolerance=1e-3)])
+    problem = DEMProblem(dem, [floor, PairContact(dem, boundary)])
     with pytest.raises(ValueError, match="rigid obstacles or contact between bodies, not both"):
         minimise_energy(problem, fixed_mean=(0,))
 
 
 STACKED = {
-    "name": "stacked", "method": "dem-B",
+    "name": "stacked",
+    "method": "dem-B",
     "mesh": {"type": "discs", "discs": [[0.0, 0.100001, 0.1], [0.0, -0.1, 0.1]], "h": 0.05},
     "material": {"E": 1e4, "nu": 0.25, "rho": 1.0},
     "loads": {"body_force": [0.0, -100.0]},
@@ -268,8 +267,9 @@ def test_static_scene_with_contact_between_bodies(tempdir):
     geom = dem.geometry
     upper = geom.cell_bodies[: dem.n_owned][geom.cell_centres[: dem.n_owned, 1] > 0]
     upper = MPI.COMM_WORLD.allreduce(int(upper.max(initial=0)), op=MPI.MAX)
-    area = MPI.COMM_WORLD.allreduce(geom.cell_volumes[: dem.n_owned][geom.cell_bodies[: dem.n_owned] == upper].sum(),
-                                    op=MPI.SUM)
+    area = MPI.COMM_WORLD.allreduce(
+        geom.cell_volumes[: dem.n_owned][geom.cell_bodies[: dem.n_owned] == upper].sum(), op=MPI.SUM
+    )
     force = summary["contact_forces"]["0_1"][1]
     assert abs(force) == pytest.approx(100.0 * area, rel=1e-8)
     with pytest.raises(scenes.SceneError, match="obstacles or contact between bodies"):
@@ -283,15 +283,18 @@ def test_static_scene_rejects_time_and_fem_needs_statics():
         scenes.load("bar-impact", {"method": "fem-P2"})
 
 
-@pytest.mark.parametrize("overrides, message", [
-    ({"mesh.refine_h": None}, "'mesh.refine_point' and 'mesh.refine_h' go together"),
-    ({"mesh.refine_h": 0.05}, "h_min must satisfy"),
-    ({"mesh.balls": [[0.0, 0.0, 0.2, 0.2], [0.3, 0.0, 0.2, 0.2]]}, "balls 1 and 2 overlap"),
-    ({"mesh.frame": [-1.0, -1.0, -1.0, 1.0, 1.0, 0.3], "mesh.frame_width": 0.1}, "not strictly inside"),
-    ({"mesh.cut": ["x", "w"]}, r"mesh.cut\[1\]"),
-    ({"method": "fem-P2", "mesh.cut": ["x"]}, "'fem-P2' solves the Hertz problems only"),
-    ({"method": "fem-P2", "mesh.refine_point": [0.0, 0.0, 0.1]}, "'fem-P2' solves the Hertz problems only"),
-])
+@pytest.mark.parametrize(
+    "overrides, message",
+    [
+        ({"mesh.refine_h": None}, "'mesh.refine_point' and 'mesh.refine_h' go together"),
+        ({"mesh.refine_h": 0.05}, "h_min must satisfy"),
+        ({"mesh.balls": [[0.0, 0.0, 0.2, 0.2], [0.3, 0.0, 0.2, 0.2]]}, "balls 1 and 2 overlap"),
+        ({"mesh.frame": [-1.0, -1.0, -1.0, 1.0, 1.0, 0.3], "mesh.frame_width": 0.1}, "not strictly inside"),
+        ({"mesh.cut": ["x", "w"]}, r"mesh.cut\[1\]"),
+        ({"method": "fem-P2", "mesh.cut": ["x"]}, "'fem-P2' solves the Hertz problems only"),
+        ({"method": "fem-P2", "mesh.refine_point": [0.0, 0.0, 0.1]}, "'fem-P2' solves the Hertz problems only"),
+    ],
+)
 def test_bad_ball_scenes_are_rejected_before_the_run(overrides, message, tmp_path):
     scene = scenes.load("hertz3d")
     for key, value in overrides.items():
@@ -330,9 +333,13 @@ def test_bar_under_an_end_traction(scheme):
     scheme A the solution is exact, u_tip = sigma L / E to 1e-12."""
     L, E, sigma = 2.0, 50.0, 3.0
     mesh, _, tags = meshes.create_interval(MPI.COMM_WORLD, 16, 0.0, L)
-    dem = DEMDiscretisation(mesh, ElasticMaterial(E=E, nu=0.0, rho=1.0), scheme,
-                            [DirichletBC(tags.find(meshes.XMIN), [0.0])],
-                            tractions=[Traction(tags.find(meshes.XMAX), [sigma])])
+    dem = DEMDiscretisation(
+        mesh,
+        ElasticMaterial(E=E, nu=0.0, rho=1.0),
+        scheme,
+        [DirichletBC(tags.find(meshes.XMIN), [0.0])],
+        tractions=[Traction(tags.find(meshes.XMAX), [sigma])],
+    )
     result = minimise_energy(DEMProblem(dem), rtol=1e-14)
     assert dem.reactions(result.u, 0.0)[0, 0] == pytest.approx(-sigma, rel=1e-12)
     if scheme == "A":
@@ -351,10 +358,16 @@ def test_patch_test_with_rollers():
     rollers balance the load: reactions (-sigma H, 0) on the left, 0 on the bottom."""
     sigma, H = 0.7, 1.0
     mesh, _, tags = meshes.create_rectangle(MPI.COMM_WORLD, [0.0, 0.0], [2.0, H], [6, 3], "crossed")
-    dem = DEMDiscretisation(mesh, ElasticMaterial(E=10.0, nu=0.3, rho=1.0), "A",
-                            [DirichletBC(tags.find(meshes.XMIN), [0.0, 0.0], components=[0]),
-                             DirichletBC(tags.find(meshes.YMIN), [0.0, 0.0], components=[1])],
-                            tractions=[Traction(tags.find(meshes.XMAX), [sigma, 0.0])])
+    dem = DEMDiscretisation(
+        mesh,
+        ElasticMaterial(E=10.0, nu=0.3, rho=1.0),
+        "A",
+        [
+            DirichletBC(tags.find(meshes.XMIN), [0.0, 0.0], components=[0]),
+            DirichletBC(tags.find(meshes.YMIN), [0.0, 0.0], components=[1]),
+        ],
+        tractions=[Traction(tags.find(meshes.XMAX), [sigma, 0.0])],
+    )
     assert dem.num_multi_neumann_cells == 0
     result = minimise_energy(DEMProblem(dem), rtol=1e-14)
     stress = dem.stress(result.u, 0.0)
@@ -373,8 +386,9 @@ def test_bar_pressed_on_a_wall_by_a_traction(n):
     stress there). A traction on a contact candidate facet is refused."""
     L, E, p = 1.0, 20.0, 0.5
     mesh, _, tags = meshes.create_interval(MPI.COMM_SELF, n, 0.0, L)
-    dem = DEMDiscretisation(mesh, ElasticMaterial(E=E, nu=0.0, rho=1.0), "A",
-                            tractions=[Traction(tags.find(meshes.XMAX), [-p])])
+    dem = DEMDiscretisation(
+        mesh, ElasticMaterial(E=E, nu=0.0, rho=1.0), "A", tractions=[Traction(tags.find(meshes.XMAX), [-p])]
+    )
     problem = DEMProblem(dem, [RigidContact(dem, [HalfSpace([0.0], [1.0], tags.find(meshes.XMIN))])])
     result = minimise_energy(problem, rtol=1e-14)
     assert np.allclose(problem.stress(result.u, 0.0)[:, 0, 0], -p, rtol=1e-12, atol=0)
@@ -393,8 +407,13 @@ def test_hertz_ball_equilibrium_and_contact_radius(tempdir):
     dem = problem.dem
     result = minimise_energy(problem)
     assert result.gradient_reduction < 1e-8
-    figures = static_simulation._contact_summary(problem.find(RigidContact), result.u, result, pathlib.Path(tempdir) / "p.csv",
-                                                 ([0.0, 0.0, 0.0], [0.0, 0.0, 1.0]))
+    figures = static_simulation._contact_summary(
+        problem.find(RigidContact),
+        result.u,
+        result,
+        pathlib.Path(tempdir) / "p.csv",
+        ([0.0, 0.0, 0.0], [0.0, 0.0, 1.0]),
+    )
     volume = MPI.COMM_WORLD.allreduce(dem.mass.array_r[2::3].sum(), op=MPI.SUM)  # rho = 1
     assert figures["contact_force"] == pytest.approx(3e5 * volume, rel=1e-8)
     assert figures["contact_radius"] == pytest.approx(0.0384, rel=0.04)

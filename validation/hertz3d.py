@@ -61,7 +61,7 @@ def table(results: dict) -> str:
     lines = ["| method | h (m) | h_c (m) | cells | a (m) | approach (m) | a - FEM | approach - FEM | a - Hertz "
              "| approach - Hertz | iterations | wall (s) |", "|" + "---|" * 12]
     for row in results["dem"] + results["fem"]:
-        rel = lambda key, r: f"{100 * (row[key] / r - 1):+.2f}%"  # noqa: E731
+        rel = lambda key, r, row=row: f"{100 * (row[key] / r - 1):+.2f}%"  # noqa: E731
         lines.append(f"| {'DEM, scheme A' if row['method'] == 'dem-A' else 'FEM P2'} | {row['h']:.4g} "
                      f"| {row['h_contact']:.4g} | {row['cells']} | {row['a']:.5e} | {row['approach']:.5e} "
                      f"| {rel('a', ref['a'])} | {rel('approach', ref['approach'])} | {rel('a', hz['a'])} "
@@ -106,7 +106,7 @@ def main():
 def stamp(argv: list) -> dict:
     """The command, date and commit of this invocation."""
     return {"command": " ".join([".venv/bin/python", "validation/hertz3d.py"] + argv),
-            "date": datetime.datetime.now(datetime.timezone.utc).strftime("%Y-%m-%d %H:%M UTC"),
+            "date": datetime.datetime.now(datetime.UTC).strftime("%Y-%m-%d %H:%M UTC"),
             "commit": subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=ROOT, capture_output=True,
                                      text=True).stdout.strip()}
 

@@ -146,7 +146,7 @@ def main():
         return
     data["runs"].append({
         "command": " ".join([".venv/bin/python", "validation/hertz3d_diagnostics.py"] + sys.argv[1:]),
-        "date": datetime.datetime.now(datetime.timezone.utc).strftime("%Y-%m-%d %H:%M UTC"),
+        "date": datetime.datetime.now(datetime.UTC).strftime("%Y-%m-%d %H:%M UTC"),
         "commit": subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=ROOT, capture_output=True,
                                  text=True).stdout.strip(),
         "load": open("/proc/loadavg").read().split()[0]})
@@ -219,7 +219,6 @@ def markdown(data: dict, bench: dict) -> str:
     group_means = ", ".join(f"{pct(g[2])} +- {100 * e:.3f}%" for g, e in zip(barycentre, errors))
     within = all(abs(g[2]) <= 2 * e for g, e in zip(barycentre, errors))
     scatters = ", ".join(f"{100 * g[3]:.3f}% (facet side {1e3 * g[1]:.1f} mm)" for g in barycentre)
-    uniform_means = ", ".join(f"{pct(g[2])} at {1e3 * g[1]:.1f} mm" for g in uniform)
     values = np.array([r["a_point_exact_load"] / a_ref - 1 for r in fine])
     mean, error = values.mean(), values.std(ddof=1) / np.sqrt(len(values))
     first, finest = dem[0], max(dem, key=lambda r: r["cells"])

@@ -30,7 +30,6 @@ import json
 import pathlib
 import time
 
-import numpy as np
 from mpi4py import MPI
 
 from dolfinx_dem import dynamics, model, scenes

@@ -68,7 +68,7 @@ def main():
     if args.quick:
         args.meshes = [0.004]
     comm = MPI.COMM_WORLD
-    started = datetime.datetime.now(datetime.timezone.utc).strftime("%Y-%m-%d %H:%M UTC")
+    started = datetime.datetime.now(datetime.UTC).strftime("%Y-%m-%d %H:%M UTC")
     per_delta = {d: [] for d in args.deltas}
     meshes = []
     for h in args.meshes:

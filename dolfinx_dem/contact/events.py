@@ -11,7 +11,7 @@ import functools
 
 import numpy as np
 
-from dolfinx_dem.contact.pair_list import Pairs, PairList
+from dolfinx_dem.contact.pair_list import PairList, Pairs
 from dolfinx_dem.errors import InputError, KernelMemoryError
 from dolfinx_dem.kernels import Struct, ffi, lib, pointer
 

@@ -73,12 +73,18 @@ from petsc4py import PETSc
 from dolfinx_dem import bodies as _bodies
 from dolfinx_dem.conditions import facet_indices
 from dolfinx_dem.contact import candidates
+from dolfinx_dem.contact.events import (
+    Flight,
+    PairState,
+    ScreenedFlight,
+    gauss_legendre,
+    integrate_flight,
+    screen_flight,
+)
 from dolfinx_dem.contact.facets import FacetRows, candidate_records
 from dolfinx_dem.contact.overlap import overlap
 from dolfinx_dem.contact.pair_list import PairList
 from dolfinx_dem.contact.pair_outputs import PairOutputs
-from dolfinx_dem.contact.events import (Flight, PairState, ScreenedFlight, gauss_legendre, integrate_flight,
-                                         screen_flight)
 from dolfinx_dem.contact.pair_statics import PairStatics
 from dolfinx_dem.errors import InputError, StateError, UnresolvedContactError
 from dolfinx_dem.kernels import Struct, arena, csr, lib, pointer

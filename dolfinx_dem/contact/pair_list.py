@@ -158,7 +158,7 @@ class PairList:
 
     def _list(self, F: CandidateFacets, ucF: np.ndarray) -> None:
         """The Verlet list of the known facets ``F`` at free displacements ``ucF`` (``build``)."""
-        d, nl = self.d, len(self.local)
+        nl = len(self.local)
         x = F.centre + ucF
         reach = self.known_reach
         skins = self.skins(reach)
@@ -276,9 +276,13 @@ class PairList:
         when no process's dofs changed (one reduction), as a round with slow bodies mostly
         leaves them."""
         facet_dofs = (F.index[:, None] * self.d + np.arange(self.d)).ravel()
-        keep = np.array([self.scatter is not None and np.array_equal(self.scatter.dofs, patch),
-                         self._candidate_scatter is not None and np.array_equal(self._candidate_scatter.dofs, facet_dofs)],
-                        dtype=np.int32)
+        keep = np.array(
+            [
+                self.scatter is not None and np.array_equal(self.scatter.dofs, patch),
+                self._candidate_scatter is not None and np.array_equal(self._candidate_scatter.dofs, facet_dofs),
+            ],
+            dtype=np.int32,
+        )
         self.comm.Allreduce(MPI.IN_PLACE, keep, op=MPI.MIN)
         if not keep[0]:
             self.scatter = PatchScatter(self.template, patch)
@@ -320,9 +324,11 @@ class PairList:
 
     def check_listed(self, uc: np.ndarray):
         if self.moved(uc):
-            raise StateError("contact between bodies: the candidate pair list is stale for these displacements "
-                               "(a facet moved more than skin/2 since it was built); call prepare(u) first "
-                               "(MEMM does it every step)")
+            raise StateError(
+                "contact between bodies: the candidate pair list is stale for these displacements "
+                "(a facet moved more than skin/2 since it was built); call prepare(u) first "
+                "(MEMM does it every step)"
+            )
 
     def free_displacements(self, up: np.ndarray) -> np.ndarray:
         """Free reconstructions u_f = R_f u + lift_f of the known candidate facets (local, then
@@ -337,7 +343,9 @@ class PairList:
         the known facets somewhere; collective)."""
         if self._candidate_scatter is None:
             F, d = self.known, self.d
-            self._candidate_scatter = PatchScatter(self._candidate_vector, (F.index[:, None] * d + np.arange(d)).ravel())
+            self._candidate_scatter = PatchScatter(
+                self._candidate_vector, (F.index[:, None] * d + np.arange(d)).ravel()
+            )
         self._candidate_vector.array[:] = own.ravel()
         return self._candidate_scatter.gather(self._candidate_vector).reshape(-1, self.d)
 
@@ -378,8 +386,10 @@ def _box(y: np.ndarray) -> np.ndarray:
     """The bounding box [min, max] (2 d) of the points y (n, d); empty (inf, -inf) without
     points. Column by column: numpy 1.24 reduces an (n, d) array along its first axis ten times
     slower."""
-    return np.array([y[:, k].min(initial=np.inf) for k in range(y.shape[1])]
-                    + [y[:, k].max(initial=-np.inf) for k in range(y.shape[1])])
+    return np.array(
+        [y[:, k].min(initial=np.inf) for k in range(y.shape[1])]
+        + [y[:, k].max(initial=-np.inf) for k in range(y.shape[1])]
+    )
 
 
 def _near(x: np.ndarray, y: np.ndarray, r: float) -> np.ndarray:
@@ -432,12 +442,33 @@ class Pairs:
         ``dem_pair_end_state`` (which number the rows their pairs touch through it)."""
         return np.full(self.Q.shape[0], -1, dtype=np.int32)
 
-    def struct(self, R: Struct, lift: np.ndarray, reference: np.ndarray, half_skin2: np.ndarray,
-               slack: float) -> Struct:
+    def struct(
+        self, R: Struct, lift: np.ndarray, reference: np.ndarray, half_skin2: np.ndarray, slack: float
+    ) -> Struct:
         """The list for the kernels (``dem_pairs``), with its known facets' free reconstructions
         (R, ``lift``), their free displacements when it was built (``reference``) and half their
         skins squared, and how far a flight's screen looks beyond its end (``slack``)."""
-        return Struct("dem_pairs", d=self.n.shape[1], n_facets=len(reference), R=R, lift=lift, reference=reference,
-                      half_skin2=half_skin2, slack=slack, end_slack2=(0.5 * slack)**2, n=len(self), i=self.i,
-                      j=self.j, normal=self.n, t=self.t, d0=self.d0, e_i=self.e_i, e_j=self.e_j, sep=self.sep,
-                      si=self.si.struct, sj=self.sj.struct, z=csr_of(self.ZT), slot=self.slot)
+        return Struct(
+            "dem_pairs",
+            d=self.n.shape[1],
+            n_facets=len(reference),
+            R=R,
+            lift=lift,
+            reference=reference,
+            half_skin2=half_skin2,
+            slack=slack,
+            end_slack2=(0.5 * slack) ** 2,
+            n=len(self),
+            i=self.i,
+            j=self.j,
+            normal=self.n,
+            t=self.t,
+            d0=self.d0,
+            e_i=self.e_i,
+            e_j=self.e_j,
+            sep=self.sep,
+            si=self.si.struct,
+            sj=self.sj.struct,
+            z=csr_of(self.ZT),
+            slot=self.slot,
+        )

@@ -23,13 +23,15 @@ class PairOutputs:
         self._grad_weights = grad_weights  # a_f / |c| of the local facets' cells (eq. (8))
 
     def facet_corrections(self, up: np.ndarray) -> np.ndarray:
-        """u_f - u_f^free of the local facets (eq. (31), directions of ``directions.correction_directions``), (n_local, d):
-        complete for the own facets (every pair of an own facet is listed here)."""
+        """u_f - u_f^free of the local facets (eq. (31), directions of
+        ``directions.correction_directions``), (n_local, d): complete for the own facets (every
+        pair of an own facet is listed here)."""
         pc = self.contact
         F, at = pc.facets_all, pc.state(up)
         delta, work = np.zeros((len(F), pc.d)), np.zeros((len(F), pc.d))  # c_p = 0 off the closed pairs
-        lib.dem_pair_facet_corrections(pc.pair_list.c_pairs.c, at.kernel_state.c, pointer(F.length), pointer(work),
-                                       pointer(delta))
+        lib.dem_pair_facet_corrections(
+            pc.pair_list.c_pairs.c, at.kernel_state.c, pointer(F.length), pointer(work), pointer(delta)
+        )
         return delta[: len(pc.facets)]
 
     def gradient_correction(self, up: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -49,8 +51,19 @@ class PairOutputs:
         F, at = pc.facets_all, pc.state(up)
         uf = at.uc + pc.pair_list.candidate_values(self.facet_corrections(up)[: pc.num_own])
         weight, mean = np.zeros(len(F)), np.zeros(len(F))
-        worst = np.array([lib.dem_pair_penetration(pc.pair_list.c_pairs.c, at.kernel_state.c, pointer(F.centre), pointer(uf),
-                                                   pc.num_own, pointer(weight), pointer(mean))])
+        worst = np.array(
+            [
+                lib.dem_pair_penetration(
+                    pc.pair_list.c_pairs.c,
+                    at.kernel_state.c,
+                    pointer(F.centre),
+                    pointer(uf),
+                    pc.num_own,
+                    pointer(weight),
+                    pointer(mean),
+                )
+            ]
+        )
         pc.comm.Allreduce(MPI.IN_PLACE, worst, op=MPI.MAX)
         return float(worst[0])
 
@@ -137,11 +150,19 @@ class PairOutputs:
         out = np.zeros((len(pc.body_pairs), pc.d))
         if state.c.n == 0:
             return out
-        missing = lib.dem_pair_body_forces(pc.pair_list.c_pairs.c, state.c, pointer(pc.pair_list.facet_bodies),
-                                           len(pc.body_pair_index), pointer(pc.body_pair_index), pointer(out))
+        missing = lib.dem_pair_body_forces(
+            pc.pair_list.c_pairs.c,
+            state.c,
+            pointer(pc.pair_list.facet_bodies),
+            len(pc.body_pair_index),
+            pointer(pc.body_pair_index),
+            pointer(out),
+        )
         if missing:  # every body with a candidate facet is in ``body_pairs``: a broken invariant
-            raise StateError(f"contact between bodies: {missing} touching pairs join bodies that have no body pair "
-                               "(bodies without candidate facets?)")
+            raise StateError(
+                f"contact between bodies: {missing} touching pairs join bodies that have no body pair "
+                "(bodies without candidate facets?)"
+            )
         return out
 
     def output_columns(self) -> tuple[str, ...]:
@@ -152,8 +173,9 @@ class PairOutputs:
         ``geometry.compute_bodies``, from 0)."""
         pc = self.contact
         xyz = "xyz"[: pc.d]
-        return ("contact_force", "penetration") + tuple(f"contact_force_{i}_{j}_{c}" for i, j in pc.body_pairs
-                                                        for c in xyz)
+        return ("contact_force", "penetration") + tuple(
+            f"contact_force_{i}_{j}_{c}" for i, j in pc.body_pairs for c in xyz
+        )
 
     def output_sums(self, up: np.ndarray) -> np.ndarray:
         """This process's part of the sums of the outputs: the pair forces, the contact force and

@@ -141,7 +141,8 @@ class PairStatics:
         ``up`` with the piece ``active``: their gaps g_p and the normal force r_p = -w_p z_p .
         (a + delta_a) each would carry in contact (the jump of -dV/dg_p across g_p = 0), on every
         process (collective: g from the owner of the pair's first facet, r summed over rows)."""
-        g, w, _ = self.contact.gaps_and_overlaps(np.arange(len(self.contact.listed)), *self.contact.pair_displacements(up))
+        c = self.contact
+        g, w, _ = c.gaps_and_overlaps(np.arange(len(c.listed)), *c.pair_displacements(up))
         on = np.isin(self.contact.pair_keys(), active) & (w > 0)
         L = self.contact.listed
         m = L.ZT @ (L.Q @ up + self.contact.row_lift + L.Z @ np.where(on, w * g, 0.0))
@@ -158,7 +159,9 @@ class PairStatics:
         """Sorted keys (every process; collective) of the overlapping pairs whose gap, affine
         along the step u + tau d (patch values ``up``, ``dp``), reaches its switch g = 0 for some
         tau in [0, 2 alpha], leaving its side: closing if out of ``piece``, opening if in it."""
-        g, w, _ = self.contact.gaps_and_overlaps(np.arange(len(self.contact.listed)), *self.contact.pair_displacements(up))
+        g, w, _ = self.contact.gaps_and_overlaps(
+            np.arange(len(self.contact.listed)), *self.contact.pair_displacements(up)
+        )
         L, d = self.contact.listed, self.contact.d
         dd = (self.contact.pair_list.R @ dp).reshape(-1, d)
         rate = np.einsum("pi,pi->p", dd[L.j] - dd[L.i], L.n)

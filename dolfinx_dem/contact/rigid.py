@@ -36,10 +36,9 @@ from petsc4py import PETSc
 
 from dolfinx_dem.conditions import facet_indices
 from dolfinx_dem.contact import candidates
-from dolfinx_dem.contact.rigid_statics import RigidStatics
 from dolfinx_dem.contact.patch import PatchScatter, negative_part_integral, piecewise_midpoints, scatter_sum
+from dolfinx_dem.contact.rigid_statics import RigidStatics
 from dolfinx_dem.errors import InputError
-
 
 #: Patch operators with at most this many entries are stored as dense arrays: a sparse
 #: product costs microseconds of Python overhead even for the three dofs of a 1D bar.
@@ -102,8 +101,12 @@ class RigidContact:
 
         # Candidate facets: the marked facets of the cells in halo layers 0 and 1.
         facets = [facet_indices(ob.facets, ob.tag, f"obstacle {k}", d) for k, ob in enumerate(obstacles)]
-        found = candidates.select(dem, np.concatenate(facets), np.repeat(np.arange(len(facets)), [len(f) for f in facets]),
-                                  "obstacles (a facet is a contact candidate of two obstacles)")
+        found = candidates.select(
+            dem,
+            np.concatenate(facets),
+            np.repeat(np.arange(len(facets)), [len(f) for f in facets]),
+            "obstacles (a facet is a contact candidate of two obstacles)",
+        )
         cell, j, f, owned, mark = found.cell, found.j, found.facet, found.owned, found.mark
         counts = self.comm.allreduce(np.bincount(mark[owned], minlength=len(obstacles)), op=MPI.SUM)
         for k in np.flatnonzero(counts == 0)[:1]:
@@ -136,7 +139,8 @@ class RigidContact:
         # Gaps g = Rn u + g0 (g0 from the geometry and the data's lift).
         dofs = (self.facets[:, None] * d + np.arange(d)).ravel()
         normal_rows = scipy.sparse.csr_matrix(
-            (self.normals.ravel(), (np.repeat(np.arange(nc), d), np.arange(nc * d))), shape=(nc, nc * d))
+            (self.normals.ravel(), (np.repeat(np.arange(nc), d), np.arange(nc * d))), shape=(nc, nc * d)
+        )
         R_free = rec.R[dofs]
         self._D_free = dem.data.facet_lift(self.facets).ravel()
         self._g0 = np.einsum("ni,ni->n", self.normals, geom.facet_centres[self.facets] - self.points)
@@ -144,8 +148,9 @@ class RigidContact:
 
         # The energy rows the candidates touch (y_f = Q_F e_f), among this process's rows.
         rows = dem.rows
-        e_cols = scipy.sparse.csr_matrix((e.ravel(), (np.arange(nc * d), np.repeat(np.arange(nc), d))),
-                                         shape=(nc * d, nc))
+        e_cols = scipy.sparse.csr_matrix(
+            (e.ravel(), (np.arange(nc * d), np.repeat(np.arange(nc), d))), shape=(nc * d, nc)
+        )
         Y = (rows.QF[:, dofs] @ e_cols).tocsc()
         touched = np.unique(Y.indices)
         Y, Q = Y[touched].tocsr(), rows.Q[touched]
@@ -168,14 +173,16 @@ class RigidContact:
         self._G_coo = G.tocoo()
         self._RnT_own = _compact(Rn[: self.num_own].T)
         self._R_free = _compact(R_free)
-        self._grad_weights = geom.facet_area_normals[self.cells, geom.facet_local[self.facets, 0]] / \
-            geom.cell_volumes[self.cells, None]
+        self._grad_weights = (
+            geom.facet_area_normals[self.cells, geom.facet_local[self.facets, 0]] / geom.cell_volumes[self.cells, None]
+        )
         self.evaluations = 0
         self._statics = None  # the statics interface, made on first use (``statics``)
 
     # -- patch data ----------------------------------------------------------------------------
-    def prepare(self, u: PETSc.Vec, v: PETSc.Vec | None = None, dt: float = 0.0,
-                up: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray | None]:
+    def prepare(
+        self, u: PETSc.Vec, v: PETSc.Vec | None = None, dt: float = 0.0, up: np.ndarray | None = None
+    ) -> tuple[np.ndarray, np.ndarray | None]:
         """Nothing to prepare (every candidate facet is tested at every evaluation): the patch
         values of u (``up`` if given) and v (collective)."""
         return self.patch_values(u) if up is None else up, None if v is None else self.patch_values(v)
@@ -382,8 +389,11 @@ class RigidContact:
         open), in 1D the position ``tip_position`` of the contact end, and the force of each
         obstacle k on the body, ``contact_force_obstacle<k>_<x|y|z>`` (``force_sums``)."""
         xyz = "xyz"[: self.d]
-        return (("contact_gap", "contact_pressure") + (("tip_position",) if self.d == 1 else ())
-                + tuple(f"contact_force_obstacle{k}_{c}" for k in range(self.num_obstacles) for c in xyz))
+        return (
+            ("contact_gap", "contact_pressure")
+            + (("tip_position",) if self.d == 1 else ())
+            + tuple(f"contact_force_obstacle{k}_{c}" for k in range(self.num_obstacles) for c in xyz)
+        )
 
     def output_sums(self, up: np.ndarray) -> np.ndarray:
         """This process's part of the sums of the outputs: ``force_sums``."""

@@ -13,7 +13,6 @@ from mpi4py import MPI
 from petsc4py import PETSc
 
 
-
 class RigidStatics:
     """The statics interface of a ``contact.rigid.RigidContact`` (module docstring)."""
 

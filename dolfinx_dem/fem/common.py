@@ -2,15 +2,14 @@
 
 from __future__ import annotations
 
+import dolfinx
+import dolfinx.fem
+import dolfinx.fem.petsc
 import numpy as np
 import numpy.typing as npt
 import ufl
 from mpi4py import MPI
 from petsc4py import PETSc
-
-import dolfinx
-import dolfinx.fem
-import dolfinx.fem.petsc
 
 from dolfinx_dem import _compat
 from dolfinx_dem.errors import InputError

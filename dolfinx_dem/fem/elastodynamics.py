@@ -22,21 +22,30 @@ from __future__ import annotations
 
 import typing
 
+import dolfinx
+import dolfinx.fem
+import dolfinx.fem.petsc
+import dolfinx.mesh
 import numpy as np
 import numpy.typing as npt
 import ufl
 from mpi4py import MPI
 from petsc4py import PETSc
 
-import dolfinx
-import dolfinx.fem
-import dolfinx.fem.petsc
-import dolfinx.mesh
-
 from dolfinx_dem import _compat
 from dolfinx_dem.errors import InputError, SolverError
-from dolfinx_dem.fem.common import (check_degree, check_facets, check_material, check_positive, check_simplex_mesh,
-                                    clamped_bc, configure_lu, evaluate_at_points, lu_solver, stiffness_and_mass)
+from dolfinx_dem.fem.common import (
+    check_degree,
+    check_facets,
+    check_material,
+    check_positive,
+    check_simplex_mesh,
+    clamped_bc,
+    configure_lu,
+    evaluate_at_points,
+    lu_solver,
+    stiffness_and_mass,
+)
 
 __all__ = ["FEMCentralDifference", "FEMElastodynamics", "evaluate_at_points", "first_eigenfrequency"]
 
@@ -164,9 +173,9 @@ class FEMElastodynamics(_FEMSolver):
         dt: float,
         clamped_facets: npt.ArrayLike,
         *,
-        body_force: typing.Optional[npt.ArrayLike] = None,
-        initial_displacement: typing.Optional[VectorField] = None,
-        initial_velocity: typing.Optional[VectorField] = None,
+        body_force: npt.ArrayLike | None = None,
+        initial_displacement: VectorField | None = None,
+        initial_velocity: VectorField | None = None,
         plane_stress: bool = False,
     ):
         self.dt = check_positive("dt (time step)", dt)
@@ -270,11 +279,11 @@ class FEMCentralDifference(_FEMSolver):
         rho: float,
         clamped_facets: npt.ArrayLike,
         *,
-        dt: typing.Optional[float] = None,
-        cfl: typing.Optional[float] = None,
-        body_force: typing.Optional[npt.ArrayLike] = None,
-        initial_displacement: typing.Optional[VectorField] = None,
-        initial_velocity: typing.Optional[VectorField] = None,
+        dt: float | None = None,
+        cfl: float | None = None,
+        body_force: npt.ArrayLike | None = None,
+        initial_displacement: VectorField | None = None,
+        initial_velocity: VectorField | None = None,
         plane_stress: bool = False,
         allow_unstable: bool = False,
     ):

@@ -80,17 +80,28 @@ import dataclasses
 import time
 import typing
 
+import dolfinx
+import dolfinx.fem
+import dolfinx.fem.petsc
+import dolfinx.mesh
 import numpy as np
 import ufl
 from mpi4py import MPI
 from petsc4py import PETSc
 
-import dolfinx
-import dolfinx.fem
-import dolfinx.fem.petsc
-import dolfinx.mesh
-
 from dolfinx_dem import _compat, meshes
+from dolfinx_dem.errors import InputError, SolverError
+from dolfinx_dem.fem.common import (
+    check_degree,
+    check_elastic,
+    check_int,
+    check_positive,
+    gather_sorted,
+    global_min,
+    lame,
+    owned_facets,
+)
+from dolfinx_dem.fem.nitsche import MeanUx, NewtonSolver, assembled_norm, sample_contact, top_displacement
 from dolfinx_dem.hertz import (
     HertzAnalytic,
     contact_half_width_fit,
@@ -100,11 +111,6 @@ from dolfinx_dem.hertz import (
     hertz_analytic,
     hertz_analytic_3d,
 )
-from dolfinx_dem.errors import InputError, SolverError
-from dolfinx_dem.fem.nitsche import (MeanUx, NewtonSolver, assembled_norm, sample_contact,
-                                     top_displacement)
-from dolfinx_dem.fem.common import (check_degree, check_elastic, check_int, check_positive, gather_sorted, global_min,
-                                    lame, owned_facets)
 
 __all__ = [
     "HertzAnalytic",
@@ -201,9 +207,9 @@ def solve_hertz(
     max_it: int = 30,
     fit_fraction: float = 0.2,
     samples_per_facet: int = 8,
-    quadrature_degree: typing.Optional[int] = None,
+    quadrature_degree: int | None = None,
     dim: int = 2,
-    refine: typing.Optional[tuple[float, float]] = None,
+    refine: tuple[float, float] | None = None,
 ) -> HertzResult:
     """Solve the static Hertz problem with P1/P2 FEM and Nitsche frictionless contact.
 
@@ -355,7 +361,8 @@ def solve_hertz(
             if step == 1:
                 # rigid downward translation: a contact zone of about the Hertz width
                 delta = analytic.a**2 / (2.0 * R) / load_steps
-                u.interpolate(lambda x: np.stack([np.zeros(x.shape[1])] * (d - 1) + [np.full(x.shape[1], -delta)]))
+                u.interpolate(lambda x, delta=delta: np.stack([np.zeros(x.shape[1])] * (d - 1)
+                                                              + [np.full(x.shape[1], -delta)]))
             it, converged = newton.solve(u)
             iterations += int(it)
             if not converged:

@@ -77,17 +77,24 @@ import dataclasses
 import time
 import typing
 
+import dolfinx.fem
 import numpy as np
 import ufl
 from mpi4py import MPI
 from petsc4py import PETSc
 
-import dolfinx.fem
-
 from dolfinx_dem import _compat
-from dolfinx_dem.fem.common import check_degree, check_elastic, check_int, check_positive, gather_sorted, lame, owned_facets
-from dolfinx_dem.hertz import contact_half_width_fit, contact_half_width_last, contact_half_width_moments
 from dolfinx_dem.errors import InputError, SolverError
+from dolfinx_dem.fem.common import (
+    check_degree,
+    check_elastic,
+    check_int,
+    check_positive,
+    gather_sorted,
+    lame,
+    owned_facets,
+)
+from dolfinx_dem.hertz import contact_half_width_fit, contact_half_width_last, contact_half_width_moments
 
 __all__ = ["IndentationResult", "create_indentation_mesh", "indentation_reference", "solve_indentation"]
 
@@ -192,7 +199,6 @@ class _Indentation:
         self.comm, self.R, self.E, self.gamma0, self.theta = comm, R, E, gamma0, theta
         mesh, tags = create_indentation_mesh(comm, h)
         self.mesh = mesh
-        fdim = mesh.topology.dim - 1
         self.top_facets = np.sort(tags.find(TOP))
         ds = ufl.Measure("ds", domain=mesh, subdomain_data=tags, metadata={"quadrature_degree": quadrature_degree})
         self.ds_c = ds(TOP)
@@ -305,7 +311,7 @@ def solve_indentation(
     rtol: float = 1e-10,
     max_it: int = 30,
     samples_per_facet: int = 8,
-    quadrature_degree: typing.Optional[int] = None,
+    quadrature_degree: int | None = None,
 ) -> list[IndentationResult]:
     """Solve the indentation problem (module docstring) for increasing indentations on one mesh.
 

@@ -5,14 +5,13 @@ residual norms, and the contact pressure and gap sampled on the contact facets.
 
 from __future__ import annotations
 
+import dolfinx
+import dolfinx.fem
+import dolfinx.fem.petsc
 import numpy as np
 import ufl
 from mpi4py import MPI
 from petsc4py import PETSc
-
-import dolfinx
-import dolfinx.fem
-import dolfinx.fem.petsc
 
 from dolfinx_dem import _compat, meshes
 from dolfinx_dem.errors import SolverError

@@ -93,8 +93,11 @@ from __future__ import annotations
 import dataclasses
 import math
 import time
-import typing
 
+import dolfinx
+import dolfinx.fem
+import dolfinx.fem.petsc
+import dolfinx.mesh
 import numpy as np
 import scipy.linalg
 import scipy.sparse
@@ -102,15 +105,15 @@ import ufl
 from mpi4py import MPI
 from petsc4py import PETSc
 
-import dolfinx
-import dolfinx.fem
-import dolfinx.fem.petsc
-import dolfinx.mesh
-
 from dolfinx_dem import _compat
 from dolfinx_dem.errors import InputError
-from dolfinx_dem.fem.signorini_schemes import (Series, modified_mass, run_modified_mass, run_newmark_penalty,
-                                               run_projection)
+from dolfinx_dem.fem.signorini_schemes import (
+    Series,
+    modified_mass,
+    run_modified_mass,
+    run_newmark_penalty,
+    run_projection,
+)
 
 __all__ = [
     "METHODS",
@@ -341,10 +344,10 @@ def solve_signorini_bar(
     method: str,
     benchmark: str = "impact",
     n_cells: int = 100,
-    cfl: typing.Optional[float] = 0.75,
+    cfl: float | None = 0.75,
     *,
-    dt: typing.Optional[float] = None,
-    t_end: typing.Optional[float] = None,
+    dt: float | None = None,
+    t_end: float | None = None,
     penalty: float = DEFAULT_PENALTY,
     allow_unstable: bool = False,
     growth_limit: float = 10.0,

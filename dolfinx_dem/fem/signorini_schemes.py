@@ -94,7 +94,7 @@ def run_projection(ops, data, dt, n_steps, s: Series, grav0, growth_limit):
 
 
 def run_modified_mass(ops, data, dt, n_steps, s: Series, grav0, growth_limit):
-    K, F = ops.K, ops.F
+    K = ops.K
     m, Fm = modified_mass(ops)
     h0, v0 = data["h0"], data["v0"]
     mass = m.sum()

@@ -15,8 +15,8 @@ from collections.abc import Mapping
 
 import numpy as np
 
-from dolfinx_dem.material import ElasticMaterial
 from dolfinx_dem.errors import MissingFileError, SceneError
+from dolfinx_dem.material import ElasticMaterial
 
 BUILTIN = pathlib.Path(__file__).parent
 
@@ -186,12 +186,16 @@ SCHEMA = {
 #: Required keys of the sections; "mesh" and "material" are required sections, the others optional.
 REQUIRED = {"mesh": ("type",), "material": ("E", "nu", "rho"), "contact": ("boundary",)}
 #: Required keys of the entries of array-of-tables sections.
-REQUIRED_ITEMS = {"materials": ("tag", "E", "nu", "rho"), "dirichlet": ("boundary",), "tractions": ("boundary", "value"),
-                  "probes": ("name", "point", "component"), "prescribed": ("tag",),
-                  "obstacles": ("point", "normal", "boundary")}
+REQUIRED_ITEMS = {
+    "materials": ("tag", "E", "nu", "rho"),
+    "dirichlet": ("boundary",),
+    "tractions": ("boundary", "value"),
+    "probes": ("name", "point", "component"),
+    "prescribed": ("tag",),
+    "obstacles": ("point", "normal", "boundary"),
+}
 #: Facet tags of the generated interval/rectangle/box meshes, by boundary name.
-SIDES = {"xmin": 1, "xmax": 2, "ymin": 3, "ymax": 4, "zmin": 5, "zmax": 6,
-         "left": 1, "right": 2, "bottom": 3, "top": 4}
+SIDES = {"xmin": 1, "xmax": 2, "ymin": 3, "ymax": 4, "zmin": 5, "zmax": 6, "left": 1, "right": 2, "bottom": 3, "top": 4}
 
 
 def _list(key, v):
@@ -204,8 +208,10 @@ def _components(key, v, d):
     """A nonempty list of distinct displacement components, each in [0, d - 1]."""
     items = [_integer(f"{key}[{i}]", x, minimum=0) for i, x in enumerate(_list(key, v))]
     if not items or len(set(items)) != len(items) or (d is not None and max(items) >= d):
-        raise SceneError(f"scene key '{key}' must be a nonempty list of distinct components in [0, {(d or 3) - 1}] "
-                         f"(0 = x, 1 = y, 2 = z), got {v!r}")
+        raise SceneError(
+            f"scene key '{key}' must be a nonempty list of distinct components in [0, {(d or 3) - 1}] "
+            f"(0 = x, 1 = y, 2 = z), got {v!r}"
+        )
     return items
 
 
@@ -220,8 +226,10 @@ def _translation(key, v, d):
             raise SceneError(f"scene key '{key}[{i}]' is not a valid expression: {err.msg}") from None
         unknown = set(names) - set(_NAMESPACE) - {"t"}
         if unknown:
-            raise SceneError(f"scene key '{key}[{i}]' uses unknown names {sorted(unknown)} "
-                             f"(allowed: {', '.join(sorted(set(_NAMESPACE) | {'t'}))})")
+            raise SceneError(
+                f"scene key '{key}[{i}]' uses unknown names {sorted(unknown)} "
+                f"(allowed: {', '.join(sorted(set(_NAMESPACE) | {'t'}))})"
+            )
     return v
 
 
@@ -281,7 +289,12 @@ def validate(scene: Mapping, mesh_dimension: int | None = None) -> dict:
     if ("material" in scene) == ("materials" in scene):
         raise SceneError("a scene needs exactly one of 'material' (one material) and 'materials' (one per cell tag)")
     for section, keys in REQUIRED.items():
-        if section not in scene and section not in ("mesh", "material") or section == "material" and "materials" in scene:
+        if (
+            section not in scene
+            and section not in ("mesh", "material")
+            or section == "material"
+            and "materials" in scene
+        ):
             continue
         for key in keys:
             if key not in scene.get(section, {}):
@@ -294,21 +307,30 @@ def validate(scene: Mapping, mesh_dimension: int | None = None) -> dict:
     for section in ("dirichlet", "tractions"):
         for i, bc in enumerate(scene.get(section, [])):
             for k, e in enumerate(bc.get("value", [])):
-                if isinstance(e, str) and "t" in compile(e, "<value>", "eval").co_names and not bc.get("time_dependent"):
-                    raise SceneError(f"scene key '{section}[{i}].value[{k}]' ({e!r}) uses t, but "
-                                     f"'{section}[{i}].time_dependent' is not true: the value would be frozen at "
-                                     "t = 0 (set time_dependent = true)")
+                if (
+                    isinstance(e, str)
+                    and "t" in compile(e, "<value>", "eval").co_names
+                    and not bc.get("time_dependent")
+                ):
+                    raise SceneError(
+                        f"scene key '{section}[{i}].value[{k}]' ({e!r}) uses t, but "
+                        f"'{section}[{i}].time_dependent' is not true: the value would be frozen at "
+                        "t = 0 (set time_dependent = true)"
+                    )
     names = [bc["name"] for bc in scene.get("dirichlet", []) if "name" in bc]
     if len(set(names)) != len(names):
         raise SceneError(f"scene key 'dirichlet[].name': names must be unique, got {names}")
     for i, body in enumerate(scene.get("prescribed", [])):
         if ("velocity" in body) == ("displacement" in body):
             raise SceneError(f"scene table 'prescribed[{i}]' needs exactly one of 'velocity' and 'displacement'")
-    reactions = [str(bc.get("name", i))
-                 for i, bc in enumerate(scene.get("dirichlet", []) + scene.get("prescribed", []))]
+    reactions = [
+        str(bc.get("name", i)) for i, bc in enumerate(scene.get("dirichlet", []) + scene.get("prescribed", []))
+    ]
     if len(set(reactions)) != len(reactions):
-        raise SceneError(f"scene keys 'dirichlet[].name' and 'prescribed[].name' name the reaction columns and must "
-                         f"be unique together, got {reactions} (unnamed: the number in the list of both)")
+        raise SceneError(
+            f"scene keys 'dirichlet[].name' and 'prescribed[].name' name the reaction columns and must "
+            f"be unique together, got {reactions} (unnamed: the number in the list of both)"
+        )
     if "statics" in scene:
         for section in ("time", "initial"):
             if section in scene:
@@ -339,16 +361,20 @@ def materials(scene: Mapping) -> ElasticMaterial | dict[int, ElasticMaterial]:
     out = {}
     for i, m in enumerate(scene["materials"]):
         if m["tag"] in out:
-            raise SceneError(f"scene key 'materials[{i}].tag': cell tag {m['tag']} already has a material "
-                             "(materials overlap)")
+            raise SceneError(
+                f"scene key 'materials[{i}].tag': cell tag {m['tag']} already has a material (materials overlap)"
+            )
         out[m["tag"]] = _material(f"scene table 'materials[{i}]'", m)
     planes = [m.plane for m in out.values()]
     if len(set(planes)) > 1:
-        raise SceneError(f"scene key 'materials': all materials must share 'plane' (the body's 2D hypothesis), got "
-                         f"{planes}")
+        raise SceneError(
+            f"scene key 'materials': all materials must share 'plane' (the body's 2D hypothesis), got {planes}"
+        )
     if "gravity" in scene.get("loads", {}):
-        raise SceneError("scene key 'loads.gravity' needs one material (rho g is one body force): with 'materials', "
-                         "give 'loads.body_force'")
+        raise SceneError(
+            "scene key 'loads.gravity' needs one material (rho g is one body force): with 'materials', "
+            "give 'loads.body_force'"
+        )
     if scene.get("method") == "fem-P2":
         raise SceneError("method 'fem-P2' (the Hertz reference) takes one material, not 'materials'")
     return out
@@ -369,7 +395,10 @@ def _validate_time(scene):
         raise SceneError("scene needs exactly one of 'time.dt' and 'time.cfl'")
     if "stable_step" in time and "cfl" not in time:
         raise SceneError("scene key 'time.stable_step' goes with 'time.cfl'")
-    if "dt" in time and abs(time["end"] / time["dt"] - round(time["end"] / time["dt"])) > 1e-9 * time["end"] / time["dt"]:
+    if (
+        "dt" in time
+        and abs(time["end"] / time["dt"] - round(time["end"] / time["dt"])) > 1e-9 * time["end"] / time["dt"]
+    ):
         raise SceneError(f"scene key 'time.end' ({time['end']}) must be a multiple of 'time.dt' ({time['dt']})")
 
 
@@ -461,7 +490,9 @@ def evaluate_field(spec, x: np.ndarray, t: float = 0.0, key: str = "field") -> n
             bad = ~np.isfinite(out[i])
             if bad.any():
                 k = int(np.argmax(bad))
-                raise SceneError(f"scene key '{key}[{i}]' ({e!r}) is not finite at t = {t:.9g}: {out[i, k]} at "
-                                 f"x = {x[:, k].tolist()}")
+                raise SceneError(
+                    f"scene key '{key}[{i}]' ({e!r}) is not finite at t = {t:.9g}: {out[i, k]} at "
+                    f"x = {x[:, k].tolist()}"
+                )
         return out
     return np.repeat(np.asarray(spec, dtype=float)[:, None], n, axis=1)
