@@ -117,12 +117,23 @@ def _documents():
     )
 
 
+def _anchors(page: pathlib.Path) -> set[str]:
+    """The anchors of a markdown page's headings, as GitHub makes them."""
+    headings = re.findall(r"^#+ (.+)$", page.read_text(), flags=re.M)
+    return {re.sub(r"[^\w\- ]", "", h.strip().lower()).replace(" ", "-") for h in headings}
+
+
 def test_every_link_of_the_documents_resolves():
+    """Every relative link names an existing file, and every anchor into a markdown page one of
+    its headings."""
     broken = []
     for page in _documents():
         for target in re.findall(r"\]\(([^)\s]+)\)", page.read_text()):
-            path = target.split("#", 1)[0]
-            if path and not re.match(r"[a-z]+:", path) and not (page.parent / path).exists():
+            path, _, anchor = target.partition("#")
+            if re.match(r"[a-z]+:", path):
+                continue
+            file = page.parent / path if path else page
+            if not file.exists() or (anchor and file.suffix == ".md" and anchor not in _anchors(file)):
                 broken.append(f"{page.relative_to(ROOT)}: {target}")
     assert broken == []
 
