@@ -6,7 +6,6 @@ explicit with the modified mass of the contact node, and implicit Newmark with a
 from __future__ import annotations
 
 import math
-import typing
 
 import numpy as np
 import scipy.linalg
@@ -14,11 +13,8 @@ import scipy.sparse
 
 from dolfinx_dem.errors import SolverError
 
-if typing.TYPE_CHECKING:
-    from dolfinx_dem.fem.signorini import BarOperators
 
-
-def modified_mass(ops: BarOperators) -> tuple[np.ndarray, np.ndarray]:
+def modified_mass(ops) -> tuple[np.ndarray, np.ndarray]:
     """Modified lumped mass and load: the contact node's mass (and load) moved to node 1."""
     m, F = ops.m.copy(), ops.F.copy()
     m[1] += m[0]
