@@ -639,6 +639,7 @@ def test_scheme_a_contact_runs_through_pairs_without_a_compliant_solution():
     assert dem.comm.allreduce(float((mass * v)[disc].sum()), op=MPI.SUM) > 0.0  # moving up again
 
 
+@pytest.mark.slow
 @pytest.mark.skip_in_parallel
 def test_a_run_reports_the_pairs_that_use_the_scheme_b_rule(tmp_path, capsys):
     """summary.json (``contact_pairs_scheme_b_rule``) and the command line report them."""
@@ -868,29 +869,6 @@ def test_pair_rows_are_the_product_of_the_directions_and_the_facet_columns():
     assert np.array_equal(ZT.data, expected.data)
     assert ZT.indptr[1] == 0 and ZT.indptr[2] == 0  # the cancelling pairs: empty rows
     assert (np.diff(ZT.indptr)[2:] > 0).sum() > 50  # and many rows that are not empty
-
-
-def test_piecewise_midpoints_cut_each_row_at_its_sorted_times():
-    """The compiled cutting of [0, dt] at each row's break times (any order and count per row;
-    rows without any keep one piece), against sorting them row by row."""
-    from dolfinx_dem.contact.patch import piecewise_midpoints
-
-    rng = np.random.default_rng(3)
-    n, dt = 7, 0.5
-    rows = rng.integers(0, n - 1, 40)  # the last row has no break
-    times = rng.uniform(0.0, dt, 40)
-    times[5] = times[6]  # a repeated time: an empty piece
-    rows[6] = rows[5]
-    mid, length = piecewise_midpoints(rows, times, n, dt)
-    k = np.bincount(rows, minlength=n).max()
-    assert mid.shape == length.shape == (n, k + 1)
-    for r in range(n):
-        points = np.concatenate([[0.0], np.sort(times[rows == r]), np.full(k - (rows == r).sum(), dt), [dt]])
-        assert np.array_equal(mid[r], 0.5 * (points[:-1] + points[1:]))
-        assert np.array_equal(length[r], np.diff(points))
-    assert np.array_equal(length[n - 1], [dt] + [0.0] * k)
-    empty = piecewise_midpoints(np.zeros(0, dtype=np.int64), np.zeros(0), 3, dt)
-    assert np.array_equal(empty[0], np.full((3, 1), 0.5 * dt)) and np.array_equal(empty[1], np.full((3, 1), dt))
 
 
 def test_overlap_of_random_triangles():
