@@ -1,23 +1,33 @@
-"""The only module that touches DOLFINx-0.5-specific API.
+"""The only module that asks which DOLFINx it runs on.
 
 Everything DOLFINx-version dependent (C++ mesh handles, AdjacencyList accessors, function-space
-constructors, the PETSc vector of a Function, VTK and gmsh adapters) is wrapped here, so that a
-move to a newer DOLFINx is this one file's work. Every function returns plain numpy arrays or
-DOLFINx objects; all data are process-local.
+constructors, the PETSc vector of a Function, the cell partitioner and its ghost mode, mesh
+creation, gmsh and XDMF adapters, point location) is wrapped here, keyed by ``DOLFINX``, the
+(major, minor) of ``dolfinx.__version__``. Tested: 0.5 (Debian 12) and 0.9 (Debian 13); written
+for 0.10 and 0.11 from their sources where their API differs (``create_mesh``'s argument order,
+``dolfinx.io.gmsh``). Every function returns plain numpy arrays or DOLFINx objects; all data are
+process-local.
 """
 
 from __future__ import annotations
 
+import re
 from typing import NamedTuple
 
 import dolfinx
 import dolfinx.cpp
 import dolfinx.fem
+import dolfinx.fem.petsc
 import dolfinx.io
 import dolfinx.mesh
 import numpy as np
 
 from dolfinx_dem.errors import InputError
+
+#: (major, minor) of the DOLFINx release in use
+DOLFINX = tuple(int(p) for p in re.match(r"(\d+)\.(\d+)", dolfinx.__version__).groups())
+if DOLFINX < (0, 5) or (0, 5) < DOLFINX < (0, 9):
+    raise ImportError(f"dolfinx_dem runs on DOLFINx 0.5 and 0.9 or later, not {dolfinx.__version__}")
 
 #: glibc's mallopt parameters (malloc.h) and the values ``restore_malloc_mmap`` sets.
 _M_MMAP_THRESHOLD, _M_MMAP_MAX = -3, -4
@@ -63,14 +73,25 @@ class LocalMeshData(NamedTuple):
 
 
 def _cpp(mesh):
-    """The C++ mesh behind Debian's patched Python wrapper."""
-    return getattr(mesh, "_mesh", mesh)
+    """The C++ mesh behind the Python wrapper (Debian's 0.5 patch names it ``_mesh``)."""
+    return getattr(mesh, "_mesh", mesh) if DOLFINX < (0, 9) else mesh._cpp_object
 
 
 def _adjacency(topology, d0: int, d1: int) -> tuple[np.ndarray, np.ndarray]:
     topology.create_connectivity(d0, d1)
     c = topology.connectivity(d0, d1)
     return c.array, c.offsets
+
+
+def _vertex_nodes(mesh) -> np.ndarray:
+    """The geometry node of each process-local vertex (DOLFINx >= 0.9 needs the vertex-to-cell
+    connectivity for it)."""
+    tdim = mesh.topology.dim
+    if DOLFINX >= (0, 9):
+        mesh.topology.create_connectivity(0, tdim)
+    num_vertices = mesh.topology.index_map(0).size_local + mesh.topology.index_map(0).num_ghosts
+    return dolfinx.cpp.mesh.entities_to_geometry(_cpp(mesh), 0, np.arange(num_vertices, dtype=np.int32),
+                                                 False).reshape(-1)
 
 
 def local_mesh_data(mesh) -> LocalMeshData:
@@ -103,10 +124,7 @@ def local_mesh_data(mesh) -> LocalMeshData:
     order = np.argmax(opposite[:, None, :] == c2v[:, :, None], axis=2)  # (n, d+1)
     c2f = np.take_along_axis(c2f, order, axis=1)
 
-    num_vertices = topology.index_map(0).size_local + topology.index_map(0).num_ghosts
-    v2x = dolfinx.cpp.mesh.entities_to_geometry(
-        _cpp(mesh), 0, np.arange(num_vertices, dtype=np.int32), False
-    ).reshape(-1)
+    v2x = _vertex_nodes(mesh)
     x = mesh.geometry.x[:, :tdim]
     cell_vertex_x = x[v2x[c2v]]
 
@@ -152,7 +170,8 @@ def owned_original_cells(V) -> np.ndarray:
 
 def cell_dofs(V) -> np.ndarray:
     """The (block) dof of each process-local cell in a DG0 space, shape (n_cells_local,)."""
-    return np.asarray(V.dofmap.list.array, dtype=np.int32)
+    dofs = V.dofmap.list.array if DOLFINX < (0, 9) else np.asarray(V.dofmap.list).reshape(-1)
+    return np.asarray(dofs, dtype=np.int32)
 
 
 def facet_cell_owners(mesh, facets: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -178,16 +197,20 @@ def local_facet_global_indices(mesh, facets: np.ndarray) -> np.ndarray:
 
 def create_vector_space(mesh, family: str, degree: int):
     """A vector-valued function space (DG0 for DEM cell displacements, P1/P2 for FEM)."""
-    return dolfinx.fem.VectorFunctionSpace(mesh, (family, degree))
+    if DOLFINX < (0, 9):
+        return dolfinx.fem.VectorFunctionSpace(mesh, (family, degree))
+    return dolfinx.fem.functionspace(mesh, (family, degree, (mesh.geometry.dim,)))
 
 
 def create_scalar_space(mesh, family: str, degree: int):
-    return dolfinx.fem.FunctionSpace(mesh, (family, degree))
+    if DOLFINX < (0, 9):
+        return dolfinx.fem.FunctionSpace(mesh, (family, degree))
+    return dolfinx.fem.functionspace(mesh, (family, degree))
 
 
 def petsc_vec(function):
     """The PETSc vector that holds a Function's degrees of freedom (ghosted)."""
-    return function.vector
+    return function.vector if DOLFINX < (0, 9) else function.x.petsc_vec
 
 
 def mesh_from_gmsh_model(model, comm, gdim: int):
@@ -196,6 +219,11 @@ def mesh_from_gmsh_model(model, comm, gdim: int):
     given one for the call)."""
     import functools
 
+    if DOLFINX >= (0, 10):
+        data = dolfinx.io.gmsh.model_to_mesh(model, comm, 0, gdim=gdim, partitioner=partitioner())
+        return data.mesh, data.cell_tags, data.facet_tags
+    if DOLFINX >= (0, 9):
+        return dolfinx.io.gmshio.model_to_mesh(model, comm, 0, gdim=gdim, partitioner=partitioner())
     gmshio = dolfinx.io.gmshio
     default = gmshio.create_mesh
     gmshio.create_mesh = functools.partial(default, partitioner=partitioner())
@@ -213,6 +241,14 @@ def read_xdmf_mesh(xdmf, name: str = "mesh"):
     cell_shape, cell_degree = xdmf.read_cell_type(name)
     cells = xdmf.read_topology_data(name)
     x = xdmf.read_geometry_data(name)
+    if DOLFINX >= (0, 9):
+        import basix.ufl
+
+        element = basix.ufl.element("Lagrange", cell_shape.name, cell_degree, basix.LagrangeVariant.equispaced,
+                                    shape=(x.shape[1],))
+        mesh = _create_mesh(xdmf.comm, cells, x, ufl.Mesh(element))
+        mesh.name = name
+        return mesh
     cell = ufl.Cell(cell_shape.name, geometric_dimension=x.shape[1])
     cmap = dolfinx.cpp.fem.CoordinateElement(cell_shape, cell_degree)
     mesh = dolfinx.cpp.mesh.create_mesh(xdmf.comm(), dolfinx.cpp.graph.AdjacencyList_int64(cells), cmap, x,
@@ -228,10 +264,24 @@ def create_simplex_mesh(comm, x: np.ndarray, cells: np.ndarray):
     import ufl
 
     d = x.shape[1]
+    cells, x = np.asarray(cells, dtype=np.int64), np.asarray(x, dtype=np.float64)
+    if DOLFINX >= (0, 9):
+        import basix.ufl
+
+        name = {1: "interval", 2: "triangle", 3: "tetrahedron"}[d]
+        return _create_mesh(comm, cells, x, ufl.Mesh(basix.ufl.element("Lagrange", name, 1, shape=(d,))))
     cell = {1: ufl.interval, 2: ufl.triangle, 3: ufl.tetrahedron}[d]
     domain = ufl.Mesh(ufl.VectorElement("Lagrange", cell, 1))
-    return dolfinx.mesh.create_mesh(comm, np.asarray(cells, dtype=np.int64), np.asarray(x, dtype=np.float64),
-                                    domain, ghost_mode=dolfinx.mesh.GhostMode.shared_facet, partitioner=partitioner())
+    return dolfinx.mesh.create_mesh(comm, cells, x, domain, ghost_mode=dolfinx.mesh.GhostMode.shared_facet,
+                                    partitioner=partitioner())
+
+
+def _create_mesh(comm, cells: np.ndarray, x: np.ndarray, domain):
+    """``dolfinx.mesh.create_mesh`` (DOLFINx >= 0.9) with ``partitioner()``: its element and
+    coordinates swapped places in 0.10."""
+    if DOLFINX >= (0, 10):
+        return dolfinx.mesh.create_mesh(comm, cells, domain, x, partitioner())
+    return dolfinx.mesh.create_mesh(comm, cells, x, domain, partitioner())
 
 
 def partitioner():
@@ -246,8 +296,11 @@ def partitioner():
     the Gibbs-Poole-Stockmeyer ordering (``reorder_gps``, bandwidth-reducing: consecutive cells
     are neighbours), and cut into P consecutive blocks of equal size: slabs across the mesh,
     the same for the same mesh and P. With ghosting (``shared_facet``) a cell is also sent to
-    the owners of its facet neighbours."""
-    return dolfinx.cpp.mesh.create_cell_partitioner(_partition_dual_graph)
+    the owners of its facet neighbours: the DEM reads its facet neighbours' cells. From DOLFINx
+    0.6 the ghost mode is the partitioner's (and its default is none)."""
+    if DOLFINX < (0, 9):
+        return dolfinx.cpp.mesh.create_cell_partitioner(_partition_dual_graph)
+    return dolfinx.cpp.mesh.create_cell_partitioner(_partition_dual_graph, dolfinx.mesh.GhostMode.shared_facet)
 
 
 def _partition_dual_graph(comm, nparts: int, graph, ghosting: bool):
@@ -284,6 +337,11 @@ def _partition_dual_graph(comm, nparts: int, graph, ghosting: bool):
                                                  np.ascontiguousarray(dest_offsets, dtype=np.int32))
 
 
+def meshtags_comm(tags):
+    """The communicator of a MeshTags' mesh (from DOLFINx 0.9 a MeshTags holds its topology)."""
+    return tags.mesh.comm if DOLFINX < (0, 9) else tags.topology.index_map(tags.dim).comm
+
+
 def locate_boundary_facets(mesh, marker) -> np.ndarray:
     """Process-local boundary facets whose vertices all satisfy ``marker(x)``, x of shape (3, n)."""
     return dolfinx.mesh.locate_entities_boundary(mesh, mesh.topology.dim - 1, marker)
@@ -308,8 +366,12 @@ def colliding_cells(mesh, points: np.ndarray) -> np.ndarray:
 
     points = np.ascontiguousarray(points, dtype=np.float64).reshape(-1, 3)
     tdim = mesh.topology.dim
-    tree = dolfinx.geometry.BoundingBoxTree(mesh, tdim)
-    candidates = dolfinx.geometry.compute_collisions(tree, points)
+    if DOLFINX < (0, 9):
+        tree = dolfinx.geometry.BoundingBoxTree(mesh, tdim)
+        candidates = dolfinx.geometry.compute_collisions(tree, points)
+    else:
+        tree = dolfinx.geometry.bb_tree(mesh, tdim)
+        candidates = dolfinx.geometry.compute_collisions_points(tree, points)
     colliding = dolfinx.geometry.compute_colliding_cells(mesh, candidates, points)
     cells = np.full(points.shape[0], -1, dtype=np.int32)
     for i in range(points.shape[0]):
@@ -321,8 +383,20 @@ def colliding_cells(mesh, points: np.ndarray) -> np.ndarray:
 
 # --- meshes / io helpers ---
 
-# `dolfinx.io` does not import its gmshio submodule in DOLFINx 0.5; mesh_from_gmsh_model needs it.
-import dolfinx.io.gmshio  # noqa: E402
+# `dolfinx.io` does not import its gmsh submodule; mesh_from_gmsh_model needs it.
+if DOLFINX < (0, 10):
+    import dolfinx.io.gmshio  # noqa: E402
+else:
+    import dolfinx.io.gmsh  # noqa: E402
+
+
+def write_meshtags(xdmf, tags, mesh) -> None:
+    """Write the MeshTags ``tags`` of ``mesh`` into the open XDMFFile ``xdmf`` (from DOLFINx 0.9
+    with the mesh's geometry)."""
+    if DOLFINX < (0, 9):
+        xdmf.write_meshtags(tags)
+    else:
+        xdmf.write_meshtags(tags, mesh.geometry)
 
 
 def owned_cell_nodes(mesh) -> tuple[np.ndarray, np.ndarray]:
@@ -332,8 +406,11 @@ def owned_cell_nodes(mesh) -> tuple[np.ndarray, np.ndarray]:
     Global node indices are the same on every process, so shared vertices can be matched.
     """
     n = mesh.topology.index_map(mesh.topology.dim).size_local
-    k = mesh.geometry.cmap.create_dof_layout().num_dofs
-    nodes = mesh.geometry.dofmap.array.reshape(-1, k)[:n]
+    if DOLFINX < (0, 9):
+        k = mesh.geometry.cmap.create_dof_layout().num_dofs
+        nodes = mesh.geometry.dofmap.array.reshape(-1, k)[:n]
+    else:
+        nodes = np.asarray(mesh.geometry.dofmap)[:n]
     node_global = mesh.geometry.index_map().local_to_global(nodes.reshape(-1).astype(np.int32))
     return (
         np.asarray(node_global, dtype=np.int64).reshape(nodes.shape),
@@ -371,13 +448,21 @@ def import_pyvista():
 
 def create_tensor_space(mesh, family: str, degree: int):
     """A (gdim, gdim) tensor-valued function space, e.g. DG(k) for stresses."""
-    return dolfinx.fem.TensorFunctionSpace(mesh, (family, degree))
+    if DOLFINX < (0, 9):
+        return dolfinx.fem.TensorFunctionSpace(mesh, (family, degree))
+    gdim = mesh.geometry.dim
+    return dolfinx.fem.functionspace(mesh, (family, degree, (gdim, gdim)))
+
+
+def interpolation_points(V) -> np.ndarray:
+    """The reference points at which V's element interpolates (a method before DOLFINx 0.10)."""
+    points = V.element.interpolation_points
+    return points() if DOLFINX < (0, 10) else points
 
 
 def interpolate_expression(function, expr) -> None:
     """Interpolate a UFL expression into ``function`` (exact if it lies in the space)."""
-    points = function.function_space.element.interpolation_points()
-    function.interpolate(dolfinx.fem.Expression(expr, points))
+    function.interpolate(dolfinx.fem.Expression(expr, interpolation_points(function.function_space)))
 
 
 def newton_solver(comm, F, u, J, bcs=()):
@@ -407,10 +492,7 @@ def facet_cell_and_vertices(mesh, facets: np.ndarray) -> tuple[np.ndarray, np.nd
     mesh.topology.create_connectivity(tdim, 0)
     f2c = mesh.topology.connectivity(tdim - 1, tdim)
     cells = np.array([f2c.links(f)[0] for f in facets], dtype=np.int32)
-    num_vertices = mesh.topology.index_map(0).size_local + mesh.topology.index_map(0).num_ghosts
-    v2x = dolfinx.cpp.mesh.entities_to_geometry(
-        _cpp(mesh), 0, np.arange(num_vertices, dtype=np.int32), False
-    ).reshape(-1)
+    v2x = _vertex_nodes(mesh)
     x = mesh.geometry.x
     f2v = mesh.topology.connectivity(tdim - 1, 0)
     c2v = mesh.topology.connectivity(tdim, 0)

@@ -13,6 +13,7 @@ from collections.abc import Callable, Sequence
 
 import numpy as np
 
+from dolfinx_dem import _compat
 from dolfinx_dem.errors import InputError
 
 
@@ -31,7 +32,8 @@ def facet_indices(facets, tag: int | None, what: str, tdim: int) -> np.ndarray:
         if tag is not None:
             return np.asarray(facets.find(int(tag)), dtype=np.int32)
         # the values over all processes (a handful of tags): every process decides alike
-        values = sorted(set().union(*facets.mesh.comm.allgather(np.unique(facets.values).tolist())))
+        comm = _compat.meshtags_comm(facets)
+        values = sorted(set().union(*comm.allgather(np.unique(facets.values).tolist())))
         if len(values) > 1:
             raise InputError(f"{what}: the MeshTags holds the values {values}; pass tag=... to select "
                              "the facets of one of them")

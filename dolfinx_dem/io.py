@@ -377,8 +377,11 @@ WORK_XDMF = ".solution.xdmf"
 
 
 def _publish(work: pathlib.Path, path: pathlib.Path) -> None:
-    """Replace ``path`` atomically by the working XML, its HDF5 references renamed."""
+    """Replace ``path`` atomically by the working XML, its HDF5 references renamed, and its
+    XInclude namespace the W3C's ``http://`` name (DOLFINx 0.9 writes ``https://``, which VTK's
+    XDMF reader, hence ParaView and pyvista, does not recognise: its meshless grids crash it)."""
     text = re.sub(r">\s*\.solution\.h5:", ">solution.h5:", work.read_text())
+    text = text.replace('xmlns:xi="https://www.w3.org/2001/XInclude"', 'xmlns:xi="http://www.w3.org/2001/XInclude"')
     path.with_suffix(".xdmf.tmp").write_text(text)
     os.replace(path.with_suffix(".xdmf.tmp"), path)
 

@@ -293,10 +293,12 @@ def _create_round_bodies(comm, d, word, bodies, h, frame, cut, refine, blocks, b
         else:
             # size h_min within the refined zone, then growing by _GRADING per unit distance up to h
             point, h_min, distance = refine
-            dist = "Sqrt(" + "+".join(f"({a}-({p!r}))^2" for a, p in zip("xyz", point)) + ")"
+            # float(): the reprs of numpy 2 scalars (np.float64(...)) are no gmsh expressions
+            big, small, reach = float(h), float(h_min), float(distance)
+            dist = "Sqrt(" + "+".join(f"({a}-({float(p)!r}))^2" for a, p in zip("xyz", point)) + ")"
             field = gmsh.model.mesh.field.add("MathEval")
             gmsh.model.mesh.field.setString(
-                field, "F", f"Min({h!r}, Max({h_min!r}, {h_min!r} + {_GRADING!r}*({dist} - {distance!r})))")
+                field, "F", f"Min({big!r}, Max({small!r}, {small!r} + {_GRADING!r}*({dist} - {reach!r})))")
             gmsh.model.mesh.field.setAsBackgroundMesh(field)
             gmsh.option.setNumber("Mesh.MeshSizeMin", h_min)
             for option in ("MeshSizeFromPoints", "MeshSizeFromCurvature", "MeshSizeExtendFromBoundary"):

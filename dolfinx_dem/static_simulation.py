@@ -344,7 +344,7 @@ def _fem_cell_fields(u, E: float, nu: float):
     Q = _compat.create_scalar_space(mesh, "DG", 0)
     V0 = _compat.create_vector_space(mesh, "DG", 0)
     q, w = dolfinx.fem.Function(Q), dolfinx.fem.Function(V0)
-    q.interpolate(dolfinx.fem.Expression(vm, Q.element.interpolation_points()))
+    q.interpolate(dolfinx.fem.Expression(vm, _compat.interpolation_points(Q)))
     w.interpolate(u)
     n = mesh.topology.index_map(d).size_local
     cells = np.arange(n)

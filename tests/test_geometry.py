@@ -97,7 +97,7 @@ def test_cell_numbering_is_dg0_numbering(case):
     assert np.array_equal(geom.cell_global[: geom.num_owned], np.arange(start, stop))
     f = dolfinx.fem.Function(V)
     f.interpolate(lambda x: x[: geom.d])
-    owned = f.vector.array_r[: (stop - start) * geom.d].reshape(-1, geom.d)
+    owned = _compat.petsc_vec(f).array_r[: (stop - start) * geom.d].reshape(-1, geom.d)
     assert np.allclose(owned, geom.cell_centres[: geom.num_owned], rtol=0, atol=1e-14)
 
 

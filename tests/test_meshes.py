@@ -302,7 +302,7 @@ def test_read_xdmf(tmp_path, with_tags):
     with dolfinx.io.XDMFFile(comm, str(path), "w") as xdmf:
         xdmf.write_mesh(mesh)
         if with_tags:
-            xdmf.write_meshtags(facet_tags)
+            _compat.write_meshtags(xdmf, facet_tags, mesh)
     mesh2, cell_tags2, facet_tags2 = meshes.read_mesh(comm, str(path))
     assert num_cells(mesh2) == num_cells(mesh) == 30
     assert cell_tags2 is None
@@ -319,8 +319,8 @@ def test_read_xdmf_discs_with_cell_tags(tmp_path):
     mesh, cell_tags, facet_tags = meshes.create_discs(comm, [((0, 0), 1), ((3, 0), 0.5)], 0.25)
     with dolfinx.io.XDMFFile(comm, str(path), "w") as xdmf:
         xdmf.write_mesh(mesh)
-        xdmf.write_meshtags(cell_tags)
-        xdmf.write_meshtags(facet_tags)
+        _compat.write_meshtags(xdmf, cell_tags, mesh)
+        _compat.write_meshtags(xdmf, facet_tags, mesh)
     mesh2, cell_tags2, facet_tags2 = meshes.read_mesh(comm, path)
     assert num_cells(mesh2) == num_cells(mesh)
     assert owned_tag_counts(mesh2, cell_tags2) == owned_tag_counts(mesh, cell_tags)

@@ -231,7 +231,7 @@ def assembled_norm(form, bcs=()) -> float:
     the residual is the reaction)."""
     vec = dolfinx.fem.petsc.assemble_vector(dolfinx.fem.form(form))
     vec.ghostUpdate(addv=PETSc.InsertMode.ADD, mode=PETSc.ScatterMode.REVERSE)
-    dolfinx.fem.petsc.set_bc(vec, list(bcs), scale=0.0)
+    dolfinx.fem.petsc.set_bc(vec, list(bcs), None, 0.0)  # x0 = None, scale (0.9: alpha) 0
     norm = vec.norm()
     vec.destroy()
     return norm
