@@ -382,6 +382,10 @@ def _publish(work: pathlib.Path, path: pathlib.Path) -> None:
     XDMF reader, hence ParaView and pyvista, does not recognise: its meshless grids crash it)."""
     text = re.sub(r">\s*\.solution\.h5:", ">solution.h5:", work.read_text())
     text = text.replace('xmlns:xi="https://www.w3.org/2001/XInclude"', 'xmlns:xi="http://www.w3.org/2001/XInclude"')
+    # DOLFINx 0.9 writes a 1D mesh's displacement (one component) padded to three, typed Scalar:
+    # read as three values per cell unless typed Vector
+    padded = r'AttributeType="Scalar"(\s+Center="Cell">\s*<DataItem Dimensions="\d+ 3")'
+    text = re.sub(padded, r'AttributeType="Vector"\1', text)
     path.with_suffix(".xdmf.tmp").write_text(text)
     os.replace(path.with_suffix(".xdmf.tmp"), path)
 

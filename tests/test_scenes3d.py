@@ -60,7 +60,9 @@ def test_two_balls_first_contact_within_a_step_and_no_sinking(tmp_path):
                              MPI.COMM_SELF, quiet=True)
     assert summary["status"] == "completed"
     assert abs(summary["first_contact_time"] - 0.02 / 0.6) < summary["dt"]
-    assert 0.2 < summary["max_penetration_over_facet_size"] < 0.35
+    # well below the limit 0.5 where facets sink into each other's holes (0.27 on gmsh 4.8's
+    # mesh, 0.36 on gmsh 4.13's)
+    assert 0.2 < summary["max_penetration_over_facet_size"] < 0.4
     assert summary["pseudo_energy_rel_drift"] <= 1e-12 and summary["momentum_rel_change"] <= 1e-12
 
 

