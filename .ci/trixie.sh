@@ -22,6 +22,7 @@ mount_all() {  # the kernel's file systems, and what pip needs: its configuratio
     done
     $SUDO cp /etc/resolv.conf "$tree/etc/resolv.conf"
     if [ -f /etc/ssl/certs/ca-certificates.crt ]; then
+        $SUDO mkdir -p "$tree/etc/ssl/certs"
         $SUDO cp /etc/ssl/certs/ca-certificates.crt "$tree/etc/ssl/certs/ca-certificates.crt"
     fi
     if [ -f /etc/pip.conf ]; then $SUDO cp /etc/pip.conf "$tree/etc/pip.conf"; fi
