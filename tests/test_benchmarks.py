@@ -158,9 +158,23 @@ def test_indentation_quick_reproduces_its_page(tmp_path):
         assert abs(row["balance"]) < 1e-9
 
 
+#: the gmsh that meshed the balls of the hertz3d pages (Debian 12's python3-gmsh 4.8.4, whose
+#: module says 4.8.0): another one meshes them otherwise (docs/platforms.md), and the pages'
+#: figures are their mesh's to 1e-7
+PAGES_GMSH = "4.8.0"
+
+
+def _skip_unless_the_pages_gmsh():
+    import gmsh
+
+    if gmsh.__version__ != PAGES_GMSH:
+        pytest.skip(f"the hertz3d pages were made on gmsh {PAGES_GMSH}'s meshes, this is gmsh {gmsh.__version__}")
+
+
 def test_hertz3d_quick_reproduces_its_pages(tmp_path):
     """The coarsest levels: the DEM's a at s = 0.5 and the FEM at s = 0.5, 0.71, 1 are those of
     hertz3d_diagnostics.json (and hertz3d.json at s = 1); the page is written."""
+    _skip_unless_the_pages_gmsh()
     _quick("validation/hertz3d.py", "--out", str(tmp_path / "hertz3d.json"), "--work", str(tmp_path / "runs"))
     data = json.loads((tmp_path / "hertz3d.json").read_text())
     rows = {(r["method"], r["scale"]): r for r in _documented("hertz3d_diagnostics.json")["rows"]
@@ -180,6 +194,7 @@ def test_hertz3d_quick_reproduces_its_pages(tmp_path):
 def test_hertz3d_diagnostics_quick_reproduces_its_page(tmp_path):
     """The level s = 0.5 solved again next to copies of the two JSON files: the same rows, and
     the page rendered with every level."""
+    _skip_unless_the_pages_gmsh()
     for name in ("hertz3d.json", "hertz3d_diagnostics.json"):
         shutil.copy(VALIDATION / name, tmp_path / name)
     _quick("validation/hertz3d_diagnostics.py", "--out", str(tmp_path / "hertz3d_diagnostics.json"))
