@@ -17,9 +17,9 @@ Every error the package raises derives from ``DEMError``.
 import importlib
 import importlib.metadata
 
-from dolfinx_dem import _compat
+from dolfinx_dem import _malloc
 
-_compat.restore_malloc_mmap()  # after PETSc is loaded (see there)
+_malloc.restore_malloc_mmap()  # after PETSc is loaded (see there)
 
 #: where each public name lives: imported on first use (PEP 562), so that ``import dolfinx_dem``
 #: and the command line's ``list`` load no more than they need

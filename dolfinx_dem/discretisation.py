@@ -229,15 +229,8 @@ class DEMDiscretisation:
             components = range(d) if bc.components is None else list(bc.components)
             fixed[np.ix_(condition[is_dirichlet] == k, components)] = True
         self.reconstruction: Reconstruction = compute_reconstruction(
-            geom,
-            materials,
-            dirichlet_facets,
-            scheme,
-            geom.facets_of_layers(1),
-            self.comm,
-            fixed,
-            marked_facets[~is_dirichlet],
-        )
+            geom, materials, dirichlet_facets, scheme, geom.facets_of_layers(1), self.comm, fixed,
+            marked_facets[~is_dirichlet])
         rec = self.reconstruction
 
         mine, jump_facets, self._jump_cells = _jump_facets(geom, self.n_owned)
@@ -246,8 +239,7 @@ class DEMDiscretisation:
         self.num_multi_neumann_cells = self.comm.allreduce(len(self.multi_neumann_cells), op=MPI.SUM)
         #: extrapolated interior facets (reconstruction.py), counted once: by the owner of their jump row
         self.num_extrapolated_facets = self.comm.allreduce(
-            int(np.isin(rec.extrapolated_facets, mine).sum()), op=MPI.SUM
-        )
+            int(np.isin(rec.extrapolated_facets, mine).sum()), op=MPI.SUM)
         n_own_jumps = len(mine)
         del mark, marked, facet_marks, mine  # before Q
 
@@ -259,14 +251,8 @@ class DEMDiscretisation:
         # on demand (``assemble_Q``).
         self.rows: EnergyRows = compute_energy_rows(geom, materials, rec, self.n_owned, jump_facets, n_own_jumps)
         _sort_rows_globally(self.rows.Q, self.columns)
-        self.factored = FactoredStiffness(
-            self.comm,
-            self.rows.Q,
-            self.rows.num_owned,
-            self.n_owned * d * (d + 1) // 2,
-            self.n_owned * d,
-            self.columns[self.n_owned * d :],
-        )
+        self.factored = FactoredStiffness(self.comm, self.rows.Q, self.rows.num_owned, self.n_owned * d * (d + 1) // 2,
+                                          self.n_owned * d, self.columns[self.n_owned * d:])
         self._K = None
         self._stable_dt = {}
 
@@ -282,13 +268,9 @@ class DEMDiscretisation:
                 raise InputError(f"body_force must be {d} finite numbers, got {f.tolist()}")
             force.array[:] = (volumes[:, None] * f).ravel()
         #: the boundary data: Dirichlet values, tractions and the body force (boundary_data.py)
-        self.data = BoundaryData(
-            self,
-            [(marked_facets[condition == k], bc) for k, bc in enumerate(dirichlet)],
-            [(marked_facets[condition == len(dirichlet) + k], bc) for k, bc in enumerate(tractions)],
-            condition[is_dirichlet],
-            force,
-        )
+        self.data = BoundaryData(self, [(marked_facets[condition == k], bc) for k, bc in enumerate(dirichlet)],
+                                 [(marked_facets[condition == len(dirichlet) + k], bc)
+                                  for k, bc in enumerate(tractions)], condition[is_dirichlet], force)
         self._held = None  # u at the held dofs (``gradient``, ``reactions``), made on first use
         #: the bodies of imposed translation (prescribed.py): mass and inverse mass 0 on their dofs
         self.prescribed = PrescribedMotion(self, prescribed, cell_tags)
@@ -298,15 +280,8 @@ class DEMDiscretisation:
         clamped[geom.cell_bodies[geom.facet_cells[rec.dirichlet_facets, 0]]] = 1
         self.comm.Allreduce(MPI.IN_PLACE, clamped, op=MPI.MAX)
         #: the free bodies' mean translations (bodies.py); a prescribed body translates exactly
-        self.bodies = _bodies.FreeBodies(
-            self.comm,
-            geom.cell_bodies,
-            geom.num_bodies,
-            (clamped > 0) | self.prescribed.flags,
-            self.n_owned,
-            self.mass,
-            d,
-        )
+        self.bodies = _bodies.FreeBodies(self.comm, geom.cell_bodies, geom.num_bodies,
+                                         (clamped > 0) | self.prescribed.flags, self.n_owned, self.mass, d)
 
     # -- forces and energies -----------------------------------------------------------------
     def force(self, u: PETSc.Vec, t: float, out: PETSc.Vec) -> PETSc.Vec:
@@ -394,12 +369,9 @@ class DEMDiscretisation:
             raise InputError(f"unknown stable time step method {method!r}; choose 'bound' or 'eigenvalue'")
         if method not in self._stable_dt:
             if method == "bound":
-                lam = stability.largest_eigenvalue_bound(
-                    self.factored,
-                    self._row_keys(),
-                    np.repeat(self.geometry.cell_owner[self.n_owned :], self.d),
-                    self.inverse_mass,
-                )
+                lam = stability.largest_eigenvalue_bound(self.factored, self._row_keys(),
+                                                         np.repeat(self.geometry.cell_owner[self.n_owned:], self.d),
+                                                         self.inverse_mass)
             else:
                 lam = stability.eigenvalues(self.K, self.inverse_mass, 1, largest=True, rtol=1e-8)[0]
             self._stable_dt[method] = 2.0 / np.sqrt(lam)
@@ -424,12 +396,8 @@ class DEMDiscretisation:
         owned = np.asarray(owned)
         k = owned.shape[1]
         geom = self.geometry
-        vec = PETSc.Vec().createGhost(
-            np.asarray(geom.cell_global[self.n_owned :], dtype=PETSc.IntType),
-            size=(self.n_owned * k, PETSc.DECIDE),
-            bsize=k,
-            comm=self.comm,
-        )
+        vec = PETSc.Vec().createGhost(np.asarray(geom.cell_global[self.n_owned:], dtype=PETSc.IntType),
+                                      size=(self.n_owned * k, PETSc.DECIDE), bsize=k, comm=self.comm)
         with vec.localForm() as local:
             local.array[: self.n_owned * k] = owned.ravel()
         vec.ghostUpdate(PETSc.InsertMode.INSERT, PETSc.ScatterMode.FORWARD)
@@ -475,10 +443,8 @@ class DEMDiscretisation:
         out = self.create_vector()
         if isinstance(values, PETSc.Vec):
             if values.getSizes() != out.getSizes():
-                raise InputError(
-                    f"the vector's sizes {values.getSizes()} are not those of the DEM dofs "
-                    f"{out.getSizes()} (use DEMDiscretisation.create_vector)"
-                )
+                raise InputError(f"the vector's sizes {values.getSizes()} are not those of the DEM dofs "
+                                 f"{out.getSizes()} (use DEMDiscretisation.create_vector)")
             values.copy(out)
         elif isinstance(values, dolfinx.fem.Function):
             f = values

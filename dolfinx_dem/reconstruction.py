@@ -124,9 +124,8 @@ def _best_combination(geom: MeshGeometry, facets, combos, alpha, valid):
     min_alpha = np.where(valid, alpha.min(axis=-1), -np.inf)
     key = np.round(min_alpha, 9)
     tied_row, tied = np.nonzero(key == key.max(axis=1, keepdims=True))  # row-major: grouped by row
-    rel = np.round(
-        (xc[combos[tied_row, tied]] - xf[tied_row, None, :]) / geom.facet_diameters[facets[tied_row], None, None], 9
-    )
+    diameters = geom.facet_diameters[facets[tied_row], None, None]
+    rel = np.round((xc[combos[tied_row, tied]] - xf[tied_row, None, :]) / diameters, 9)
     spread = np.round(np.sum(rel**2, axis=(-1, -2)), 7)
     point_order = np.lexsort([rel[:, :, i] for i in reversed(range(d))], axis=-1)
     canonical = np.take_along_axis(rel, point_order[:, :, None], axis=1).reshape(len(tied), k * d)
@@ -221,11 +220,8 @@ def compute_interior_stencils(geom: MeshGeometry, facets: np.ndarray | None = No
     m = math.comb(_NEIGHBOURS[geom.d], geom.d - 1) * (geom.d + 1)
     chunk = max(1, _CHUNK // m)  # facets per block: bounds the memory of the candidate arrays
     parts = [_stencils_of(geom, graph, facets[i : i + chunk]) for i in range(0, len(facets), chunk)]
-    cells, alpha, min_alpha = (
-        (np.concatenate(x) for x in zip(*parts))
-        if parts
-        else (np.empty((0, geom.d + 1), np.int64), np.empty((0, geom.d + 1)), np.empty(0))
-    )
+    cells, alpha, min_alpha = (np.concatenate(x) for x in zip(*parts)) if parts else (
+        np.empty((0, geom.d + 1), np.int64), np.empty((0, geom.d + 1)), np.empty(0))
     if np.any(min_alpha < _MAX_EXTRAPOLATION):
         bad = facets[min_alpha < _MAX_EXTRAPOLATION]
         raise InputError(
@@ -256,9 +252,8 @@ def _stencils_of(geom: MeshGeometry, graph: _MeshGraph, facets: np.ndarray):
         near_retry = _nearest_in(geom, facets[retry], graph.widen(star[retry]), k) if widen else near[retry]
         combos = near_retry[:, full]
         xf = geom.facet_centres[facets[retry]]
-        c2, a2, m2 = _best_combination(
-            geom, facets[retry], combos, *_barycentric(geom.cell_centres[combos], xf[:, None, :])
-        )
+        c2, a2, m2 = _best_combination(geom, facets[retry], combos,
+                                       *_barycentric(geom.cell_centres[combos], xf[:, None, :]))
         better = m2 > min_alpha[retry]
         cells[retry[better]], alpha[retry[better]], min_alpha[retry[better]] = c2[better], a2[better], m2[better]
     return cells, alpha, min_alpha
@@ -294,15 +289,12 @@ def _pair_simplices(geom: MeshGeometry, facets: np.ndarray, pair: np.ndarray, ne
         r_x_a = np.cross(r[:, None, :], ea)
         dot_b = lambda u: np.einsum("nai,nbi->nab", u, ea)[:, a, b]  # noqa: E731
         det = dot_b(e_x_a)  # det(e, e_a, e_b)
-        numerators = [
-            dot_b(r_x_a),  # det(r, e_a, e_b)
-            (np.cross(e, r)[:, None, :] * ea).sum(axis=2)[:, b],  # det(e, r, e_b)
-            np.einsum("nai,ni->na", e_x_a, r)[:, a],
-        ]  # det(e, e_a, r)
+        numerators = [dot_b(r_x_a),  # det(r, e_a, e_b)
+                      (np.cross(e, r)[:, None, :] * ea).sum(axis=2)[:, b],  # det(e, r, e_b)
+                      np.einsum("nai,ni->na", e_x_a, r)[:, a]]  # det(e, e_a, r)
         scale = norm_e[:, None] * norm_a[:, a] * norm_a[:, b]
-        combos = np.concatenate(
-            [np.repeat(pair[:, None, :], len(a), axis=1), near[:, a, None], near[:, b, None]], axis=2
-        )
+        combos = np.concatenate([np.repeat(pair[:, None, :], len(a), axis=1), near[:, a, None], near[:, b, None]],
+                                axis=2)
     valid = np.abs(det) > 1e-8 * scale
     safe = np.where(valid, det, 1.0)
     beta = np.stack([num / safe for num in numerators], axis=-1)
@@ -361,11 +353,9 @@ def compute_reconstruction(
     stencils = compute_interior_stencils(geom, rows)
     # interior facets: alpha I blocks, stored by their diagonals only
     component = np.arange(d)
-    r_int = (
-        (np.repeat(stencils.facets, d + 1)[:, None] * d + component).ravel(),
-        (stencils.cells.ravel()[:, None] * d + component).ravel(),
-        np.repeat(stencils.alpha.ravel(), d),
-    )
+    r_int = ((np.repeat(stencils.facets, d + 1)[:, None] * d + component).ravel(),
+             (stencils.cells.ravel()[:, None] * d + component).ravel(),
+             np.repeat(stencils.alpha.ravel(), d))
 
     # Open facets: Neumann facets and partly fixed Dirichlet facets, with their free components.
     # Scheme A applies to the open facets of cells with exactly one open facet.
@@ -385,12 +375,10 @@ def compute_reconstruction(
     nD, nT = len(dirichlet_facets), len(traction_facets)
     k_fix, i_fix = np.nonzero(fixed)
     R0 = scipy.sparse.coo_matrix(
-        (np.concatenate([r_int[2], r_b[2]]), (np.concatenate([r_int[0], r_b[0]]), np.concatenate([r_int[1], r_b[1]]))),
-        shape=(F * d, N * d),
-    ).tocsr()
-    D0 = scipy.sparse.coo_matrix(
-        (np.ones(len(k_fix)), (dirichlet_facets[k_fix] * d + i_fix, k_fix * d + i_fix)), shape=(F * d, nD * d)
-    ).tocsr()
+        (np.concatenate([r_int[2], r_b[2]]), (np.concatenate([r_int[0], r_b[0]]),
+         np.concatenate([r_int[1], r_b[1]]))), shape=(F * d, N * d)).tocsr()
+    D0 = scipy.sparse.coo_matrix((np.ones(len(k_fix)), (dirichlet_facets[k_fix] * d + i_fix, k_fix * d + i_fix)),
+                                 shape=(F * d, nD * d)).tocsr()
 
     a_facets = open_facets[is_a]
     lift = scipy.sparse.csr_matrix((F * d, nT * d))
@@ -443,17 +431,13 @@ def _interface_operator(geom: MeshGeometry, materials: CellMaterials, facets: np
     gives u_f = -(A_1 + A_2)^-1 sum_c sum_{f' != f} B^c_{f'} u_{f'}, A_c = B^c_f symmetric
     positive definite."""
     d = geom.d
-    n = (
-        geom.facet_area_normals[geom.facet_cells[facets, 0], geom.facet_local[facets, 0]]
-        / geom.facet_areas[facets, None]
-    )
+    an = geom.facet_area_normals[geom.facet_cells[facets, 0], geom.facet_local[facets, 0]]
+    n = an / geom.facet_areas[facets, None]
     sides = []
     for side, sign in ((0, 1.0), (1, -1.0)):
         c, j = geom.facet_cells[facets, side], geom.facet_local[facets, side]
-        B = (
-            np.einsum("nijkl,nj,nml->nmik", materials.elasticity_tensor(d, c), sign * n, geom.facet_area_normals[c])
-            / geom.cell_volumes[c, None, None, None]
-        )
+        B = np.einsum("nijkl,nj,nml->nmik", materials.elasticity_tensor(d, c), sign * n,
+                      geom.facet_area_normals[c]) / geom.cell_volumes[c, None, None, None]
         sides.append((c, j, B))
     inverse = np.linalg.inv(sum(B[np.arange(len(facets)), j] for _, j, B in sides))
     rows, cols, blocks = [], [], []

@@ -12,12 +12,7 @@ import ufl
 from mpi4py import MPI
 
 from dolfinx_dem.fem.elastodynamics import evaluate_at_points
-from dolfinx_dem.fem.hertz import (
-    contact_half_width_fit,
-    contact_half_width_last,
-    hertz_analytic,
-    solve_hertz,
-)
+from dolfinx_dem.fem.hertz import contact_half_width_fit, contact_half_width_last, hertz_analytic, solve_hertz
 from dolfinx_dem.hertz import (
     contact_half_width_moments,
     contact_radius_moments,

@@ -121,9 +121,7 @@ class PairContact:
     skin : one Verlet-list margin (m) for every facet; default each facet's own diameter about its
         barycentre (its length in 2D).
     tolerance : how far facets may interpenetrate at t = 0 (m).
-
-    The pair list is ``pair_list`` (pair_list.py), the outputs ``outputs`` (pair_outputs.py).
-    """
+    The pair list is ``pair_list`` (pair_list.py), the outputs ``outputs`` (pair_outputs.py)."""
 
     tracks_momentum = True
 
@@ -196,8 +194,7 @@ class PairContact:
         for k, (a, b) in enumerate(self.body_pairs):
             self.body_pair_index[a, b] = self.body_pair_index[b, a] = k
 
-        self.evaluations = 0
-        self._statics = None  # the statics interface, made on first use (``statics``)
+        self.evaluations, self._statics = 0, None  # the statics interface, made on first use (``statics``)
         self.seconds = 0.0  # processor time of the contact work of the steps (``_timed``)
         self._timing = False  # inside a ``_timed`` method
         self._state = None  # the PairState of the last displacement (a step's end is the next one's start)
