@@ -80,35 +80,6 @@ def test_materials_take_numpy_scalars_and_refuse_what_is_not_a_number():
 
 
 @pytest.mark.mpi
-def test_conditions_take_meshtags_and_their_tags():
-    """A MeshTags of the facets with ``tag`` selects the facets of that value: the same
-    discretisation as the facet indices; a MeshTags of several values without a tag, of cells,
-    or a tag with facet indices, is refused."""
-    mesh, tags = plate()
-    u = None
-    reactions = []
-    for bc in (dolfinx_dem.DirichletBC(tags.find(meshes.XMIN), [0.0, 0.0]),
-               dolfinx_dem.DirichletBC(tags, [0.0, 0.0], tag=meshes.XMIN)):
-        dem = dolfinx_dem.DEMDiscretisation(mesh, PLATE, "A", [bc], body_force=[0.0, -1.0])
-        u = cell_vector(dem, lambda x: 0.01 * x ** 2) if u is None else u
-        reactions.append(dem.reactions(u, 0.0))
-    assert np.array_equal(reactions[0], reactions[1]) and np.abs(reactions[0]).max() > 0
-    with pytest.raises(
-        dolfinx_dem.InputError, match=r"Dirichlet condition 0: the MeshTags holds the values \[1, 2, 3, 4\]"
-    ):
-        dolfinx_dem.DEMDiscretisation(mesh, PLATE, "A", [dolfinx_dem.DirichletBC(tags, [0.0, 0.0])])
-    with pytest.raises(dolfinx_dem.InputError, match="tag=1 selects among the values of a MeshTags"):
-        dolfinx_dem.DEMDiscretisation(mesh, PLATE, "A", [dolfinx_dem.DirichletBC(tags.find(1), [0.0, 0.0], tag=1)])
-    with pytest.raises(
-        dolfinx_dem.InputError, match="facets must be a 1D array of facet indices or a DOLFINx MeshTags"
-    ):
-        dolfinx_dem.DEMDiscretisation(mesh, PLATE, "A", [dolfinx_dem.DirichletBC(np.array([0.5, 1.5]), [0.0, 0.0])])
-    dem = dolfinx_dem.DEMDiscretisation(mesh, PLATE, "A", [dolfinx_dem.DirichletBC(tags, [0, 0], tag=meshes.XMIN)])
-    floor = dolfinx_dem.RigidContact(dem, [dolfinx_dem.HalfSpace([0.0, -0.1], [0.0, 1.0], tags, tag=meshes.YMIN)])
-    assert MPI.COMM_WORLD.allreduce(floor.num_own, op=MPI.SUM) == 8  # the 8 facets of the lower side
-
-
-@pytest.mark.mpi
 def test_initial_states_are_dolfinx_functions_vectors_or_arrays():
     """``MEMM.initialise`` takes the DG0 Function of the discretisation, a Function of another
     space of the mesh (interpolated into DG0: its values at the barycentres for a P1 field), a
