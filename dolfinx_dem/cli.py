@@ -130,6 +130,9 @@ def _execute(comm, args, out: pathlib.Path, start) -> int:
         return 2
     if comm.rank == 0 and not args.quiet:
         _print(summary_line(summary))
+        if summary.get("obstacle_facets_scheme_b_rule"):
+            _print(f"note: {summary['obstacle_facets_scheme_b_rule']} scheme A candidate facets use the scheme B "
+                   "contact rule, being more than 45 degrees from their obstacle's plane (docs/theory.md)")
         if summary.get("contact_pairs_scheme_b_rule"):
             _print(f"note: {summary['contact_pairs_scheme_b_rule']} pairs of scheme A facets used the scheme B "
                    "contact rule, eq. (23)-(24) having no well-posed solution for them (docs/theory.md)")

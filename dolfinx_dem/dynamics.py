@@ -351,6 +351,7 @@ class DynamicRun:
             summary["checkpoint"] = checkpoint.DIRECTORY
         if self.obstacles is not None:
             summary["contact_candidate_facets"] = self.obstacles.num_facets
+            summary["obstacle_facets_scheme_b_rule"] = self.obstacles.scheme_b_rule
             summary["min_contact_gap"] = stats.min_gap
         if self.pairs is not None:
             summary.update(self.pair_stats.summary(stats.stepping_seconds))

@@ -116,15 +116,18 @@ class PrescribedMotion:
         for body, cells in zip(self.bodies, self._cells):
             u.array.reshape(-1, self.d)[cells] = body.translation(t, self.d)
 
-    def values(self, u: PETSc.Vec, force: PETSc.Vec) -> np.ndarray:
+    def values(self, u: PETSc.Vec, force: PETSc.Vec, forcing: PETSc.Vec) -> np.ndarray:
         """For each prescribed body, its reaction, the force it exerts on the other bodies,
-        -(sum of ``force`` on its dofs) = dV/dU when ``force`` = -dV/du, and its translation (its
-        cells' mean u): (n, 2, d), global sums (collective)."""
+        -(sum of ``force`` - ``forcing`` on its dofs), and its translation (its cells' mean u):
+        (n, 2, d), global sums (collective). With ``force`` = -dV/du and ``forcing`` the external
+        force f(t) (its body force and tractions), the reaction is dV/dU without the loads on the
+        body itself: the forces of the contacts it transmits (its cells translate together, so its
+        elastic forces sum to zero)."""
         d = self.d
         out = np.zeros((len(self.bodies), 2, d))
         counts = np.zeros(len(self.bodies))
         for k, cells in enumerate(self._cells):
-            out[k, 0] = -force.array_r.reshape(-1, d)[cells].sum(axis=0)
+            out[k, 0] = -(force.array_r.reshape(-1, d)[cells] - forcing.array_r.reshape(-1, d)[cells]).sum(axis=0)
             out[k, 1] = u.array_r.reshape(-1, d)[cells].sum(axis=0)
             counts[k] = len(cells)
         self.comm.Allreduce(MPI.IN_PLACE, out, op=MPI.SUM)

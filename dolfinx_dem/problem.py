@@ -91,13 +91,13 @@ class DEMProblem:
         return von_mises(self.dem.materials, self.gradient(u, t))
 
     def prescribed_values(self, u: PETSc.Vec, t: float, force: PETSc.Vec | None = None) -> np.ndarray:
-        """For each prescribed body, its reaction, the force it exerts on the other bodies,
-        -(sum of the force on its dofs) = dV/dU, the exact derivative of the potential with
-        respect to its translation U, and its translation: (n, 2, d), global. ``force``: the force
+        """For each prescribed body, its reaction, the force it exerts on the other bodies (dV/dU,
+        the exact derivative of the potential with respect to its translation U, without the loads
+        on the body itself: its weight does not count), and its translation: (n, 2, d), global. ``force``: the force
         vector to sum instead of ``force(u, t)`` (statics: the Lagrangian's, whose multipliers
         carry the pairs held on a contact switch). Collective (a force evaluation)."""
         if force is None:
             if self._work is None:
                 self._work = self.dem.create_vector()
             force = self.force(u, t, self._work)
-        return self.dem.prescribed.values(u, force)
+        return self.dem.prescribed.values(u, force, self.dem.data.forcing(t))

@@ -186,6 +186,35 @@ def _rectangle_tags(comm, tag_of_cell):
 MATERIAL = ElasticMaterial(E=1e4, nu=0.3, rho=1.0)
 
 
+def pair_force(problem, u):
+    """contact_force_0_1 (the force the disc, body 1, exerts on the block, body 0), (2,)."""
+    values = dict(zip(model.contact_columns(problem), model.contact_values(problem, u)))
+    return np.array([values["contact_force_0_1_x"], values["contact_force_0_1_y"]])
+
+
+def test_the_reaction_under_gravity_is_the_force_on_the_other_bodies():
+    """With gravity the disc's reaction is the force it exerts on the block, the contact force
+    between them: 0 before contact (before: the disc's weight, 1.26 N/m, at t = 0 with nothing
+    touching), the pair force to rounding after; in statics too."""
+    scene = indentation() | {"time": {"end": 0.004, "cfl": 0.5}, "loads": {"gravity": [0.0, -10.0]}}
+    r, _, values = run(scene)
+    assert np.abs(values[0, :2]).max() == 0.0
+    force = pair_force(r.problem, r.stepper.u)
+    assert force[1] < -1.0  # measured: -9.07
+    assert np.abs(values[-1, :2] - force).max() < 1e-10 * abs(force[1])
+    static = {k: v for k, v in scene.items() if k != "time"} | {"statics": {"time": 0.0105}}
+    problem = model.build(scenes.validate(static), MPI.COMM_WORLD)
+    result = statics.minimise_energy(problem, t=0.0105)
+    disc = problem.prescribed_values(result.u, 0.0105, result.force)[0, 0]
+    force = pair_force(problem, result.u)
+    assert force[1] < -10.0  # measured: -42.14 (before, the reaction: -40.90)
+    assert np.abs(disc - force).max() < 1e-8 * abs(force[1])
+    # The block's equilibrium: the base and the disc hold its weight (rho g times its area, 0.5 m^2).
+    base = problem.dem.reactions(result.u, 0.0105)[0]
+    assert abs(base[1] + disc[1] - 5.0) < 1e-8 * abs(base[1])
+
+
+
 @pytest.mark.parametrize(
     "overrides, message",
     [

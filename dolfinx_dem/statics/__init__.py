@@ -8,9 +8,9 @@ rigid motions and the prescribed bodies' dofs (linear.py). Without contact the p
 quadratic: one linear solve.
 
 The potential is minimised at a load time t: the Dirichlet and traction data are those of time t
-and each prescribed body is held at its translation U(t). The force on its dofs at the solution
-is its reaction, the force it exerts on the other bodies (``DEMProblem.prescribed_values`` with
-``StaticResult.force``).
+and each prescribed body is held at its translation U(t). The force on its dofs at the solution,
+without the loads on the body itself, is its reaction, the force it exerts on the other bodies
+(``DEMProblem.prescribed_values`` with ``StaticResult.force``).
 """
 
 from __future__ import annotations
