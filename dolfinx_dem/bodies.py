@@ -5,6 +5,8 @@ and do not overlap.
 
 from __future__ import annotations
 
+import warnings
+
 import numpy as np
 import scipy.sparse
 import scipy.spatial
@@ -12,7 +14,15 @@ from mpi4py import MPI
 from petsc4py import PETSc
 
 from dolfinx_dem import _compat
-from dolfinx_dem.errors import InputError
+from dolfinx_dem.errors import AccuracyWarning, InputError
+
+#: A body is slender when the diagonal of its bounding box exceeds this many thicknesses t = d |body| / |boundary|
+#: (a disc, a ball or a square: 2.8-3.5; the cantilever 1 x 0.1: 11).
+SLENDER = 4.0
+#: A slender body with scheme B facets is too thin for its mesh below this many boundary facet sizes across
+#: its thickness: scheme B stiffens the cantilever's bending 9.6 times at 3.6 facets, 2.3 times at 29
+#: (docs/validation/scheme_b.md).
+SCHEME_B_MIN_FACETS_ACROSS = 100.0
 
 
 def tagged_cells(V, cell_tags, tag: int) -> np.ndarray:
@@ -149,3 +159,42 @@ class FreeBodies:
         out = self._shifted if out is None else out
         np.subtract(ua, self._means[self.body_of_cell], out=out.array.reshape(-1, self.d))
         return out
+
+
+def thin_scheme_b_bodies(geom, comm: MPI.Comm, scheme_b_facets: np.ndarray) -> list[tuple[int, float, float]]:
+    """The slender bodies too thin for scheme B: (body, t / h, L / t) of each body with scheme B
+    facets (``scheme_b_facets``, held facet indices) whose thickness t = d |body| / |boundary| (2A/P in
+    2D, 3V/S in 3D: the thickness of a beam, the radius of a disc) is below
+    ``SCHEME_B_MIN_FACETS_ACROSS`` mean boundary facet sizes h, and whose bounding-box diagonal L
+    exceeds ``SLENDER`` t. Scheme B moves each boundary cell's facet with its barycentre, which
+    stiffens bending by an amount that falls only as h / t (docs/theory.md#scheme-bs-accuracy).
+    Warns about them (``AccuracyWarning``, rank 0). Collective; arrays of the number of bodies only."""
+    n, d, own = geom.num_bodies, geom.d, geom.num_owned
+    bf = geom.boundary_facets
+    bf = bf[geom.facet_cells[bf, 0] < own]  # each boundary facet once: by its cell's owner
+    cells = geom.facet_cells[bf, 0]
+    body, fb = geom.cell_bodies[:own], geom.cell_bodies[cells]
+    area = np.linalg.norm(geom.facet_area_normals[cells, geom.facet_local[bf, 0]], axis=1)
+    sums = np.stack([np.bincount(body, geom.cell_volumes[:own], n), np.bincount(fb, area, n),
+                     np.bincount(fb, geom.facet_diameters[bf], n), np.bincount(fb, minlength=n),
+                     np.bincount(fb, np.isin(bf, scheme_b_facets), n)])
+    x = geom.cell_vertices[:own].reshape(own, -1, d)
+    lo, hi = np.full((n, d), np.inf), np.full((n, d), -np.inf)
+    np.minimum.at(lo, body, x.min(axis=1))
+    np.maximum.at(hi, body, x.max(axis=1))
+    comm.Allreduce(MPI.IN_PLACE, sums, op=MPI.SUM)
+    comm.Allreduce(MPI.IN_PLACE, lo, op=MPI.MIN)
+    comm.Allreduce(MPI.IN_PLACE, hi, op=MPI.MAX)
+    volume, boundary, diameters, count, b = sums
+    t = d * volume / boundary
+    across, slender = t / (diameters / count), np.linalg.norm(hi - lo, axis=1) / t
+    thin = [(int(k), float(across[k]), float(slender[k]))
+            for k in np.flatnonzero((b > 0) & (across < SCHEME_B_MIN_FACETS_ACROSS) & (slender > SLENDER))]
+    if thin and comm.rank == 0:
+        listed = ", ".join(f"body {k} ({a:.3g} facets across, {s:.3g} thicknesses long)" for k, a, s in thin)
+        warnings.warn(AccuracyWarning(
+            f"scheme B on slender bodies thinner than {SCHEME_B_MIN_FACETS_ACROSS:g} boundary facets: {listed}. "
+            "Scheme B moves each boundary facet with its cell, which stiffens bending (the cantilever 3.6 facets "
+            "across: 9.6 times too stiff); use scheme A (method dem-A, or dem-AB to keep scheme B on the contact "
+            "candidates only) or refine (docs/theory.md#scheme-bs-accuracy)"), stacklevel=3)
+    return thin

@@ -14,10 +14,21 @@ import pathlib
 import signal
 import sys
 import time
+import warnings
 
 from mpi4py import MPI
 
-from dolfinx_dem.errors import DEMError, InputError, InstabilityError, SceneError, UnresolvedContactError
+from dolfinx_dem.errors import (
+    AccuracyWarning,
+    DEMError,
+    InputError,
+    InstabilityError,
+    SceneError,
+    UnresolvedContactError,
+)
+
+#: Python's own display of warnings (``_show_accuracy_warning`` passes the others to it)
+_SHOW_WARNING = warnings.showwarning
 
 #: Exit status of a run stopped by SIGINT or SIGTERM (128 + SIGINT, as shells report Ctrl-C).
 INTERRUPTED = 130
@@ -198,9 +209,18 @@ def run_state(directory: pathlib.Path, summary: dict | None) -> str:
     return ""
 
 
+def _show_accuracy_warning(message, category, filename, lineno, file=None, line=None):
+    """AccuracyWarnings as the command's own lines, ``dolfinx-dem: warning: ...``; others as Python shows them."""
+    if issubclass(category, AccuracyWarning):
+        print(f"dolfinx-dem: warning: {message}", file=sys.stderr, flush=True)
+    else:
+        _SHOW_WARNING(message, category, filename, lineno, file, line)
+
+
 def main(argv: list[str] | None = None) -> int:
     global _GUARD
     _quiet_compiler_logging()
+    warnings.showwarning = _show_accuracy_warning
     if _GUARD is None and MPI.COMM_WORLD.size > 1:
         _GUARD = MPI.COMM_WORLD.Dup()  # for _error's agreement only
     parser = argparse.ArgumentParser(prog="dolfinx-dem", description=__doc__,

@@ -129,22 +129,6 @@ def _cell_materials(dem, material, cell_tags, prescribed: bool) -> CellMaterials
     return CellMaterials(tuple(material[t] for t in material), held.astype(np.int32))
 
 
-def von_mises(materials: CellMaterials, G: np.ndarray) -> np.ndarray:
-    """Von Mises stress (Pa) of the cells of gradients G (n, d, d) (the first n cells of
-    ``materials``); the out-of-plane stress of plane strain counts."""
-    sigma = materials.stress(G)
-    n, d = G.shape[0], G.shape[-1]
-    if d == 1:
-        return np.abs(sigma[:, 0, 0])
-    s = np.zeros((n, 3, 3))
-    s[:, :d, :d] = sigma
-    if d == 2 and materials.plane == "strain":
-        lmbda = np.array([m.lame(2)[0] for m in materials.materials])[materials.index[:n]]
-        s[:, 2, 2] = lmbda * (G[:, 0, 0] + G[:, 1, 1])
-    dev = s - np.trace(s, axis1=1, axis2=2)[:, None, None] * np.eye(3) / 3
-    return np.sqrt(1.5 * np.einsum("nij,nij->n", dev, dev))
-
-
 class DEMDiscretisation:
     """Cell-centred DEM for linear elasticity on a DOLFINx simplex mesh (1D, 2D, 3D).
 
@@ -159,6 +143,9 @@ class DEMDiscretisation:
     tractions : Traction conditions; all other boundary facets are traction-free.
     cell_tags : DOLFINx MeshTags of the cells, with ``material`` given per tag or ``prescribed``.
     prescribed : PrescribedBody bodies (2D), whose translation is imposed (prescribed.py).
+    scheme_b_facets : with scheme "A", boundary facets (indices or a MeshTags) reconstructed by
+        scheme B instead, e.g. the contact candidates (method "dem-AB" of the scenes): the bulk of
+        the body keeps scheme A's accuracy and the contact scheme B's simple rule (docs/theory.md).
 
     The potential is V(u, t) = E_P + E_S - f.u - sum_f |f| t_f . u_f (eq. (11), (13) and the
     work of the body force f and of the tractions on the reconstructed facet values u_f), and
@@ -175,6 +162,7 @@ class DEMDiscretisation:
         tractions: Sequence[Traction] = (),
         cell_tags=None,
         prescribed: Sequence[PrescribedBody] = (),
+        scheme_b_facets=None,
     ):
         self.mesh = mesh
         self.comm = mesh.comm
@@ -202,6 +190,12 @@ class DEMDiscretisation:
             mesh, np.concatenate(facets) if facets else np.empty(0, np.int32),
             np.repeat(np.arange(len(facets)), [len(f) for f in facets]),
             "boundary conditions (Dirichlet conditions or tractions)")}
+        if scheme_b_facets is not None:
+            if scheme != "A":
+                raise InputError("scheme_b_facets selects scheme B facets under scheme 'A'; with scheme 'B' every "
+                                 "Neumann facet is a scheme B facet already")
+            b_facets = facet_indices(scheme_b_facets, None, "scheme_b_facets", d)
+            marks["scheme_b"] = owned_facet_marks(mesh, b_facets, np.zeros(len(b_facets)), "scheme B facets")
         # several materials: one more halo layer, as an interface facet of a layer-1 cell reads the
         # reconstructions of the facets of its layer-2 cell (reconstruction.py)
         layers = halo.HALO_LAYERS + (not isinstance(material, ElasticMaterial))
@@ -228,10 +222,14 @@ class DEMDiscretisation:
         for k, bc in enumerate(dirichlet):
             components = range(d) if bc.components is None else list(bc.components)
             fixed[np.ix_(condition[is_dirichlet] == k, components)] = True
+        b_facets = None if scheme_b_facets is None else np.unique(geom.cell_facets[facet_marks["scheme_b"] >= 0])
         self.reconstruction: Reconstruction = compute_reconstruction(
             geom, materials, dirichlet_facets, scheme, geom.facets_of_layers(1), self.comm, fixed,
-            marked_facets[~is_dirichlet])
+            marked_facets[~is_dirichlet], b_facets)
         rec = self.reconstruction
+        #: slender bodies too thin for their scheme B facets (``bodies.thin_scheme_b_bodies``), warned about
+        self.thin_scheme_b_bodies = _bodies.thin_scheme_b_bodies(
+            geom, self.comm, rec.neumann_facets if scheme == "B" else np.empty(0) if b_facets is None else b_facets)
 
         mine, jump_facets, self._jump_cells = _jump_facets(geom, self.n_owned)
         #: owned cells whose Neumann facets use scheme B under scheme A (reconstruction.py)
@@ -330,7 +328,7 @@ class DEMDiscretisation:
 
     def von_mises(self, u: PETSc.Vec, t: float) -> np.ndarray:
         """Von Mises stress of the owned cells (Pa); the out-of-plane stress of plane strain counts."""
-        return von_mises(self.materials, self.gradient(u, t))
+        return self.materials.von_mises(self.gradient(u, t))
 
     def reactions(self, u: PETSc.Vec, t: float) -> np.ndarray:
         """The force each Dirichlet condition exerts on the body, (n_conditions, d), global sums:

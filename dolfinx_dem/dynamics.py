@@ -345,6 +345,7 @@ class DynamicRun:
             "processes": self.comm.size,
             "resumes": stats.resumes,
             "multi_neumann_cells": dem.num_multi_neumann_cells,
+            "scheme_b_thin_bodies": [k for k, _, _ in dem.thin_scheme_b_bodies],
             "extrapolated_facets": dem.num_extrapolated_facets,
         }
         if error is None:

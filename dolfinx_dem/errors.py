@@ -1,4 +1,5 @@
-"""The errors of dolfinx_dem: every error the package raises derives from ``DEMError``.
+"""The errors of dolfinx_dem: every error the package raises derives from ``DEMError``; its one
+warning, ``AccuracyWarning``, from ``UserWarning``.
 
 Each class also derives from the built-in exception a Python user would expect there
 (``ValueError`` for bad input, ``RuntimeError`` for a run that cannot go on, ...), so that
@@ -70,3 +71,8 @@ class OutputError(DEMError, OSError):
 
 class KernelMemoryError(DEMError, MemoryError):
     """A compiled kernel could not allocate its work arrays."""
+
+
+class AccuracyWarning(UserWarning):
+    """A discretisation choice that is known to give inaccurate results for this input (e.g. scheme B
+    on a slender body): the run goes on, and the warning says what to change."""

@@ -148,3 +148,18 @@ class CellMaterials:
         for k, m in enumerate(self.materials):
             sigma[index == k] = m.stress(grad[index == k])
         return sigma
+
+    def von_mises(self, G: np.ndarray) -> np.ndarray:
+        """Von Mises stress (Pa) of the first n cells of gradients G (n, d, d); the out-of-plane
+        stress of plane strain counts."""
+        sigma = self.stress(G)
+        n, d = G.shape[0], G.shape[-1]
+        if d == 1:
+            return np.abs(sigma[:, 0, 0])
+        s = np.zeros((n, 3, 3))
+        s[:, :d, :d] = sigma
+        if d == 2 and self.plane == "strain":
+            lmbda = np.array([m.lame(2)[0] for m in self.materials])[self.index[:n]]
+            s[:, 2, 2] = lmbda * (G[:, 0, 0] + G[:, 1, 1])
+        dev = s - np.trace(s, axis1=1, axis2=2)[:, None, None] * np.eye(3) / 3
+        return np.sqrt(1.5 * np.einsum("nij,nij->n", dev, dev))

@@ -167,32 +167,28 @@ def build(scene: Mapping, comm: MPI.Comm = MPI.COMM_WORLD) -> DEMProblem:
     body_force = loads.get("body_force")
     if "gravity" in loads:
         body_force = [material.rho * g for g in loads["gravity"]]  # one material (scenes.materials)
-    scheme = scene["method"].split("-")[1]
-    dem = DEMDiscretisation(mesh, material, scheme, dirichlet, body_force, tractions, cell_tags, prescribed)
-    contacts = []
-    if scene.get("obstacles"):
-        contacts.append(
-            RigidContact(
-                dem,
-                [
-                    HalfSpace(
-                        ob["point"],
-                        ob["normal"],
-                        _boundary_facets(mesh, tags, names, ob["boundary"], f"obstacles[{k}].boundary"),
-                        ob.get("tolerance", 0.0),
-                    )
-                    for k, ob in enumerate(scene["obstacles"])
-                ],
-            )
-        )
+    obstacle_facets = [_boundary_facets(mesh, tags, names, ob["boundary"], f"obstacles[{k}].boundary")
+                       for k, ob in enumerate(scene.get("obstacles", []))]
+    pair_facets = None
     if "contact" in scene:
+        pair_facets = np.unique(np.concatenate([_boundary_facets(mesh, tags, names, b, f"contact.boundary[{k}]")
+                                                for k, b in enumerate(scene["contact"]["boundary"])]))
+    # dem-AB: scheme A, but scheme B on the contact candidates
+    scheme = scene["method"].split("-")[1]
+    candidates = None
+    if scheme == "AB":
+        scheme = "A"
+        candidates = np.unique(np.concatenate([np.empty(0, np.int32), *obstacle_facets,
+                                               *([] if pair_facets is None else [pair_facets])])).astype(np.int32)
+    dem = DEMDiscretisation(mesh, material, scheme, dirichlet, body_force, tractions, cell_tags, prescribed, candidates)
+    contacts = []
+    if obstacle_facets:
+        contacts.append(RigidContact(dem, [HalfSpace(ob["point"], ob["normal"], facets, ob.get("tolerance", 0.0))
+                                           for ob, facets in zip(scene["obstacles"], obstacle_facets)]))
+    if pair_facets is not None:
         c = scene["contact"]
-        facets = np.unique(
-            np.concatenate(
-                [_boundary_facets(mesh, tags, names, b, f"contact.boundary[{k}]") for k, b in enumerate(c["boundary"])]
-            )
-        )
-        contacts.append(PairContact(dem, facets, c.get("self_contact", False), c.get("skin"), c.get("tolerance", 0.0)))
+        contacts.append(PairContact(dem, pair_facets, c.get("self_contact", False), c.get("skin"),
+                                    c.get("tolerance", 0.0)))
     return DEMProblem(dem, contacts)
 
 

@@ -16,7 +16,7 @@ import numpy as np
 from petsc4py import PETSc
 
 from dolfinx_dem.contact.protocol import ContactModel
-from dolfinx_dem.discretisation import DEMDiscretisation, energies_of, von_mises
+from dolfinx_dem.discretisation import DEMDiscretisation, energies_of
 from dolfinx_dem.errors import InputError
 
 
@@ -88,7 +88,7 @@ class DEMProblem:
 
     def von_mises(self, u: PETSc.Vec, t: float) -> np.ndarray:
         """Von Mises stress of the owned cells (Pa; collective)."""
-        return von_mises(self.dem.materials, self.gradient(u, t))
+        return self.dem.materials.von_mises(self.gradient(u, t))
 
     def prescribed_values(self, u: PETSc.Vec, t: float, force: PETSc.Vec | None = None) -> np.ndarray:
         """For each prescribed body, its reaction, the force it exerts on the other bodies (dV/dU,

@@ -319,12 +319,14 @@ def compute_reconstruction(
     comm=None,
     fixed: np.ndarray | None = None,
     traction_facets: np.ndarray | None = None,
+    scheme_b_facets: np.ndarray | None = None,
 ) -> Reconstruction:
     """Assemble R, D and N (eq. (6)) for the given Dirichlet facets and Neumann scheme "A" or "B".
 
     ``fixed`` (n_D, d) bool, in the order of ``dirichlet_facets``: the components each Dirichlet
     facet fixes (default: all). ``traction_facets``: the Neumann facets that carry a traction
-    (default: none); they must not be Dirichlet facets. Only the rows of ``facets`` (default:
+    (default: none); they must not be Dirichlet facets. ``scheme_b_facets``: facets reconstructed
+    by scheme B under scheme A (the contact candidates of method "dem-AB"). Only the rows of ``facets`` (default:
     all held facets; in parallel the facets of the cells in halo layers 0 and 1, see
     geometry.py) are computed; the others stay empty. ``comm``, if given, makes the input checks
     collective, so that every process raises the same error.
@@ -366,6 +368,8 @@ def compute_reconstruction(
     per_cell = np.bincount(ocell, minlength=N)
     multi = np.flatnonzero(per_cell > 1)
     is_a = np.full(open_facets.shape, scheme == "A") & (per_cell[ocell] == 1)
+    if scheme_b_facets is not None:
+        is_a &= ~np.isin(open_facets, scheme_b_facets)
     # scheme B: the free components follow the cell
     b_free = free[~is_a]
     b_facets = np.repeat(open_facets[~is_a], b_free.sum(axis=1))

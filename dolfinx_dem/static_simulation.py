@@ -133,6 +133,7 @@ class StaticRun:
             "iterations": result.iterations,
             "linear_iterations": result.linear_iterations,
             "gradient_norm_reduction": result.gradient_reduction,
+            "scheme_b_thin_bodies": [k for k, _, _ in dem.thin_scheme_b_bodies],
             "time": t,
             "top_vertical_displacement": float(self.top.values(u, t)[0]),
             "setup_time_s": self.setup_seconds,

@@ -1,6 +1,8 @@
 """The bodies of a mesh (bodies.py): the free bodies' masses and the displacement relative to
 each free body's mean translation, on any number of processes."""
 
+import warnings
+
 import numpy as np
 import pytest
 from mpi4py import MPI
@@ -39,3 +41,32 @@ def test_free_bodies_masses_and_relative_displacement():
         mean = mean / bodies.mass[b]
         if len(mine):
             assert np.abs(mine[0] - mean).max() < 1e-14
+
+
+@pytest.mark.mpi
+@pytest.mark.parametrize(
+    ("name", "overrides", "thin"),
+    [
+        ("cantilever", {"method": "dem-B"}, [(0, 3.636, 11.05)]),  # 2A/P = 0.0909 m over facets of 0.025 m
+        ("cantilever", {"method": "dem-B", "mesh.n": [160, 16]}, [(0, 14.55, 11.05)]),
+        ("cantilever", {"method": "dem-A"}, []),  # scheme A: its corner cells' scheme B facets do not count
+        ("two-disks", {}, []),  # discs: 2.8 thicknesses long, not slender
+        ("billiard", {"mesh.h": 0.2}, [(0, 5.0, 14.14)]),  # the frame, 1 m wide
+    ],
+)
+def test_slender_bodies_too_thin_for_scheme_b_are_found_and_warned_about(name, overrides, thin):
+    """``thin_scheme_b_bodies``: (body, t / h, L / t), with an AccuracyWarning (rank 0) at set-up. Before,
+    the cantilever under dem-B was 9.6 times too stiff (tip deflection -90 %) without a word."""
+    from dolfinx_dem.errors import AccuracyWarning
+
+    scene = scenes.load(name, overrides)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        dem = simulation.build(scene, MPI.COMM_WORLD).dem
+    assert [k for k, _, _ in dem.thin_scheme_b_bodies] == [k for k, _, _ in thin]
+    for (_, across, slender), (_, a, s) in zip(dem.thin_scheme_b_bodies, thin):
+        assert across == pytest.approx(a, rel=1e-3) and slender == pytest.approx(s, rel=1e-3)
+    accuracy = [w for w in caught if issubclass(w.category, AccuracyWarning)]
+    assert len(accuracy) == (bool(thin) and MPI.COMM_WORLD.rank == 0)
+    if accuracy:
+        assert "body 0 (" in str(accuracy[0].message) and "dem-AB" in str(accuracy[0].message)

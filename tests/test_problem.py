@@ -25,8 +25,10 @@ def plate(comm=MPI.COMM_WORLD):
 def test_every_public_name_is_documented_and_every_error_is_a_dem_error():
     for name in dolfinx_dem.__all__[1:]:
         assert inspect.getdoc(getattr(dolfinx_dem, name)), name
-    classes = [c for c in vars(errors).values() if inspect.isclass(c) and issubclass(c, Exception)]
+    classes = [c for c in vars(errors).values() if inspect.isclass(c) and issubclass(c, Exception)
+               and not issubclass(c, Warning)]
     assert len(classes) >= 12 and all(issubclass(c, dolfinx_dem.DEMError) for c in classes)
+    assert issubclass(dolfinx_dem.AccuracyWarning, UserWarning)
     assert issubclass(dolfinx_dem.InputError, ValueError) and issubclass(dolfinx_dem.StateError, RuntimeError)
     assert dolfinx_dem.__version__.count(".") >= 2
 

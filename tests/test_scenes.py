@@ -139,3 +139,29 @@ def test_the_suggested_time_step_is_one_the_scene_accepts(tmp_path):
     scenes.load("bar-wave", {"time": {"end": 8.0, "dt": error.value.suggested_dt}})
     memm = float(re.search(r"MEMM suggests at most ([0-9.e-]+),", str(error.value)).group(1))
     assert memm == 0.005 and error.value.suggested_dt <= memm
+
+
+@pytest.mark.mpi
+def test_dem_ab_puts_scheme_b_on_the_contact_candidates_only():
+    """method dem-AB: the candidates of [contact] are scheme B facets, the other Neumann facets scheme A
+    ones; the energy stays exact through the impact. Without candidates it is an error."""
+    comm = MPI.COMM_WORLD
+    scene = scenes.load("two-disks", {"method": "dem-AB", "mesh.h": 0.04, "time.end": 0.2})
+    r = dynamics.DynamicRun(scenes.validate(scene), comm, quiet=True)
+    dem, contact = r.dem, r.problem.contacts[0]
+    rec = dem.reconstruction
+    own = dem.geometry.facets_of_layers(0)
+    neumann = np.intersect1d(rec.neumann_facets, own)
+    candidate = np.isin(neumann, contact.facets)
+    is_a = np.isin(neumann, rec.scheme_a_facets)
+    assert comm.allreduce(int(candidate.sum())) > 10 and comm.allreduce(int((~candidate).sum())) > 10
+    assert not is_a[candidate].any() and is_a[~candidate].all()
+    first = r.stepper.diagnostics()
+    scale, drift = first.mechanical, 0.0
+    for _ in range(r.n_steps):
+        diag = r.stepper.step()
+        drift = max(drift, abs(diag.pseudo_energy - first.pseudo_energy))
+    assert comm.allreduce(r.stepper.max_step_evaluations, op=MPI.MAX) > 1  # contact events split steps
+    assert drift < 1e-13 * scale
+    with pytest.raises(scenes.SceneError, match="'dem-AB' puts scheme B on the contact candidates"):
+        scenes.validate(scenes.load("cantilever", {"method": "dem-AB"}))

@@ -69,7 +69,7 @@ def _field(key, v, d):
 
 
 MESH_TYPES = ("interval", "rectangle", "box", "disc", "discs", "balls", "file")
-METHODS = ("dem-A", "dem-B", "fem-P2")
+METHODS = ("dem-A", "dem-B", "dem-AB", "fem-P2")
 QUADRATURES = ("midpoint", "gauss-legendre-1", "gauss-legendre-2", "gauss-legendre-3", "gauss-legendre-5")
 
 #: Allowed keys per section; values are validators (key, value, d) -> value.
@@ -345,9 +345,11 @@ def validate(scene: Mapping, mesh_dimension: int | None = None) -> dict:
         raise SceneError("scene key 'loads': give 'gravity' or 'body_force', not both")
     scene.setdefault("method", "dem-A")
     scene.setdefault("name", "scene")
+    if scene["method"] == "dem-AB" and not (scene.get("obstacles") or "contact" in scene):
+        raise SceneError("method 'dem-AB' puts scheme B on the contact candidates: this scene has none (use dem-A)")
     if "contact" in scene:
         if scene["method"] == "fem-P2":
-            raise SceneError("contact between bodies ('contact' table) needs a DEM method (dem-A or dem-B)")
+            raise SceneError("contact between bodies ('contact' table) needs a DEM method (dem-A, dem-B or dem-AB)")
         if "statics" in scene and scene.get("obstacles"):
             raise SceneError("a static scene takes obstacles or contact between bodies ('contact' table), not both")
     return scene
