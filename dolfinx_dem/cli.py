@@ -166,7 +166,7 @@ def summary_line(summary: dict) -> str:
 
 
 def _show(args) -> int:
-    from dolfinx_dem import plotting
+    from dolfinx_dem import show
 
     directory = pathlib.Path(args.directory)
     series = directory / "series.csv"
@@ -179,12 +179,8 @@ def _show(args) -> int:
         state = run_state(directory, summary)
         if state:
             _print(state)
-        with open(series) as f:
-            header = f.readline().strip().split(",")
-        _print(f"wrote {plotting.plot_series(series, header[1:6], directory / 'energies.png')}")
-        probes = header[6:]
-        if probes:
-            _print(f"wrote {plotting.plot_series(series, probes, directory / 'probes.png')}")
+        for picture in show.write_pictures(directory, summary):
+            _print(f"wrote {picture}")
         if summary is not None:
             _print(json.dumps(summary, indent=2))
     return 0
@@ -192,7 +188,7 @@ def _show(args) -> int:
 
 def run_state(directory: pathlib.Path, summary: dict | None) -> str:
     """A plain sentence on a run folder that does not hold a completed run, else ""."""
-    from dolfinx_dem import io
+    from dolfinx_dem import checkpoint, io
 
     marker = directory / io.INCOMPLETE
     if summary is not None and summary.get("status") == "interrupted":
@@ -205,7 +201,9 @@ def run_state(directory: pathlib.Path, summary: dict | None) -> str:
     if marker.exists():
         error = directory / io.ERROR
         why = f"it failed, see {error}" if error.exists() else "it is still running, or was killed"
-        return f"INCOMPLETE: this run did not finish ({why}); the files below hold what it wrote"
+        again = (f"; continue it from its last checkpoint with: dolfinx-dem resume {directory}"
+                 if (directory / checkpoint.DIRECTORY / "checkpoint.json").is_file() and not error.exists() else "")
+        return f"INCOMPLETE: this run did not finish ({why}); the files below hold what it wrote{again}"
     return ""
 
 

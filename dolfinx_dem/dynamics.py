@@ -301,6 +301,7 @@ class DynamicRun:
                 scale,
                 obstacles,
                 model.prescribed_cells(dem),
+                plotting.picture_caption(self.scene["name"], stepper.t, scale),
             )
         if animation and output.get("animation") and not plotting.too_large(dem.mesh):
             if dem.d == 1:

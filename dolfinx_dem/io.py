@@ -57,10 +57,11 @@ INCOMPLETE = "INCOMPLETE"
 ERROR = "error.txt"
 #: Every file and folder that a run (or ``dolfinx-dem show``) writes into its output folder.
 RUN_FILES = (INCOMPLETE, ERROR, "summary.json", "series.csv", "solution.xdmf", "solution.h5", "final.png",
-             "animation.gif", "contact_pressure.csv", "energies.png", "probes.png", "checkpoint",
-             ".solution.xdmf", ".solution.h5", "solution.xdmf.tmp")
+             "animation.gif", "contact_pressure.csv", "energies.png", "series.png", "force_displacement.png",
+             "pressure.png", "checkpoint", ".solution.xdmf", ".solution.h5", "solution.xdmf.tmp")
 #: The files derived from a whole run, removed when it is resumed (the resumed run rewrites them).
-DERIVED_FILES = ("summary.json", "final.png", "animation.gif", "energies.png", "probes.png")
+DERIVED_FILES = ("summary.json", "final.png", "animation.gif", "energies.png", "series.png", "force_displacement.png",
+                 "pressure.png")
 
 
 def call_on_root(comm: MPI.Comm, fn: Callable, *args):
@@ -386,6 +387,10 @@ def _publish(work: pathlib.Path, path: pathlib.Path) -> None:
     # read as three values per cell unless typed Vector
     padded = r'AttributeType="Scalar"(\s+Center="Cell">\s*<DataItem Dimensions="\d+ 3")'
     text = re.sub(padded, r'AttributeType="Vector"\1', text)
+    # DOLFINx 0.5 types it Vector with its one component: VTK then warns at every read ("Can not
+    # set attribute Vectors. Incorrect number of components"), about 80 times per 1D animation
+    one = r'AttributeType="Vector"(\s+Center="Cell">\s*<DataItem Dimensions="\d+ 1")'
+    text = re.sub(one, r'AttributeType="Scalar"\1', text)
     path.with_suffix(".xdmf.tmp").write_text(text)
     os.replace(path.with_suffix(".xdmf.tmp"), path)
 

@@ -4,8 +4,8 @@
 gathering the owned cells of every rank, the colour bar and the time in a column of their own
 beside the body, rigid obstacles (half-spaces) as grey bands bounded by a dark line (2D) or plane
 (3D); ``plot_bar`` draws a 1D bar as matplotlib line plots of its displacement and stress, its
-obstacles as walls, and ``animate_bar`` animates it in the same layout; ``plot_series`` draws a
-``series.csv``. Matplotlib draws on its Agg canvas (no display, no global pyplot state).
+obstacles as walls, and ``animate_bar`` animates it in the same layout (``show.py`` draws the
+series). Matplotlib draws on its Agg canvas (no display, no global pyplot state).
 Pictures gather on rank 0 only meshes of at most ``PICTURE_MAX_CELLS`` cells.
 """
 
@@ -92,6 +92,7 @@ def plot_cell_field(
     scale: float = 1.0,
     obstacles: Sequence[tuple[Sequence[float], Sequence[float]]] = (),
     rigid: np.ndarray | None = None,
+    caption: str | None = None,
 ) -> str:
     """Picture of the mesh, deformed by ``scale * displacement``, coloured by a cell field.
 
@@ -111,6 +112,7 @@ def plot_cell_field(
         ``gdim`` numbers, drawn across the view.
     rigid : (n_owned_cells,) booleans: cells of rigid (prescribed) bodies, drawn light grey
         without the field's colour (their stress means nothing), or None.
+    caption : text in the upper left corner, e.g. ``picture_caption(...)``: what, when, how scaled.
 
     Rows follow the owned DG0 dofs, i.e. dolfinx_dem's cell numbering: for DG0 Functions ``u``
     (vector) and ``s`` (scalar) pass ``u.x.array[:n * gdim].reshape(n, gdim)`` and
@@ -131,6 +133,9 @@ def plot_cell_field(
         return str(filename)
     plotter = _plotter((1200, 900))
     _show(plotter, grid, title, mesh.geometry.dim, obstacles)
+    if caption:
+        plotter.subplot(0, 0)
+        plotter.add_text(caption, position="upper_left", font_size=11, color="black")
     plotter.screenshot(str(filename))
     plotter.close()
     return str(filename)
@@ -299,16 +304,9 @@ def animate_solution(
     """
     filename = pathlib.Path(filename)
     _check_output(filename, scale)
-    reader = pyvista.get_reader(str(xdmf))
     plotter = _plotter((800, 640))
     plotter.open_gif(str(filename))
-    for k, t in enumerate(reader.time_values):
-        reader.set_active_time_value(t)
-        blocks = reader.read()
-        grid = pyvista.UnstructuredGrid(blocks[field])
-        grid.cell_data["u"] = blocks["displacement"].cell_data["displacement"]
-        u = grid.cell_data_to_point_data().point_data["u"].reshape(grid.n_points, -1)  # 1D: one component
-        grid.points[:, : u.shape[1]] += scale * u
+    for k, (t, blocks, grid) in enumerate(solution_frames(xdmf, field, scale)):
         grid.cell_data[title] = grid.cell_data[field]
         if len(rigid_bodies):
             grid.cell_data[title][np.isin(blocks["body"].cell_data["body"], rigid_bodies)] = np.nan
@@ -323,7 +321,29 @@ def animate_solution(
         plotter.subplot(0, 0)
         plotter.write_frame()
     plotter.close()
-    return len(reader.time_values)
+    return k + 1
+
+
+def picture_caption(scene: str, t: float, scale: float, static: bool = False) -> str:
+    """The caption of a run's ``final.png``: the scene, the (load) time and the displacement scale."""
+    when = f"static, load time t = {t:.4g} s" if static else f"t = {t:.4g} s"
+    return f"{scene}: {when}, displacement x{scale:g}"
+
+
+def solution_frames(xdmf: str | pathlib.Path, field: str, scale: float):
+    """For each output time of a ``solution.xdmf``: (t, its blocks, a grid of the cell field
+    ``field`` whose points are the mesh's moved by ``scale`` times the mean displacement of the
+    cells around them). Each frame's grid is a deep copy: the reader keeps its points from time to
+    time, and moving them in place added every frame's displacement to the previous ones'."""
+    reader = pyvista.get_reader(str(xdmf))
+    for t in reader.time_values:
+        reader.set_active_time_value(t)
+        blocks = reader.read()
+        grid = blocks[field].copy(deep=True)
+        grid.cell_data["u"] = blocks["displacement"].cell_data["displacement"]
+        u = grid.cell_data_to_point_data().point_data["u"].reshape(grid.n_points, -1)  # 1D: one component
+        grid.points[:, : u.shape[1]] += scale * u
+        yield t, blocks, grid
 
 
 def _check_output(filename: pathlib.Path, scale: float):
@@ -435,36 +455,3 @@ def _show(plotter, grid, title: str, gdim: int, obstacles=(), name: str | None =
         label_font_size=12,
     )
     plotter.subplot(0, 0)
-
-
-def plot_series(csv_path: str | pathlib.Path, columns: Sequence[str], filename: str | pathlib.Path) -> str:
-    """Line plots of ``columns`` of a ``series.csv`` against its column ``t`` (s), one per axes.
-
-    Serial (for ``dolfinx-dem show``). Returns ``str(filename)``.
-    """
-    csv_path = pathlib.Path(csv_path)
-    if not csv_path.is_file():
-        raise MissingFileError(f"series file {csv_path} does not exist")
-    with open(csv_path) as f:
-        header = f.readline().strip().split(",")
-    columns = list(columns)
-    if not columns:
-        raise InputError("columns must name at least one column to plot")
-    for name in ["t", *columns]:
-        if name not in header:
-            raise InputError(f"column {name!r} is not in {csv_path} (columns: {', '.join(header)})")
-    data = np.loadtxt(csv_path, delimiter=",", skiprows=1, ndmin=2)
-    if data.shape[0] == 0:
-        raise InputError(f"{csv_path} holds no rows")
-    t = data[:, header.index("t")]
-
-    figure = matplotlib.figure.Figure(figsize=(7.0, 0.8 + 2.2 * len(columns)))
-    axes = figure.subplots(len(columns), 1, sharex=True, squeeze=False)[:, 0]
-    for ax, name in zip(axes, columns):
-        ax.plot(t, data[:, header.index(name)])
-        ax.set_ylabel(name)
-        ax.grid(True, alpha=0.3)
-    axes[-1].set_xlabel("t (s)")
-    figure.tight_layout()
-    figure.savefig(str(filename), dpi=120)
-    return str(filename)

@@ -155,7 +155,7 @@ class StaticRun:
                 u.array_r.reshape(-1, 1),
                 problem.stress(u, t)[:, 0, 0],
                 directory / "final.png",
-                0.0,
+                t,
                 obstacles,
             )
         else:
@@ -168,6 +168,7 @@ class StaticRun:
                 scene.get("output", {}).get("picture_scale", 1.0),
                 obstacles,
                 model.prescribed_cells(dem),
+                plotting.picture_caption(scene["name"], t, scene.get("output", {}).get("picture_scale", 1.0), True),
             )
         return summary
 

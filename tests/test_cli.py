@@ -44,7 +44,7 @@ def test_cli(tmp_path):
     assert json.loads((tmp_path / "ok" / "summary.json").read_text())["n_cells"] == 20
     r = subprocess.run([CLI, "show", str(tmp_path / "ok")], capture_output=True, text=True, check=True)
     assert (tmp_path / "ok" / "energies.png").stat().st_size > 0
-    assert (tmp_path / "ok" / "probes.png").stat().st_size > 0
+    assert (tmp_path / "ok" / "series.png").stat().st_size > 0
 
 
 @pytest.mark.skip_in_parallel
@@ -101,7 +101,7 @@ def test_a_folder_holding_a_run_needs_overwrite_and_keeps_no_stale_file(tmp_path
     before = _snapshot(out)
     assert cli.main(run) == 2
     assert (f"dolfinx-dem: error: output folder {out} holds another run (summary.json, series.csv, solution.xdmf, "
-            "solution.h5, final.png, animation.gif, energies.png, probes.png, checkpoint): pass --overwrite to "
+            "solution.h5, final.png, animation.gif, energies.png, series.png, checkpoint): pass --overwrite to "
             f"replace it (its files are removed first), or `dolfinx-dem resume {out}` to continue it") \
         in capsys.readouterr().err
     assert _snapshot(out) == before
@@ -122,7 +122,7 @@ def test_show_survives_a_closed_pipe_and_says_what_a_folder_holds(tmp_path):
     stderr = process.stderr.read()
     assert process.wait(timeout=120) == 0, stderr
     assert "PETSC ERROR" not in stderr and "Broken pipe" not in stderr and stderr == ""
-    assert (out / "energies.png").stat().st_size > 0 and (out / "probes.png").stat().st_size > 0
+    assert (out / "energies.png").stat().st_size > 0 and (out / "series.png").stat().st_size > 0
     (out / "INCOMPLETE").write_text("")
     (out / "error.txt").write_text("boom")
     shown = subprocess.run([CLI, "show", str(out)], capture_output=True, text=True, check=True).stdout

@@ -298,3 +298,21 @@ def test_a_dataset_written_after_the_last_xdmf_entry_does_not_block_a_resume(tmp
         u.x.array[:] = 2.0
         writer.write(0.5, {"displacement": u})
     assert xdmf_times(path) == {"displacement": [0.0, 0.5]}
+
+
+@pytest.mark.skip_in_parallel
+def test_a_1d_solution_reads_without_vtk_warnings(tmp_path, capfd):
+    """The 1D displacement (one component) is typed Scalar in solution.xdmf: typed Vector, as
+    DOLFINx 0.5 writes it, VTK printed "Can not set attribute Vectors. Incorrect number of
+    components" at every read (about 80 times per 1D animation)."""
+    from dolfinx_dem import scenes, simulation
+    from dolfinx_dem.plotting import pyvista
+
+    simulation.run(scenes.load("bar-impact", {"time.end": 0.05, "output.every": 5}), tmp_path / "run", quiet=True)
+    capfd.readouterr()
+    reader = pyvista.get_reader(str(tmp_path / "run" / "solution.xdmf"))
+    for t in reader.time_values:
+        reader.set_active_time_value(t)
+        u = reader.read()["displacement"].cell_data["displacement"]
+        assert u.size == 100
+    assert "Can not set attribute" not in capfd.readouterr().err

@@ -83,18 +83,6 @@ def test_plot_cell_field_undeformed_and_errors(tmp_path):
         plotting.plot_cell_field(mesh, None, np.zeros(n), tmp_path / "missing" / "b.png", "v")
 
 
-def test_plot_series(tmp_path):
-    csv = tmp_path / "series.csv"
-    t = np.linspace(0, 1, 11)
-    np.savetxt(csv, np.c_[t, t**2, np.sin(t)], delimiter=",", header="t,kinetic,gap", comments="")
-    filename = plotting.plot_series(csv, ["kinetic", "gap"], tmp_path / "series.png")
-    assert png_size(pathlib.Path(filename))[0] > 0
-    with pytest.raises(ValueError, match="'energy' is not in"):
-        plotting.plot_series(csv, ["energy"], tmp_path / "x.png")
-    with pytest.raises(FileNotFoundError, match="nope.csv"):
-        plotting.plot_series(tmp_path / "nope.csv", ["gap"], tmp_path / "x.png")
-
-
 def test_pictures_are_skipped_above_the_size_limit(tmp_path, monkeypatch):
     """Pictures gather the mesh on rank 0: above PICTURE_MAX_CELLS they are not drawn at all."""
     mesh = dolfinx.mesh.create_unit_square(MPI.COMM_WORLD, 4, 4)
@@ -158,3 +146,53 @@ def test_animate_bar_draws_the_bar_in_the_layout_of_plot_bar(tmp_path):
     assert stress[1].sum() > 500
     left_end = [np.flatnonzero(bar[k, :120].any(axis=0)).min() for k in range(2)]
     assert left_end[1] < left_end[0] - 50  # moved 3 m towards the obstacle (about 120 pixels)
+
+
+@pytest.mark.skip_in_parallel
+def test_every_animation_frame_shows_the_displacement_written_at_its_time(tmp_path):
+    """The frames of ``animate_solution`` (``solution_frames``): at every output time the points are
+    the mesh's plus scale times the cell displacements of solution.xdmf at that time (averaged
+    around each point), read by a reader of their own. Before, each frame moved the reader's points
+    in place, adding its displacement to all the previous frames' (two-disks: the discs overlapped
+    at t = 0.12 s, frames empty or zoomed)."""
+    import pyvista
+
+    from dolfinx_dem import scenes, simulation
+
+    scene = scenes.load("two-disks", {"mesh.h": 0.04, "time.end": 0.2, "output.every": 20})
+    simulation.run(scenes.validate(scene), tmp_path / "run", quiet=True)
+    xdmf, scale = tmp_path / "run" / "solution.xdmf", 10.0
+    frames = list(plotting.solution_frames(xdmf, "von_mises", scale))
+    assert len(frames) >= 5
+    moved = 0.0
+    for t, _, grid in frames:
+        reader = pyvista.get_reader(str(xdmf))
+        reader.set_active_time_value(t)
+        blocks = reader.read()
+        reference = blocks["von_mises"].copy(deep=True)
+        reference.cell_data["u"] = blocks["displacement"].cell_data["displacement"]
+        u = reference.cell_data_to_point_data().point_data["u"]
+        expected = reference.points + scale * u
+        assert np.abs(grid.points - expected).max() < 1e-12
+        moved = max(moved, np.abs(scale * u).max())
+    assert moved > 0.1  # the discs move (0.3 m/s for 0.2 s, times 10)
+
+
+@pytest.mark.skip_in_parallel
+def test_final_pictures_say_the_scene_the_time_and_the_scale(tmp_path):
+    """final.png's caption (``picture_caption``): drawn in the upper left corner, where the picture
+    without it is blank (before: no time, scene or scale; the cantilever is drawn x10)."""
+    import imageio.v3 as iio
+
+    assert plotting.picture_caption("cantilever", 4.0, 10.0) == "cantilever: t = 4 s, displacement x10"
+    static = plotting.picture_caption("hertz", 0.0, 1.0, static=True)
+    assert static == "hertz: static, load time t = 0 s, displacement x1"
+    mesh, _, _ = meshes.create_rectangle(MPI.COMM_SELF, [0, 0], [2, 1], [6, 3], "crossed")
+    values, centroids = dg0_rows(mesh)
+    images = []
+    for caption in (None, "cantilever: t = 4 s, displacement x10"):
+        path = tmp_path / f"{caption is None}.png"
+        plotting.plot_cell_field(mesh, 0.01 * centroids, values, path, "x", caption=caption)
+        images.append(iio.imread(path)[:60, :500].astype(float))
+    assert np.ptp(images[0]) == 0.0  # white
+    assert np.ptp(images[1]) > 100.0  # dark text on white
