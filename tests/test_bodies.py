@@ -65,7 +65,8 @@ def test_slender_bodies_too_thin_for_scheme_b_are_found_and_warned_about(name, o
         dem = simulation.build(scene, MPI.COMM_WORLD).dem
     assert [k for k, _, _ in dem.thin_scheme_b_bodies] == [k for k, _, _ in thin]
     for (_, across, slender), (_, a, s) in zip(dem.thin_scheme_b_bodies, thin):
-        assert across == pytest.approx(a, rel=1e-3) and slender == pytest.approx(s, rel=1e-3)
+        rel = 1e-3 if scene["mesh"]["type"] == "rectangle" else 3e-2  # another gmsh meshes the frame otherwise
+        assert across == pytest.approx(a, rel=rel) and slender == pytest.approx(s, rel=rel)
     accuracy = [w for w in caught if issubclass(w.category, AccuracyWarning)]
     assert len(accuracy) == (bool(thin) and MPI.COMM_WORLD.rank == 0)
     if accuracy:
