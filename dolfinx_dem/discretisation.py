@@ -367,13 +367,20 @@ class DEMDiscretisation:
             raise InputError(f"unknown stable time step method {method!r}; choose 'bound' or 'eigenvalue'")
         if method not in self._stable_dt:
             if method == "bound":
-                lam = stability.largest_eigenvalue_bound(self.factored, self._row_keys(),
+                lower, lam = stability.eigenvalue_bounds(self.factored, self._row_keys(),
                                                          np.repeat(self.geometry.cell_owner[self.n_owned:], self.d),
                                                          self.inverse_mass)
+                self._stable_dt["unstable"] = 2.0 / np.sqrt(lower)
             else:
                 lam = stability.eigenvalues(self.K, self.inverse_mass, 1, largest=True, rtol=1e-8)[0]
             self._stable_dt[method] = 2.0 / np.sqrt(lam)
         return self._stable_dt[method]
+
+    def unstable_time_step(self) -> float:
+        """A step beyond which MEMM is unstable whatever the modes (s): 2 / sqrt(max_i (M^-1 K)_ii),
+        the diagonal being a lower bound on lambda_max (stability.eigenvalue_bounds). Collective."""
+        self.stable_time_step("bound")
+        return self._stable_dt["unstable"]
 
     def _row_keys(self) -> np.ndarray:
         """A number for each own row of Q, increasing along them, that orders the rows of all

@@ -369,13 +369,22 @@ def time_step(dem: DEMDiscretisation, time_spec: Mapping) -> float:
     step (``time.stable_step``: by default from a bound on lambda_max, the same to the bit on any
     number of processes; SLEPc's eigenvalue differs in the last digits), floored to 4
     significant digits so that every process count takes the same steps, then shortened to
-    divide the end time."""
+    divide the end time. A step beyond the stability limit whatever the modes
+    (``DEMDiscretisation.unstable_time_step``) is an error at set-up (before, the monitor stopped
+    the run after its folder was written)."""
     if "dt" in time_spec:
-        return time_spec["dt"]
-    limit = time_spec["cfl"] * dem.stable_time_step(time_spec.get("stable_step", "bound"))
-    exponent = math.floor(math.log10(limit)) - 3
-    n_steps = math.ceil(time_spec["end"] / (math.floor(limit / 10.0**exponent) * 10.0**exponent))
-    return time_spec["end"] / n_steps
+        dt, key = time_spec["dt"], f"time.dt = {time_spec['dt']:g}"
+    else:
+        limit = time_spec["cfl"] * dem.stable_time_step(time_spec.get("stable_step", "bound"))
+        exponent = math.floor(math.log10(limit)) - 3
+        dt = time_spec["end"] / math.ceil(time_spec["end"] / (math.floor(limit / 10.0**exponent) * 10.0**exponent))
+        key = f"time.cfl = {time_spec['cfl']:g} (dt = {dt:.4g} s)"
+    if dt > dem.unstable_time_step():
+        raise InputError(f"{key} is beyond MEMM's stability limit 2 / sqrt(lambda_max(M^-1 K)): it exceeds "
+                         f"2 / sqrt(max_i (M^-1 K)_ii) = {dem.unstable_time_step():.4g} s, which is above that limit. "
+                         f"Set time.dt = {dividing_time_step(time_spec['end'], 0.5 * dem.stable_time_step())}, or "
+                         "time.cfl <= 1")
+    return dt
 
 
 def dividing_time_step(end: float, at_most: float) -> float:

@@ -35,6 +35,7 @@ writers must be the same on every rank (e.g. global reductions).
 
 from __future__ import annotations
 
+import fcntl
 import json
 import math
 import os
@@ -42,6 +43,7 @@ import pathlib
 import pickle
 import re
 import shutil
+import tempfile
 import traceback
 import xml.etree.ElementTree as ElementTree
 from collections.abc import Callable, Mapping, Sequence
@@ -54,6 +56,8 @@ from mpi4py import MPI
 from dolfinx_dem.errors import InputError, MissingFileError, OutputFolderError
 
 INCOMPLETE = "INCOMPLETE"
+#: The lock file of a run in progress in its folder (``OutputDirectory``), removed at its end.
+LOCK = ".lock"
 ERROR = "error.txt"
 #: Every file and folder that a run (or ``dolfinx-dem show``) writes into its output folder.
 RUN_FILES = (INCOMPLETE, ERROR, "summary.json", "series.csv", "solution.xdmf", "solution.h5", "final.png",
@@ -105,11 +109,45 @@ class OutputDirectory:
         self.comm = comm
         self.overwrite, self.resume = overwrite, resume
         self._note = None
+        self._lock = None  # rank 0's open lock file while the run holds the folder
+
+    def _take_lock(self) -> None:
+        """An exclusive lock (flock) on ``LOCK`` in the folder, which the OS releases when the
+        process ends, however it ends: two runs never write into one folder at once. The file is
+        removed on release; a lock taken on a file removed meanwhile (its inode no longer the
+        path's) counts as taken by another run."""
+        path = self.path / LOCK
+        self._lock = open(path, "a")  # noqa: SIM115 (held until _release_lock)
+        try:
+            fcntl.flock(self._lock, fcntl.LOCK_EX | fcntl.LOCK_NB)
+            if os.fstat(self._lock.fileno()).st_ino != os.stat(path).st_ino:
+                raise BlockingIOError
+        except (BlockingIOError, FileNotFoundError):
+            self._lock.close()
+            self._lock = None
+            raise OutputFolderError(f"output folder {self.path} is in use by a run in progress (it holds "
+                                    f"{path}): wait for it to end, or choose another --out") from None
+
+    def _release_lock(self) -> None:
+        (self.path / LOCK).unlink()
+        self._lock.close()
+        self._lock = None
 
     def _check(self) -> list[pathlib.Path]:
-        """The run files present in the folder; raises if the run may not go there."""
+        """The run files present in the folder; raises if the run may not go there: not a folder,
+        not writable (a folder made and removed in its nearest existing ancestor tells), held by
+        another run, or locked by a run in progress (``_lock``)."""
         if self.path.exists() and not self.path.is_dir():
             raise OutputFolderError(f"output path {self.path} exists and is not a directory")
+        ancestor = next(p for p in (self.path.absolute(), *self.path.absolute().parents) if p.exists())
+        try:
+            os.rmdir(tempfile.mkdtemp(dir=ancestor, prefix=".dolfinx-dem-"))
+        except OSError as err:
+            raise OutputFolderError(f"output folder {self.path} cannot be written ({ancestor}: "
+                                    f"{err.strerror})") from None
+        if self.path.is_dir() and self._lock is None:
+            self._take_lock()
+            self._release_lock()
         present = [self.path / name for name in RUN_FILES if os.path.lexists(self.path / name)]
         if self.resume or not present or self.overwrite:
             return present
@@ -131,8 +169,14 @@ class OutputDirectory:
 
     def __enter__(self) -> pathlib.Path:
         def start():
-            present = self._check()
+            self._check()
             self.path.mkdir(parents=True, exist_ok=True)
+            self._take_lock()
+            try:
+                present = self._check()
+            except OutputFolderError:
+                self._release_lock()
+                raise
             remove = [p for p in present if self.overwrite or p.name == ERROR or
                       (self.resume and p.name in DERIVED_FILES)]
             for p in remove:
@@ -153,6 +197,8 @@ class OutputDirectory:
             message = "".join(traceback.format_exception(exc_type, exc, tb))
             with open(self.path / ERROR, "a") as f:
                 f.write(f"[rank {self.comm.rank} of {self.comm.size}] {message}")
+        if self._lock is not None:
+            self._release_lock()
         return False
 
 

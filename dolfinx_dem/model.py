@@ -268,6 +268,25 @@ def prescribed_cells(dem: DEMDiscretisation) -> np.ndarray | None:
     return np.isin(dem.geometry.cell_bodies[: dem.n_owned], dem.prescribed.body_numbers)
 
 
+#: How far outside the mesh a probe may lie, in heights of its nearest cell: a point on a curved
+#: boundary lies up to about h / (8 R) of them outside the polygonal mesh of facets h.
+PROBE_TOLERANCE = 0.1
+
+
+def _depth_outside(dem: DEMDiscretisation, x: np.ndarray, nearest: int = 8) -> float:
+    """How far ``x`` lies outside the nearest of this process's owned cells, in heights of that cell:
+    -min of its barycentric coordinates there, least over the ``nearest`` cells of nearest barycentre
+    (inf without owned cells)."""
+    geom = dem.geometry
+    if dem.n_owned == 0:
+        return np.inf
+    cells = np.argsort(np.linalg.norm(geom.cell_centres[: dem.n_owned] - x, axis=1))[:nearest]
+    v = geom.cell_vertices[cells]  # (k, d+1, d)
+    lam = np.linalg.solve(np.swapaxes(v[:, 1:] - v[:, :1], 1, 2), (x - v[:, 0])[..., None])[..., 0]
+    lam = np.concatenate([1.0 - lam.sum(axis=1, keepdims=True), lam], axis=1)
+    return float(-lam.min(axis=1).max())
+
+
 class Probes:
     """Displacement components at points: the P1 reconstruction (eq. (10)) of the cell whose
     barycentre is nearest to the point (ties broken by position, so any process count agrees),
@@ -287,16 +306,23 @@ class Probes:
         clash = [name for name in self.names if name in columns]
         if clash:
             raise SceneError(f"probe names {clash} are series columns of this scene; the columns: {columns}")
-        if any(p["component"] >= dem.d for p in specs):
-            raise SceneError(f"probe components must be < {dem.d}")
+        for i, p in enumerate(specs):
+            if p["component"] >= dem.d:
+                raise SceneError(f"scene key 'probes[{i}].component' must be < {dem.d} (0 = x, 1 = y, 2 = z in "
+                                 f"{dem.d}D), got {p['component']}")
         points = np.zeros((len(specs), 3))
         for i, p in enumerate(specs):
             points[i, : dem.d] = p["point"]
         inside = _compat.colliding_cells(dem.mesh, points) >= 0 if specs else np.empty(0, bool)
         inside = dem.comm.allreduce(inside.astype(int), op=MPI.SUM) > 0 if specs else inside
-        if not np.all(inside):
-            bad = int(np.argmin(inside))
-            raise SceneError(f"probe {self.names[bad]!r} at {specs[bad]['point']} is outside the mesh")
+        # a point of a curved boundary lies a little outside the polygonal mesh: accepted within
+        # PROBE_TOLERANCE of a cell's height beyond its nearest cells (barycentric coordinates)
+        depth = np.array([_depth_outside(dem, x[: dem.d]) if not ok else 0.0 for x, ok in zip(points, inside)])
+        depth = dem.comm.allreduce(depth, op=MPI.MIN) if specs else depth
+        if np.any(depth > PROBE_TOLERANCE):
+            bad = int(np.argmax(depth))
+            raise SceneError(f"probe {self.names[bad]!r} at {specs[bad]['point']} is outside the mesh (beyond "
+                             f"{PROBE_TOLERANCE:g} of a cell's height from its nearest cells)")
         # Each process proposes its nearest owned cell (key: distance rounded relative to the
         # mesh extent, then position); the smallest key over the processes wins.
         xc = dem.geometry.cell_centres[: dem.n_owned]

@@ -119,11 +119,13 @@ def _transposed_blocks(factored: FactoredStiffness):
     return lambda: (block(a, b, r) for a, b, r in zip(edges[:-1], edges[1:], ranges))
 
 
-def largest_eigenvalue_bound(factored: FactoredStiffness, row_keys: np.ndarray, ghost_owners: np.ndarray,
-                             inverse_mass: PETSc.Vec, iterations: int = 3) -> float:
-    """An upper bound on lambda_max(M^-1 Q^T Q) (rad^2/s^2): the smallest of ``iterations``
-    weighted row sums max_i (|Kt| w)_i / w_i, w = d, |Kt| d, |Kt|^2 d, ... with d the diagonal
-    of Kt (module docstring).
+def eigenvalue_bounds(factored: FactoredStiffness, row_keys: np.ndarray, ghost_owners: np.ndarray,
+                      inverse_mass: PETSc.Vec, iterations: int = 3) -> tuple[float, float]:
+    """A lower and an upper bound on lambda_max(M^-1 Q^T Q) (rad^2/s^2). Upper: the smallest of
+    ``iterations`` weighted row sums max_i (|Kt| w)_i / w_i, w = d, |Kt| d, |Kt|^2 d, ... with d
+    the diagonal of Kt (module docstring). Lower: max_i d_i = max_i e_i . Kt e_i (a Rayleigh
+    quotient), so that a step dt > 2 / sqrt(max_i d_i) is beyond the stability limit whatever the
+    modes.
 
     factored : the local rows of Q (``DEMDiscretisation.factored``); row_keys : a number of each
     local row, increasing along them, that orders the rows of all processes independently of the
@@ -185,7 +187,8 @@ def largest_eigenvalue_bound(factored: FactoredStiffness, row_keys: np.ndarray, 
     # start from the diagonal of Kt (cheaper than w = 1 for the same bound: 2 passes, not 3)
     rowsums(ffi.NULL)
     w = s**2 * r
-    w = np.maximum(w / comm.allreduce(w.max() if n else 0.0, op=MPI.MAX), np.finfo(float).tiny)
+    lower = comm.allreduce(w.max() if n else 0.0, op=MPI.MAX)
+    w = np.maximum(w / lower, np.finfo(float).tiny)
     bound = np.inf
     for _ in range(iterations):
         np.multiply(s, w, out=x.array)
@@ -200,7 +203,7 @@ def largest_eigenvalue_bound(factored: FactoredStiffness, row_keys: np.ndarray, 
     x.destroy()
     x_reach.destroy()
     scatter.destroy()
-    return float(bound) * (1.0 + ROUNDING_MARGIN)
+    return float(lower) * (1.0 - ROUNDING_MARGIN), float(bound) * (1.0 + ROUNDING_MARGIN)
 
 
 def eigenvalues(

@@ -38,7 +38,7 @@ from dolfinx_dem import hertz, io, model, plotting
 from dolfinx_dem.contact import PairContact, RigidContact
 from dolfinx_dem.errors import SceneError
 from dolfinx_dem.run_statistics import peak_rss_mb
-from dolfinx_dem.statics import minimise_energy
+from dolfinx_dem.statics import check_held, minimise_energy
 
 
 def _top_point(dem) -> list[float]:
@@ -88,6 +88,8 @@ class StaticRun:
         if self.pairs is not None and dem.d != 2:
             raise SceneError("a static scene with contact between bodies ('contact' table) is implemented "
                                     "in 2D, not 3D")
+        if not problem.contacts:  # a free rigid motion is an error before the output folder is touched
+            check_held(dem, scene["statics"].get("fixed_mean", ()), scene["statics"].get("fixed_rotation", False))
         self.top = model.Probes(problem, [{"name": "top", "point": _top_point(dem), "component": dem.d - 1}])
         self.probes = model.Probes(problem, scene.get("probes", []))
         self.setup_seconds = comm.allreduce(time.perf_counter() - self.wall, op=MPI.MAX)

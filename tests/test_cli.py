@@ -50,8 +50,8 @@ def test_cli(tmp_path):
 @pytest.mark.skip_in_parallel
 @pytest.mark.parametrize("overwrite", [False, True])
 @pytest.mark.parametrize("args, message", [
-    (["cantilever", "--set", "mesh.type=file", "--set", "mesh.path=nope.msh"], "mesh file nope.msh does not exist"),
-    (["cantilever", "--set", "mesh.type=file", "--set", "mesh.path={quad}", "--set", 'dirichlet=[{boundary="all"}]'],
+    (["cantilever", "--set", 'mesh={type="file", path="nope.msh"}'], "mesh file nope.msh does not exist"),
+    (["cantilever", "--set", 'mesh={type="file", path="{quad}"}', "--set", 'dirichlet=[{boundary="all"}]'],
      "dolfinx_dem needs a simplex mesh (every cell with 3 vertices)"),
     (["bar-impact", "--set", 'obstacles=[{point=[6.0], normal=[1.0], boundary="left"}]'],
      "obstacle 0 intersects the body at t = 0"),

@@ -182,7 +182,7 @@ def test_output_directory_refuses_another_run_and_overwrite_removes_only_run_fil
     assert sorted(p.name for p in path.iterdir()) == before  # refused: nothing touched
     comm.barrier()  # every rank has looked before rank 0 removes
     with io.OutputDirectory(path, comm, overwrite=True):
-        assert sorted(p.name for p in path.iterdir()) == [io.INCOMPLETE, "notes.txt"]
+        assert sorted(p.name for p in path.iterdir()) == [io.LOCK, io.INCOMPLETE, "notes.txt"]
     assert sorted(p.name for p in path.iterdir()) == ["notes.txt"]
     assert (path / "notes.txt").read_text() == "mine"
 
@@ -200,7 +200,7 @@ def test_output_directory_resume_and_keep_incomplete(tmp_path):
     comm.barrier()  # every rank has looked before rank 0 removes
     with io.OutputDirectory(path, comm, resume=True):
         # the derived files go, the series stays to be appended to
-        assert sorted(p.name for p in path.iterdir()) == [io.INCOMPLETE, "series.csv"]
+        assert sorted(p.name for p in path.iterdir()) == [io.LOCK, io.INCOMPLETE, "series.csv"]
     assert sorted(p.name for p in path.iterdir()) == ["series.csv"]
 
 
@@ -316,3 +316,31 @@ def test_a_1d_solution_reads_without_vtk_warnings(tmp_path, capfd):
         u = reader.read()["displacement"].cell_data["displacement"]
         assert u.size == 100
     assert "Can not set attribute" not in capfd.readouterr().err
+
+
+@pytest.mark.skip_in_parallel
+def test_an_unwritable_output_folder_is_an_error_before_the_set_up(capsys):
+    """Before: a Python traceback after the set-up, when the folder was made."""
+    from dolfinx_dem import cli
+
+    assert cli.main(["run", "bar-wave", "--out", "/proc/dolfinx-dem-test"]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("dolfinx-dem: error: output folder /proc/dolfinx-dem-test cannot be written (/proc: ")
+    assert "Traceback" not in err
+
+
+@pytest.mark.skip_in_parallel
+def test_two_runs_never_write_into_one_folder_at_once(tmp_path):
+    """The folder's lock (flock on .lock) is held while a run writes: another run, even with
+    --overwrite, is refused before its set-up; once the first ends, the folder is free again. Before,
+    two concurrent --overwrite runs wrote into the same files."""
+    first = io.OutputDirectory(tmp_path / "out", MPI.COMM_SELF)
+    with first:
+        second = io.OutputDirectory(tmp_path / "out", MPI.COMM_SELF, overwrite=True)
+        with pytest.raises(io.OutputFolderError, match="is in use by a run in progress"):
+            second.check()
+        with pytest.raises(io.OutputFolderError, match="is in use by a run in progress"):
+            second.__enter__()
+    with io.OutputDirectory(tmp_path / "out", MPI.COMM_SELF, overwrite=True) as directory:
+        assert (directory / io.LOCK).exists()
+    assert not (tmp_path / "out" / io.LOCK).exists()

@@ -100,3 +100,20 @@ def test_contact_columns_follow_the_contact_models_in_order():
     values = model.contact_values(problem, problem.create_vector())
     assert len(values) == len(columns) - 3
     assert values[columns.index("penetration")] == 0.0  # nothing touches at rest
+
+
+@pytest.mark.mpi
+def test_a_probe_on_a_curved_boundary_is_accepted_and_one_beyond_it_is_not():
+    """A point of the circle between two vertices of the polygonal disc lies a little outside the
+    mesh (here 0.015 of its cell's height): before, "outside the mesh"; now its nearest cell reads it.
+    0.002 m beyond the circle (0.26 of a height) it is still refused."""
+    theta = 0.5 * (2 * np.pi / 63)  # about halfway between two boundary vertices
+    for radius, accepted in ((0.1, True), (0.102, False)):
+        point = [0.14 + radius * np.cos(theta), 2.27 + radius * np.sin(theta)]
+        scene = scenes.load("two-disks", {"probes": [{"name": "edge", "point": point, "component": 0}]})
+        problem = simulation.build(scene, MPI.COMM_WORLD)
+        if accepted:
+            assert model.Probes(problem, scene["probes"]).names == ["edge"]
+        else:
+            with pytest.raises(scenes.SceneError, match="'edge' .* is outside the mesh"):
+                model.Probes(problem, scene["probes"])

@@ -110,7 +110,7 @@ def test_a_missing_mesh_file_names_the_absolute_path_tried(tmp_path, monkeypatch
     """``--set mesh.path=plate.msh`` is relative to the working directory; the error says
     which file it looked for."""
     monkeypatch.chdir(tmp_path)
-    code = cli.main(["run", "cantilever", "--set", "mesh.type=file", "--set", "mesh.path=plate.msh",
+    code = cli.main(["run", "cantilever", "--set", 'mesh={type="file", path="plate.msh"}',
                      "--out", str(tmp_path / "out"), "--quiet"])
     assert code == 2
     assert f"mesh file plate.msh does not exist (looked for {tmp_path / 'plate.msh'})" in capsys.readouterr().err

@@ -71,7 +71,7 @@ def test_hertz_disc_equilibrium_and_symmetry(tempdir):
 def test_free_body_is_rejected():
     mesh, _, _ = meshes.create_interval(MPI.COMM_WORLD, 10, 0.0, 1.0)
     dem = DEMDiscretisation(mesh, ElasticMaterial(E=1.0, nu=0.0, rho=1.0), "A", body_force=[-1.0])
-    with pytest.raises(StaticsError, match="unconstrained rigid mode"):
+    with pytest.raises(StaticsError, match=r"body 0 has a free rigid motion \(translation along x\)"):
         minimise_energy(DEMProblem(dem))
     with pytest.raises(ValueError, match="fixed_mean components"):
         minimise_energy(DEMProblem(dem), fixed_mean=(3,))
@@ -422,3 +422,43 @@ def test_hertz_ball_equilibrium_and_contact_radius(tempdir):
     assert 0.97 * figures["contact_radius"] < figures["contact_radius_barycentre"] < 0.997 * figures["contact_radius"]
     reactions = dem.reactions(result.u, 0.0)  # symmetry planes: normal forces only
     assert np.all(reactions[:, 2] == 0.0) and reactions[0, 1] == reactions[1, 0] == 0.0
+
+
+def _static_cantilever(**overrides) -> dict:
+    scene = {k: v for k, v in scenes.load("cantilever").items() if k not in ("time", "output")}
+    return scene | {"statics": {}} | overrides
+
+
+@pytest.mark.mpi
+@pytest.mark.parametrize(
+    ("dirichlet", "statics", "free"),
+    [
+        ([{"boundary": "left", "components": [0]}], {}, "translation along y"),  # rollers: before, solved silently
+        ([{"boundary": "bottom", "components": [1]}], {}, "translation along x"),
+        ([], {"fixed_mean": [0, 1]}, "rotation"),
+        ([], {}, "translation along x, translation along y and rotation"),
+    ],
+)
+def test_a_free_rigid_motion_of_a_static_body_is_an_error_before_anything_is_written(dirichlet, statics, free,
+                                                                                     tmp_path):
+    scene = scenes.validate(_static_cantilever(dirichlet=dirichlet, statics=statics))
+    with pytest.raises(StaticsError, match=rf"body 0 has a free rigid motion \({free}"):
+        static_simulation.StaticRun(scene, MPI.COMM_WORLD)
+    with pytest.raises(StaticsError, match="free rigid motion"):
+        minimise_energy(model.build(scene, MPI.COMM_WORLD))
+    out = MPI.COMM_WORLD.bcast(tmp_path / "out", root=0)
+    with pytest.raises(StaticsError):
+        simulation.run(scene, out)
+    assert not out.exists()
+
+
+@pytest.mark.mpi
+def test_rollers_on_two_sides_hold_a_static_body():
+    """Rollers on the left (x fixed) and the bottom (y fixed) hold every rigid motion: it solves, and
+    the reactions balance the load."""
+    scene = scenes.validate(_static_cantilever(dirichlet=[{"boundary": "left", "components": [0]},
+                                                          {"boundary": "bottom", "components": [1]}]))
+    problem = model.build(scene, MPI.COMM_WORLD)
+    result = minimise_energy(problem)
+    reactions = problem.dem.reactions(result.u, 0.0).sum(axis=0)
+    assert np.allclose(reactions, [0.0, 0.1 * 0.1], rtol=1e-8, atol=1e-12)  # body force (0, -0.1) over 0.1 m^2

@@ -17,6 +17,7 @@ import numpy as np
 
 from dolfinx_dem.errors import MissingFileError, SceneError
 from dolfinx_dem.material import ElasticMaterial
+from dolfinx_dem.scenes.usage import check_used
 
 BUILTIN = pathlib.Path(__file__).parent
 
@@ -288,6 +289,7 @@ def validate(scene: Mapping, mesh_dimension: int | None = None) -> dict:
     scene = _validate_table("", scene, SCHEMA, d)
     if ("material" in scene) == ("materials" in scene):
         raise SceneError("a scene needs exactly one of 'material' (one material) and 'materials' (one per cell tag)")
+    check_used(scene, d)
     for section, keys in REQUIRED.items():
         if (
             section not in scene

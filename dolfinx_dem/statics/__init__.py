@@ -21,13 +21,12 @@ import time
 from collections.abc import Sequence
 
 import numpy as np
-from mpi4py import MPI
 from petsc4py import PETSc
 
-from dolfinx_dem.errors import InputError, StaticsError
+from dolfinx_dem.errors import InputError
 from dolfinx_dem.problem import DEMProblem
 from dolfinx_dem.statics.active_set import ActiveSetNewton, Iterate
-from dolfinx_dem.statics.linear import LinearSolver, project, rigid_mode_constraints
+from dolfinx_dem.statics.linear import LinearSolver, check_held, project, rigid_mode_constraints
 
 __all__ = ["StaticResult", "minimise_energy"]
 
@@ -95,7 +94,7 @@ def minimise_energy(
     if not isinstance(problem, DEMProblem):
         raise InputError(f"minimise_energy takes a DEMProblem, got {type(problem).__name__} (wrap a discretisation "
                          "as DEMProblem(dem) or DEMProblem(dem, contacts))")
-    dem, d, comm = problem.dem, problem.d, problem.comm
+    dem, d = problem.dem, problem.d
     if any(not (isinstance(i, numbers.Integral) and 0 <= i < d) for i in fixed_mean):
         raise InputError(f"fixed_mean components must be integers in [0, {d}), got {list(fixed_mean)}")
     if not 0 < rtol < 1:
@@ -107,9 +106,8 @@ def minimise_energy(
     if len(problem.contacts) > 1:
         raise InputError("minimise_energy takes rigid obstacles or contact between bodies, not both")
     models = [c.statics() for c in problem.contacts]
-    if comm.allreduce(len(dem.reconstruction.dirichlet_facets), op=MPI.SUM) == 0 and not models:
-        raise StaticsError("the body is free: with neither a Dirichlet condition nor an obstacle its "
-                           "rigid motions are unconstrained (unconstrained rigid mode)")
+    if not models:
+        check_held(dem, fixed_mean, fixed_rotation)
     start = time.perf_counter()
     constraints = rigid_mode_constraints(dem, fixed_mean, fixed_rotation)
 

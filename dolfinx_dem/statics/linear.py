@@ -38,6 +38,63 @@ class Constraints:
         return bool(self.normals) or self.holds
 
 
+def check_held(dem, components=(), rotation: bool = False) -> None:
+    """A StaticsError naming a body and a rigid motion of it (a translation or a rotation) that
+    its Dirichlet conditions (their fixed components: rollers fix some only) and the constraints
+    ``components`` / ``rotation`` of ``rigid_mode_constraints`` leave free, for each body without
+    a prescribed motion, when no contact holds the bodies. Such a problem has no unique minimum:
+    before, a body held only by rollers solved without a word. The rigid motions r_k about the
+    body's centroid are evaluated at its Dirichlet facets: the Gram matrix of their fixed
+    components (and of the constraints) is singular exactly when a combination of them is free.
+    Collective; (bodies, modes, modes) arrays only."""
+    d, geom, rec, comm = dem.d, dem.geometry, dem.reconstruction, dem.comm
+    modes = d + {1: 0, 2: 1, 3: 3}[d]
+    own = geom.facet_cells[rec.dirichlet_facets, 0] < dem.n_owned
+    facets, fixed = rec.dirichlet_facets[own], rec.fixed[own]
+    body = geom.cell_bodies[geom.facet_cells[facets, 0]]
+    cells = geom.cell_bodies[: dem.n_owned]
+    sums = np.zeros((geom.num_bodies, 1 + d + 2 * d))  # volume, first moments, lower and upper corners
+    sums[:, 0] = np.bincount(cells, geom.cell_volumes[: dem.n_owned], geom.num_bodies)
+    for i in range(d):
+        sums[:, 1 + i] = np.bincount(cells, geom.cell_volumes[: dem.n_owned] * geom.cell_centres[: dem.n_owned, i],
+                                     geom.num_bodies)
+    comm.Allreduce(MPI.IN_PLACE, sums, op=MPI.SUM)
+    centre = sums[:, 1 : 1 + d] / sums[:, :1]
+    size = np.maximum(np.sqrt(sums[:, 0]) if d == 2 else np.cbrt(sums[:, 0]) if d == 3 else sums[:, 0], 1e-300)
+    x = (geom.facet_centres[facets] - centre[body]) / size[body, None]  # dimensionless arms
+    r = np.zeros((len(facets), modes, d))  # the rigid motions at the facets
+    r[:, np.arange(d), np.arange(d)] = 1.0
+    if d == 2:
+        r[:, 2] = np.stack([-x[:, 1], x[:, 0]], axis=1)
+    elif d == 3:
+        for k, (a, b) in enumerate(((1, 2), (2, 0), (0, 1))):  # rotations about x, y, z
+            r[:, 3 + k, a], r[:, 3 + k, b] = -x[:, b], x[:, a]
+    rows = r * fixed[:, None, :]
+    gram = np.zeros((geom.num_bodies, modes, modes))
+    np.add.at(gram, body, np.einsum("fki,fli->fkl", rows, rows))
+    comm.Allreduce(MPI.IN_PLACE, gram, op=MPI.SUM)
+    extra = np.zeros(modes)  # the constraints of rigid_mode_constraints, on every body without Dirichlet facets
+    extra[list(components)] = 1.0
+    if rotation and d == 2:
+        extra[2] = 1.0
+    names = ["translation along " + "xyz"[i] for i in range(d)] + (
+        ["rotation"] if d == 2 else ["rotation about x", "rotation about y", "rotation about z"] if d == 3 else [])
+    held = set(np.asarray(dem.prescribed.body_numbers).tolist())
+    for b in range(geom.num_bodies):
+        if b in held:
+            continue
+        g = gram[b] + (np.diag(extra) if not gram[b].any() else 0.0)
+        values, vectors = np.linalg.eigh(g)
+        null = vectors[:, values <= 1e-10 * max(values[-1], 1.0)]  # the free combinations
+        if null.shape[1]:
+            parts = [n for n, c in zip(names, np.linalg.norm(null, axis=1)) if c > 0.1]
+            free = " and ".join([", ".join(parts[:-1]), parts[-1]] if len(parts) > 1 else parts)
+            raise StaticsError(f"body {b} has a free rigid motion ({free}): its Dirichlet conditions (with their "
+                               "fixed components) do not hold it, so the static problem has no unique solution; fix "
+                               "more components, add a Dirichlet condition, or hold the mean with statics.fixed_mean"
+                               + (" / fixed_rotation" if d == 2 else ""))
+
+
 def rigid_mode_constraints(dem, components, rotation) -> Constraints:
     """The normals w of the linear constraints w . u = 0 (orthonormal), for each body (connected
     component) without a Dirichlet condition or a prescribed motion: its mass-weighted mean displacement in
