@@ -192,13 +192,14 @@ class OutputDirectory:
             if self.comm.rank == 0:
                 if self._note is None:
                     (self.path / INCOMPLETE).unlink()
-            self.comm.barrier()
+                self._release_lock()
+            self.comm.barrier()  # every rank leaves after the marker and the lock are gone
         else:
             message = "".join(traceback.format_exception(exc_type, exc, tb))
             with open(self.path / ERROR, "a") as f:
                 f.write(f"[rank {self.comm.rank} of {self.comm.size}] {message}")
-        if self._lock is not None:
-            self._release_lock()
+            if self._lock is not None:
+                self._release_lock()
         return False
 
 

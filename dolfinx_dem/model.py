@@ -318,7 +318,7 @@ class Probes:
         # a point of a curved boundary lies a little outside the polygonal mesh: accepted within
         # PROBE_TOLERANCE of a cell's height beyond its nearest cells (barycentric coordinates)
         depth = np.array([_depth_outside(dem, x[: dem.d]) if not ok else 0.0 for x, ok in zip(points, inside)])
-        depth = dem.comm.allreduce(depth, op=MPI.MIN) if specs else depth
+        dem.comm.Allreduce(MPI.IN_PLACE, depth, op=MPI.MIN)
         if np.any(depth > PROBE_TOLERANCE):
             bad = int(np.argmax(depth))
             raise SceneError(f"probe {self.names[bad]!r} at {specs[bad]['point']} is outside the mesh (beyond "

@@ -1,7 +1,10 @@
 """The benchmark studies (benchmarks/) and the validation studies (validation/) run in their quick
 modes and write their JSON and charts, so that they never rot; the validation studies' quick runs
-reproduce the figures of their pages' JSON (docs/validation/) on the meshes they share."""
+reproduce the figures of their pages' JSON (docs/validation/) on the meshes they share. Every
+script imports, and the branches that no quick mode reaches (the DEM in bench_signorini's
+stability sweep, the kink facets of hertz3d_diagnostics) run on their smallest case."""
 
+import importlib.util
 import json
 import os
 import pathlib
@@ -13,6 +16,7 @@ import pytest
 
 ROOT = pathlib.Path(__file__).resolve().parent.parent
 VALIDATION = ROOT / "docs" / "validation"
+SCRIPTS = sorted((ROOT / "benchmarks").glob("*.py")) + sorted((ROOT / "validation").glob("*.py"))
 
 # each test runs a study (quick mode) in a process of its own
 pytestmark = pytest.mark.slow
@@ -28,6 +32,35 @@ def _quick(script, *args, timeout=300):
 
 def _documented(path):
     return json.loads((VALIDATION / path).read_text())
+
+
+def _script(path, monkeypatch):
+    """The script at ``path`` imported as a module (its folder on sys.path, as when it runs)."""
+    monkeypatch.syspath_prepend(str(path.parent))
+    name = f"_script_{path.parent.name}_{path.stem}"
+    spec = importlib.util.spec_from_file_location(name, path)
+    module = importlib.util.module_from_spec(spec)
+    monkeypatch.setitem(sys.modules, name, module)
+    spec.loader.exec_module(module)
+    return module
+
+
+@pytest.mark.parametrize("path", SCRIPTS, ids=[f"{p.parent.name}/{p.name}" for p in SCRIPTS])
+def test_script_imports(path, monkeypatch):
+    """Every script's module-level imports resolve against the package (its main is not run)."""
+    assert len(SCRIPTS) >= 14
+    module = _script(path, monkeypatch)
+    assert path.stem == "work_precision" or callable(module.main)
+
+
+def test_bench_signorini_dem_stability_sweep(tmp_path, monkeypatch):
+    """The DEM part of the stability sweep (left out of --quick): its SLEPc limit and bound in
+    CFL units, and a stable run at CFL 0.5 with the energy conserved."""
+    signorini = _script(ROOT / "benchmarks" / "bench_signorini.py", monkeypatch)
+    sweep = signorini.stability_sweep([0.5], tmp_path, lambda message: None, n=50, t_end=0.2, dem=True)
+    assert 1.0 < sweep["cfl_limit"]["dem-A"] < 1.01 and 0.99 < sweep["cfl_bound_dem-A"] <= 1.0
+    (run,) = sweep["runs"]["dem-A"]
+    assert run["stable"] and run["energy_rel_error_max"] < 1e-12
 
 
 def test_bench_study_quick(tmp_path):
@@ -214,6 +247,21 @@ def test_hertz3d_quick_reproduces_its_pages(tmp_path):
             assert r[key] == pytest.approx(rows[("fem-P2", r["scale"])][key], rel=1e-7), (r["scale"], key)
     assert data["fem"][-1]["a"] == pytest.approx(_documented("hertz3d.json")["fem"][0]["a"], rel=1e-7)
     assert "## Criteria" in (tmp_path / "hertz3d.md").read_text()
+
+
+def test_hertz3d_diagnostics_kink_facet(monkeypatch):
+    """Level s = 0.71 (one kink facet, not in --quick): the contact force, a and the kink facet's
+    force and interval are those of hertz3d_diagnostics.json."""
+    _skip_unless_the_pages_gmsh()
+    diagnostics = _script(ROOT / "validation" / "hertz3d_diagnostics.py", monkeypatch)
+    row = diagnostics.dem_level(0.71)
+    rows = _documented("hertz3d_diagnostics.json")["rows"]
+    (same,) = [r for r in rows if r["method"] == "dem-A" and r["scale"] == 0.71]
+    for key in ("contact_force", "a_uniform", "a_point", "approach"):
+        assert row[key] == pytest.approx(same[key], rel=1e-7), key
+    assert row["contact_facets"] == same["contact_facets"] and len(row["kink_facets"]) == len(same["kink_facets"]) == 1
+    for key in ("force", "r_f", "a_at_0", "a_at_r_f"):
+        assert row["kink_facets"][0][key] == pytest.approx(same["kink_facets"][0][key], rel=1e-7), key
 
 
 def test_hertz3d_diagnostics_quick_reproduces_its_page(tmp_path):
