@@ -17,13 +17,12 @@ A run writes straight into its output folder, inside ``OutputDirectory``:
 
 Files (all in the output folder):
 
-* ``solution.xdmf`` + ``solution.h5``: the mesh once, then DG0 fields (cell-centred) per time
-  (``SolutionWriter``; collective). The HDF5 file is closed and reopened after every output
-  time, and only then does ``solution.xdmf`` (replaced atomically) name that time: a run killed
-  by ``kill -9`` leaves a pair that reads back up to its last output time. While a run writes,
-  DOLFINx's working files ``.solution.xdmf`` and ``.solution.h5`` (a link) are there too. A
-  resumed run writes the mesh again (as ``mesh_1``, ``mesh_2``, ...: its processes may number
-  the cells differently) and its times refer to it.
+* ``solution.xdmf``, ``solution.h5`` and the folder ``solution/``: the mesh once (``solution.h5``), then DG0
+  fields (cell-centred) per output time, each time in a file of its own (``solution/t<k>.h5``,
+  ``SolutionWriter``; collective), named by ``solution.xdmf`` (replaced atomically) only once
+  it is complete: a run killed at any moment, ``kill -9`` during an HDF5 close included, leaves
+  every listed time readable. A resumed run writes the mesh again (``mesh_1``, ``mesh_2``, ...:
+  its processes may number the cells differently) and its times refer to it.
 * ``series.csv``: one header line of column names, then one row of floats per time, written
   with ``'%.17g'`` so that they read back bit-identical (``SeriesWriter``; rank 0 writes).
 * ``summary.json`` (``write_summary``; rank 0 writes): strict JSON, a number that is not finite
@@ -60,9 +59,9 @@ INCOMPLETE = "INCOMPLETE"
 LOCK = ".lock"
 ERROR = "error.txt"
 #: Every file and folder that a run (or ``dolfinx-dem show``) writes into its output folder.
-RUN_FILES = (INCOMPLETE, ERROR, "summary.json", "series.csv", "solution.xdmf", "solution.h5", "final.png",
+RUN_FILES = (INCOMPLETE, ERROR, "summary.json", "series.csv", "solution.xdmf", "solution", "solution.h5", "final.png",
              "animation.gif", "contact_pressure.csv", "energies.png", "series.png", "force_displacement.png",
-             "pressure.png", "checkpoint", ".solution.xdmf", ".solution.h5", "solution.xdmf.tmp")
+             "pressure.png", "checkpoint", "solution.xdmf.tmp")
 #: The files derived from a whole run, removed when it is resumed (the resumed run rewrites them).
 DERIVED_FILES = ("summary.json", "final.png", "animation.gif", "energies.png", "series.png", "force_displacement.png",
                  "pressure.png")
@@ -204,19 +203,20 @@ class OutputDirectory:
 
 
 class SolutionWriter:
-    """Context manager writing DG0 Functions over time to ``directory/solution.xdmf`` (+ ``.h5``).
+    """Context manager writing DG0 Functions over time to ``directory/solution.xdmf``, their data in
+    the folder ``directory/solution/``.
 
-    The mesh is written once on construction. ``resume_writes``: append to the file of a run
-    whose first ``resume_writes`` output times are kept (later ones, written after its last
-    checkpoint, are removed) and write the mesh again for the new times (see the module
-    docstring). ``writes`` counts the output times in the file. Collective over ``comm`` (the
+    The mesh is written once on construction (``solution.h5``). ``resume_writes``: continue
+    the file of a run whose first ``resume_writes`` output times are kept (the later ones, written
+    after its last checkpoint, are dropped with their files), with the mesh written again for the
+    new times (``solution/mesh_<k>.h5``: a resumed run's processes may number the cells
+    otherwise). ``writes`` counts the output times in the file. Collective over ``comm`` (the
     mesh's communicator).
 
-    Kill-safety: DOLFINx rewrites its XML file in place at every write (a run killed then left
-    an empty ``solution.xdmf``) and HDF5 writes its metadata at close. So DOLFINx writes the
-    working pair ``.solution.xdmf`` + ``.solution.h5`` (a symbolic link to ``solution.h5``), and
-    after each output time the HDF5 file is closed and reopened and ``solution.xdmf`` is
-    replaced atomically by the working XML: it only ever names times whose data are on disk.
+    Kill-safety: each output time's fields go into a file of their own, written by DOLFINx under a
+    hidden name, closed, then renamed ``solution/t<k>.h5``, and only then does ``solution.xdmf``
+    (replaced atomically) name it. No file that a listed time lives in is ever open for writing
+    again, so a kill at any moment (an HDF5 close included) leaves every listed time readable.
     """
 
     def __init__(self, comm: MPI.Comm, directory: str | pathlib.Path, mesh, resume_writes: int | None = None):
@@ -224,31 +224,28 @@ class SolutionWriter:
         if not directory.is_dir():
             raise MissingFileError(f"output directory {directory} does not exist")
         self.path = directory / "solution.xdmf"
-        self._work = directory / WORK_XDMF
         self._comm, self._mesh = comm, mesh
-        if resume_writes is None:
-            call_on_root(comm, _start_work_files, self.path, None)
-            self._xdmf = dolfinx.io.XDMFFile(comm, str(self._work), "w")
-            self._xdmf.write_mesh(mesh)
-            self._mesh_xpath = "/Xdmf/Domain/Grid[@GridType='Uniform'][1]"
-        else:
-            name = call_on_root(comm, _start_work_files, self.path, resume_writes)
-            self._xdmf = dolfinx.io.XDMFFile(comm, str(self._work), "a")
-            original, mesh.name = mesh.name, name
-            try:
-                self._xdmf.write_mesh(mesh)
-            finally:
-                mesh.name = original
-            self._mesh_xpath = f"/Xdmf/Domain/Grid[@Name='{name}'][1]"
+        self._mesh_name = call_on_root(comm, _start_solution, self.path, resume_writes)
+        original, mesh.name = mesh.name, self._mesh_name
+        # the first mesh in solution.h5, where DOLFINx's XDMFFile.read_mesh looks for it
+        final = "solution.h5" if self._mesh_name == "mesh" else f"{FOLDER}/{self._mesh_name}.h5"
+        try:
+            self._write_file(final, lambda xdmf: xdmf.write_mesh(mesh), "w")
+        finally:
+            mesh.name = original
         self.writes = resume_writes or 0
-        self._reopen()
 
-    def _reopen(self) -> None:
-        """Close the file (HDF5 then writes all it holds), open it again to append, and publish
-        the XML that names what is now on disk."""
-        self._xdmf.close()
-        self._xdmf = dolfinx.io.XDMFFile(self._comm, str(self._work), "a")
-        call_on_root(self._comm, _publish, self._work, self.path)
+    def _write_file(self, final: str, write: Callable, mode: str) -> None:
+        """Let DOLFINx write into ``solution/.work.xdmf`` (mode "w": a new file; "a": the mesh's
+        XML, whose grid the fields refer to) by ``write(xdmf)``, close it, rename its HDF5 file to
+        ``final`` (relative to the output folder) and add what it wrote to ``solution.xdmf``
+        (collective)."""
+        folder = self.path.parent / FOLDER
+        if mode == "a":
+            call_on_root(self._comm, _mesh_xml, self.path, folder / WORK_XDMF, self._mesh_name)
+        with dolfinx.io.XDMFFile(self._comm, str(folder / WORK_XDMF), mode) as xdmf:
+            write(xdmf)
+        call_on_root(self._comm, _publish, folder / WORK_XDMF, final, self.path)
 
     def write(self, t: float, fields: Mapping[str, dolfinx.fem.Function]) -> None:
         """Write ``fields`` (name -> DG0 Function on the writer's mesh) at time ``t`` (s).
@@ -266,30 +263,22 @@ class SolutionWriter:
                 raise InputError(f"field {name!r} must be a dolfinx.fem.Function, got {type(f)}")
             if f.function_space.mesh is not self._mesh:
                 raise InputError(f"field {name!r} is not defined on the writer's mesh")
-        for name, f in fields.items():
-            f.name = name
-            self._xdmf.write_function(f, float(t), self._mesh_xpath)
-        self._reopen()
+
+        def write(xdmf):
+            for name, f in fields.items():
+                f.name = name
+                xdmf.write_function(f, float(t), f"/Xdmf/Domain/Grid[@Name='{self._mesh_name}'][1]")
+
+        self._write_file(f"{FOLDER}/t{self.writes:06d}.h5", write, "a")
         self.writes += 1
 
     def close(self) -> None:
-        if self._xdmf is None:
-            return
-        self._xdmf.close()
-        self._xdmf = None
-
-        def finish():
-            _publish(self._work, self.path)
-            for work in (self._work, self._work.with_suffix(".h5")):
-                work.unlink(missing_ok=True)
-
-        call_on_root(self._comm, finish)
+        """Nothing to close: every output time's file is complete when ``write`` returns."""
 
     def __enter__(self) -> SolutionWriter:
         return self
 
     def __exit__(self, exc_type, exc, tb) -> bool:
-        self.close()
         return False
 
 
@@ -420,68 +409,88 @@ def write_summary(path: str | pathlib.Path, comm: MPI.Comm, data: Mapping) -> No
     call_on_root(comm, write)
 
 
-#: DOLFINx's working XML file and the name under which it writes solution.h5 (see SolutionWriter).
-WORK_XDMF = ".solution.xdmf"
+#: The folder of ``solution.xdmf``'s data, and DOLFINx's working XML file in it (``SolutionWriter``).
+FOLDER = "solution"
+WORK_XDMF = ".work.xdmf"
+ElementTree.register_namespace("xi", "http://www.w3.org/2001/XInclude")
 
 
-def _publish(work: pathlib.Path, path: pathlib.Path) -> None:
-    """Replace ``path`` atomically by the working XML, its HDF5 references renamed, and its
-    XInclude namespace the W3C's ``http://`` name (DOLFINx 0.9 writes ``https://``, which VTK's
-    XDMF reader, hence ParaView and pyvista, does not recognise: its meshless grids crash it)."""
-    text = re.sub(r">\s*\.solution\.h5:", ">solution.h5:", work.read_text())
+def _fixed(text: str) -> str:
+    """DOLFINx's XML as VTK's XDMF reader (ParaView, pyvista) reads it: the XInclude namespace the
+    W3C's ``http://`` name (DOLFINx 0.9 writes ``https://``, on which the reader crashes), and a 1D
+    mesh's displacement (one component) typed as what its data are."""
     text = text.replace('xmlns:xi="https://www.w3.org/2001/XInclude"', 'xmlns:xi="http://www.w3.org/2001/XInclude"')
-    # DOLFINx 0.9 writes a 1D mesh's displacement (one component) padded to three, typed Scalar:
-    # read as three values per cell unless typed Vector
+    # DOLFINx 0.9 pads it to three components, typed Scalar: read as three values per cell unless typed Vector
     padded = r'AttributeType="Scalar"(\s+Center="Cell">\s*<DataItem Dimensions="\d+ 3")'
     text = re.sub(padded, r'AttributeType="Vector"\1', text)
-    # DOLFINx 0.5 types it Vector with its one component: VTK then warns at every read ("Can not
-    # set attribute Vectors. Incorrect number of components"), about 80 times per 1D animation
+    # DOLFINx 0.5 types its one component Vector: VTK then warns at every read ("Can not set attribute
+    # Vectors. Incorrect number of components"), about 80 times per 1D animation
     one = r'AttributeType="Vector"(\s+Center="Cell">\s*<DataItem Dimensions="\d+ 1")'
-    text = re.sub(one, r'AttributeType="Scalar"\1', text)
-    path.with_suffix(".xdmf.tmp").write_text(text)
+    return re.sub(one, r'AttributeType="Scalar"\1', text)
+
+
+def _write_xml(tree, path: pathlib.Path) -> None:
+    """Replace ``path`` atomically by ``tree`` (fixed by ``_fixed``)."""
+    text = _fixed(ElementTree.tostring(tree.getroot(), encoding="unicode"))
+    path.with_suffix(".xdmf.tmp").write_text('<?xml version="1.0"?>\n' + text + "\n")
     os.replace(path.with_suffix(".xdmf.tmp"), path)
 
 
-def _start_work_files(path: pathlib.Path, resume_writes: int | None) -> str | None:
-    """The working pair of ``SolutionWriter`` next to ``path`` (solution.xdmf): the link
-    ``.solution.h5`` -> ``solution.h5``, and for a resumed run the working XML made from
-    ``path`` truncated to ``resume_writes`` output times (``truncate_xdmf``), whose unused
-    mesh name is returned. Serial (rank 0)."""
-    work = path.parent / WORK_XDMF
-    for stale in (work, work.with_suffix(".h5")):
-        stale.unlink(missing_ok=True)
-    os.symlink("solution.h5", work.with_suffix(".h5"))
+def _start_solution(path: pathlib.Path, resume_writes: int | None) -> str:
+    """Prepare ``path`` (solution.xdmf) and its folder for a ``SolutionWriter``; returns the name of
+    its mesh. A new run: an empty file and folder. A resumed run: the first ``resume_writes`` output
+    times kept, the files of the others (and any a kill left unlisted) removed, and an unused mesh
+    name ``mesh_<k>``. Serial (rank 0)."""
+    folder = path.parent / FOLDER
     if resume_writes is None:
-        return None
-    name = truncate_xdmf(path, resume_writes)
-    work.write_text(re.sub(r">\s*solution\.h5:", ">.solution.h5:", path.read_text()))
-    return name
-
-
-def truncate_xdmf(path: pathlib.Path, writes: int) -> str:
-    """Keep the first ``writes`` output times of an XDMF file written by ``SolutionWriter`` (and
-    delete the HDF5 datasets of the others); returns an unused name for a mesh. Serial (rank 0),
-    with the file closed."""
-    ElementTree.register_namespace("xi", "http://www.w3.org/2001/XInclude")
+        shutil.rmtree(folder, ignore_errors=True)
+        (path.parent / "solution.h5").unlink(missing_ok=True)
+        folder.mkdir()
+        _write_xml(ElementTree.ElementTree(ElementTree.fromstring(
+            '<Xdmf Version="3.0" xmlns:xi="http://www.w3.org/2001/XInclude"><Domain/></Xdmf>')), path)
+        return "mesh"
     tree = ElementTree.parse(path)
     domain = tree.getroot().find("Domain")
-    stale, kept = [], []
     for collection in domain.findall("Grid[@GridType='Collection']"):
-        for k, grid in enumerate(collection.findall("Grid")):
-            names = [item.text.strip().split(":", 1)[1] for item in grid.iter("DataItem")]
-            if k < writes:
-                kept += names
-            else:
-                stale += names
-                collection.remove(grid)
+        for grid in collection.findall("Grid")[resume_writes:]:
+            collection.remove(grid)
+    _write_xml(tree, path)
+    listed = {item.text.strip().split(":", 1)[0] for item in domain.iter("DataItem")}
+    for stale in folder.iterdir():
+        if f"{FOLDER}/{stale.name}" not in listed:
+            stale.unlink()
     meshes = {grid.get("Name") for grid in domain.findall("Grid[@GridType='Uniform']")}
-    name = next(f"mesh_{k}" for k in range(1, len(meshes) + 2) if f"mesh_{k}" not in meshes)
-    tree.write(path, xml_declaration=True, encoding="utf-8")
-    from dolfinx_dem import _hdf5
+    return next(f"mesh_{k}" for k in range(1, len(meshes) + 2) if f"mesh_{k}" not in meshes)
 
-    h5 = path.with_suffix(".h5")
-    _hdf5.delete(h5, stale + [f"/Mesh/{name}"])
-    # datasets a killed run wrote after its last XDMF entry: in the fields' groups, not listed
-    groups = {n.rsplit("/", 1)[0] for n in kept + stale if n.startswith("/Function/")}
-    _hdf5.delete_unlisted(h5, groups, kept)
-    return name
+
+def _mesh_xml(path: pathlib.Path, work: pathlib.Path, name: str) -> None:
+    """The XML of ``path`` with only its mesh ``name``, into ``work``: the grid the fields that
+    DOLFINx appends to ``work`` refer to. Serial (rank 0)."""
+    grid = ElementTree.parse(path).getroot().find(f"Domain/Grid[@Name='{name}']")
+    work.write_text('<?xml version="1.0"?>\n<Xdmf Version="3.0" xmlns:xi="http://www.w3.org/2001/XInclude">'
+                    f"<Domain>{ElementTree.tostring(grid, encoding='unicode')}</Domain></Xdmf>\n")
+
+
+def _publish(work: pathlib.Path, h5: str, path: pathlib.Path) -> None:
+    """Rename the HDF5 file DOLFINx wrote beside ``work`` to ``h5`` (relative to the folder of
+    ``path``, solution.xdmf) and add the grids of ``work`` that ``path`` does not hold to it, their
+    data read from ``h5``: the mesh grid, or each field's grid of the new time into the field's
+    temporal collection. Serial (rank 0)."""
+    os.replace(work.with_suffix(".h5"), path.parent / h5)
+    tree = ElementTree.parse(path)
+    domain = tree.getroot().find("Domain")
+    for grid in ElementTree.fromstring(_fixed(work.read_text())).find("Domain"):
+        if grid.get("GridType") == "Uniform" and domain.find(f"Grid[@Name='{grid.get('Name')}']") is not None:
+            continue  # the mesh the fields refer to, listed already
+        for item in grid.iter("DataItem"):
+            item.text = f"{h5}:{item.text.strip().split(':', 1)[1]}"
+        if grid.get("GridType") == "Uniform":
+            domain.insert(len(domain.findall("Grid[@GridType='Uniform']")), grid)
+            continue
+        collection = domain.find(f"Grid[@Name='{grid.get('Name')}'][@GridType='Collection']")
+        if collection is None:
+            domain.append(grid)
+        else:
+            collection.extend(grid.findall("Grid"))
+    _write_xml(tree, path)
+    work.unlink()

@@ -41,7 +41,7 @@ def test_solution_writer(tmp_path):
             s.x.array[:] = 2 * t
             writer.write(t, {"displacement": u, "von_mises": s})
     assert u.name == "displacement" and s.name == "von_mises"
-    assert (directory / "solution.h5").is_file()
+    assert (directory / "solution.h5").is_file() and (directory / "solution" / "t000002.h5").is_file()
     assert xdmf_times(directory / "solution.xdmf") == {"displacement": times, "von_mises": times}
     with dolfinx.io.XDMFFile(comm, str(directory / "solution.xdmf"), "r") as xdmf:
         mesh2 = xdmf.read_mesh(name="mesh")
