@@ -299,11 +299,15 @@ def animate_solution(
 
     Serial: VTK reads the file (so a resumed run, whose output times refer to several meshes,
     animates as one). The points move by the mean displacement of the cells around them, as in
-    ``plot_cell_field``; the colour scale of each frame spans that frame's values, the frame
-    shows the time (above the colour bar, beside the body). Returns the number of frames.
+    ``plot_cell_field``; the view holds the deformed body of every frame (before, the camera was set
+    on the first frame, and bodies that moved left the view), the colour scale of each frame spans
+    that frame's values, the frame shows the time (above the colour bar, beside the body). Returns
+    the number of frames.
     """
     filename = pathlib.Path(filename)
     _check_output(filename, scale)
+    corners = np.array([np.reshape(grid.bounds, (3, 2)).T for _, _, grid in solution_frames(xdmf, field, scale)])
+    bounds = np.array([corners[:, 0].min(axis=0), corners[:, 1].max(axis=0)])  # of the whole run
     plotter = _plotter((800, 640))
     plotter.open_gif(str(filename))
     for k, (t, blocks, grid) in enumerate(solution_frames(xdmf, field, scale)):
@@ -315,7 +319,7 @@ def animate_solution(
             obstacles = _check_obstacles(
                 obstacles, np.flatnonzero(np.ptp(grid.points, axis=0) > 0).max(initial=0) + 1 if flat == 2 else 3
             )
-        _show(plotter, grid, title, flat, obstacles, name="body", reset=k == 0)
+        _show(plotter, grid, title, flat, obstacles, name="body", reset=k == 0, bounds=bounds)
         plotter.subplot(0, 1)
         plotter.add_text(f"t = {t:.4g} s", position="upper_left", font_size=12, color="black", name="time")
         plotter.subplot(0, 0)
@@ -417,10 +421,12 @@ def _obstacle_meshes(obstacles, bounds: np.ndarray, gdim: int) -> tuple[list, np
     return shapes, np.reshape(feet, (-1, 3))
 
 
-def _show(plotter, grid, title: str, gdim: int, obstacles=(), name: str | None = None, reset: bool = True):
+def _show(plotter, grid, title: str, gdim: int, obstacles=(), name: str | None = None, reset: bool = True,
+          bounds: np.ndarray | None = None):
     """Add ``grid`` (white background, viridis) to the left of ``plotter`` (``_plotter``), its
-    colour bar on the right; with ``reset`` set the camera to the body and the nearest points of
-    the obstacles, and draw the obstacles."""
+    colour bar on the right; with ``reset`` set the camera to the body (or to the box ``bounds``,
+    (2, 3) lower and upper corners) and the nearest points of the obstacles, and draw the
+    obstacles."""
     plotter.subplot(0, 0)
     plotter.set_background("white")
     style = {"scalars": title, "cmap": "viridis", "name": name, "show_scalar_bar": False, "nan_color": "lightgrey"}
@@ -430,7 +436,7 @@ def _show(plotter, grid, title: str, gdim: int, obstacles=(), name: str | None =
     else:
         actor = plotter.add_mesh(grid, show_edges=num_cells <= _MAX_CELLS_WITH_EDGES, edge_color="grey", **style)
     if reset:
-        bounds = np.reshape(grid.bounds, (3, 2)).T
+        bounds = np.reshape(grid.bounds, (3, 2)).T if bounds is None else bounds
         shapes, feet = _obstacle_meshes(obstacles, bounds, gdim)
         view = np.vstack([bounds, feet])
         for shape, shape_style in shapes:

@@ -196,3 +196,26 @@ def test_final_pictures_say_the_scene_the_time_and_the_scale(tmp_path):
         images.append(iio.imread(path)[:60, :500].astype(float))
     assert np.ptp(images[0]) == 0.0  # white
     assert np.ptp(images[1]) > 100.0  # dark text on white
+
+
+@pytest.mark.skip_in_parallel
+def test_the_animation_view_holds_the_body_of_every_frame(tmp_path):
+    """A body translated by twice its width: every frame draws all of it (the camera was set
+    on the first frame, and the body left the view). Written by a helper on branch pictures."""
+    import imageio
+
+    from dolfinx_dem import io
+
+    mesh, _, _ = meshes.create_rectangle(MPI.COMM_SELF, [0, 0], [1, 0.5], [4, 2])
+    values, centroids = dg0_rows(mesh)
+    u = dolfinx.fem.Function(_compat.create_vector_space(mesh, "DG", 0))
+    s = dolfinx.fem.Function(_compat.create_scalar_space(mesh, "DG", 0))
+    s.x.array[: values.size] = 1.0
+    with io.SolutionWriter(MPI.COMM_SELF, tmp_path, mesh) as writer:
+        for k in range(3):
+            u.x.array[: centroids.size] = np.tile([1.0 * k, 0.0], len(values))
+            writer.write(float(k), {"displacement": u, "von_mises": s})
+    assert plotting.animate_solution(tmp_path / "solution.xdmf", tmp_path / "a.gif", "von_mises", "x") == 3
+    gif = np.asarray(imageio.mimread(tmp_path / "a.gif"))[..., :3].astype(int)
+    body = (np.abs(gif[:, :, :600] - 255).sum(axis=-1) > 60).sum(axis=(1, 2))  # non-white pixels, left column
+    assert body.min() > 0.95 * body.max(), f"the body's pixels in each frame: {body}"
