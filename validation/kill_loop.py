@@ -17,6 +17,7 @@ import json
 import os
 import pathlib
 import random
+import shutil
 import signal
 import subprocess
 import sys
@@ -26,6 +27,8 @@ from xml.etree import ElementTree
 
 CLI = str(pathlib.Path(sys.executable).parent / "dolfinx-dem")
 RUN = ["run", "bar-wave", "--set", "time.end=1.6", "--set", "output.every=2", "--checkpoint-every", "25", "--quiet"]
+#: Where the folders of failed rounds are kept, as the kill left them.
+KEPT = pathlib.Path(tempfile.gettempdir()) / "kill_loop_failures"
 READ = """
 import sys
 import numpy as np
@@ -63,9 +66,17 @@ def round_trip(out: pathlib.Path, rng: random.Random, reference: pathlib.Path) -
            "error": read.stderr[-300:] if read.returncode else ""}
     row["resumed"] = (out / "checkpoint" / "checkpoint.json").exists() and not finished
     if row["resumed"]:
-        subprocess.run([CLI, "resume", str(out), "--quiet"], check=True, env=env(), capture_output=True)
-        row["identical"] = ((out / "series.csv").read_bytes() == (reference / "series.csv").read_bytes()
+        killed = out.with_name(out.name + "-killed")
+        shutil.copytree(out, killed, symlinks=True)  # the folder as the kill left it, for a failure's record
+        resume = subprocess.run([CLI, "resume", str(out), "--quiet"], env=env(), capture_output=True, text=True)
+        row["identical"] = (resume.returncode == 0
+                            and (out / "series.csv").read_bytes() == (reference / "series.csv").read_bytes()
                             and listed_times(xdmf) == listed_times(reference / "solution.xdmf"))
+        if not row["identical"]:
+            row["error"] += resume.stderr[-2000:]
+            row["kept"] = str(KEPT / out.name)
+            shutil.copytree(killed, KEPT / out.name, symlinks=True)
+        shutil.rmtree(killed)
     return row
 
 
