@@ -45,8 +45,8 @@ from mpi4py import MPI
 from dolfinx_dem.errors import CheckpointError
 from dolfinx_dem.io import call_on_root
 
-FORMAT = 4  # 2: per-process local files (the recurrence, contact states); no shared file; 3: MEMM work;
-# 4: the pair contact's exchange counter
+FORMAT = 5  # 2: per-process local files (the recurrence, contact states); no shared file; 3: MEMM work;
+# 4: the pair contact's exchange counter; 5: the solution as one HDF5 file per output time (io.SolutionWriter)
 DIRECTORY = "checkpoint"
 HEADER = "checkpoint.json"
 VECTORS = ("u", "v_prev", "v_next")

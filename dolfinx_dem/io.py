@@ -17,13 +17,13 @@ A run writes straight into its output folder, inside ``OutputDirectory``:
 
 Files (all in the output folder):
 
-* ``solution.xdmf`` + ``solution.h5``: the mesh once, then DG0 fields (cell-centred) per time
-  (``SolutionWriter``; collective). The HDF5 file is closed and reopened after every output
-  time, and only then does ``solution.xdmf`` (replaced atomically) name that time: a run killed
-  by ``kill -9`` leaves a pair that reads back up to its last output time. While a run writes,
-  DOLFINx's working files ``.solution.xdmf`` and ``.solution.h5`` (a link) are there too. A
-  resumed run writes the mesh again (as ``mesh_1``, ``mesh_2``, ...: its processes may number
-  the cells differently) and its times refer to it.
+* ``solution.xdmf`` + the folder ``solution``: the mesh (``solution/mesh.h5``), then DG0 fields
+  (cell-centred) per output time, each time in its own HDF5 file ``solution/<k:06d>.h5``
+  (``SolutionWriter``, ``_xdmf``; collective). A file is renamed into place once complete and
+  only then listed in ``solution.xdmf`` (replaced atomically): a run killed at any moment leaves
+  every listed time readable. Hidden files (``solution/.*``, ``solution.xdmf.tmp``) are those of
+  a write in progress. A resumed run writes the mesh again (``mesh_1``, ``mesh_2``, ...: its
+  processes may number the cells differently) and its times refer to it.
 * ``series.csv``: one header line of column names, then one row of floats per time, written
   with ``'%.17g'`` so that they read back bit-identical (``SeriesWriter``; rank 0 writes).
 * ``summary.json`` (``write_summary``; rank 0 writes): strict JSON, a number that is not finite
@@ -40,10 +40,8 @@ import math
 import os
 import pathlib
 import pickle
-import re
 import shutil
 import traceback
-import xml.etree.ElementTree as ElementTree
 from collections.abc import Callable, Mapping, Sequence
 
 import dolfinx.fem
@@ -51,14 +49,16 @@ import dolfinx.io
 import numpy as np
 from mpi4py import MPI
 
-from dolfinx_dem.errors import InputError, MissingFileError, OutputFolderError
+from dolfinx_dem import _xdmf
+from dolfinx_dem.errors import InputError, MissingFileError, OutputFolderError, StateError
 
 INCOMPLETE = "INCOMPLETE"
 ERROR = "error.txt"
 #: Every file and folder that a run (or ``dolfinx-dem show``) writes into its output folder.
-RUN_FILES = (INCOMPLETE, ERROR, "summary.json", "series.csv", "solution.xdmf", "solution.h5", "final.png",
-             "animation.gif", "contact_pressure.csv", "energies.png", "probes.png", "checkpoint",
-             ".solution.xdmf", ".solution.h5", "solution.xdmf.tmp")
+#: (``solution.h5``: the FEM reference's; ``.solution.xdmf``, ``.solution.h5``: earlier versions' working files.)
+RUN_FILES = (INCOMPLETE, ERROR, "summary.json", "series.csv", "solution.xdmf", _xdmf.FOLDER, "solution.h5",
+             "final.png", "animation.gif", "contact_pressure.csv", "energies.png", "probes.png", "checkpoint",
+             "solution.xdmf.tmp", ".solution.xdmf", ".solution.h5")
 #: The files derived from a whole run, removed when it is resumed (the resumed run rewrites them).
 DERIVED_FILES = ("summary.json", "final.png", "animation.gif", "energies.png", "probes.png")
 
@@ -156,19 +156,20 @@ class OutputDirectory:
 
 
 class SolutionWriter:
-    """Context manager writing DG0 Functions over time to ``directory/solution.xdmf`` (+ ``.h5``).
+    """Context manager writing DG0 Functions over time to ``directory/solution.xdmf`` and its
+    folder ``directory/solution`` of HDF5 files (``_xdmf``: one file per output time).
 
-    The mesh is written once on construction. ``resume_writes``: append to the file of a run
-    whose first ``resume_writes`` output times are kept (later ones, written after its last
-    checkpoint, are removed) and write the mesh again for the new times (see the module
-    docstring). ``writes`` counts the output times in the file. Collective over ``comm`` (the
-    mesh's communicator).
+    The mesh is written on construction. ``resume_writes``: continue the output of a run whose
+    first ``resume_writes`` output times are kept (later ones, written after its last
+    checkpoint, are dropped), with the mesh written again with the first new time (see the
+    module docstring). ``writes`` counts the output times listed. Collective over ``comm`` (the mesh's
+    communicator).
 
-    Kill-safety: DOLFINx rewrites its XML file in place at every write (a run killed then left
-    an empty ``solution.xdmf``) and HDF5 writes its metadata at close. So DOLFINx writes the
-    working pair ``.solution.xdmf`` + ``.solution.h5`` (a symbolic link to ``solution.h5``), and
-    after each output time the HDF5 file is closed and reopened and ``solution.xdmf`` is
-    replaced atomically by the working XML: it only ever names times whose data are on disk.
+    Kill-safety: DOLFINx keeps HDF5 metadata in memory until it closes a file and rewrites its
+    XML file in place at every write, so a kill during a write damaged a single growing file.
+    Here every output time is a new file, written under a hidden name, renamed into place once
+    closed, and only then listed in ``solution.xdmf`` (replaced atomically): a kill at any moment
+    leaves every listed time readable.
     """
 
     def __init__(self, comm: MPI.Comm, directory: str | pathlib.Path, mesh, resume_writes: int | None = None):
@@ -176,37 +177,35 @@ class SolutionWriter:
         if not directory.is_dir():
             raise MissingFileError(f"output directory {directory} does not exist")
         self.path = directory / "solution.xdmf"
-        self._work = directory / WORK_XDMF
+        self._folder = directory / _xdmf.FOLDER
         self._comm, self._mesh = comm, mesh
-        if resume_writes is None:
-            call_on_root(comm, _start_work_files, self.path, None)
-            self._xdmf = dolfinx.io.XDMFFile(comm, str(self._work), "w")
-            self._xdmf.write_mesh(mesh)
-            self._mesh_xpath = "/Xdmf/Domain/Grid[@GridType='Uniform'][1]"
-        else:
-            name = call_on_root(comm, _start_work_files, self.path, resume_writes)
-            self._xdmf = dolfinx.io.XDMFFile(comm, str(self._work), "a")
-            original, mesh.name = mesh.name, name
-            try:
-                self._xdmf.write_mesh(mesh)
-            finally:
-                mesh.name = original
-            self._mesh_xpath = f"/Xdmf/Domain/Grid[@Name='{name}'][1]"
-        self.writes = resume_writes or 0
-        self._reopen()
+        self._index, self._closed = None, False  # rank 0's _xdmf.Index
 
-    def _reopen(self) -> None:
-        """Close the file (HDF5 then writes all it holds), open it again to append, and publish
-        the XML that names what is now on disk."""
-        self._xdmf.close()
-        self._xdmf = dolfinx.io.XDMFFile(self._comm, str(self._work), "a")
-        call_on_root(self._comm, _publish, self._work, self.path)
+        def start():
+            fresh = resume_writes is None
+            self._index = _xdmf.Index.fresh(self.path) if fresh else _xdmf.Index.resume(self.path, resume_writes)
+            return self._index.next_mesh()
+
+        self._mesh_name = call_on_root(comm, start)
+        self._mesh_xpath = None  # until the mesh is written: now, or with a resumed writer's first time
+        if resume_writes is None:
+            self._write_mesh()
+        self.writes = resume_writes or 0
+
+    def _write_mesh(self) -> None:
+        name = self._mesh_name
+        with dolfinx.io.XDMFFile(self._comm, str(_xdmf.hidden(self._folder, name, ".xdmf")), "w") as xdmf:
+            xdmf.write_mesh(self._mesh)
+        call_on_root(self._comm, lambda: self._index.add_mesh(name))
+        self._mesh_xpath = _xdmf.mesh_xpath(name)
 
     def write(self, t: float, fields: Mapping[str, dolfinx.fem.Function]) -> None:
         """Write ``fields`` (name -> DG0 Function on the writer's mesh) at time ``t`` (s).
 
         Each Function is renamed to its key, which becomes its name in the XDMF file.
         """
+        if self._closed:
+            raise StateError("the solution writer is closed")
         if not math.isfinite(t):
             raise InputError(f"time t must be finite, got {t!r}")
         if not fields:
@@ -218,24 +217,23 @@ class SolutionWriter:
                 raise InputError(f"field {name!r} must be a dolfinx.fem.Function, got {type(f)}")
             if f.function_space.mesh is not self._mesh:
                 raise InputError(f"field {name!r} is not defined on the writer's mesh")
-        for name, f in fields.items():
-            f.name = name
-            self._xdmf.write_function(f, float(t), self._mesh_xpath)
-        self._reopen()
+        if self._mesh_xpath is None:
+            self._write_mesh()
+        k = self.writes
+        call_on_root(self._comm, lambda: self._index.time_template(k))
+        xdmf = dolfinx.io.XDMFFile(self._comm, str(_xdmf.hidden(self._folder, _xdmf.time_file(k), ".xdmf")), "a")
+        try:
+            for name, f in fields.items():
+                f.name = name
+                xdmf.write_function(f, float(t), self._mesh_xpath)
+        finally:
+            xdmf.close()
+        call_on_root(self._comm, lambda: self._index.add_time(k))
         self.writes += 1
 
     def close(self) -> None:
-        if self._xdmf is None:
-            return
-        self._xdmf.close()
-        self._xdmf = None
-
-        def finish():
-            _publish(self._work, self.path)
-            for work in (self._work, self._work.with_suffix(".h5")):
-                work.unlink(missing_ok=True)
-
-        call_on_root(self._comm, finish)
+        """Every output time is published as it is written: closing only ends the writer."""
+        self._index, self._closed = None, True
 
     def __enter__(self) -> SolutionWriter:
         return self
@@ -370,66 +368,3 @@ def write_summary(path: str | pathlib.Path, comm: MPI.Comm, data: Mapping) -> No
         path.write_text(text + "\n")
 
     call_on_root(comm, write)
-
-
-#: DOLFINx's working XML file and the name under which it writes solution.h5 (see SolutionWriter).
-WORK_XDMF = ".solution.xdmf"
-
-
-def _publish(work: pathlib.Path, path: pathlib.Path) -> None:
-    """Replace ``path`` atomically by the working XML, its HDF5 references renamed, and its
-    XInclude namespace the W3C's ``http://`` name (DOLFINx 0.9 writes ``https://``, which VTK's
-    XDMF reader, hence ParaView and pyvista, does not recognise: its meshless grids crash it)."""
-    text = re.sub(r">\s*\.solution\.h5:", ">solution.h5:", work.read_text())
-    text = text.replace('xmlns:xi="https://www.w3.org/2001/XInclude"', 'xmlns:xi="http://www.w3.org/2001/XInclude"')
-    # DOLFINx 0.9 writes a 1D mesh's displacement (one component) padded to three, typed Scalar:
-    # read as three values per cell unless typed Vector
-    padded = r'AttributeType="Scalar"(\s+Center="Cell">\s*<DataItem Dimensions="\d+ 3")'
-    text = re.sub(padded, r'AttributeType="Vector"\1', text)
-    path.with_suffix(".xdmf.tmp").write_text(text)
-    os.replace(path.with_suffix(".xdmf.tmp"), path)
-
-
-def _start_work_files(path: pathlib.Path, resume_writes: int | None) -> str | None:
-    """The working pair of ``SolutionWriter`` next to ``path`` (solution.xdmf): the link
-    ``.solution.h5`` -> ``solution.h5``, and for a resumed run the working XML made from
-    ``path`` truncated to ``resume_writes`` output times (``truncate_xdmf``), whose unused
-    mesh name is returned. Serial (rank 0)."""
-    work = path.parent / WORK_XDMF
-    for stale in (work, work.with_suffix(".h5")):
-        stale.unlink(missing_ok=True)
-    os.symlink("solution.h5", work.with_suffix(".h5"))
-    if resume_writes is None:
-        return None
-    name = truncate_xdmf(path, resume_writes)
-    work.write_text(re.sub(r">\s*solution\.h5:", ">.solution.h5:", path.read_text()))
-    return name
-
-
-def truncate_xdmf(path: pathlib.Path, writes: int) -> str:
-    """Keep the first ``writes`` output times of an XDMF file written by ``SolutionWriter`` (and
-    delete the HDF5 datasets of the others); returns an unused name for a mesh. Serial (rank 0),
-    with the file closed."""
-    ElementTree.register_namespace("xi", "http://www.w3.org/2001/XInclude")
-    tree = ElementTree.parse(path)
-    domain = tree.getroot().find("Domain")
-    stale, kept = [], []
-    for collection in domain.findall("Grid[@GridType='Collection']"):
-        for k, grid in enumerate(collection.findall("Grid")):
-            names = [item.text.strip().split(":", 1)[1] for item in grid.iter("DataItem")]
-            if k < writes:
-                kept += names
-            else:
-                stale += names
-                collection.remove(grid)
-    meshes = {grid.get("Name") for grid in domain.findall("Grid[@GridType='Uniform']")}
-    name = next(f"mesh_{k}" for k in range(1, len(meshes) + 2) if f"mesh_{k}" not in meshes)
-    tree.write(path, xml_declaration=True, encoding="utf-8")
-    from dolfinx_dem import _hdf5
-
-    h5 = path.with_suffix(".h5")
-    _hdf5.delete(h5, stale + [f"/Mesh/{name}"])
-    # datasets a killed run wrote after its last XDMF entry: in the fields' groups, not listed
-    groups = {n.rsplit("/", 1)[0] for n in kept + stale if n.startswith("/Function/")}
-    _hdf5.delete_unlisted(h5, groups, kept)
-    return name

@@ -178,7 +178,7 @@ def test_a_killed_run_resumes_from_its_last_checkpoint_bit_identical(tmp_path):
                    check=True, env=mpi_env())
     assert (out / "series.csv").read_bytes() == (tmp_path / "full" / "series.csv").read_bytes()
     assert xdmf_times(out / "solution.xdmf") == xdmf_times(tmp_path / "full" / "solution.xdmf")
-    assert not (out / "INCOMPLETE").exists() and not (out / ".solution.xdmf").exists()
+    assert not (out / "INCOMPLETE").exists() and not (out / "solution.xdmf.tmp").exists()
 
 
 @pytest.mark.slow

@@ -101,14 +101,14 @@ def test_a_folder_holding_a_run_needs_overwrite_and_keeps_no_stale_file(tmp_path
     before = _snapshot(out)
     assert cli.main(run) == 2
     assert (f"dolfinx-dem: error: output folder {out} holds another run (summary.json, series.csv, solution.xdmf, "
-            "solution.h5, final.png, animation.gif, energies.png, probes.png, checkpoint): pass --overwrite to "
-            f"replace it (its files are removed first), or `dolfinx-dem resume {out}` to continue it") \
+            "solution, solution.h5, final.png, animation.gif, energies.png, probes.png, checkpoint): pass --overwrite "
+            f"to replace it (its files are removed first), or `dolfinx-dem resume {out}` to continue it") \
         in capsys.readouterr().err
     assert _snapshot(out) == before
     (out / "notes.txt").write_text("mine")
     assert cli.main([*run, "--overwrite"]) == 0
     assert sorted(p.name for p in out.iterdir()) == ["checkpoint", "final.png", "notes.txt", "series.csv",
-                                                     "solution.h5", "solution.xdmf", "summary.json"]
+                                                     "solution", "solution.h5", "solution.xdmf", "summary.json"]
 
 
 @pytest.mark.slow
