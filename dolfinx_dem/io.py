@@ -317,11 +317,12 @@ class SeriesWriter:
                 self._file.flush()
 
     def position(self) -> int:
-        """Flush and return the size of the file in bytes, where a resumed run continues
-        (``append_at``); the same on every rank."""
+        """Flush the file to disk (fsync) and return its size in bytes, where a resumed run
+        continues (``append_at``); the same on every rank."""
         size = None
         if self._file is not None:
             self._file.flush()
+            os.fsync(self._file.fileno())
             size = self._file.tell()
         return self._comm.bcast(size, root=0)
 
