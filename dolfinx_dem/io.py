@@ -6,7 +6,8 @@ A run writes straight into its output folder, inside ``OutputDirectory``:
 
 * Before: the folder may be missing, empty, or hold files that are not a run's; a folder holding
   another run (any of ``RUN_FILES``) is refused unless ``overwrite``, which removes that run's
-  files first (and only those), so no stale file survives. The caller builds and checks
+  files first (and only those, after writing the marker below and its checkpoint first), so no
+  stale file survives. The caller builds and checks
   everything before entering, so an error in the input leaves the folder as it was.
 * During: a marker file ``INCOMPLETE``. On a clean exit the marker is removed, unless the run
   keeps it with a note (``keep_incomplete``: an interrupted run, to be resumed); if the run
@@ -132,11 +133,13 @@ class OutputDirectory:
         def start():
             present = self._check()
             self.path.mkdir(parents=True, exist_ok=True)
-            remove = [p for p in present if self.overwrite or p.name == ERROR or
-                      (self.resume and p.name in DERIVED_FILES)]
-            for p in remove:
-                shutil.rmtree(p) if p.is_dir() and not p.is_symlink() else p.unlink()
+            # the marker first, then the old checkpoint: a run killed while the old files go leaves
+            # a folder marked incomplete, and no checkpoint to resume into half-removed outputs
             (self.path / INCOMPLETE).write_text("dolfinx_dem run in progress or failed\n")
+            remove = [p for p in present if p.name != INCOMPLETE and (self.overwrite or p.name == ERROR or
+                                                                      (self.resume and p.name in DERIVED_FILES))]
+            for p in sorted(remove, key=lambda p: p.name != "checkpoint"):
+                shutil.rmtree(p) if p.is_dir() and not p.is_symlink() else p.unlink()
 
         call_on_root(self.comm, start)
         return self.path

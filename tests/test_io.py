@@ -307,3 +307,27 @@ def test_a_resumed_writer_drops_what_a_killed_writer_left_and_never_rewrites_a_l
     assert xdmf_times(tmp_path / "solution.xdmf") == {"displacement": [0.0, 0.5, 1.0]}
     with pytest.raises(StateError, match="closed"):
         writer.write(1.5, {"displacement": u})
+
+
+def test_an_overwrite_stopped_midway_leaves_the_folder_marked_incomplete(tmp_path, monkeypatch):
+    """The marker is written before the old run's files go, and its checkpoint goes first: a run
+    killed meanwhile leaves no folder that looks complete, nor a checkpoint to resume into
+    half-removed outputs."""
+    out = tmp_path / "out"
+    out.mkdir()
+    for name in ("summary.json", "series.csv", "solution.xdmf"):
+        (out / name).write_text("an old run's")
+    (out / "checkpoint").mkdir()
+    (out / "checkpoint" / "checkpoint.json").write_text("{}")
+    unlink = pathlib.Path.unlink
+
+    def killed(self, *args, **kwargs):
+        if self.name == "series.csv":
+            raise RuntimeError("killed")
+        unlink(self, *args, **kwargs)
+
+    monkeypatch.setattr(pathlib.Path, "unlink", killed)
+    with pytest.raises(RuntimeError, match="killed"):
+        with io.OutputDirectory(out, MPI.COMM_SELF, overwrite=True):
+            pass
+    assert sorted(p.name for p in out.iterdir()) == [io.INCOMPLETE, "series.csv", "solution.xdmf"]
