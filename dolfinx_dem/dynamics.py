@@ -257,7 +257,7 @@ class DynamicRun:
             "series_every": self.series_every,
             "checkpoint_every": self.checkpoint_every,
             "series_bytes": self.series.position(),
-            "xdmf_writes": self.solution.writes,
+            "xdmf_writes": self.solution.writes,  # on disk (sync below)
         }
         local = state["recurrence"] | {
             f"contact{k}_{name}": a
@@ -266,6 +266,7 @@ class DynamicRun:
         }
         local["memm_counters"] = np.array([state["force_evaluations"], state["max_step_evaluations"]], dtype=np.int64)
         vectors = {name: state[name].array_r.reshape(-1, dem.d) for name in checkpoint.VECTORS}
+        self.solution.sync()
         checkpoint.write(
             directory,
             self.comm,

@@ -234,6 +234,11 @@ class SolutionWriter:
         call_on_root(self._comm, lambda: self._index.add_time(k))
         self.writes += 1
 
+    def sync(self) -> None:
+        """Put every listed output time on disk (fsync; before a checkpoint, so that a stopped
+        machine keeps what the checkpoint counts)."""
+        call_on_root(self._comm, lambda: self._index.sync())
+
     def close(self) -> None:
         """Every output time is published as it is written: closing only ends the writer."""
         self._index, self._closed = None, True
