@@ -6,9 +6,9 @@ A run writes straight into its output folder, inside ``OutputDirectory``:
 
 * Before: the folder may be missing, empty, or hold files that are not a run's; a folder holding
   another run (any of ``RUN_FILES``) is refused unless ``overwrite``, which removes that run's
-  files first (and only those, after writing the marker below and its checkpoint first), so no
-  stale file survives. The caller builds and checks
-  everything before entering, so an error in the input leaves the folder as it was.
+  files first (and only those; its checkpoint first, and after writing the marker below), so no
+  stale file survives. The caller builds and checks everything before entering, so an error in
+  the input leaves the folder as it was.
 * During: a marker file ``INCOMPLETE``. On a clean exit the marker is removed, unless the run
   keeps it with a note (``keep_incomplete``: an interrupted run, to be resumed); if the run
   raised, every failing rank appends the exception and its traceback to ``error.txt``. A folder
@@ -18,8 +18,8 @@ A run writes straight into its output folder, inside ``OutputDirectory``:
 
 Files (all in the output folder):
 
-* ``solution.xdmf`` + the folder ``solution``: the mesh (``solution/mesh.h5``), then DG0 fields
-  (cell-centred) per output time, each time in its own HDF5 file ``solution/<k:06d>.h5``
+* ``solution.xdmf``, ``solution.h5`` and the folder ``solution``: the mesh (``solution.h5``), then
+  DG0 fields (cell-centred) per output time, each time in its own HDF5 file ``solution/<k:06d>.h5``
   (``SolutionWriter``, ``_xdmf``; collective). A file is renamed into place once complete and
   only then listed in ``solution.xdmf`` (replaced atomically): a run killed at any moment leaves
   every listed time readable. Hidden files (``solution/.*``, ``solution.xdmf.tmp``) are those of
@@ -56,7 +56,7 @@ from dolfinx_dem.errors import InputError, MissingFileError, OutputFolderError, 
 INCOMPLETE = "INCOMPLETE"
 ERROR = "error.txt"
 #: Every file and folder that a run (or ``dolfinx-dem show``) writes into its output folder.
-#: (``solution.h5``: the FEM reference's; ``.solution.xdmf``, ``.solution.h5``: earlier versions' working files.)
+#: (``.solution.xdmf``, ``.solution.h5``: the working files of earlier versions.)
 RUN_FILES = (INCOMPLETE, ERROR, "summary.json", "series.csv", "solution.xdmf", _xdmf.FOLDER, "solution.h5",
              "final.png", "animation.gif", "contact_pressure.csv", "energies.png", "probes.png", "checkpoint",
              "solution.xdmf.tmp", ".solution.xdmf", ".solution.h5")
@@ -165,8 +165,8 @@ class SolutionWriter:
     The mesh is written on construction. ``resume_writes``: continue the output of a run whose
     first ``resume_writes`` output times are kept (later ones, written after its last
     checkpoint, are dropped), with the mesh written again with the first new time (see the
-    module docstring). ``writes`` counts the output times listed. Collective over ``comm`` (the mesh's
-    communicator).
+    module docstring). ``writes`` counts the output times listed. Collective over ``comm`` (the
+    mesh's communicator).
 
     Kill-safety: DOLFINx keeps HDF5 metadata in memory until it closes a file and rewrites its
     XML file in place at every write, so a kill during a write damaged a single growing file.
