@@ -15,7 +15,10 @@ Layout, in the run's output folder (docs/scenes.md, "Checkpoints and resume")::
 The header holds the format number ``FORMAT``, the package version, the ``scene_hash``, the
 validated scene itself, the number of processes, the step n, t and dt, and whatever the runner
 adds (stepper scalars, statistics, output positions). A checkpoint is complete as soon as its
-header names it: a run killed while writing one leaves the previous one in force.
+header names it: every process writes and fsyncs its files into a new folder, then rank 0
+fsyncs that folder, writes the header to a temporary file, fsyncs it and renames it over the
+old header (``os.replace``), and only then removes the previous checkpoint's folder. A run
+killed (or a machine stopped) at any moment of a checkpoint keeps the previous one in force.
 
 Cells are keyed by their index in the input mesh (DOLFINx's original cell index), which does not
 depend on the number of processes; a resumed run sends each stored cell to the process that owns
@@ -42,11 +45,12 @@ from collections.abc import Mapping
 import numpy as np
 from mpi4py import MPI
 
+from dolfinx_dem._xdmf import fsync
 from dolfinx_dem.errors import CheckpointError
 from dolfinx_dem.io import call_on_root
 
 FORMAT = 5  # 2: per-process local files (the recurrence, contact states); no shared file; 3: MEMM work;
-# 4: the pair contact's exchange counter; 5: solution.xdmf's data one file per output time (io.SolutionWriter)
+# 4: the pair contact's exchange counter; 5: the solution as one HDF5 file per output time (io.SolutionWriter)
 DIRECTORY = "checkpoint"
 HEADER = "checkpoint.json"
 VECTORS = ("u", "v_prev", "v_next")
@@ -91,19 +95,33 @@ def write(folder: pathlib.Path, comm: MPI.Comm, header: Mapping, keys: np.ndarra
     name = comm.bcast(f"step-{int(header['step']):09d}-{time.time_ns()}" if comm.rank == 0 else None, root=0)
     data = root / name
     call_on_root(comm, lambda: data.mkdir(parents=True))
-    np.savez(data / f"cells-{comm.rank}.npz", key=keys, centre=centres, **vectors)
-    np.savez(data / f"local-{comm.rank}.npz", **local)
+    _save(data / f"cells-{comm.rank}.npz", dict(key=keys, centre=centres, **vectors))
+    _save(data / f"local-{comm.rank}.npz", local)
     comm.barrier()  # every process's data are on disk before the header names them
 
     def commit():
+        fsync(data)
+        fsync(root)
         text = json.dumps(dict(header, data=name, processes=comm.size), indent=1, sort_keys=True)
-        (root / (HEADER + ".tmp")).write_text(text + "\n")
+        with open(root / (HEADER + ".tmp"), "w") as f:
+            f.write(text + "\n")
+            f.flush()
+            os.fsync(f.fileno())
         os.replace(root / (HEADER + ".tmp"), root / HEADER)
+        fsync(root)
         for old in root.glob("step-*"):
             if old.name != name:
                 shutil.rmtree(old)
 
     call_on_root(comm, commit)
+
+
+def _save(path: pathlib.Path, arrays: Mapping[str, np.ndarray]) -> None:
+    """``np.savez`` to ``path``, on disk when it returns (fsync)."""
+    with open(path, "wb") as f:
+        np.savez(f, **arrays)
+        f.flush()
+        os.fsync(f.fileno())
 
 
 def read_header(folder: pathlib.Path, comm: MPI.Comm) -> dict:

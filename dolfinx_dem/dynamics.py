@@ -89,8 +89,9 @@ class DynamicRun:
                overrides: Mapping[str, object] | None = None, quiet: bool = False,
                checkpoint_every: int | None = None) -> DynamicRun:
         """The run of ``folder`` set up again and restored from its checkpoint. ``overrides``
-        may only change ``time.end`` (to a multiple of the run's dt, not before the checkpoint);
-        any other change of the scene is a ``CheckpointError`` naming the keys."""
+        may only change ``time.end`` (to a multiple of the run's dt after the checkpoint, or at it
+        for a run that did not finish: killed after its last step); any other change of the
+        scene is a ``CheckpointError`` naming the keys."""
         header = checkpoint.read_header(folder, comm)
         scene = scenes.override(header["scene"], overrides)
         if checkpoint.scene_hash(scene) != header["scene_hash"]:
@@ -103,7 +104,9 @@ class DynamicRun:
         steps = end / dt
         if abs(steps - round(steps)) > 1e-9 * steps:
             raise CheckpointError(f"time.end = {end!r} is not a multiple of the run's time step dt = {dt!r}")
-        if round(steps) <= header["step"]:
+        # a run killed after its last step (during its pictures) is finished by a resume without steps
+        unfinished = io.call_on_root(comm, (pathlib.Path(folder) / io.INCOMPLETE).exists)
+        if round(steps) < header["step"] or (round(steps) == header["step"] and not unfinished):
             raise CheckpointError(
                 f"the checkpoint is at step {header['step']} (t = {t:.9g}), not before time.end = {end:.9g}: "
                 "pass a later --set time.end=... to go further")
@@ -254,7 +257,7 @@ class DynamicRun:
             "series_every": self.series_every,
             "checkpoint_every": self.checkpoint_every,
             "series_bytes": self.series.position(),
-            "xdmf_writes": self.solution.writes,
+            "xdmf_writes": self.solution.writes,  # on disk (sync below)
         }
         local = state["recurrence"] | {
             f"contact{k}_{name}": a
@@ -263,6 +266,7 @@ class DynamicRun:
         }
         local["memm_counters"] = np.array([state["force_evaluations"], state["max_step_evaluations"]], dtype=np.int64)
         vectors = {name: state[name].array_r.reshape(-1, dem.d) for name in checkpoint.VECTORS}
+        self.solution.sync()
         checkpoint.write(
             directory,
             self.comm,

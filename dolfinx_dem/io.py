@@ -6,8 +6,9 @@ A run writes straight into its output folder, inside ``OutputDirectory``:
 
 * Before: the folder may be missing, empty, or hold files that are not a run's; a folder holding
   another run (any of ``RUN_FILES``) is refused unless ``overwrite``, which removes that run's
-  files first (and only those), so no stale file survives. The caller builds and checks
-  everything before entering, so an error in the input leaves the folder as it was.
+  files first (and only those; its checkpoint first, and after writing the marker below), so no
+  stale file survives. The caller builds and checks everything before entering, so an error in
+  the input leaves the folder as it was.
 * During: a marker file ``INCOMPLETE``. On a clean exit the marker is removed, unless the run
   keeps it with a note (``keep_incomplete``: an interrupted run, to be resumed); if the run
   raised, every failing rank appends the exception and its traceback to ``error.txt``. A folder
@@ -17,12 +18,13 @@ A run writes straight into its output folder, inside ``OutputDirectory``:
 
 Files (all in the output folder):
 
-* ``solution.xdmf``, ``solution.h5`` and the folder ``solution/``: the mesh once (``solution.h5``), then DG0
-  fields (cell-centred) per output time, each time in a file of its own (``solution/t<k>.h5``,
-  ``SolutionWriter``; collective), named by ``solution.xdmf`` (replaced atomically) only once
-  it is complete: a run killed at any moment, ``kill -9`` during an HDF5 close included, leaves
-  every listed time readable. A resumed run writes the mesh again (``mesh_1``, ``mesh_2``, ...:
-  its processes may number the cells differently) and its times refer to it.
+* ``solution.xdmf``, ``solution.h5`` and the folder ``solution``: the mesh (``solution.h5``), then
+  DG0 fields (cell-centred) per output time, each time in its own HDF5 file ``solution/<k:06d>.h5``
+  (``SolutionWriter``, ``_xdmf``; collective). A file is renamed into place once complete and
+  only then listed in ``solution.xdmf`` (replaced atomically): a run killed at any moment leaves
+  every listed time readable. Hidden files (``solution/.*``, ``solution.xdmf.tmp``) are those of
+  a write in progress. A resumed run writes the mesh again (``mesh_1``, ``mesh_2``, ...: its
+  processes may number the cells differently) and its times refer to it.
 * ``series.csv``: one header line of column names, then one row of floats per time, written
   with ``'%.17g'`` so that they read back bit-identical (``SeriesWriter``; rank 0 writes).
 * ``summary.json`` (``write_summary``; rank 0 writes): strict JSON, a number that is not finite
@@ -40,11 +42,9 @@ import math
 import os
 import pathlib
 import pickle
-import re
 import shutil
 import tempfile
 import traceback
-import xml.etree.ElementTree as ElementTree
 from collections.abc import Callable, Mapping, Sequence
 
 import dolfinx.fem
@@ -52,16 +52,19 @@ import dolfinx.io
 import numpy as np
 from mpi4py import MPI
 
-from dolfinx_dem.errors import InputError, MissingFileError, OutputFolderError
+from dolfinx_dem import _xdmf
+from dolfinx_dem.errors import InputError, MissingFileError, OutputFolderError, StateError
 
 INCOMPLETE = "INCOMPLETE"
 #: The lock file of a run in progress in its folder (``OutputDirectory``), removed at its end.
 LOCK = ".lock"
 ERROR = "error.txt"
 #: Every file and folder that a run (or ``dolfinx-dem show``) writes into its output folder.
-RUN_FILES = (INCOMPLETE, ERROR, "summary.json", "series.csv", "solution.xdmf", "solution", "solution.h5", "final.png",
-             "animation.gif", "contact_pressure.csv", "energies.png", "series.png", "force_displacement.png",
-             "pressure.png", "checkpoint", "solution.xdmf.tmp")
+#: (``.solution.xdmf``, ``.solution.h5``: the working files of earlier versions.)
+RUN_FILES = (INCOMPLETE, ERROR, "summary.json", "series.csv", "solution.xdmf", _xdmf.FOLDER, "solution.h5",
+             "final.png", "animation.gif", "contact_pressure.csv", "energies.png", "series.png",
+             "force_displacement.png", "pressure.png", "checkpoint", "solution.xdmf.tmp", ".solution.xdmf",
+             ".solution.h5")
 #: The files derived from a whole run, removed when it is resumed (the resumed run rewrites them).
 DERIVED_FILES = ("summary.json", "final.png", "animation.gif", "energies.png", "series.png", "force_displacement.png",
                  "pressure.png")
@@ -173,14 +176,16 @@ class OutputDirectory:
             self._take_lock()
             try:
                 present = self._check()
-            except OutputFolderError:
+                # the marker first, then the old checkpoint: a run killed while the old files go
+                # leaves a folder marked incomplete, and no checkpoint to resume into half-removed outputs
+                (self.path / INCOMPLETE).write_text("dolfinx_dem run in progress or failed\n")
+                remove = [p for p in present if p.name != INCOMPLETE and (
+                    self.overwrite or p.name == ERROR or (self.resume and p.name in DERIVED_FILES))]
+                for p in sorted(remove, key=lambda p: p.name != "checkpoint"):
+                    shutil.rmtree(p) if p.is_dir() and not p.is_symlink() else p.unlink()
+            except BaseException:
                 self._release_lock()
                 raise
-            remove = [p for p in present if self.overwrite or p.name == ERROR or
-                      (self.resume and p.name in DERIVED_FILES)]
-            for p in remove:
-                shutil.rmtree(p) if p.is_dir() and not p.is_symlink() else p.unlink()
-            (self.path / INCOMPLETE).write_text("dolfinx_dem run in progress or failed\n")
 
         call_on_root(self.comm, start)
         return self.path
@@ -203,20 +208,20 @@ class OutputDirectory:
 
 
 class SolutionWriter:
-    """Context manager writing DG0 Functions over time to ``directory/solution.xdmf``, their data in
-    the folder ``directory/solution/``.
+    """Context manager writing DG0 Functions over time to ``directory/solution.xdmf`` and its
+    folder ``directory/solution`` of HDF5 files (``_xdmf``: one file per output time).
 
-    The mesh is written once on construction (``solution.h5``). ``resume_writes``: continue
-    the file of a run whose first ``resume_writes`` output times are kept (the later ones, written
-    after its last checkpoint, are dropped with their files), with the mesh written again for the
-    new times (``solution/mesh_<k>.h5``: a resumed run's processes may number the cells
-    otherwise). ``writes`` counts the output times in the file. Collective over ``comm`` (the
+    The mesh is written on construction. ``resume_writes``: continue the output of a run whose
+    first ``resume_writes`` output times are kept (later ones, written after its last
+    checkpoint, are dropped), with the mesh written again with the first new time (see the
+    module docstring). ``writes`` counts the output times listed. Collective over ``comm`` (the
     mesh's communicator).
 
-    Kill-safety: each output time's fields go into a file of their own, written by DOLFINx under a
-    hidden name, closed, then renamed ``solution/t<k>.h5``, and only then does ``solution.xdmf``
-    (replaced atomically) name it. No file that a listed time lives in is ever open for writing
-    again, so a kill at any moment (an HDF5 close included) leaves every listed time readable.
+    Kill-safety: DOLFINx keeps HDF5 metadata in memory until it closes a file and rewrites its
+    XML file in place at every write, so a kill during a write damaged a single growing file.
+    Here every output time is a new file, written under a hidden name, renamed into place once
+    closed, and only then listed in ``solution.xdmf`` (replaced atomically): a kill at any moment
+    leaves every listed time readable.
     """
 
     def __init__(self, comm: MPI.Comm, directory: str | pathlib.Path, mesh, resume_writes: int | None = None):
@@ -224,34 +229,35 @@ class SolutionWriter:
         if not directory.is_dir():
             raise MissingFileError(f"output directory {directory} does not exist")
         self.path = directory / "solution.xdmf"
+        self._folder = directory / _xdmf.FOLDER
         self._comm, self._mesh = comm, mesh
-        self._mesh_name = call_on_root(comm, _start_solution, self.path, resume_writes)
-        original, mesh.name = mesh.name, self._mesh_name
-        # the first mesh in solution.h5, where DOLFINx's XDMFFile.read_mesh looks for it
-        final = "solution.h5" if self._mesh_name == "mesh" else f"{FOLDER}/{self._mesh_name}.h5"
-        try:
-            self._write_file(final, lambda xdmf: xdmf.write_mesh(mesh), "w")
-        finally:
-            mesh.name = original
+        self._index, self._closed = None, False  # rank 0's _xdmf.Index
+
+        def start():
+            fresh = resume_writes is None
+            self._index = _xdmf.Index.fresh(self.path) if fresh else _xdmf.Index.resume(self.path, resume_writes)
+            return self._index.next_mesh()
+
+        self._mesh_name = call_on_root(comm, start)
+        self._mesh_xpath = None  # until the mesh is written: now, or with a resumed writer's first time
+        if resume_writes is None:
+            self._write_mesh()
         self.writes = resume_writes or 0
 
-    def _write_file(self, final: str, write: Callable, mode: str) -> None:
-        """Let DOLFINx write into ``solution/.work.xdmf`` (mode "w": a new file; "a": the mesh's
-        XML, whose grid the fields refer to) by ``write(xdmf)``, close it, rename its HDF5 file to
-        ``final`` (relative to the output folder) and add what it wrote to ``solution.xdmf``
-        (collective)."""
-        folder = self.path.parent / FOLDER
-        if mode == "a":
-            call_on_root(self._comm, _mesh_xml, self.path, folder / WORK_XDMF, self._mesh_name)
-        with dolfinx.io.XDMFFile(self._comm, str(folder / WORK_XDMF), mode) as xdmf:
-            write(xdmf)
-        call_on_root(self._comm, _publish, folder / WORK_XDMF, final, self.path)
+    def _write_mesh(self) -> None:
+        name = self._mesh_name
+        with dolfinx.io.XDMFFile(self._comm, str(_xdmf.hidden(self._folder, name, ".xdmf")), "w") as xdmf:
+            xdmf.write_mesh(self._mesh)
+        call_on_root(self._comm, lambda: self._index.add_mesh(name))
+        self._mesh_xpath = _xdmf.mesh_xpath(name)
 
     def write(self, t: float, fields: Mapping[str, dolfinx.fem.Function]) -> None:
         """Write ``fields`` (name -> DG0 Function on the writer's mesh) at time ``t`` (s).
 
         Each Function is renamed to its key, which becomes its name in the XDMF file.
         """
+        if self._closed:
+            raise StateError("the solution writer is closed")
         if not math.isfinite(t):
             raise InputError(f"time t must be finite, got {t!r}")
         if not fields:
@@ -263,22 +269,34 @@ class SolutionWriter:
                 raise InputError(f"field {name!r} must be a dolfinx.fem.Function, got {type(f)}")
             if f.function_space.mesh is not self._mesh:
                 raise InputError(f"field {name!r} is not defined on the writer's mesh")
-
-        def write(xdmf):
+        if self._mesh_xpath is None:
+            self._write_mesh()
+        k = self.writes
+        call_on_root(self._comm, lambda: self._index.time_template(k))
+        xdmf = dolfinx.io.XDMFFile(self._comm, str(_xdmf.hidden(self._folder, _xdmf.time_file(k), ".xdmf")), "a")
+        try:
             for name, f in fields.items():
                 f.name = name
-                xdmf.write_function(f, float(t), f"/Xdmf/Domain/Grid[@Name='{self._mesh_name}'][1]")
-
-        self._write_file(f"{FOLDER}/t{self.writes:06d}.h5", write, "a")
+                xdmf.write_function(f, float(t), self._mesh_xpath)
+        finally:
+            xdmf.close()
+        call_on_root(self._comm, lambda: self._index.add_time(k))
         self.writes += 1
 
+    def sync(self) -> None:
+        """Put every listed output time on disk (fsync; before a checkpoint, so that a stopped
+        machine keeps what the checkpoint counts)."""
+        call_on_root(self._comm, lambda: self._index.sync())
+
     def close(self) -> None:
-        """Nothing to close: every output time's file is complete when ``write`` returns."""
+        """Every output time is published as it is written: closing only ends the writer."""
+        self._index, self._closed = None, True
 
     def __enter__(self) -> SolutionWriter:
         return self
 
     def __exit__(self, exc_type, exc, tb) -> bool:
+        self.close()
         return False
 
 
@@ -356,11 +374,12 @@ class SeriesWriter:
                 self._file.flush()
 
     def position(self) -> int:
-        """Flush and return the size of the file in bytes, where a resumed run continues
-        (``append_at``); the same on every rank."""
+        """Flush the file to disk (fsync) and return its size in bytes, where a resumed run
+        continues (``append_at``); the same on every rank."""
         size = None
         if self._file is not None:
             self._file.flush()
+            os.fsync(self._file.fileno())
             size = self._file.tell()
         return self._comm.bcast(size, root=0)
 
@@ -407,90 +426,3 @@ def write_summary(path: str | pathlib.Path, comm: MPI.Comm, data: Mapping) -> No
         path.write_text(text + "\n")
 
     call_on_root(comm, write)
-
-
-#: The folder of ``solution.xdmf``'s data, and DOLFINx's working XML file in it (``SolutionWriter``).
-FOLDER = "solution"
-WORK_XDMF = ".work.xdmf"
-ElementTree.register_namespace("xi", "http://www.w3.org/2001/XInclude")
-
-
-def _fixed(text: str) -> str:
-    """DOLFINx's XML as VTK's XDMF reader (ParaView, pyvista) reads it: the XInclude namespace the
-    W3C's ``http://`` name (DOLFINx 0.9 writes ``https://``, on which the reader crashes), and a 1D
-    mesh's displacement (one component) typed as what its data are."""
-    text = text.replace('xmlns:xi="https://www.w3.org/2001/XInclude"', 'xmlns:xi="http://www.w3.org/2001/XInclude"')
-    # DOLFINx 0.9 pads it to three components, typed Scalar: read as three values per cell unless typed Vector
-    padded = r'AttributeType="Scalar"(\s+Center="Cell">\s*<DataItem Dimensions="\d+ 3")'
-    text = re.sub(padded, r'AttributeType="Vector"\1', text)
-    # DOLFINx 0.5 types its one component Vector: VTK then warns at every read ("Can not set attribute
-    # Vectors. Incorrect number of components"), about 80 times per 1D animation
-    one = r'AttributeType="Vector"(\s+Center="Cell">\s*<DataItem Dimensions="\d+ 1")'
-    return re.sub(one, r'AttributeType="Scalar"\1', text)
-
-
-def _write_xml(tree, path: pathlib.Path) -> None:
-    """Replace ``path`` atomically by ``tree`` (fixed by ``_fixed``)."""
-    text = _fixed(ElementTree.tostring(tree.getroot(), encoding="unicode"))
-    path.with_suffix(".xdmf.tmp").write_text('<?xml version="1.0"?>\n' + text + "\n")
-    os.replace(path.with_suffix(".xdmf.tmp"), path)
-
-
-def _start_solution(path: pathlib.Path, resume_writes: int | None) -> str:
-    """Prepare ``path`` (solution.xdmf) and its folder for a ``SolutionWriter``; returns the name of
-    its mesh. A new run: an empty file and folder. A resumed run: the first ``resume_writes`` output
-    times kept, the files of the others (and any a kill left unlisted) removed, and an unused mesh
-    name ``mesh_<k>``. Serial (rank 0)."""
-    folder = path.parent / FOLDER
-    if resume_writes is None:
-        shutil.rmtree(folder, ignore_errors=True)
-        (path.parent / "solution.h5").unlink(missing_ok=True)
-        folder.mkdir()
-        _write_xml(ElementTree.ElementTree(ElementTree.fromstring(
-            '<Xdmf Version="3.0" xmlns:xi="http://www.w3.org/2001/XInclude"><Domain/></Xdmf>')), path)
-        return "mesh"
-    tree = ElementTree.parse(path)
-    domain = tree.getroot().find("Domain")
-    for collection in domain.findall("Grid[@GridType='Collection']"):
-        for grid in collection.findall("Grid")[resume_writes:]:
-            collection.remove(grid)
-    _write_xml(tree, path)
-    listed = {item.text.strip().split(":", 1)[0] for item in domain.iter("DataItem")}
-    for stale in folder.iterdir():
-        if f"{FOLDER}/{stale.name}" not in listed:
-            stale.unlink()
-    meshes = {grid.get("Name") for grid in domain.findall("Grid[@GridType='Uniform']")}
-    return next(f"mesh_{k}" for k in range(1, len(meshes) + 2) if f"mesh_{k}" not in meshes)
-
-
-def _mesh_xml(path: pathlib.Path, work: pathlib.Path, name: str) -> None:
-    """The XML of ``path`` with only its mesh ``name``, into ``work``: the grid the fields that
-    DOLFINx appends to ``work`` refer to. Serial (rank 0)."""
-    grid = ElementTree.parse(path).getroot().find(f"Domain/Grid[@Name='{name}']")
-    work.write_text('<?xml version="1.0"?>\n<Xdmf Version="3.0" xmlns:xi="http://www.w3.org/2001/XInclude">'
-                    f"<Domain>{ElementTree.tostring(grid, encoding='unicode')}</Domain></Xdmf>\n")
-
-
-def _publish(work: pathlib.Path, h5: str, path: pathlib.Path) -> None:
-    """Rename the HDF5 file DOLFINx wrote beside ``work`` to ``h5`` (relative to the folder of
-    ``path``, solution.xdmf) and add the grids of ``work`` that ``path`` does not hold to it, their
-    data read from ``h5``: the mesh grid, or each field's grid of the new time into the field's
-    temporal collection. Serial (rank 0)."""
-    os.replace(work.with_suffix(".h5"), path.parent / h5)
-    tree = ElementTree.parse(path)
-    domain = tree.getroot().find("Domain")
-    for grid in ElementTree.fromstring(_fixed(work.read_text())).find("Domain"):
-        if grid.get("GridType") == "Uniform" and domain.find(f"Grid[@Name='{grid.get('Name')}']") is not None:
-            continue  # the mesh the fields refer to, listed already
-        for item in grid.iter("DataItem"):
-            item.text = f"{h5}:{item.text.strip().split(':', 1)[1]}"
-        if grid.get("GridType") == "Uniform":
-            domain.insert(len(domain.findall("Grid[@GridType='Uniform']")), grid)
-            continue
-        collection = domain.find(f"Grid[@Name='{grid.get('Name')}'][@GridType='Collection']")
-        if collection is None:
-            domain.append(grid)
-        else:
-            collection.extend(grid.findall("Grid"))
-    _write_xml(tree, path)
-    work.unlink()

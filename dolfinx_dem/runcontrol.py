@@ -19,8 +19,10 @@ Open MPI's ``mpirun`` does not pass SIGINT or SIGTERM on: on either it sends the
 SIGCONT, SIGTERM after ``odls_base_sigkill_timeout`` seconds (default 1) and SIGKILL as long after
 that; the run must reach its checkpoint within that time (raise it with
 ``OMPI_MCA_odls_base_sigkill_timeout=30`` for large runs), and ``mpirun`` itself then exits with
-1 whatever the processes return. A signal sent to the processes themselves (``kill`` of their
-ids, a batch system such as SLURM) gives every process and ``mpirun`` the exit status 130.
+1 whatever the processes return. A run killed then keeps its last complete checkpoint and every
+listed output time (``checkpoint.py``, ``io.SolutionWriter``). A signal sent to the processes
+themselves (``kill`` of their ids, a batch system such as SLURM) gives every process and
+``mpirun`` the exit status 130.
 """
 
 from __future__ import annotations

@@ -9,9 +9,10 @@
 
 Outputs in the run folder: ``summary.json`` (with ``status``: ``completed``, ``interrupted``,
 ``unstable``), ``series.csv`` (t, kinetic, elastic, stabilisation, external, pseudo_energy,
-then contact columns and probes), ``solution.xdmf`` (+ .h5: DG0 displacement, velocity, von
-Mises stress), ``final.png``, with ``output.animation`` the GIF ``animation.gif``, and for a
-dynamic run its ``checkpoint`` folder (``checkpoint.py``), from which ``resume`` continues.
+then contact columns and probes), ``solution.xdmf`` (+ ``solution.h5`` and ``solution/``: DG0
+displacement, velocity, von Mises stress), ``final.png``, with ``output.animation`` the GIF
+``animation.gif``, and for a dynamic run its ``checkpoint`` folder (``checkpoint.py``), from
+which ``resume`` continues.
 
 ``build``, ``Probes``, ``contact_columns`` and ``contact_values`` of ``model.py`` are available
 here too, for scripts that drive the model themselves.

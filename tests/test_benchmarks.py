@@ -185,17 +185,6 @@ def test_scheme_b_quick_reproduces_its_page(tmp_path):
         assert r["u_top"] == pytest.approx(d["u_top"], rel=1e-8) and r["a"] == pytest.approx(d["a"], rel=1e-8)
 
 
-def test_kill_loop_quick(tmp_path):
-    """10 runs killed (SIGKILL) at random moments of their output: every listed time of each
-    solution.xdmf reads back, and each resume is bit-identical to an uninterrupted run (the
-    200-kill study: docs/validation/kill_loop.json)."""
-    _quick("validation/kill_loop.py", "--out", str(tmp_path / "kills.json"), timeout=600)
-    data = json.loads((tmp_path / "kills.json").read_text())
-    assert data["kills"] == 10 and data["failures"] == []
-    assert data["read"] == 10 and data["identical"] == data["resumed"] >= 5  # measured: 10 resumed
-    assert max(data["listed_times"]) > 20
-
-
 def test_indentation_fem_quick_reproduces_its_page(tmp_path):
     """The coarsest mesh (h = 0.004 m) of indentation_fem.json: P, a and p_max, and the balance."""
     _quick("validation/indentation_fem.py", "--out", str(tmp_path / "fem.json"))

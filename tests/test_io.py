@@ -10,6 +10,7 @@ import pytest
 from mpi4py import MPI
 
 from dolfinx_dem import _compat, io, meshes
+from dolfinx_dem.errors import OutputError, StateError
 
 
 def shared_path(tmp_path) -> pathlib.Path:
@@ -41,7 +42,7 @@ def test_solution_writer(tmp_path):
             s.x.array[:] = 2 * t
             writer.write(t, {"displacement": u, "von_mises": s})
     assert u.name == "displacement" and s.name == "von_mises"
-    assert (directory / "solution.h5").is_file() and (directory / "solution" / "t000002.h5").is_file()
+    assert (directory / "solution.h5").is_file() and (directory / "solution" / "000002.h5").is_file()
     assert xdmf_times(directory / "solution.xdmf") == {"displacement": times, "von_mises": times}
     with dolfinx.io.XDMFFile(comm, str(directory / "solution.xdmf"), "r") as xdmf:
         mesh2 = xdmf.read_mesh(name="mesh")
@@ -277,27 +278,59 @@ def test_solution_writer_resumes_after_a_later_write_and_flushes_every_write(tmp
 
 
 @pytest.mark.skip_in_parallel
-def test_a_dataset_written_after_the_last_xdmf_entry_does_not_block_a_resume(tmp_path):
-    """A run killed between writing a time's HDF5 dataset and listing it in the XDMF file leaves
-    the dataset unlisted; the resumed writer deletes it, or DOLFINx could not write that time
-    again ("Failed to create HDF5 global dataset")."""
-    from xml.etree import ElementTree
-
+def test_a_resumed_writer_drops_what_a_killed_writer_left_and_never_rewrites_a_listed_file(tmp_path):
+    """A writer killed while writing its 4th time leaves hidden files, and one killed between
+    renaming a time's file into place and listing it leaves that file unlisted: a writer resumed
+    at 2 kept times first lists those 2 (solution.xdmf reads), removes every file it does not
+    list, and writes the later times to new files; the listed files are the same files."""
     comm = MPI.COMM_SELF
     mesh, _, _ = meshes.create_rectangle(comm, [0, 0], [1, 1], [2, 2])
     u = dolfinx.fem.Function(_compat.create_vector_space(mesh, "DG", 0))
     with io.SolutionWriter(comm, tmp_path, mesh) as writer:
-        for t in (0.0, 0.5):
+        for t in (0.0, 0.5, 1.0):
             writer.write(t, {"displacement": u})
-    path = tmp_path / "solution.xdmf"
-    tree = ElementTree.parse(path)  # as if killed after the dataset of t = 0.5, before its entry
-    collection = tree.getroot().find("Domain").find("Grid[@GridType='Collection']")
-    collection.remove(collection.findall("Grid")[-1])
-    tree.write(path, xml_declaration=True, encoding="utf-8")
-    with io.SolutionWriter(comm, tmp_path, mesh, resume_writes=1) as writer:
+    folder = tmp_path / "solution"
+    for leftover in (".000003.h5", ".000003.xdmf", "000004.h5"):
+        (folder / leftover).write_text("a killed writer's")
+    listed = {name: (folder / name).stat().st_ino for name in ("000000.h5", "000001.h5")}
+    with pytest.raises(OutputError, match="solution.xdmf lists 3 of the 4 output times of the checkpoint"):
+        io.SolutionWriter(comm, tmp_path, mesh, resume_writes=4)
+    with io.SolutionWriter(comm, tmp_path, mesh, resume_writes=2) as writer:
+        assert sorted(p.name for p in folder.iterdir()) == ["000000.h5", "000001.h5"]
+        assert xdmf_times(tmp_path / "solution.xdmf") == {"displacement": [0.0, 0.5]}
+        with dolfinx.io.XDMFFile(comm, str(tmp_path / "solution.xdmf"), "r") as xdmf:
+            assert xdmf.read_mesh(name="mesh").topology.index_map(2).size_global == 8
         u.x.array[:] = 2.0
-        writer.write(0.5, {"displacement": u})
-    assert xdmf_times(path) == {"displacement": [0.0, 0.5]}
+        writer.write(1.0, {"displacement": u})
+    assert {name: (folder / name).stat().st_ino for name in listed} == listed
+    assert sorted(p.name for p in folder.iterdir()) == ["000000.h5", "000001.h5", "000002.h5", "mesh_1.h5"]
+    assert xdmf_times(tmp_path / "solution.xdmf") == {"displacement": [0.0, 0.5, 1.0]}
+    with pytest.raises(StateError, match="closed"):
+        writer.write(1.5, {"displacement": u})
+
+
+def test_an_overwrite_stopped_midway_leaves_the_folder_marked_incomplete(tmp_path, monkeypatch):
+    """The marker is written before the old run's files go, and its checkpoint goes first: a run
+    killed meanwhile leaves no folder that looks complete, nor a checkpoint to resume into
+    half-removed outputs."""
+    out = tmp_path / "out"
+    out.mkdir()
+    for name in ("summary.json", "series.csv", "solution.xdmf"):
+        (out / name).write_text("an old run's")
+    (out / "checkpoint").mkdir()
+    (out / "checkpoint" / "checkpoint.json").write_text("{}")
+    unlink = pathlib.Path.unlink
+
+    def killed(self, *args, **kwargs):
+        if self.name == "series.csv":
+            raise RuntimeError("killed")
+        unlink(self, *args, **kwargs)
+
+    monkeypatch.setattr(pathlib.Path, "unlink", killed)
+    with pytest.raises(RuntimeError, match="killed"):
+        with io.OutputDirectory(out, MPI.COMM_SELF, overwrite=True):
+            pass
+    assert sorted(p.name for p in out.iterdir()) == [io.INCOMPLETE, "series.csv", "solution.xdmf"]
 
 
 @pytest.mark.skip_in_parallel
