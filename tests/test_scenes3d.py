@@ -105,7 +105,7 @@ def test_a_static_3d_scene_with_contact_between_bodies_is_refused_before_the_run
     """Statics with contact between bodies is 2D (its Hessian takes the overlaps as affine on a
     piece): a 3D static scene with a 'contact' table is a clear error, and no folder is made."""
     scene = scenes.load("two-balls", {"mesh.h": 0.06})
-    for key in ("time", "initial"):
+    for key in ("time", "initial", "output"):
         scene.pop(key)
     scene["statics"] = {}
     with pytest.raises(scenes.SceneError, match="contact between bodies .* in 2D, not 3D"):

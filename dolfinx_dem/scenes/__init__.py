@@ -17,7 +17,7 @@ import numpy as np
 
 from dolfinx_dem.errors import MissingFileError, SceneError
 from dolfinx_dem.material import ElasticMaterial
-from dolfinx_dem.scenes.usage import check_used
+from dolfinx_dem.scenes.usage import check_method, check_names, check_static, check_used
 
 BUILTIN = pathlib.Path(__file__).parent
 
@@ -306,37 +306,9 @@ def validate(scene: Mapping, mesh_dimension: int | None = None) -> dict:
             for key in keys:
                 if key not in item:
                     raise SceneError(f"scene key '{section}[{i}].{key}' is missing")
-    for section in ("dirichlet", "tractions"):
-        for i, bc in enumerate(scene.get(section, [])):
-            for k, e in enumerate(bc.get("value", [])):
-                if (
-                    isinstance(e, str)
-                    and "t" in compile(e, "<value>", "eval").co_names
-                    and not bc.get("time_dependent")
-                ):
-                    raise SceneError(
-                        f"scene key '{section}[{i}].value[{k}]' ({e!r}) uses t, but "
-                        f"'{section}[{i}].time_dependent' is not true: the value would be frozen at "
-                        "t = 0 (set time_dependent = true)"
-                    )
-    names = [bc["name"] for bc in scene.get("dirichlet", []) if "name" in bc]
-    if len(set(names)) != len(names):
-        raise SceneError(f"scene key 'dirichlet[].name': names must be unique, got {names}")
-    for i, body in enumerate(scene.get("prescribed", [])):
-        if ("velocity" in body) == ("displacement" in body):
-            raise SceneError(f"scene table 'prescribed[{i}]' needs exactly one of 'velocity' and 'displacement'")
-    reactions = [
-        str(bc.get("name", i)) for i, bc in enumerate(scene.get("dirichlet", []) + scene.get("prescribed", []))
-    ]
-    if len(set(reactions)) != len(reactions):
-        raise SceneError(
-            f"scene keys 'dirichlet[].name' and 'prescribed[].name' name the reaction columns and must "
-            f"be unique together, got {reactions} (unnamed: the number in the list of both)"
-        )
+    check_names(scene)
     if "statics" in scene:
-        for section in ("time", "initial"):
-            if section in scene:
-                raise SceneError(f"a static scene ('statics' table) takes no '{section}' table")
+        check_static(scene)
     else:
         _validate_time(scene)
         if scene.get("method") == "fem-P2":
@@ -347,13 +319,7 @@ def validate(scene: Mapping, mesh_dimension: int | None = None) -> dict:
         raise SceneError("scene key 'loads': give 'gravity' or 'body_force', not both")
     scene.setdefault("method", "dem-A")
     scene.setdefault("name", "scene")
-    if scene["method"] == "dem-AB" and not (scene.get("obstacles") or "contact" in scene):
-        raise SceneError("method 'dem-AB' puts scheme B on the contact candidates: this scene has none (use dem-A)")
-    if "contact" in scene:
-        if scene["method"] == "fem-P2":
-            raise SceneError("contact between bodies ('contact' table) needs a DEM method (dem-A, dem-B or dem-AB)")
-        if "statics" in scene and scene.get("obstacles"):
-            raise SceneError("a static scene takes obstacles or contact between bodies ('contact' table), not both")
+    check_method(scene)
     return scene
 
 

@@ -1,8 +1,10 @@
-"""Scene keys that only some scenes use: each must act or be an error naming it (issue 32.7).
+"""Scene keys checked against each other: each must act or be an error naming it.
 
 The schema (``scenes.SCHEMA``) checks each key's type; these checks say which mesh types read which
-``[mesh]`` keys (docs/scenes.md, the "used by" column), and that ``plane`` (plane strain or plane
-stress) is a 2D hypothesis.
+``[mesh]`` keys (docs/scenes.md, the "used by" column), that ``plane`` (plane strain or plane
+stress) is a 2D hypothesis and ``statics.fixed_rotation`` a 2D constraint, and that a static scene
+(one state written) has no use for the output periods, the animation and the dynamic penetration
+limit.
 """
 
 from __future__ import annotations
@@ -23,9 +25,13 @@ MESH_KEYS = {
     "file": ("path",),
 }
 
+#: Keys of dynamic scenes that a static scene (a ``statics`` table) has no use for.
+DYNAMIC_ONLY = {"output": ("every", "series_every", "animation"), "contact": ("max_penetration",)}
+
 
 def check_used(scene: Mapping, d: int | None) -> None:
-    """A SceneError for a ``[mesh]`` key its type does not read, or a ``plane`` outside 2D."""
+    """A SceneError for a ``[mesh]`` key its type does not read, or a ``plane`` or
+    ``statics.fixed_rotation`` outside 2D."""
     mesh = scene["mesh"]
     used = MESH_KEYS.get(mesh.get("type"), ())
     unused = [k for k in mesh if k != "type" and k not in used]
@@ -40,3 +46,60 @@ def check_used(scene: Mapping, d: int | None) -> None:
             if "plane" in table:
                 raise SceneError(f"scene key '{name}.plane' (plane strain or plane stress) is a 2D hypothesis; "
                                  f"this scene is {d}D")
+        if scene.get("statics", {}).get("fixed_rotation"):
+            raise SceneError(f"scene key 'statics.fixed_rotation' holds the rotation of a 2D body; this scene is {d}D")
+
+
+def check_names(scene: Mapping) -> None:
+    """A SceneError for a time-dependent value without ``time_dependent``, names of the reaction
+    columns (Dirichlet conditions and prescribed bodies) that are not unique, or a prescribed body
+    without exactly one of velocity and displacement."""
+    for section in ("dirichlet", "tractions"):
+        for i, bc in enumerate(scene.get(section, [])):
+            for k, e in enumerate(bc.get("value", [])):
+                if (
+                    isinstance(e, str)
+                    and "t" in compile(e, "<value>", "eval").co_names
+                    and not bc.get("time_dependent")
+                ):
+                    raise SceneError(
+                        f"scene key '{section}[{i}].value[{k}]' ({e!r}) uses t, but "
+                        f"'{section}[{i}].time_dependent' is not true: the value would be frozen at "
+                        "t = 0 (set time_dependent = true)"
+                    )
+    names = [bc["name"] for bc in scene.get("dirichlet", []) if "name" in bc]
+    if len(set(names)) != len(names):
+        raise SceneError(f"scene key 'dirichlet[].name': names must be unique, got {names}")
+    for i, body in enumerate(scene.get("prescribed", [])):
+        if ("velocity" in body) == ("displacement" in body):
+            raise SceneError(f"scene table 'prescribed[{i}]' needs exactly one of 'velocity' and 'displacement'")
+    reactions = [
+        str(bc.get("name", i)) for i, bc in enumerate(scene.get("dirichlet", []) + scene.get("prescribed", []))
+    ]
+    if len(set(reactions)) != len(reactions):
+        raise SceneError(
+            f"scene keys 'dirichlet[].name' and 'prescribed[].name' name the reaction columns and must "
+            f"be unique together, got {reactions} (unnamed: the number in the list of both)"
+        )
+
+
+def check_method(scene: Mapping) -> None:
+    """A SceneError for a method that cannot run the scene's contact (``method`` set)."""
+    if scene["method"] == "dem-AB" and not (scene.get("obstacles") or "contact" in scene):
+        raise SceneError("method 'dem-AB' puts scheme B on the contact candidates: this scene has none (use dem-A)")
+    if "contact" in scene:
+        if scene["method"] == "fem-P2":
+            raise SceneError("contact between bodies ('contact' table) needs a DEM method (dem-A, dem-B or dem-AB)")
+        if "statics" in scene and scene.get("obstacles"):
+            raise SceneError("a static scene takes obstacles or contact between bodies ('contact' table), not both")
+
+
+def check_static(scene: Mapping) -> None:
+    """A SceneError for a key of dynamic scenes in a static scene (``statics`` table)."""
+    for section in ("time", "initial"):
+        if section in scene:
+            raise SceneError(f"a static scene ('statics' table) takes no '{section}' table")
+    for section, keys in DYNAMIC_ONLY.items():
+        for key in (k for k in keys if k in scene.get(section, {})):
+            raise SceneError(f"scene key '{section}.{key}' applies to dynamic scenes: a static scene computes and "
+                             "writes one state")
