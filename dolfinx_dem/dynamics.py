@@ -10,7 +10,7 @@ then integrates into the output folder (``io.OutputDirectory``) and ends with on
 - ``unstable``: the stability monitor stopped it (``memm.InstabilityError``, raised after the
   outputs and the summary are written);
 - ``unresolved``: contact between bodies no longer resolved: the contact surfaces
-  interpenetrated by more than ``contact.max_penetration`` candidate facet sizes, or deeper than
+  interpenetrated by more than ``contact.max_penetration`` local candidate facet diameters, or deeper than
   the pair list radius, or a facet outran its skin (``pair_contact.UnresolvedContactError``,
   raised the same way).
 
@@ -213,7 +213,8 @@ class DynamicRun:
         contact = model.contact_values(self.problem, stepper.u, stepper.contact_patch_values())
         if self.pairs is not None:
             contact += list(diag.momentum)
-            self.pair_stats.record(diag.t, stepper, contact[self._penetration_column], diag.momentum)
+            penetration = (contact[self._penetration_column], self.pairs.outputs.penetration_ratio)
+            self.pair_stats.record(diag.t, stepper, penetration, diag.momentum)
             # contact work done at every step for its outputs: part of the contact share
             self.pair_stats.output_seconds += time.process_time() - tic
         if self.obstacles is not None:

@@ -60,8 +60,8 @@ class InstabilityError(DEMError, RuntimeError):
 class UnresolvedContactError(DEMError, RuntimeError):
     """The contact between bodies is no longer resolved, and a run stops instead of going on
     with bodies passing through each other (collective: raised on every process alike): the
-    contact surfaces interpenetrate by more than ``contact.max_penetration`` times the candidate
-    facets' mean size, touching pairs lie deeper than the pair list radius, or a facet moves more
+    contact surfaces interpenetrate by more than ``contact.max_penetration`` times the local
+    candidate facet diameter, touching pairs lie deeper than the pair list radius, or a facet moves more
     than half its skin in one step."""
 
 

@@ -35,7 +35,7 @@ class Statistics:
         return self.drift / self.scale if self.scale > 0 else 0.0
 
 
-#: The default of ``contact.max_penetration`` (candidate facets' mean sizes): above every built-in
+#: The default of ``contact.max_penetration`` (local candidate facet diameters): above every built-in
 #: scene's largest penetration over its whole run, below what a contact surface that does not hold
 #: reaches (facets sliding into each other's holes on fine 3D meshes with eta = E; the figures are
 #: in docs/validation/contact3d.md).
@@ -51,11 +51,11 @@ class PairContactStatistics:
 
     def __init__(self, problem: DEMProblem, stepper: MEMM, momentum: np.ndarray, max_penetration: float):
         """``momentum``: the total momentum of the initial state (``memm.Diagnostics``);
-        ``max_penetration``: the largest interpenetration a run accepts, in candidate facets'
-        mean sizes (``contact.max_penetration``)."""
+        ``max_penetration``: the largest interpenetration a run accepts, in local candidate facet
+        diameters (``contact.max_penetration``)."""
         dem = problem.dem
         self.contact = problem.find(PairContact)
-        self.first_contact, self.penetration = None, 0.0
+        self.first_contact, self.penetration, self.penetration_ratio = None, 0.0, 0.0
         self.max_penetration = max_penetration
         # floats: on a 3-vector, numpy's operations cost more than a loop, at every step
         self.p0 = momentum.tolist() if self.contact is not None else None
@@ -68,8 +68,9 @@ class PairContactStatistics:
         self.previous = None  # the displacement of the previous step, until the first contact
         self.output_seconds = 0.0  # processor time of the per-step contact outputs (this process)
 
-    def record(self, t: float, stepper: MEMM, penetration: float, momentum: np.ndarray):
-        """Update with the state at ``t``: its ``penetration`` and ``momentum`` (series columns)."""
+    def record(self, t: float, stepper: MEMM, penetration: tuple[float, float], momentum: np.ndarray):
+        """Update with the state at ``t``: its ``penetration`` (depth in m, the series column, and
+        depth over the local facet diameter: ``PairOutputs.penetration``) and ``momentum``."""
         contact = self.contact
         if self.first_contact is None:
             if self.previous is not None:
@@ -77,13 +78,14 @@ class PairContactStatistics:
                 if tau is not None:
                     self.first_contact = t - stepper.dt + tau
             self.previous = stepper.u.copy()
+        penetration, ratio = penetration
         self.penetration = max(self.penetration, penetration)
-        size = contact.facet_size
-        if penetration > self.max_penetration * size:  # the same on every process (a reduced value)
+        self.penetration_ratio = max(self.penetration_ratio, ratio)
+        if ratio > self.max_penetration:  # the same on every process (a reduced value)
             raise UnresolvedContactError(
                 f"contact between bodies is not resolved at t = {t:.6g}: the contact surfaces interpenetrate by "
-                f"{penetration:.3g} m, {penetration / size:.3g} of the candidate facets' mean size ({size:.3g} m), "
-                f"more than contact.max_penetration = {self.max_penetration:g}. Eq. (31) corrects a gap only where "
+                f"{ratio:.3g} of a candidate facet's diameter (deepest: {penetration:.3g} m), more than "
+                f"contact.max_penetration = {self.max_penetration:g}. Eq. (31) corrects a gap only where "
                 "the facets of the two bodies overlap: the bodies are too soft for their load or speed, or, in 3D, "
                 "the facets slide into holes of each other's mosaic on a mesh too fine for the stabilisation: a "
                 "larger material.eta (two-balls: 10 E) keeps the mosaic tiled (docs/validation/contact3d.md). The "
@@ -99,6 +101,7 @@ class PairContactStatistics:
         return {
             "first_contact": self.first_contact,
             "penetration": self.penetration,
+            "penetration_ratio": self.penetration_ratio,
             "momentum_change": self.momentum_change,
             "p_scale": self.p_scale,
             "output_seconds": self.output_seconds,
@@ -107,6 +110,7 @@ class PairContactStatistics:
 
     def restore(self, state: Mapping, stepper: MEMM):
         self.first_contact, self.penetration = state["first_contact"], state["penetration"]
+        self.penetration_ratio = state["penetration_ratio"]
         self.momentum_change, self.p_scale = state["momentum_change"], state["p_scale"]
         self.output_seconds = state["output_seconds"]
         self.p0 = state["p0"]
@@ -124,7 +128,7 @@ class PairContactStatistics:
             "contact_pairs_scheme_b_rule": c.scheme_b_pairs,
             "first_contact_time": self.first_contact,
             "max_penetration": self.penetration,
-            "max_penetration_over_facet_size": self.penetration / c.facet_size,
+            "max_penetration_over_facet_size": self.penetration_ratio,
             # all contact work of the steps, outputs included, over the steps and those outputs
             "contact_seconds": comm.allreduce(c.seconds + self.output_seconds, op=MPI.MAX),
             "contact_output_seconds": comm.allreduce(self.output_seconds, op=MPI.MAX),

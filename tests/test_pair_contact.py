@@ -232,9 +232,34 @@ def test_matching_facets_close_the_gap_exactly(scheme):
     up = c.patch_values(u)
     gap, overlap = c.outputs.pair_states(up)
     assert np.allclose(gap[(gap < 0) & (overlap > 0)], -0.006)
-    assert c.outputs.penetration(up) < 1e-15
+    assert c.outputs.penetration(up)[0] < 1e-15
     if scheme == "B":
         assert np.abs(np.abs(c.outputs.facet_corrections(up)[:, 0]) - 0.003).max() < 1e-15
+
+
+def test_a_facet_in_a_hole_of_the_other_mosaic_counts_as_penetration():
+    """The right block's facing facets part (those above y = 0.1 move up by 0.04, those below
+    down), and the two left facets facing the hole move into it by 0.03 (0.02 past the right
+    block's side): they overlap no partner, so the overlap-weighted measure did not see them
+    (it gave 0); counted behind the plane of their nearest partner, 0.02 m, 0.6 of their length."""
+    dem, facets = two_blocks()
+    problem = DEMProblem(dem, [PairContact(dem, facets)])
+    c = problem.find(PairContact)
+
+    def field(x):
+        u = np.zeros_like(x)
+        right, left = (x[:, 0] > 0.205) & (x[:, 0] < 0.235), (x[:, 0] > 0.18) & (x[:, 0] < 0.205)
+        u[right, 1] = np.where(x[right, 1] > 0.1, 0.04, -0.04)
+        u[left & (np.abs(x[:, 1] - 0.1) < 0.035), 0] = 0.03
+        return u
+
+    u = cell_vector(dem, field)
+    c.prepare(u)
+    up = c.patch_values(u)
+    gap, overlap = c.outputs.pair_states(up)
+    assert dem.comm.allreduce(int(((gap < 0) & (overlap > 0)).sum()), op=MPI.SUM) == 0  # no partner covers them
+    depth, ratio = c.outputs.penetration(up)
+    assert depth == pytest.approx(0.02, rel=1e-12) and ratio == pytest.approx(0.6, rel=1e-12)
 
 
 @pytest.mark.parametrize("quadrature", ["midpoint", pytest.param("gauss-legendre-2", marks=pytest.mark.mpi)])
@@ -298,7 +323,7 @@ def test_blocks_collide_with_exact_energy_and_bounded_penetration():
         drift = max(drift, abs(diag.pseudo_energy - first.pseudo_energy) / first.mechanical)
         up = c.patch_values(stepper.u)
         deepest = min(deepest, dem.comm.allreduce(c.outputs.pair_states(up)[0].min(initial=np.inf), op=MPI.MIN))
-        penetration = max(penetration, c.outputs.penetration(up))
+        penetration = max(penetration, c.outputs.penetration(up)[0])
     assert deepest < -1e-3  # the cell gaps do go negative: the contact is active
     assert penetration < 0.3 * -deepest
     assert drift < 1e-13

@@ -52,10 +52,10 @@ def test_first_contact_penetration_limit_and_momentum_change():
     def statistics(s, t=1.0):
         stepper.u.set(0.0)
         stats = PairContactStatistics(problem, stepper, np.zeros(2), 0.5)
-        stats.record(t - dt, stepper, 0.0, np.zeros(2))  # apart: remembers the state
+        stats.record(t - dt, stepper, (0.0, 0.0), np.zeros(2))  # apart: remembers the state
         assert stats.first_contact is None
         stepper.u.array.reshape(-1, 2)[:, 0] = np.where(left, s, -s)
-        stats.record(t, stepper, 0.0, np.array([0.5, -2.0]))
+        stats.record(t, stepper, (0.0, 0.0), np.array([0.5, -2.0]))
         return stats
 
     slow, fast = (statistics(s).first_contact - (1.0 - dt) for s in (0.016, 0.02))
@@ -64,12 +64,12 @@ def test_first_contact_penetration_limit_and_momentum_change():
     stats = statistics(0.02)
     assert stats.free and stats.p_scale == pytest.approx(0.3 * mass, rel=1e-12)
     assert stats.momentum_change == 2.0
-    size = problem.find(PairContact).facet_size
-    stats.record(1.0 + dt, stepper, 0.4 * size, np.array([0.0, 1.0]))
-    assert stats.penetration == 0.4 * size and stats.momentum_change == 2.0
+    stats.record(1.0 + dt, stepper, (0.004, 0.4), np.array([0.0, 1.0]))
+    assert stats.penetration == 0.004 and stats.penetration_ratio == 0.4 and stats.momentum_change == 2.0
     state = stats.state()
-    with pytest.raises(UnresolvedContactError, match=r"interpenetrate by .*, 0.6 of the candidate facets' mean size"):
-        stats.record(1.0 + 2 * dt, stepper, 0.6 * size, np.zeros(2))
+    with pytest.raises(UnresolvedContactError, match=r"interpenetrate by 0.6 of a candidate facet's diameter "
+                                                     r"\(deepest: 0.006 m\)"):
+        stats.record(1.0 + 2 * dt, stepper, (0.006, 0.6), np.zeros(2))
     again = PairContactStatistics(problem, stepper, np.zeros(2), 0.5)
     again.restore(state, stepper)
     assert again.state() == state and again.previous is None  # contact already found

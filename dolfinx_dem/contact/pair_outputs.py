@@ -10,6 +10,7 @@ import numpy as np
 from mpi4py import MPI
 from petsc4py import PETSc
 
+from dolfinx_dem.contact.facets import reach
 from dolfinx_dem.errors import StateError
 from dolfinx_dem.kernels import Struct, lib, pointer
 
@@ -21,6 +22,7 @@ class PairOutputs:
     def __init__(self, contact, grad_weights: np.ndarray):
         self.contact = contact
         self._grad_weights = grad_weights  # a_f / |c| of the local facets' cells (eq. (8))
+        self.penetration_ratio = 0.0  # of the last output_values
 
     def facet_corrections(self, up: np.ndarray) -> np.ndarray:
         """u_f - u_f^free of the local facets (eq. (31), directions of
@@ -40,32 +42,40 @@ class PairOutputs:
         own = slice(0, pc.num_own)
         return pc.cells[own], np.einsum("ni,nj->nij", self.facet_corrections(up)[own], self._grad_weights[own])
 
-    def penetration(self, up: np.ndarray) -> float:
-        """Largest interpenetration (m, >= 0) of the contact-aware facet reconstructions: over the
-        own facets, the overlap-weighted mean over their touching partners (g < 0) of the reconstructed gap
-        (x_f' + u_f' - x_f - u_f) . n, negated (collective). Eq. (31) makes it zero when each
-        facet has one partner covering it exactly; partial overlaps (facets sliding against each
-        other) leave a gap of the order of the cell gap times the uncovered fraction. The
-        corrections of the partners come from their owners (a scatter over the candidates)."""
+    def penetration(self, up: np.ndarray) -> tuple[float, float]:
+        """Largest interpenetration of the contact-aware facet reconstructions, as (depth in m,
+        depth over the local facet diameter), each >= 0 and the largest over the own facets
+        (collective). A facet's depth: with touching partners (g < 0, w > 0), the overlap-weighted
+        mean over them of the reconstructed gap (x_f' + u_f' - x_f - u_f) . n, negated; eq. (31)
+        makes it zero when each facet has one partner covering it exactly, and partial overlaps
+        (facets sliding against each other) leave a gap of the order of the cell gap times the
+        uncovered fraction. Without any (a facet that slid into a hole of the other body's mosaic
+        overlaps no partner): its depth behind the plane of its nearest listed partner (reconstructed
+        barycentres), whose outward normal tells inside from outside. The corrections of the
+        partners come from their owners (a scatter over the candidates)."""
         pc = self.contact
-        F, at = pc.facets_all, pc.state(up)
+        F, at, L = pc.facets_all, pc.state(up), pc.listed
         uf = at.uc + pc.pair_list.candidate_values(self.facet_corrections(up)[: pc.num_own])
         weight, mean = np.zeros(len(F)), np.zeros(len(F))
-        worst = np.array(
-            [
-                lib.dem_pair_penetration(
-                    pc.pair_list.c_pairs.c,
-                    at.kernel_state.c,
-                    pointer(F.centre),
-                    pointer(uf),
-                    pc.num_own,
-                    pointer(weight),
-                    pointer(mean),
-                )
-            ]
-        )
+        lib.dem_pair_penetration(pc.pair_list.c_pairs.c, at.kernel_state.c, pointer(F.centre), pointer(uf),
+                                 pointer(weight), pointer(mean))
+        own = np.arange(len(F)) < pc.num_own
+        covered = own & (weight > 0)
+        depth = np.zeros(len(F))
+        depth[covered] = np.maximum(-mean[covered] / weight[covered], 0.0)
+        # the facets without touching partners: how far behind their nearest partner they lie
+        y = F.centre + uf
+        facet, partner = np.concatenate([L.i, L.j]), np.concatenate([L.j, L.i])
+        keep = own[facet] & ~covered[facet]
+        facet, partner = facet[keep], partner[keep]
+        offset = y[facet] - y[partner]
+        order = np.lexsort((np.einsum("pi,pi->p", offset, offset), facet))
+        first = order[np.unique(facet[order], return_index=True)[1]]
+        depth[facet[first]] = np.maximum(-np.einsum("pi,pi->p", offset[first], F.normal[partner[first]]), 0.0)
+        depth = depth[own]
+        worst = np.array([depth.max(initial=0.0), (depth / (2 * reach(F)[own])).max(initial=0.0)])
         pc.comm.Allreduce(MPI.IN_PLACE, worst, op=MPI.MAX)
-        return float(worst[0])
+        return float(worst[0]), float(worst[1])
 
     def pair_states(self, up: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Gap g and overlap w of the pairs listed on this process (``listed``; indices into
@@ -184,8 +194,10 @@ class PairOutputs:
 
     def output_values(self, up: np.ndarray, sums: np.ndarray) -> list[float]:
         """The values of ``output_columns`` from the reduced ``output_sums``: the penetration's
-        scatter and reduction only where some process has a closed pair (collective)."""
-        return [sums[-2], self.penetration(up) if sums[-1] > 0 else 0.0, *sums[:-2]]
+        scatter and reduction only where some process has a closed pair (collective). Its depth
+        over the local facet diameter is kept as ``penetration_ratio`` (the run's check)."""
+        depth, self.penetration_ratio = self.penetration(up) if sums[-1] > 0 else (0.0, 0.0)
+        return [sums[-2], depth, *sums[:-2]]
 
     def smallest_gap(self, up: np.ndarray) -> float:
         """The smallest gap of the pairs that overlap (w > 0), over all processes (m; inf if none)."""

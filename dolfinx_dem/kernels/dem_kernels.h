@@ -213,7 +213,7 @@ void dem_pair_facet_corrections(const dem_pairs *pairs, const dem_pair_state *st
                                 double *work, double *out);
 int64_t dem_pair_body_forces(const dem_pairs *pairs, const dem_pair_state *state, const int64_t *body,
                              int64_t n_bodies, const int64_t *index, double *out);
-double dem_pair_penetration(const dem_pairs *pairs, const dem_pair_state *state, const double *centre,
-                            const double *uf, int64_t n_own, double *weight, double *mean);
+void dem_pair_penetration(const dem_pairs *pairs, const dem_pair_state *state, const double *centre,
+                          const double *uf, double *weight, double *mean);
 
 #endif

@@ -60,14 +60,13 @@ int64_t dem_pair_body_forces(const dem_pairs *pairs, const dem_pair_state *state
   return missing;
 }
 
-/* pair_contact.PairContact.penetration after the scatter of the facet corrections: for the
+/* pair_outputs.PairOutputs.penetration after the scatter of the facet corrections: for the
  * closed pairs p of the state (facets (i, j), normals) with w_p > 0, the reconstructed gap
  * (x_j + u_j - x_i - u_i) . n (centre: the known facets' barycentres x, uf: their reconstructions
- * u, n_facets x d), and for each of the first n_own facets touched the overlap-weighted mean of
- * its pairs' gaps; returns the largest of their negatives, or 0. weight and mean: n_facets, zero
- * on entry (work). */
-double dem_pair_penetration(const dem_pairs *pairs, const dem_pair_state *state, const double *restrict centre,
-                            const double *restrict uf, int64_t n_own, double *restrict weight, double *restrict mean)
+ * u, n_facets x d), summed into each facet's overlap weight (weight) and overlap-weighted gap
+ * (mean): n_facets, zero on entry. */
+void dem_pair_penetration(const dem_pairs *pairs, const dem_pair_state *state, const double *restrict centre,
+                          const double *restrict uf, double *restrict weight, double *restrict mean)
 {
   const int32_t d = pairs->d;
   const int64_t *restrict i = pairs->i, *restrict j = pairs->j, *restrict p = state->closed;
@@ -86,9 +85,4 @@ double dem_pair_penetration(const dem_pairs *pairs, const dem_pair_state *state,
     mean[i[q]] += w[k] * gap;
     mean[j[q]] += w[k] * gap;
   }
-  double worst = 0.0;
-  for (int64_t f = 0; f < n_own; ++f)
-    if (weight[f] > 0 && -mean[f] / weight[f] > worst)
-      worst = -mean[f] / weight[f];
-  return worst;
 }
