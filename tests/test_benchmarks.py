@@ -303,3 +303,17 @@ def test_the_run_comparison_tools_of_contact3d_md(tmp_path):
     assert proc.returncode == 0, proc.stderr
     first = json.loads(proc.stdout)["0"]
     assert first["1"][0] == pytest.approx(-first["2"][0], rel=0.01) and first["1"][0] > 0.1
+
+
+def test_hertz_impact_quick_is_near_hertz(tmp_path):
+    """Two balls meeting at v/c = 0.02 on a coarse contact zone (a / refine_h = 2.1, dem-B, eta = 10 E;
+    measured: duration -11.6 %, approach -9.3 %, force +14 % from Hertz, restitution 0.938), the energy
+    exact; the study under refinement: docs/validation/hertz_impact.md."""
+    _quick("validation/hertz_impact.py", "--out", str(tmp_path / "h.json"))
+    data = json.loads((tmp_path / "h.json").read_text())
+    ref, (run,) = data["hertz"], data["runs"]
+    assert ref["duration"] == pytest.approx(1.2578, rel=1e-3) and ref["approach"] == pytest.approx(8.542e-3, rel=1e-3)
+    assert run["drift"] < 1e-13
+    assert abs(run["duration"] / ref["duration"] - 1) < 0.15 and abs(run["approach"] / ref["approach"] - 1) < 0.15
+    assert abs(run["force"] / ref["force"] - 1) < 0.2 and 0.85 < run["restitution"] <= 1.0
+    assert (tmp_path / "h.md").read_text().startswith("# Hertz impact of two balls")
