@@ -212,6 +212,24 @@ def _pairs(rng, n_facets=6, n=5, d=3):
                   normal=normal, e_i=e_i, e_j=e_j)
 
 
+def test_penetration_of_a_facet_without_partner_over_it():
+    """dem_pair_penetration for own facets that overlap no partner (no closed pair): facet 0 sits 0.1
+    below the plane y = 0 of its neighbours 2 and 3 (a hole between them): 0.1 (the far facet 4
+    facing the other way is not around it); facet 1, beside a convex body, is behind the plane of 5
+    but in front of that of its nearest partner 6: 0."""
+    i, j = np.array([0, 0, 0, 1, 1]), np.array([2, 3, 4, 5, 6])
+    pairs = Struct("dem_pairs", d=2, n_facets=7, n=5, i=i, j=j, normal=np.tile([0.0, 1.0], (5, 1)))
+    state = Struct("dem_pair_state", n=0, closed=np.zeros(0, dtype=np.int64), g=np.zeros(0), w=np.zeros(0),
+                   dw=np.zeros((0, 2)), c=np.zeros(0), mu=np.zeros(0))
+    centre = np.array([[0.0, -0.1], [0.9, -0.05], [-0.5, 0.0], [0.5, 0.0], [5.0, 0.0], [0.0, 0.0], [1.0, -0.2]])
+    normals = np.array([[0.0, -1.0], [0.0, -1.0], [0.0, 1.0], [0.0, 1.0], [0.0, -1.0], [0.0, 1.0], [0.8, 0.6]])
+    reach, depth = np.full(7, 0.3), np.zeros(2)
+    lib.dem_pair_penetration(pairs.c, state.c, pointer(centre), pointer(np.zeros((7, 2))), pointer(normals),
+                             pointer(reach), 2, pointer(np.zeros(7)), pointer(np.zeros(7)), pointer(np.empty(2)),
+                             pointer(depth))
+    assert depth[0] == pytest.approx(0.1, rel=1e-14) and depth[1] == 0.0
+
+
 def test_worst_motion_is_the_largest_motion_relative_to_half_the_skin():
     """dem_pair_worst_motion: the facet maximising |uc - reference|^2 / (skin/2)^2, and that ratio."""
     rng = np.random.default_rng(6)
@@ -228,7 +246,8 @@ def test_facet_forces_corrections_body_forces_and_penetration_are_their_formulas
     """The outputs at a contact state of closed pairs p: dem_pair_facet_forces (mu (w n + g dw)
     on facet i, its opposite on j), dem_pair_facet_corrections (c / |f| e_f on each facet),
     dem_pair_body_forces (the forces between bodies, signed for the lower-numbered body) and
-    dem_pair_penetration (each facet's overlap weight and overlap-weighted reconstructed gap)."""
+    dem_pair_penetration (each facet's overlap-weighted reconstructed gap, or its least depth behind the
+    partners around its nearest)."""
     rng = np.random.default_rng(7)
     d, n_facets = 3, 6
     pairs = _pairs(rng, n_facets, 5, d)
@@ -272,7 +291,10 @@ def test_facet_forces_corrections_body_forces_and_penetration_are_their_formulas
 
     centre, uf = rng.standard_normal((n_facets, d)), rng.standard_normal((n_facets, d))
     weight, mean = np.zeros(n_facets), np.zeros(n_facets)
-    lib.dem_pair_penetration(pairs.c, state.c, pointer(centre), pointer(uf), pointer(weight), pointer(mean))
+    normals, reach = rng.standard_normal((n_facets, d)), 0.2 * rng.random(n_facets)
+    depth = np.zeros(4)
+    lib.dem_pair_penetration(pairs.c, state.c, pointer(centre), pointer(uf), pointer(normals), pointer(reach), 4,
+                             pointer(weight), pointer(mean), pointer(np.empty(4)), pointer(depth))
     x = centre + uf
     gap = np.einsum("pi,pi->p", x[j[closed]] - x[i[closed]], normal[closed])
     on = w > 0
@@ -280,5 +302,15 @@ def test_facet_forces_corrections_body_forces_and_penetration_are_their_formulas
     for f in (i[closed][on], j[closed][on]):
         np.add.at(W, f, w[on])
         np.add.at(M, f, (w * gap)[on])
-    assert np.count_nonzero(W) >= 4 and (M != 0).sum() >= 4
     assert np.allclose(weight, W, rtol=1e-13, atol=0) and np.allclose(mean, M, rtol=1e-13, atol=0)
+    expected = np.zeros(4)
+    for f in range(4):
+        if W[f] > 0:
+            expected[f] = max(-M[f] / W[f], 0.0)
+            continue
+        partners = [o for a, b in zip(i, j) for g, o in ((a, b), (b, a)) if g == f]
+        if partners:  # the least depth behind the partners around the nearest one
+            r = [np.linalg.norm(x[f] - x[o]) for o in partners]
+            around = [o for o, ro in zip(partners, r) if ro <= min(r) + 2 * (reach[f] + reach[o])]
+            expected[f] = max(min(-np.dot(x[f] - x[o], normals[o]) for o in around), 0.0)
+    assert np.allclose(depth, expected, rtol=1e-13, atol=1e-15)

@@ -23,6 +23,7 @@ class PairOutputs:
         self.contact = contact
         self._grad_weights = grad_weights  # a_f / |c| of the local facets' cells (eq. (8))
         self.penetration_ratio = 0.0  # of the last output_values
+        self._reach = (None, None)  # (the known facets, facets.reach of them)
 
     def facet_corrections(self, up: np.ndarray) -> np.ndarray:
         """u_f - u_f^free of the local facets (eq. (31), directions of
@@ -50,30 +51,20 @@ class PairOutputs:
         makes it zero when each facet has one partner covering it exactly, and partial overlaps
         (facets sliding against each other) leave a gap of the order of the cell gap times the
         uncovered fraction. Without any (a facet that slid into a hole of the other body's mosaic
-        overlaps no partner): its depth behind the plane of its nearest listed partner (reconstructed
-        barycentres), whose outward normal tells inside from outside. The corrections of the
-        partners come from their owners (a scatter over the candidates)."""
+        overlaps no partner): the least of its depths behind the planes of its listed partners
+        around the nearest one (``dem_pair_penetration``): in a hole it lies behind all of them,
+        beside a convex body in front of one. The corrections of the partners come from their
+        owners (a scatter over the candidates)."""
         pc = self.contact
-        F, at, L = pc.facets_all, pc.state(up), pc.listed
-        uf = at.uc + pc.pair_list.candidate_values(self.facet_corrections(up)[: pc.num_own])
-        weight, mean = np.zeros(len(F)), np.zeros(len(F))
+        F, at, n = pc.facets_all, pc.state(up), pc.num_own
+        uf = at.uc + pc.pair_list.candidate_values(self.facet_corrections(up)[:n])
+        if self._reach[0] is not F:  # the known facets change with each list build
+            self._reach = (F, reach(F))
+        weight, mean, depth = np.zeros(len(F)), np.zeros(len(F)), np.zeros(n)
         lib.dem_pair_penetration(pc.pair_list.c_pairs.c, at.kernel_state.c, pointer(F.centre), pointer(uf),
-                                 pointer(weight), pointer(mean))
-        own = np.arange(len(F)) < pc.num_own
-        covered = own & (weight > 0)
-        depth = np.zeros(len(F))
-        depth[covered] = np.maximum(-mean[covered] / weight[covered], 0.0)
-        # the facets without touching partners: how far behind their nearest partner they lie
-        y = F.centre + uf
-        facet, partner = np.concatenate([L.i, L.j]), np.concatenate([L.j, L.i])
-        keep = own[facet] & ~covered[facet]
-        facet, partner = facet[keep], partner[keep]
-        offset = y[facet] - y[partner]
-        order = np.lexsort((np.einsum("pi,pi->p", offset, offset), facet))
-        first = order[np.unique(facet[order], return_index=True)[1]]
-        depth[facet[first]] = np.maximum(-np.einsum("pi,pi->p", offset[first], F.normal[partner[first]]), 0.0)
-        depth = depth[own]
-        worst = np.array([depth.max(initial=0.0), (depth / (2 * reach(F)[own])).max(initial=0.0)])
+                                 pointer(F.normal), pointer(self._reach[1]), n, pointer(weight), pointer(mean),
+                                 pointer(np.empty(n)), pointer(depth))
+        worst = np.array([depth.max(initial=0.0), (depth / (2 * self._reach[1][:n])).max(initial=0.0)])
         pc.comm.Allreduce(MPI.IN_PLACE, worst, op=MPI.MAX)
         return float(worst[0]), float(worst[1])
 

@@ -60,13 +60,20 @@ int64_t dem_pair_body_forces(const dem_pairs *pairs, const dem_pair_state *state
   return missing;
 }
 
-/* pair_outputs.PairOutputs.penetration after the scatter of the facet corrections: for the
- * closed pairs p of the state (facets (i, j), normals) with w_p > 0, the reconstructed gap
- * (x_j + u_j - x_i - u_i) . n (centre: the known facets' barycentres x, uf: their reconstructions
- * u, n_facets x d), summed into each facet's overlap weight (weight) and overlap-weighted gap
- * (mean): n_facets, zero on entry. */
+/* pair_outputs.PairOutputs.penetration after the scatter of the facet corrections: the depth of
+ * each of the first n_own known facets inside the other body (depth, n_own), from their
+ * reconstructed barycentres y = x + u (centre: x, uf: u, n_facets x d). A facet with closed pairs
+ * p of the state (g < 0) with w_p > 0: the overlap-weighted mean over them of the reconstructed
+ * gap (y_j - y_i) . n_p, negated (weight and mean: n_facets, zero on entry, its sums). Any other
+ * facet f: the least of its depths -(y_f - y_o) . n_o behind the planes of its listed partners o
+ * around the nearest one (those within the nearest's distance plus twice their two reaches;
+ * facet_normal: the outward normals, n_facets x d; reach: the largest distance from each
+ * barycentre to its vertices, n_facets; nearest: n_own, work): behind all of them, f lies in a
+ * hole of the other body's mosaic; beside a convex body, in front of one. Floored at 0. */
 void dem_pair_penetration(const dem_pairs *pairs, const dem_pair_state *state, const double *restrict centre,
-                          const double *restrict uf, double *restrict weight, double *restrict mean)
+                          const double *restrict uf, const double *restrict facet_normal,
+                          const double *restrict reach, int64_t n_own, double *restrict weight,
+                          double *restrict mean, double *restrict nearest, double *restrict depth)
 {
   const int32_t d = pairs->d;
   const int64_t *restrict i = pairs->i, *restrict j = pairs->j, *restrict p = state->closed;
@@ -84,5 +91,35 @@ void dem_pair_penetration(const dem_pairs *pairs, const dem_pair_state *state, c
     weight[j[q]] += w[k];
     mean[i[q]] += w[k] * gap;
     mean[j[q]] += w[k] * gap;
+  }
+  for (int64_t f = 0; f < n_own; ++f)
+  {
+    nearest[f] = INFINITY; /* the distance to the nearest partner */
+    depth[f] = INFINITY;   /* the least depth behind the partners around it */
+  }
+  for (int32_t pass = 0; pass < 2; ++pass)
+    for (int32_t side = 0; side < 2; ++side)
+      for (int64_t q = 0; q < pairs->n; ++q)
+      {
+        const int64_t f = side == 0 ? i[q] : j[q], o = side == 0 ? j[q] : i[q];
+        if (f >= n_own || weight[f] > 0)
+          continue;
+        double r2 = 0.0, behind = 0.0;
+        for (int32_t x = 0; x < d; ++x)
+        {
+          const double r = (centre[f * d + x] + uf[f * d + x]) - (centre[o * d + x] + uf[o * d + x]);
+          r2 += r * r;
+          behind -= r * facet_normal[o * d + x];
+        }
+        const double r = sqrt(r2);
+        if (pass == 0 && r < nearest[f])
+          nearest[f] = r;
+        else if (pass == 1 && r <= nearest[f] + 2 * (reach[f] + reach[o]) && behind < depth[f])
+          depth[f] = behind;
+      }
+  for (int64_t f = 0; f < n_own; ++f)
+  {
+    const double value = weight[f] > 0 ? -mean[f] / weight[f] : (isfinite(depth[f]) ? depth[f] : 0.0);
+    depth[f] = value > 0 ? value : 0.0;
   }
 }
