@@ -20,6 +20,8 @@ h = 0.03 m elsewhere; each level is run with schemes A and B and eta = E and 10 
 
     .venv/bin/python validation/hertz_impact.py --out docs/validation/hertz_impact.json
     .venv/bin/python validation/hertz_impact.py --quick --out OUT.json   # one coarse level, scheme B, eta = 10 E
+    .venv/bin/python validation/hertz_impact.py --levels 0.006 --methods dem-A --etas 100 --radius 0.06 \\
+        --append --out docs/validation/hertz_impact.json          # more runs in the same tables
 
 It writes the JSON and, next to it, the Markdown page (``--out``'s stem + .md). One process per run.
 """
@@ -49,18 +51,19 @@ def hertz(v: float) -> dict:
             "m_star": m_star}
 
 
-def run(refine_h: float, method: str, eta: float, v: float, cfl: float, work: pathlib.Path) -> dict:
+def run(refine_h: float, method: str, eta: float, v: float, cfl: float, work: pathlib.Path, h: float = 0.03,
+        radius: float = 0.03) -> dict:
     reference = hertz(v)
     end = GAP / v + 1.5 * reference["duration"]
     scene = scenes.load("two-balls", {
         "method": method, "material.eta": eta, "mesh.balls": [[LEFT, 0.0, 0.0, R], [RIGHT, 0.0, 0.0, R]],
-        "mesh.refine_h": refine_h, "mesh.refine_radius": 0.03, "initial.velocity": [
+        "mesh.h": h, "mesh.refine_h": refine_h, "mesh.refine_radius": radius, "initial.velocity": [
             f"where(x < 0.25, {v / 2!r}, {-v / 2!r})", "0", "0"], "time.cfl": cfl, "time.end": end,
         "output.every": 100000, "probes": [{"name": "left", "point": [LEFT, 0.0, 0.0], "component": 0},
                                            {"name": "right", "point": [RIGHT, 0.0, 0.0], "component": 0}]})
-    out = work / f"{method}-{eta:g}-{refine_h:g}"
+    out = work / f"{method}-{eta:g}-{refine_h:g}-{h:g}-{radius:g}"
     start = time.perf_counter()
-    row = {"refine_h": refine_h, "method": method, "eta": eta}
+    row = {"h": h, "refine_h": refine_h, "refine_radius": radius, "method": method, "eta": eta}
     try:
         summary = simulation.run(scene, out, quiet=True, overwrite=True)
     except UnresolvedContactError as err:
@@ -73,31 +76,30 @@ def run(refine_h: float, method: str, eta: float, v: float, cfl: float, work: pa
         "cells": summary["n_cells"], "candidates": summary["contact_candidate_facets"], "steps": summary["n_steps"],
         "dt": summary["dt"], "duration": float(t[on[-1]] - t[on[0]]), "force": float(np.abs(force).max()),
         "approach": float((series["left"] - series["right"]).max() - GAP),
-        "restitution": impulse / (reference["m_star"] * v) - 1.0,
-        "penetration_ratio": summary["max_penetration_over_facet_size"],
-        "drift": summary["pseudo_energy_rel_drift"], "wall_s": time.perf_counter() - start}
+        "restitution": impulse / (reference["m_star"] * v) - 1.0, "drift": summary["pseudo_energy_rel_drift"], "wall_s": time.perf_counter() - start}
 
 
-def page(results: dict, command: str) -> str:
+def page(results: dict) -> str:
     ref = results["hertz"]
+    made = ", then ".join(f"`{c}`" for c in results["commands"])
     lines = ["# Hertz impact of two balls", "",
-             f"Made by `{command}` (validation/hertz_impact.py, one process per run; its docstring says what is "
+             f"Made by {made} (validation/hertz_impact.py, one process per run; its docstring says what is "
              "measured and how).", "",
              f"Approach speed v = {results['speed']:g} m/s (v/c = {results['speed']:g}), CFL {results['cfl']:g}. "
              f"Hertz: duration {ref['duration']:.4g} s, largest approach {ref['approach']:.4g} m, largest force "
              f"{ref['force']:.4g} N, contact radius a = {ref['contact_radius']:.4g} m, restitution 1.", "",
-             "| refine_h (m) | a / refine_h | method | eta / E | cells | steps | duration | approach | force | "
-             "restitution | penetration / facet | drift | wall (s) |",
-             "|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
+             "| h, refine_h, radius (m) | a / refine_h | method | eta / E | cells | steps | duration | approach | "
+             "force | restitution | drift | wall (s) |",
+             "|---|---|---|---|---|---|---|---|---|---|---|---|"]
     for r in results["runs"]:
-        head = (f"| {r['refine_h']:g} | {ref['contact_radius'] / r['refine_h']:.2g} | {r['method']} | "
-                f"{r['eta'] / E:g} |")
+        head = (f"| {r.get('h', 0.03):g}, {r['refine_h']:g}, {r.get('refine_radius', 0.03):g} | "
+                f"{ref['contact_radius'] / r['refine_h']:.2g} | {r['method']} | {r['eta'] / E:g} |")
         if "error" in r:
-            lines.append(f"{head} stopped: {r['error']} |||||||||")
+            lines.append(f"{head} stopped: {r['error']} ||||||||")
             continue
         lines.append(f"{head} {r['cells']} | {r['steps']} | {r['duration'] / ref['duration'] - 1:+.2%} | "
                      f"{r['approach'] / ref['approach'] - 1:+.2%} | {r['force'] / ref['force'] - 1:+.2%} | "
-                     f"{r['restitution']:.4f} | {r['penetration_ratio']:.3f} | {r['drift']:.1e} | {r['wall_s']:.0f} |")
+                     f"{r['restitution']:.4f} | {r['drift']:.1e} | {r['wall_s']:.0f} |")
     lines += ["", "Duration, approach and force: relative differences from Hertz."]
     return "\n".join(lines) + "\n"
 
@@ -107,25 +109,34 @@ def main():
     parser.add_argument("--levels", type=float, nargs="+", default=[0.006, 0.004, 0.0027], help="refine_h (m)")
     parser.add_argument("--methods", nargs="+", default=["dem-B", "dem-A"])
     parser.add_argument("--etas", type=float, nargs="+", default=[E, 10 * E], help="material.eta (Pa)")
+    parser.add_argument("--h", type=float, default=0.03, help="mesh.h away from the contact zone (m)")
+    parser.add_argument("--radius", type=float, default=0.03, help="mesh.refine_radius (m)")
     parser.add_argument("--speed", type=float, default=0.02, help="approach speed (m/s)")
     parser.add_argument("--cfl", type=float, default=0.5)
     parser.add_argument("--quick", action="store_true", help="one coarse level, dem-B, eta = 10 E")
+    parser.add_argument("--append", action="store_true", help="add the runs to those of --out (same speed, cfl)")
     parser.add_argument("--out", type=pathlib.Path, required=True)
     args = parser.parse_args()
     if args.quick:
         args.levels, args.methods, args.etas = [0.01], ["dem-B"], [10 * E]
-    results = {"speed": args.speed, "cfl": args.cfl, "hertz": hertz(args.speed), "runs": []}
+    results = {"speed": args.speed, "cfl": args.cfl, "hertz": hertz(args.speed), "runs": [], "commands": []}
+    if args.append:
+        results = json.loads(args.out.read_text())
+        if (results["speed"], results["cfl"]) != (args.speed, args.cfl):
+            raise SystemExit(f"{args.out} has speed {results['speed']} and cfl {results['cfl']}: append the same")
     with tempfile.TemporaryDirectory() as work:
         for h in args.levels:
             for method in args.methods:
                 for eta in args.etas:
-                    results["runs"].append(run(h, method, eta, args.speed, args.cfl, pathlib.Path(work)))
+                    results["runs"].append(run(h, method, eta, args.speed, args.cfl, pathlib.Path(work), args.h,
+                                               args.radius))
                     print(json.dumps(results["runs"][-1]), flush=True)
-    args.out.write_text(json.dumps(results, indent=1) + "\n")
-    command = "validation/hertz_impact.py " + ("--quick" if args.quick else " ".join(
+    results["commands"].append("validation/hertz_impact.py " + ("--quick" if args.quick else " ".join(
         [f"--levels {' '.join(f'{h:g}' for h in args.levels)}", f"--methods {' '.join(args.methods)}",
-         f"--etas {' '.join(f'{e:g}' for e in args.etas)}", f"--speed {args.speed:g}", f"--cfl {args.cfl:g}"]))
-    args.out.with_suffix(".md").write_text(page(results, command))
+         f"--etas {' '.join(f'{e:g}' for e in args.etas)}", f"--h {args.h:g}", f"--radius {args.radius:g}",
+         f"--speed {args.speed:g}", f"--cfl {args.cfl:g}"])) + (" --append" if args.append else ""))
+    args.out.write_text(json.dumps(results, indent=1) + "\n")
+    args.out.with_suffix(".md").write_text(page(results))
 
 
 if __name__ == "__main__":
