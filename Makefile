@@ -150,6 +150,9 @@ validate: setup
 	$(PYTHON) validation/two_materials.py --meshes 350 700 1400 2800 --out docs/validation/two_materials.json
 	$(PYTHON) validation/scheme_b.py --out docs/validation/scheme_b.json
 	$(PYTHON) validation/hertz_impact.py --out docs/validation/hertz_impact.json
+	$(PYTHON) validation/hertz_impact.py --levels 0.006 --methods dem-A --etas 100 --radius 0.06 --append --out docs/validation/hertz_impact.json
+	$(PYTHON) validation/hertz_impact.py --levels 0.006 --methods dem-A --etas 100 --h 0.015 --append --out docs/validation/hertz_impact.json
+	$(PYTHON) validation/hertz_impact.py --levels 0.006 0.004 --methods dem-A --etas 100 --h 0.015 --speed 0.01 --out docs/validation/hertz_impact_slow.json
 	$(PYTHON) validation/kill_loop.py --processes 1 2 3 --kills 140 30 30 --out docs/validation/kill_loop.json
 	$(PYTHON) validation/indentation_fem.py --out docs/validation/indentation_fem.json
 	$(PYTHON) validation/indentation_fem.py --meshes 0.0005 --out docs/validation/indentation_fem_fine.json
