@@ -223,11 +223,12 @@ def test_penetration_of_a_facet_without_partner_over_it():
                    dw=np.zeros((0, 2)), c=np.zeros(0), mu=np.zeros(0))
     centre = np.array([[0.0, -0.1], [0.9, -0.05], [-0.5, 0.0], [0.5, 0.0], [5.0, 0.0], [0.0, 0.0], [1.0, -0.2]])
     normals = np.array([[0.0, -1.0], [0.0, -1.0], [0.0, 1.0], [0.0, 1.0], [0.0, -1.0], [0.0, 1.0], [0.8, 0.6]])
-    reach, depth = np.full(7, 0.3), np.zeros(2)
+    reach, depth, scale = np.array([0.3, 0.3, 0.3, 0.5, 0.9, 0.3, 0.3]), np.zeros(2), np.zeros(2)
     lib.dem_pair_penetration(pairs.c, state.c, pointer(centre), pointer(np.zeros((7, 2))), pointer(normals),
                              pointer(reach), 2, pointer(np.zeros(7)), pointer(np.zeros(7)), pointer(np.empty(2)),
-                             pointer(depth))
+                             pointer(depth), pointer(scale))
     assert depth[0] == pytest.approx(0.1, rel=1e-14) and depth[1] == 0.0
+    assert list(scale) == [0.5, 0.3]  # the largest reach of the facet and the partners around it (not 4's)
 
 
 def test_worst_motion_is_the_largest_motion_relative_to_half_the_skin():
@@ -293,8 +294,9 @@ def test_facet_forces_corrections_body_forces_and_penetration_are_their_formulas
     weight, mean = np.zeros(n_facets), np.zeros(n_facets)
     normals, reach = rng.standard_normal((n_facets, d)), 0.2 * rng.random(n_facets)
     depth = np.zeros(4)
+    scale = np.zeros(4)
     lib.dem_pair_penetration(pairs.c, state.c, pointer(centre), pointer(uf), pointer(normals), pointer(reach), 4,
-                             pointer(weight), pointer(mean), pointer(np.empty(4)), pointer(depth))
+                             pointer(weight), pointer(mean), pointer(np.empty(4)), pointer(depth), pointer(scale))
     x = centre + uf
     gap = np.einsum("pi,pi->p", x[j[closed]] - x[i[closed]], normal[closed])
     on = w > 0
@@ -313,4 +315,7 @@ def test_facet_forces_corrections_body_forces_and_penetration_are_their_formulas
             r = [np.linalg.norm(x[f] - x[o]) for o in partners]
             around = [o for o, ro in zip(partners, r) if ro <= min(r) + 2 * (reach[f] + reach[o])]
             expected[f] = max(min(-np.dot(x[f] - x[o], normals[o]) for o in around), 0.0)
+    read = [[f] + ([o for k, p in enumerate(closed) if w[k] > 0 for g, o in ((i[p], j[p]), (j[p], i[p])) if g == f]
+                   if W[f] > 0 else []) for f in range(4)]
+    assert np.array_equal(scale[W[:4] > 0], [max(reach[o] for o in read[f]) for f in range(4) if W[f] > 0])
     assert np.allclose(depth, expected, rtol=1e-13, atol=1e-15)

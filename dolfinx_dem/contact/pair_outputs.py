@@ -46,7 +46,9 @@ class PairOutputs:
     def penetration(self, up: np.ndarray) -> tuple[float, float]:
         """Largest interpenetration of the contact-aware facet reconstructions, as (depth in m,
         depth over the local facet diameter), each >= 0 and the largest over the own facets
-        (collective). A facet's depth: with touching partners (g < 0, w > 0), the overlap-weighted
+        (collective); the local diameter of a facet: the largest of its own and those of the
+        partners its depth reads (a fine facet against a coarse mosaic sits as deep as the coarse
+        facets allow). A facet's depth: with touching partners (g < 0, w > 0), the overlap-weighted
         mean over them of the reconstructed gap (x_f' + u_f' - x_f - u_f) . n, negated; eq. (31)
         makes it zero when each facet has one partner covering it exactly, and partial overlaps
         (facets sliding against each other) leave a gap of the order of the cell gap times the
@@ -60,11 +62,11 @@ class PairOutputs:
         uf = at.uc + pc.pair_list.candidate_values(self.facet_corrections(up)[:n])
         if self._reach[0] is not F:  # the known facets change with each list build
             self._reach = (F, reach(F))
-        weight, mean, depth = np.zeros(len(F)), np.zeros(len(F)), np.zeros(n)
+        weight, mean, depth, scale = np.zeros(len(F)), np.zeros(len(F)), np.zeros(n), np.zeros(n)
         lib.dem_pair_penetration(pc.pair_list.c_pairs.c, at.kernel_state.c, pointer(F.centre), pointer(uf),
                                  pointer(F.normal), pointer(self._reach[1]), n, pointer(weight), pointer(mean),
-                                 pointer(np.empty(n)), pointer(depth))
-        worst = np.array([depth.max(initial=0.0), (depth / (2 * self._reach[1][:n])).max(initial=0.0)])
+                                 pointer(np.empty(n)), pointer(depth), pointer(scale))
+        worst = np.array([depth.max(initial=0.0), (depth / (2 * scale)).max(initial=0.0)])
         pc.comm.Allreduce(MPI.IN_PLACE, worst, op=MPI.MAX)
         return float(worst[0]), float(worst[1])
 

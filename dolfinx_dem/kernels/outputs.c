@@ -69,11 +69,14 @@ int64_t dem_pair_body_forces(const dem_pairs *pairs, const dem_pair_state *state
  * around the nearest one (those within the nearest's distance plus twice their two reaches;
  * facet_normal: the outward normals, n_facets x d; reach: the largest distance from each
  * barycentre to its vertices, n_facets; nearest: n_own, work): behind all of them, f lies in a
- * hole of the other body's mosaic; beside a convex body, in front of one. Floored at 0. */
+ * hole of the other body's mosaic; beside a convex body, in front of one. Floored at 0. scale
+ * (n_own): the largest reach of f and of the partners its depth reads, the size its depth is
+ * compared with. */
 void dem_pair_penetration(const dem_pairs *pairs, const dem_pair_state *state, const double *restrict centre,
                           const double *restrict uf, const double *restrict facet_normal,
                           const double *restrict reach, int64_t n_own, double *restrict weight,
-                          double *restrict mean, double *restrict nearest, double *restrict depth)
+                          double *restrict mean, double *restrict nearest, double *restrict depth,
+                          double *restrict scale)
 {
   const int32_t d = pairs->d;
   const int64_t *restrict i = pairs->i, *restrict j = pairs->j, *restrict p = state->closed;
@@ -96,6 +99,17 @@ void dem_pair_penetration(const dem_pairs *pairs, const dem_pair_state *state, c
   {
     nearest[f] = INFINITY; /* the distance to the nearest partner */
     depth[f] = INFINITY;   /* the least depth behind the partners around it */
+    scale[f] = reach[f];
+  }
+  for (int64_t k = 0; k < state->n; ++k)
+  {
+    const int64_t q = p[k];
+    if (!(w[k] > 0))
+      continue;
+    if (i[q] < n_own && reach[j[q]] > scale[i[q]])
+      scale[i[q]] = reach[j[q]];
+    if (j[q] < n_own && reach[i[q]] > scale[j[q]])
+      scale[j[q]] = reach[i[q]];
   }
   for (int32_t pass = 0; pass < 2; ++pass)
     for (int32_t side = 0; side < 2; ++side)
@@ -114,8 +128,13 @@ void dem_pair_penetration(const dem_pairs *pairs, const dem_pair_state *state, c
         const double r = sqrt(r2);
         if (pass == 0 && r < nearest[f])
           nearest[f] = r;
-        else if (pass == 1 && r <= nearest[f] + 2 * (reach[f] + reach[o]) && behind < depth[f])
-          depth[f] = behind;
+        else if (pass == 1 && r <= nearest[f] + 2 * (reach[f] + reach[o]))
+        {
+          if (behind < depth[f])
+            depth[f] = behind;
+          if (reach[o] > scale[f])
+            scale[f] = reach[o];
+        }
       }
   for (int64_t f = 0; f < n_own; ++f)
   {
