@@ -2,7 +2,7 @@
 calling them: C pointers to numpy arrays, the structs of ``dem_kernels.h``, the build's single
 declaration of every kernel. The kernels that need a mesh (the flight, the contact state, the
 force integral, the overlap, the pairs' rows) are tested through ``PairContact`` in
-test_pair_contact.py."""
+test_pair_contact.py, test_pair_contact3d.py and test_overlap.py."""
 
 import gc
 import pathlib
