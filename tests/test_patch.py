@@ -1,12 +1,13 @@
-"""The contact patches (contact/patch.py): the scatter of a patch's dofs between processes, the
-compiled sums, the exact integral of a negative part and the pieces cut at break times."""
+"""The contact patches (contact/patch.py): the scatter of a patch's dofs between processes; the
+pieces that break times cut a step into (the compiled ``dem_piecewise_midpoints``)."""
 
 import numpy as np
 import pytest
 from mpi4py import MPI
 from petsc4py import PETSc
 
-from dolfinx_dem.contact.patch import PatchScatter, negative_part_integral, scatter_sum
+from dolfinx_dem.contact.patch import PatchScatter
+from dolfinx_dem.kernels import lib, pointer
 
 
 @pytest.mark.mpi
@@ -34,34 +35,17 @@ def test_a_patch_gathers_and_adds_any_processes_dofs():
     assert np.array_equal(out.array_r, counts[lo:hi])
 
 
-def test_scatter_sum_is_add_at_bit_for_bit():
-    rng = np.random.default_rng(1)
-    index, values = rng.integers(0, 9, 200), rng.standard_normal((200, 3))
-    expected = np.zeros((9, 3))
-    np.add.at(expected, index, values)
-    assert np.array_equal(scatter_sum(index, values, 9), expected)
-    expected1 = np.zeros(9)
-    np.add.at(expected1, index, values[:, 0])
-    assert np.array_equal(scatter_sum(index, values[:, 0], 9), expected1)
-
-
-def test_the_negative_part_integral_is_exact():
-    """int_0^dt min(g0 + s tau, 0) dtau against a fine midpoint sum, in every case: negative
-    throughout, positive throughout, a root inside from either side, a zero slope."""
-    g0 = np.array([-1.0, 1.0, -1.0, 1.0, -2.0, 0.5])
-    slope = np.array([-1.0, 1.0, 4.0, -4.0, 0.0, 0.0])
-    dt, m = 0.5, 200000
-    tau = (np.arange(m) + 0.5) * dt / m
-    fine = np.minimum(g0[:, None] + slope[:, None] * tau, 0.0).sum(axis=1) * dt / m
-    exact = negative_part_integral(g0, slope, dt)
-    assert np.abs(exact - fine).max() < 1e-9
-    assert exact[1] == 0.0 and exact[5] == 0.0 and exact[4] == -1.0
-
-
 def test_piecewise_midpoints_cut_each_row_at_its_sorted_times():
     """The compiled cutting of [0, dt] at each row's break times (any order and count per row;
     rows without any keep one piece), against sorting them row by row."""
-    from dolfinx_dem.contact.patch import piecewise_midpoints
+
+    def piecewise_midpoints(rows, times, n, dt):
+        counts = np.bincount(rows, minlength=n)
+        k = int(counts.max(initial=0))
+        points, mid, length = np.empty((n, k + 2)), np.empty((n, k + 1)), np.empty((n, k + 1))
+        lib.dem_piecewise_midpoints(len(rows), pointer(rows), pointer(times), n, k, dt, pointer(counts),
+                                    pointer(points), pointer(mid), pointer(length))
+        return mid, length
 
     rng = np.random.default_rng(3)
     n, dt = 7, 0.5

@@ -15,18 +15,6 @@ from __future__ import annotations
 import numpy as np
 from petsc4py import PETSc
 
-from dolfinx_dem.kernels import lib, pointer
-
-
-def scatter_sum(index: np.ndarray, values: np.ndarray, n: int) -> np.ndarray:
-    """out[index[k]] += values[k] for values of shape (k,) or (k, m), into zeros of n rows: the
-    sums of ``np.add.at`` in the same order (the same bits), by ``np.bincount`` per column, many
-    times faster on numpy 1.24."""
-    if values.ndim == 1:
-        return np.bincount(index, weights=values, minlength=n)
-    return np.stack([np.bincount(index, weights=values[:, k], minlength=n) for k in range(values.shape[1])],
-                    axis=1).reshape(n, *values.shape[1:])
-
 
 class PatchScatter:
     """Values of distributed vectors (layout of ``template``) at the global dofs ``dofs``, and
@@ -64,30 +52,3 @@ class PatchScatter:
         the processes."""
         self._local.stateIncrease()  # written through its array
         self._scatter.scatter(self._local, vec, PETSc.InsertMode.ADD_VALUES, PETSc.ScatterMode.REVERSE)
-
-
-def negative_part_integral(g0: np.ndarray, slope: np.ndarray, dt: float) -> np.ndarray:
-    """int_0^dt min(g0 + slope tau, 0) dtau, exactly, for arrays g0 and slope."""
-    end = g0 + slope * dt
-    with np.errstate(divide="ignore", invalid="ignore"):
-        root = np.where(slope != 0, -g0 / slope, np.inf)
-    # the interval [a, b] of [0, dt] where the affine function is negative
-    a = np.where(g0 < 0, 0.0, np.clip(root, 0.0, dt))
-    b = np.where(end < 0, dt, np.clip(root, 0.0, dt))
-    b = np.where((g0 >= 0) & (end >= 0), a, b)
-    return (b - a) * (g0 + slope * 0.5 * (a + b))
-
-
-def piecewise_midpoints(rows: np.ndarray, times: np.ndarray, n: int, dt: float) -> tuple[np.ndarray, np.ndarray]:
-    """Break times ``times`` in (0, dt) of rows ``rows`` (0 <= rows < n, any order and count per
-    row): the midpoints and lengths of the pieces of [0, dt] they cut each row into, as (n, K)
-    arrays; rows with fewer breaks are padded with pieces of zero length (the compiled kernel
-    ``dem_piecewise_midpoints``: each row's times sorted by insertion)."""
-    rows = np.ascontiguousarray(rows, dtype=np.int64)
-    times = np.ascontiguousarray(times, dtype=np.float64)
-    counts = np.bincount(rows, minlength=n)
-    k = int(counts.max(initial=0))
-    points, mid, length = np.empty((n, k + 2)), np.empty((n, k + 1)), np.empty((n, k + 1))
-    lib.dem_piecewise_midpoints(len(rows), pointer(rows), pointer(times), n, k, float(dt), pointer(counts),
-                                pointer(points), pointer(mid), pointer(length))
-    return mid, length

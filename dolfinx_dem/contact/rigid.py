@@ -36,9 +36,10 @@ from petsc4py import PETSc
 
 from dolfinx_dem.conditions import facet_indices
 from dolfinx_dem.contact import candidates
-from dolfinx_dem.contact.patch import PatchScatter, negative_part_integral, piecewise_midpoints, scatter_sum
+from dolfinx_dem.contact.patch import PatchScatter
 from dolfinx_dem.contact.rigid_statics import RigidStatics
 from dolfinx_dem.errors import InputError
+from dolfinx_dem.kernels import Struct, arena, csr_of, lib, pointer
 
 #: Patch operators with at most this many entries are stored as dense arrays: a sparse
 #: product costs microseconds of Python overhead even for the three dofs of a 1D bar.
@@ -70,6 +71,12 @@ def scheme_a_posed(n: np.ndarray, area_normals: np.ndarray) -> np.ndarray:
 def _compact(A: scipy.sparse.spmatrix):
     """A as a dense array if small (see ``_DENSE_ENTRIES``), else as CSR; both support ``@``."""
     return A.toarray() if A.shape[0] * A.shape[1] <= _DENSE_ENTRIES else A.tocsr()
+
+
+def _csr(A) -> Struct:
+    """The ``dem_csr`` of a ``_compact`` operator: a dense one's nonzeros row by row (its
+    products skip only zero terms: the same sums)."""
+    return csr_of(scipy.sparse.csr_matrix(A) if isinstance(A, np.ndarray) else A)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -197,9 +204,14 @@ class RigidContact:
         self._Yq = Y_own.T @ self._q
         G = (Y_own.T @ Y).tocsr()  # y_f . y_f' for the own facets f
         self._G = _compact(G)
-        self._G_coo = G.tocoo()
         self._RnT_own = _compact(Rn[: self.num_own].T)
         self._R_free = _compact(R_free)
+        self._kernel = Struct(
+            "dem_rigid", Rn=_csr(self._Rn), g0=self._g0, n_own=self.num_own, Z=_csr(self._Z), YQ=_csr(self._YQ),
+            G=_csr(G), RnT=_csr(self._RnT_own), Q=_csr(self._Q), Y=_csr(self._Y), Yq=self._Yq, q=self._q,
+            own_row=own_rows.astype(np.int8), elastic=self._is_elastic_row.astype(np.int8))
+        self._arena = arena()
+        self._patch_force = np.zeros(len(self.scatter))
         self._grad_weights = (
             geom.facet_area_normals[self.cells, geom.facet_local[self.facets, 0]] / geom.cell_volumes[self.cells, None]
         )
@@ -318,14 +330,21 @@ class RigidContact:
         r = self._Rn[[k]]
         return float(np.asarray(r @ up).ravel()[0])
 
+    def _check_patch(self, *values: np.ndarray) -> None:
+        """Patch values for the kernels: one float64 per patch dof (they read that many)."""
+        for x in values:
+            if x.shape != (len(self.scatter),) or x.dtype != np.float64:
+                raise ValueError(f"patch values of shape {x.shape} and type {x.dtype}: the rigid contact's patch has "
+                                 f"{len(self.scatter)} float64 dofs")
+
     def energy_correction(self, up: np.ndarray) -> tuple[float, float]:
-        """(elastic, stabilisation) energy changes of this process's own rows (not reduced)."""
-        g = self.gaps(up)
-        if not (g < 0).any():
-            return 0.0, 0.0
-        _, _, a, delta = self._state(up, g=g)
-        change = np.where(self._own_rows, -a * delta + 0.5 * delta**2, 0.0)
-        return float(change[self._is_elastic_row].sum()), float(change[~self._is_elastic_row].sum())
+        """(elastic, stabilisation) energy changes of this process's own rows (not reduced):
+        sum of -a delta + delta^2 / 2 over them (compiled: ``dem_rigid_energy``)."""
+        self._check_patch(up)
+        energy = np.zeros(2)
+        if lib.dem_rigid_energy(self._kernel.c, pointer(up), self._arena, pointer(energy)) < 0:
+            raise MemoryError("the rigid contact's energy kernel ran out of memory")
+        return float(energy[0]), float(energy[1])
 
     # -- events --------------------------------------------------------------------------------
     def force_integral(self, up: np.ndarray, vp: np.ndarray, dt: float, out: PETSc.Vec) -> int:
@@ -338,31 +357,14 @@ class RigidContact:
         part, coefficient_f(tau) r_f with coefficient_f = y_f . (a - delta) on facet f's
         contact, is affine in tau between the events (sign changes) of the candidates that share
         rows with f, so it is split there, and only there (paper §4: an impact elsewhere does not
-        split it), and integrated by the midpoint rule on each piece: exact."""
-        g0, s = self.gaps(up), self._Rn @ vp
-        g1 = g0 + dt * s
-        out_p = self._Z @ negative_part_integral(g0, s, dt)
-        own = slice(0, self.num_own)
-        touching = np.flatnonzero((g0[own] < 0) | (g1[own] < 0))
-        pieces = 1
-        if touching.size:
-            with np.errstate(divide="ignore", invalid="ignore"):
-                tau = np.where(g0 * g1 < 0, -g0 / s, np.inf)
-            G = self._G_coo
-            keep = np.isin(G.row, touching)
-            row, col, val = G.row[keep], G.col[keep], G.data[keep]
-            index = np.searchsorted(touching, row)  # row of each entry among ``touching``
-            event = np.isfinite(tau[col])
-            pairs = np.unique(np.stack([index[event], col[event]], axis=1), axis=0)
-            mid, length = piecewise_midpoints(pairs[:, 0], tau[pairs[:, 1]], len(touching), dt)
-            coefficient = (self._YQ @ up + self._Yq)[touching, None] + mid * (self._YQ @ vp)[touching, None]
-            negative = np.minimum(g0[col, None] + mid[index] * s[col, None], 0.0)
-            coefficient += scatter_sum(index, -val[:, None] * negative, len(coefficient))
-            active = g0[touching, None] + mid * s[touching, None] < 0
-            integral = (length * coefficient * active).sum(axis=1)
-            out_p += self._RnT_own[:, touching] @ integral
-            pieces = mid.shape[1]
-        self.scatter.add(out_p, out)
+        split it), and integrated by the midpoint rule on each piece: exact (compiled:
+        ``dem_rigid_force_integral``)."""
+        self._check_patch(up, vp)
+        pieces = lib.dem_rigid_force_integral(self._kernel.c, pointer(up), pointer(vp), float(dt), self._arena,
+                                              pointer(self._patch_force))
+        if pieces < 0:
+            raise MemoryError("the rigid contact's force integral kernel ran out of memory")
+        self.scatter.add(self._patch_force, out)
         self.evaluations += pieces
         return pieces
 

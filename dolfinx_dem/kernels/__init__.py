@@ -4,9 +4,10 @@
 One C file per concern: ``rows.c`` (energy rows, MEMM update, the stability bound's row sums),
 ``overlap.c`` (overlap geometry), ``flight.c`` (free flight, screen, contact state),
 ``integral.c`` (events, exact force integral), ``outputs.c`` (facet corrections, forces
-between bodies, penetration). The kernels take structs (``dem_csr``, ``dem_pairs``, ...)
-instead of long argument lists: Python builds each once where its arrays are made
-(``Struct``, ``csr``) and passes its pointer (``Struct.c``) per call."""
+between bodies, penetration), ``rigid.c`` (contact with rigid obstacles: force integral,
+energy). The kernels take structs (``dem_csr``, ``dem_pairs``, ...) instead of long argument
+lists: Python builds each once where its arrays are made (``Struct``, ``csr``) and passes its
+pointer (``Struct.c``) per call."""
 
 from __future__ import annotations
 

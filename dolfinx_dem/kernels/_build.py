@@ -14,8 +14,8 @@ HERE = pathlib.Path(__file__).resolve().parent
 ROOT = HERE.parent.parent  # the project: setup.py runs there, and ``compile`` below builds there
 HEADER = HERE / "dem_kernels.h"
 #: one file per concern: energy rows and MEMM, overlap geometry, flight and screen, events and
-#: force integral, outputs
-SOURCES = ["rows.c", "overlap.c", "flight.c", "integral.c", "outputs.c"]
+#: force integral, outputs, rigid obstacles
+SOURCES = ["rows.c", "overlap.c", "flight.c", "integral.c", "outputs.c", "rigid.c"]
 
 
 def declarations(header: str) -> str:

@@ -151,6 +151,23 @@ typedef struct
   int32_t from_flight;
 } dem_pair_state;
 
+/* Contact with rigid obstacles on a process's patch (rigid.RigidContact): the candidates' gaps
+ * g = Rn up + g0 (own candidates first), the rows' part Z (patch x candidates: Q^T Y on the own
+ * rows), the own facets' coefficients y_f . a = YQ up + Yq and Gram rows G (own x candidates),
+ * RnT (patch x own: Rn's own rows transposed), and the touched rows a = Q up + q, delta = Y g^-
+ * with whether each is own and elastic. */
+typedef struct
+{
+  dem_csr Rn;
+  const double *g0;
+  int64_t n_own;
+  dem_csr Z, YQ, G, RnT, Q, Y;
+  const double *Yq;
+  const double *q;
+  const int8_t *own_row;
+  const int8_t *elastic;
+} dem_rigid;
+
 /* Work memory of the contact kernels, kept between their calls (zero-initialised; released by
  * dem_arena_free). */
 typedef struct
@@ -206,6 +223,12 @@ void dem_pair_facet_forces(const dem_pairs *pairs, int64_t n, const int64_t *p, 
 int64_t dem_pair_force_integral(const dem_pairs *pairs, const dem_patch *patch, const double *up,
                                 const dem_flight *flight, const dem_gauss *gauss, dem_arena *work, double *result);
 void dem_arena_free(dem_arena *work);
+
+/* ---- contact with rigid obstacles (rigid.c) --------------------------------------------- */
+
+int64_t dem_rigid_force_integral(const dem_rigid *c, const double *up, const double *vp, double dt, dem_arena *arena,
+                                 double *out);
+int64_t dem_rigid_energy(const dem_rigid *c, const double *up, dem_arena *arena, double *energy);
 
 /* ---- outputs (outputs.c) ---------------------------------------------------------------- */
 
