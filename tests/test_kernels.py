@@ -224,11 +224,13 @@ def test_penetration_of_a_facet_without_partner_over_it():
     centre = np.array([[0.0, -0.1], [0.9, -0.05], [-0.5, 0.0], [0.5, 0.0], [5.0, 0.0], [0.0, 0.0], [1.0, -0.2]])
     normals = np.array([[0.0, -1.0], [0.0, -1.0], [0.0, 1.0], [0.0, 1.0], [0.0, -1.0], [0.0, 1.0], [0.8, 0.6]])
     reach, depth, scale = np.array([0.3, 0.3, 0.3, 0.5, 0.9, 0.3, 0.3]), np.zeros(2), np.zeros(2)
+    worst = np.empty(2)
     lib.dem_pair_penetration(pairs.c, state.c, pointer(centre), pointer(np.zeros((7, 2))), pointer(normals),
-                             pointer(reach), 2, pointer(np.zeros(7)), pointer(np.zeros(7)), pointer(np.empty(2)),
-                             pointer(depth), pointer(scale))
+                             pointer(reach), 2, pointer(np.zeros((2, 7))), pointer(np.empty(2)), pointer(depth),
+                             pointer(scale), pointer(worst))
     assert depth[0] == pytest.approx(0.1, rel=1e-14) and depth[1] == 0.0
     assert list(scale) == [0.5, 0.3]  # the largest reach of the facet and the partners around it (not 4's)
+    assert list(worst) == [depth[0], depth[0] / (2 * 0.5)]  # the largest depth and depth / (2 scale)
 
 
 def test_worst_motion_is_the_largest_motion_relative_to_half_the_skin():
@@ -291,12 +293,12 @@ def test_facet_forces_corrections_body_forces_and_penetration_are_their_formulas
     assert np.allclose(out, expected, rtol=1e-13, atol=1e-15)
 
     centre, uf = rng.standard_normal((n_facets, d)), rng.standard_normal((n_facets, d))
-    weight, mean = np.zeros(n_facets), np.zeros(n_facets)
+    sums = np.zeros((2, n_facets))
+    weight, mean = sums
     normals, reach = rng.standard_normal((n_facets, d)), 0.2 * rng.random(n_facets)
-    depth = np.zeros(4)
-    scale = np.zeros(4)
+    depth, scale, worst = np.zeros(4), np.zeros(4), np.empty(2)
     lib.dem_pair_penetration(pairs.c, state.c, pointer(centre), pointer(uf), pointer(normals), pointer(reach), 4,
-                             pointer(weight), pointer(mean), pointer(np.empty(4)), pointer(depth), pointer(scale))
+                             pointer(sums), pointer(np.empty(4)), pointer(depth), pointer(scale), pointer(worst))
     x = centre + uf
     gap = np.einsum("pi,pi->p", x[j[closed]] - x[i[closed]], normal[closed])
     on = w > 0
@@ -319,3 +321,4 @@ def test_facet_forces_corrections_body_forces_and_penetration_are_their_formulas
                    if W[f] > 0 else []) for f in range(4)]
     assert np.array_equal(scale[W[:4] > 0], [max(reach[o] for o in read[f]) for f in range(4) if W[f] > 0])
     assert np.allclose(depth, expected, rtol=1e-13, atol=1e-15)
+    assert list(worst) == [depth.max(initial=0.0), (depth / (2 * scale)).max(initial=0.0)]

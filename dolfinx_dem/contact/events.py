@@ -27,15 +27,15 @@ def gauss_legendre(d: int) -> tuple[np.ndarray, np.ndarray]:
 @dataclasses.dataclass(frozen=True)
 class Flight:
     """The free flight u + tau v, 0 <= tau <= dt, that ``PairContact.prepare`` checked valid for
-    a step: the patch values ``up``, ``vp`` of u and v, the free facet velocities ``vc``, the
-    screened pairs that may touch during it (``touching``) and whether no pair touches anywhere
-    (``quiet``: the force integral adds nothing on any process)."""
+    a step: the patch values ``up``, ``vp`` of u and v, its screen (``screen_flight``'s struct:
+    the free facet velocities vc and the screened pairs that may touch during it, which the
+    force integral reads) and whether no pair touches anywhere (``quiet``: the force integral
+    adds nothing on any process)."""
 
     up: np.ndarray
     vp: np.ndarray
     dt: float
-    vc: np.ndarray
-    touching: np.ndarray
+    screen: Struct
     quiet: bool
 
 
@@ -143,11 +143,12 @@ def screen_flight(pair_list: PairList, uc: np.ndarray, vp: np.ndarray, dt: float
     return vc, int(k), ratio, (None if found < 0 else flight.arrays["touching"][:found]), flight
 
 
-def integrate_flight(pair_list: PairList, patch: Struct, gauss: Struct, work, up: np.ndarray, vp: np.ndarray,
-                     uc: np.ndarray, vc: np.ndarray, dt: float, touching: np.ndarray, result: np.ndarray) -> int:
+def integrate_flight(pair_list: PairList, patch: Struct, gauss: Struct, work, up: np.ndarray, flight: Struct,
+                     result: np.ndarray) -> int:
     """result += int_0^dt (F - F_free)(u + tau v) dtau at the patch dofs, for the screened pairs
-    ``touching`` of the flight of free facet displacements uc + tau vc (patch values up + tau vp),
-    in one compiled call (``dem_pair_force_integral``); returns the pieces of the pair integral
+    ``touching`` of the flight of free facet displacements uc + tau vc (patch values up + tau vp;
+    ``flight``: the struct of ``screen_flight``, which holds them but up), in one compiled call
+    (``dem_pair_force_integral``); returns the pieces of the pair integral
     with the most pieces. Each touching pair's events (its gap's and its overlap's kinks); the
     pairs sharing an own row (N_pp' != 0) integrated on common pieces, those cut by the events of
     their connected component of that relation (an impact in another component does not split
@@ -156,8 +157,7 @@ def integrate_flight(pair_list: PairList, patch: Struct, gauss: Struct, work, up
     pieces only and interpolated at its component's; the rows' term -Q^T Z int c dtau on the own
     rows the touching pairs' z_p touch (a = Q u + q + tau Q v there: no sliced Q or Z) and the
     pairs' term -int (z_p . (a + delta_a)) dc_p/du dtau at the facets."""
-    c_flight = Struct("dem_flight", uc=uc, vp=vp, vc=vc, dt=float(dt), touching=touching, n_touching=len(touching))
-    pieces = lib.dem_pair_force_integral(pair_list.c_pairs.c, patch.c, pointer(up), c_flight.c, gauss.c, work,
+    pieces = lib.dem_pair_force_integral(pair_list.c_pairs.c, patch.c, pointer(up), flight.c, gauss.c, work,
                                          pointer(result))
     if pieces < 0:
         raise KernelMemoryError("contact between bodies: out of memory in the force integral of a step")

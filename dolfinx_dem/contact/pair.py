@@ -313,11 +313,12 @@ class PairContact:
                         f"contact between bodies: a candidate facet moves {motion:.3e} m in one step, more than half "
                         f"the Verlet skin ({skin:.3e} m): no pair list covers the step; reduce the time step or "
                         "pass a larger skin")
-        # the flight checked valid at both ends, kept for ``force_integral`` (the free facet
-        # velocities and the screen too: none is computed twice per step), and whether no pair
-        # touches anywhere during it
+        # the flight checked valid at both ends, kept for ``force_integral`` with its screen's
+        # struct (the last ``free_flight`` screened, the list standing: ``_end``; the free facet
+        # velocities and the screen are computed once per step), and whether no pair touches
+        # anywhere during it
         quiet = not (drifted_anywhere or may_touch)
-        self._flight = Flight(up, vp, float(dt), vc, screen, quiet) if moving else None
+        self._flight = Flight(up, vp, float(dt), self._end.flight, quiet) if moving else None
         return up, vp
 
     def _touching_keys(self, at: PairState) -> np.ndarray:
@@ -436,18 +437,17 @@ class PairContact:
         flight = self._flight
         if flight is None or flight.up is not up or flight.vp is not vp or flight.dt != dt:
             raise StateError("force_integral needs the patch values that prepare(u, v, dt) returned for this step")
-        uc, vc, touching, quiet = self.state(up).uc, flight.vc, flight.touching, flight.quiet
-        if quiet:  # no pair touches during the step, on any process
+        if flight.quiet:  # no pair touches during the step, on any process
             return 0
         # The pairs whose c_p may not vanish during the step (``free_flight``, in ``prepare``): the
         # others add exact zeros, and splitting their neighbours at their events would only cost.
         result = self.scatter.zeroed()  # the kernel sums into the scatter's own array
         pieces = 0
-        if touching.size:
+        if flight.screen.c.n_touching:
             if len(result) != self.pair_list.Rc.c.n_cols:
                 raise StateError("the force integral's patch and the facets' reconstructions disagree")
-            pieces = integrate_flight(self.pair_list, self._c_patch, self._c_gauss, self._work, up, vp, uc, vc, dt,
-                                      touching, result)
+            pieces = integrate_flight(self.pair_list, self._c_patch, self._c_gauss, self._work, up, flight.screen,
+                                      result)
         self.scatter.add_zeroed(out)
         self.evaluations += len(self._gauss[0]) * pieces
         return len(self._gauss[0]) * pieces

@@ -62,11 +62,10 @@ class PairOutputs:
         uf = at.uc + pc.pair_list.candidate_values(self.facet_corrections(up)[:n])
         if self._reach[0] is not F:  # the known facets change with each list build
             self._reach = (F, reach(F))
-        weight, mean, depth, scale = np.zeros(len(F)), np.zeros(len(F)), np.zeros(n), np.zeros(n)
+        worst = np.empty(2)
         lib.dem_pair_penetration(pc.pair_list.c_pairs.c, at.kernel_state.c, pointer(F.centre), pointer(uf),
-                                 pointer(F.normal), pointer(self._reach[1]), n, pointer(weight), pointer(mean),
-                                 pointer(np.empty(n)), pointer(depth), pointer(scale))
-        worst = np.array([depth.max(initial=0.0), (depth / (2 * scale)).max(initial=0.0)])
+                                 pointer(F.normal), pointer(self._reach[1]), n, pointer(np.zeros((2, len(F)))),
+                                 pointer(np.empty(n)), pointer(np.empty(n)), pointer(np.empty(n)), pointer(worst))
         pc.comm.Allreduce(MPI.IN_PLACE, worst, op=MPI.MAX)
         return float(worst[0]), float(worst[1])
 

@@ -238,6 +238,6 @@ int64_t dem_pair_body_forces(const dem_pairs *pairs, const dem_pair_state *state
                              int64_t n_bodies, const int64_t *index, double *out);
 void dem_pair_penetration(const dem_pairs *pairs, const dem_pair_state *state, const double *centre,
                           const double *uf, const double *facet_normal, const double *reach, int64_t n_own,
-                          double *weight, double *mean, double *nearest, double *depth, double *scale);
+                          double *sums, double *nearest, double *depth, double *scale, double *worst);
 
 #endif

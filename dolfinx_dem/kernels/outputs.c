@@ -60,25 +60,76 @@ int64_t dem_pair_body_forces(const dem_pairs *pairs, const dem_pair_state *state
   return missing;
 }
 
+/* The depths of dem_pair_penetration's facets f < n_own without a touching partner (weight[f] =
+ * 0; nearest, depth: INFINITY on entry), through their listed partners o, the pairs taken in order,
+ * facet i then facet j of each. Pass 0: the nearest partner (squared distances: sqrt is monotone,
+ * so the nearest distance is the same) and the depth behind it, which is one of those the least
+ * is taken over (the nearest lies around itself): where it is not positive the facet's depth is 0
+ * whatever the others, and pass 1 skips it; pass 1: the least depth behind the partners around
+ * the nearest and the largest reach among them (scale). */
+DEM_INLINE void behind_partners(const int32_t d, const dem_pairs *pairs, const double *restrict centre,
+                                const double *restrict uf, const double *restrict facet_normal,
+                                const double *restrict reach, int64_t n_own, const double *restrict weight,
+                                double *restrict nearest, double *restrict depth, double *restrict scale)
+{
+  const int64_t *restrict i = pairs->i, *restrict j = pairs->j;
+  for (int32_t pass = 0; pass < 2; ++pass)
+  {
+    for (int64_t q = 0; q < pairs->n; ++q)
+      for (int32_t side = 0; side < 2; ++side)
+      {
+        const int64_t f = side == 0 ? i[q] : j[q], o = side == 0 ? j[q] : i[q];
+        if (f >= n_own || weight[f] > 0 || (pass == 1 && !(depth[f] > 0)))
+          continue;
+        double r2 = 0.0, behind = 0.0;
+        for (int32_t x = 0; x < d; ++x)
+        {
+          const double r = (centre[f * d + x] + uf[f * d + x]) - (centre[o * d + x] + uf[o * d + x]);
+          r2 += r * r;
+          behind -= r * facet_normal[o * d + x];
+        }
+        if (pass == 0 && r2 < nearest[f])
+        {
+          nearest[f] = r2;
+          depth[f] = behind;
+        }
+        else if (pass == 1 && sqrt(r2) <= nearest[f] + 2 * (reach[f] + reach[o]))
+        {
+          if (behind < depth[f])
+            depth[f] = behind;
+          if (reach[o] > scale[f])
+            scale[f] = reach[o];
+        }
+      }
+    if (pass == 0)
+      for (int64_t f = 0; f < n_own; ++f)
+        nearest[f] = sqrt(nearest[f]);
+  }
+}
+
 /* pair_outputs.PairOutputs.penetration after the scatter of the facet corrections: the depth of
  * each of the first n_own known facets inside the other body (depth, n_own), from their
  * reconstructed barycentres y = x + u (centre: x, uf: u, n_facets x d). A facet with closed pairs
  * p of the state (g < 0) with w_p > 0: the overlap-weighted mean over them of the reconstructed
- * gap (y_j - y_i) . n_p, negated (weight and mean: n_facets, zero on entry, its sums). Any other
+ * gap (y_j - y_i) . n_p, negated (sums: 2 x n_facets, zero on entry: the weights, then the weighted
+ * gaps). Any other
  * facet f: the least of its depths -(y_f - y_o) . n_o behind the planes of its listed partners o
  * around the nearest one (those within the nearest's distance plus twice their two reaches;
  * facet_normal: the outward normals, n_facets x d; reach: the largest distance from each
  * barycentre to its vertices, n_facets; nearest: n_own, work): behind all of them, f lies in a
  * hole of the other body's mosaic; beside a convex body, in front of one. Floored at 0. scale
  * (n_own): the largest reach of f and of the partners its depth reads, the size its depth is
- * compared with. */
+ * compared with (of the facets of positive depth: a facet in front of its nearest partner has
+ * depth 0 whatever the partners around it, which are then not read). worst: the largest depth
+ * and the largest depth / (2 scale), each >= 0 (the run's two figures, in one pass). */
 void dem_pair_penetration(const dem_pairs *pairs, const dem_pair_state *state, const double *restrict centre,
                           const double *restrict uf, const double *restrict facet_normal,
-                          const double *restrict reach, int64_t n_own, double *restrict weight,
-                          double *restrict mean, double *restrict nearest, double *restrict depth,
-                          double *restrict scale)
+                          const double *restrict reach, int64_t n_own, double *restrict sums,
+                          double *restrict nearest, double *restrict depth, double *restrict scale,
+                          double *restrict worst)
 {
   const int32_t d = pairs->d;
+  double *restrict weight = sums, *restrict mean = sums + pairs->n_facets;
   const int64_t *restrict i = pairs->i, *restrict j = pairs->j, *restrict p = state->closed;
   const double *restrict normal = pairs->normal, *restrict w = state->w;
   for (int64_t k = 0; k < state->n; ++k)
@@ -97,8 +148,8 @@ void dem_pair_penetration(const dem_pairs *pairs, const dem_pair_state *state, c
   }
   for (int64_t f = 0; f < n_own; ++f)
   {
-    nearest[f] = INFINITY; /* the distance to the nearest partner */
-    depth[f] = INFINITY;   /* the least depth behind the partners around it */
+    nearest[f] = INFINITY; /* the squared distance to the nearest partner, then the distance */
+    depth[f] = INFINITY;   /* the depth behind the nearest partner, then the least behind those around it */
     scale[f] = reach[f];
   }
   for (int64_t k = 0; k < state->n; ++k)
@@ -111,34 +162,17 @@ void dem_pair_penetration(const dem_pairs *pairs, const dem_pair_state *state, c
     if (j[q] < n_own && reach[i[q]] > scale[j[q]])
       scale[j[q]] = reach[i[q]];
   }
-  for (int32_t pass = 0; pass < 2; ++pass)
-    for (int32_t side = 0; side < 2; ++side)
-      for (int64_t q = 0; q < pairs->n; ++q)
-      {
-        const int64_t f = side == 0 ? i[q] : j[q], o = side == 0 ? j[q] : i[q];
-        if (f >= n_own || weight[f] > 0)
-          continue;
-        double r2 = 0.0, behind = 0.0;
-        for (int32_t x = 0; x < d; ++x)
-        {
-          const double r = (centre[f * d + x] + uf[f * d + x]) - (centre[o * d + x] + uf[o * d + x]);
-          r2 += r * r;
-          behind -= r * facet_normal[o * d + x];
-        }
-        const double r = sqrt(r2);
-        if (pass == 0 && r < nearest[f])
-          nearest[f] = r;
-        else if (pass == 1 && r <= nearest[f] + 2 * (reach[f] + reach[o]))
-        {
-          if (behind < depth[f])
-            depth[f] = behind;
-          if (reach[o] > scale[f])
-            scale[f] = reach[o];
-        }
-      }
+  if (d == 3) /* a constant d: the loops unrolled */
+    behind_partners(3, pairs, centre, uf, facet_normal, reach, n_own, weight, nearest, depth, scale);
+  else
+    behind_partners(2, pairs, centre, uf, facet_normal, reach, n_own, weight, nearest, depth, scale);
+  worst[0] = worst[1] = 0.0;
   for (int64_t f = 0; f < n_own; ++f)
   {
     const double value = weight[f] > 0 ? -mean[f] / weight[f] : (isfinite(depth[f]) ? depth[f] : 0.0);
     depth[f] = value > 0 ? value : 0.0;
+    const double ratio = depth[f] / (2 * scale[f]);
+    worst[0] = depth[f] > worst[0] ? depth[f] : worst[0];
+    worst[1] = ratio > worst[1] ? ratio : worst[1];
   }
 }
