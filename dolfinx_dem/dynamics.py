@@ -445,9 +445,10 @@ def fields(problem: DEMProblem, stepper: MEMM) -> dict:
     v.scale(0.5)
     out = {
         "displacement": dem.function(stepper.u, "displacement"),
-        "velocity": dem.function(v, "velocity"),
+        "velocity": dem.function(v, "velocity"),  # a copy of v's values
         "von_mises": dem.scalar_function(problem.von_mises(stepper.u, stepper.t), "von_mises"),
     }
+    v.destroy()  # petsc4py frees a vector not on COMM_SELF only at PETSc.garbage_cleanup
     if dem.d == 1:
         out["stress_xx"] = dem.scalar_function(problem.stress(stepper.u, stepper.t)[:, 0, 0], "stress_xx")
     if dem.geometry.num_bodies > 1:

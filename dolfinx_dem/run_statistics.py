@@ -65,7 +65,7 @@ class PairContactStatistics:
         self.momentum_change = 0.0
         # momentum is conserved without Dirichlet conditions and prescribed bodies (their impulse)
         self.free = dem.comm.allreduce(len(dem.reconstruction.dirichlet_facets), op=MPI.SUM) == 0 and not dem.prescribed
-        self.previous = None  # the displacement of the previous step, until the first contact
+        self.previous = None  # the displacement of the previous step, until the first contact (one vector)
         self.output_seconds = 0.0  # processor time of the per-step contact outputs (this process)
 
     def record(self, t: float, stepper: MEMM, penetration: tuple[float, float], momentum: np.ndarray):
@@ -73,11 +73,16 @@ class PairContactStatistics:
         depth over the local facet diameter: ``PairOutputs.penetration``) and ``momentum``."""
         contact = self.contact
         if self.first_contact is None:
-            if self.previous is not None:
+            if self.previous is None:
+                self.previous = stepper.u.copy()
+            else:
                 tau = contact.outputs.touch_time(self.previous, stepper.u, stepper.dt)
                 if tau is not None:
                     self.first_contact = t - stepper.dt + tau
-            self.previous = stepper.u.copy()
+                # in place: petsc4py frees a vector not on COMM_SELF only at
+                # PETSc.garbage_cleanup, so a new copy per step would keep every one (a vector
+                # of the mesh's size per step until the first contact)
+                stepper.u.copy(self.previous)
         penetration, ratio = penetration
         self.penetration = max(self.penetration, penetration)
         self.penetration_ratio = max(self.penetration_ratio, ratio)

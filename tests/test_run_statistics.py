@@ -73,3 +73,23 @@ def test_first_contact_penetration_limit_and_momentum_change():
     again = PairContactStatistics(problem, stepper, np.zeros(2), 0.5)
     again.restore(state, stepper)
     assert again.state() == state and again.previous is None  # contact already found
+
+
+@pytest.mark.mpi
+def test_the_state_before_the_first_contact_is_one_vector_written_in_place():
+    """Until the first contact the statistics keep the previous step's displacement in one vector,
+    overwritten at each step: petsc4py frees a dropped vector not on COMM_SELF only at
+    PETSc.garbage_cleanup, so a new copy per step kept a vector of the mesh's size per step (the
+    pair contact's memory grew with the cells times the steps before the first contact)."""
+    problem, stepper = two_discs()
+    dem = problem.dem
+    left = dem.geometry.cell_centres[: dem.n_owned, 0] < 0.25
+    stats = PairContactStatistics(problem, stepper, np.zeros(2), 0.5)
+    stepper.u.set(0.0)
+    stats.record(0.0, stepper, (0.0, 0.0), np.zeros(2))
+    kept = stats.previous
+    for k, s in enumerate((0.001, 0.002, 0.003)):  # still apart
+        stepper.u.array.reshape(-1, 2)[:, 0] = np.where(left, s, -s)
+        stats.record((k + 1) * stepper.dt, stepper, (0.0, 0.0), np.zeros(2))
+        assert stats.first_contact is None and stats.previous is kept
+        assert kept is not stepper.u and np.array_equal(kept.array_r, stepper.u.array_r)

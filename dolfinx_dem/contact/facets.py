@@ -173,4 +173,6 @@ class FacetRows:
         indptr, indices, data = np.empty(P + 1, dtype=np.int32), np.empty(bound, dtype=np.int32), np.empty(bound)
         nnz = lib.dem_pair_rows(self._struct.c, P, d, pointer(i), pointer(j), pointer(e_i), pointer(e_j),
                                 pointer(length), pointer(indptr), pointer(indices), pointer(data))
-        return scipy.sparse.csr_matrix((data[:nnz], indices[:nnz], indptr), shape=(P, self.shape[0]))
+        # copies of the entries: the list keeps them, and the bound exceeds them (a facet's d
+        # columns share rows)
+        return scipy.sparse.csr_matrix((data[:nnz].copy(), indices[:nnz].copy(), indptr), shape=(P, self.shape[0]))

@@ -67,6 +67,7 @@ import time
 from collections.abc import Mapping
 
 import numpy as np
+import scipy.sparse
 from mpi4py import MPI
 from petsc4py import PETSc
 
@@ -87,7 +88,7 @@ from dolfinx_dem.contact.pair_list import PairList
 from dolfinx_dem.contact.pair_outputs import PairOutputs
 from dolfinx_dem.contact.pair_statics import PairStatics
 from dolfinx_dem.errors import InputError, StateError, UnresolvedContactError
-from dolfinx_dem.kernels import Struct, arena, csr, lib, pointer
+from dolfinx_dem.kernels import Struct, arena, csr_of, lib, pointer
 
 
 def _timed(method):
@@ -171,12 +172,12 @@ class PairContact:
         # the global dofs these rows read (sorted), the patch's first dofs whatever the list, and
         # Q on them (the list rounds widen it to the patch)
         row_dofs, entry_dof = np.unique(dem.columns[Q.indices], return_inverse=True)
-        entry_dof = entry_dof.astype(np.int32)
+        Q = scipy.sparse.csr_matrix((Q.data, entry_dof.astype(np.int32), Q.indptr), shape=(len(touched), len(row_dofs)))
         #: q of the energy rows a = Q u + q that candidate facets touch (own rows)
         self.row_lift = dem.data.row_lift(touched)
         # the kernels' structs of what stays (``dem_patch``: Q on the patch's first dofs, its
         # rows' dofs), and their work memory
-        self._c_patch = Struct("dem_patch", Q=csr(Q.indptr, entry_dof, Q.data, len(row_dofs)), q=self.row_lift,
+        self._c_patch = Struct("dem_patch", Q=csr_of(Q), q=self.row_lift,
                                elastic=(touched < rows.num_elastic).astype(np.int8))
         self._work = arena()
         an = geom.facet_area_normals[self.cells, geom.facet_local[self.facets, 0]]
@@ -201,7 +202,7 @@ class PairContact:
         self._flight = None  # the Flight ``prepare`` checked last
         self._end = None  # the last flight's screen (``ScreenedFlight``)
         #: the Verlet list, built at u = 0
-        self.pair_list = PairList(self.comm, local, self.num_own, Q, entry_dof, row_dofs, FacetRows(QF[touched], d),
+        self.pair_list = PairList(self.comm, local, self.num_own, Q, row_dofs, FacetRows(QF[touched], d),
                                   dem.create_vector(), self.self_contact, rigid, skin)
         self._check_no_overlap_at_rest()
 

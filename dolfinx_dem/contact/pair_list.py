@@ -51,20 +51,19 @@ class PairList:
     Parameters
     ----------
     local : the local candidate facets (the own ones first, ``num_own`` of them).
-    rows_Q, rows_entry_dof, row_dofs : the own energy rows that candidate facets touch, their
-        entries' patch dofs and the sorted global dofs they read (the patch's first dofs).
+    rows_Q, row_dofs : the own energy rows that candidate facets touch, on the patch's first
+        dofs: the sorted global dofs ``row_dofs`` they read.
     facet_rows : those rows' columns of the local facets' dofs (``FacetRows``).
     template : a vector of the dof layout (the scatters' source).
     self_contact, rigid, skin : as ``PairContact``'s; ``rigid`` per body number.
     """
 
     def __init__(self, comm: MPI.Comm, local: CandidateFacets, num_own: int, rows_Q: scipy.sparse.csr_matrix,
-                 rows_entry_dof: np.ndarray, row_dofs: np.ndarray, facet_rows: FacetRows, template: PETSc.Vec,
-                 self_contact: bool, rigid: np.ndarray, skin: float | None):
+                 row_dofs: np.ndarray, facet_rows: FacetRows, template: PETSc.Vec, self_contact: bool,
+                 rigid: np.ndarray, skin: float | None):
         self.comm, self.d, self.local, self.num_own = comm, local.centre.shape[1], local, num_own
-        self.rows_Q, self.rows_entry_dof, self.row_dofs, self.facet_rows = rows_Q, rows_entry_dof, row_dofs, facet_rows
+        self.rows_Q, self.row_dofs, self.facet_rows = rows_Q, row_dofs, facet_rows
         self.self_contact, self.rigid = self_contact, rigid
-        self._own_records = local.take(np.arange(num_own)).records()  # what a list round sends
         self._local_keys = np.sort(local.key)
         # a list round summarises the local facets' places by the boxes of at most _SUMMARY_BOXES
         # groups of nearby facets (``_bisection`` of the reference barycentres, fixed)
@@ -135,7 +134,8 @@ class PairList:
             # nothing new near this process: its list stands, and so do its scatters' dofs
             self._remake_scatters(self.scatter.dofs, self.known)
             return
-        F = CandidateFacets.concatenate([local, ghosts])
+        # the known facets: the local ones (the same arrays without ghosts, as on one process), then the ghosts
+        F = CandidateFacets.concatenate([local, ghosts]) if len(ghosts) else local
         ucF = np.concatenate([uc[:nl], uc_ghosts])
         # The patch: the own rows' held dofs and the reconstruction dofs of every known facet
         # (the ghosts' too: their motion decides when the list is stale), and its scatters, first:
@@ -194,8 +194,8 @@ class PairList:
         # z_p restricted to the own rows: the local facets' entries only, Z^T = E^T QF^T with E
         # the facet dofs' directions (``dem_pair_rows``).
         ZT = self.facet_rows.pair_rows(i, j, e_i, e_j, F.length)  # (P, own rows touched)
-        Qp = scipy.sparse.csr_matrix((self.rows_Q.data, self.rows_entry_dof, self.rows_Q.indptr),
-                                     shape=(self.rows_Q.shape[0], len(self.scatter)))
+        Qp = scipy.sparse.csr_matrix((self.rows_Q.data, self.rows_Q.indices, self.rows_Q.indptr),
+                                     shape=(self.rows_Q.shape[0], len(self.scatter)))  # on the whole patch
         # the facets projected on the plane normal to n, origin at f_i's barycentre; n . n_f >
         # |f| / (|f| + |f'|) for facing facets, so no projection degenerates
         si, sj = Simplices.of(project(F, i, i, t)), Simplices.of(project(F, j, i, t))
@@ -246,12 +246,11 @@ class PairList:
             send[q] = k
             sent[k] = True
         if sent.any():
-            floats, ints = self._own_records
             k = np.flatnonzero(sent)
+            floats, ints = local.take(k).records()  # own facets: the first of the local ones
             rows = np.full(self.num_own, -1, dtype=np.int64)
             rows[k] = np.arange(len(k))
-            floats = np.concatenate([floats[k], uc[k]], axis=1)  # with the sender's displacements
-            ints = ints[k]
+            floats = np.concatenate([floats, uc[k]], axis=1)  # with the sender's displacements
             send = [None if s is None else (floats[rows[s]], ints[rows[s]]) for s in send]
         received = [m for m in comm.alltoall(send) if m is not None]
         if not received:
