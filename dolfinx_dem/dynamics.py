@@ -61,9 +61,12 @@ class DynamicRun:
         self.n_steps = max(1, round(time_spec["end"] / self.dt))
         self.stepper = MEMM(problem, self.dt, time_spec.get("quadrature", "midpoint"))
         self.probes = model.Probes(problem, scene.get("probes", []))
-        # with time-dependent data or prescribed bodies, the work W^n they do (memm.py) and the
-        # energy balance E^n - W^n
-        self.work_columns = ("work", "balance") if self.stepper.does_work else ()
+        # with time-dependent data or prescribed bodies, the work W^n they do (memm.py), with
+        # friction the dissipation D^n (contact/friction.py), and the balance E^n + D^n - W^n
+        self.frictional = any(c.friction is not None for c in problem.contacts)
+        does_work = self.stepper.does_work
+        self.work_columns = ((("work",) if does_work else ()) + (("dissipation",) if self.frictional else ())
+                             + (("balance",) if does_work or self.frictional else ()))
         self.columns = (model.SERIES_COLUMNS + self.work_columns + model.reaction_columns(dem)
                         + model.prescribed_columns(dem) + model.contact_columns(problem) + tuple(self.probes.names))
         output = scene.get("output", {})
@@ -133,6 +136,7 @@ class DynamicRun:
             m["work"],
             m["data_potential"],
             *counters,
+            m["dissipation"],
             local and {name: local[name] for name in ("y", "z", "means")},
         )
         for k, contact in enumerate(self.problem.contacts):
@@ -220,7 +224,7 @@ class DynamicRun:
         if self.obstacles is not None:
             self.stats.min_gap = min(self.stats.min_gap, contact[self._gap_column])
         if diag.step % self.series_every == 0 or force_fields:
-            work = [diag.work, diag.balance] if self.work_columns else []
+            work = [getattr(diag, name) for name in self.work_columns]  # Diagnostics' attributes
             self.series.write(
                 [
                     diag.t,
@@ -250,7 +254,7 @@ class DynamicRun:
             "step": stepper.n,
             "t": stepper.t,
             "dt": self.dt,
-            "memm": {k: state[k] for k in ("t0", "n", "budget", "work", "data_potential")}
+            "memm": {k: state[k] for k in ("t0", "n", "budget", "work", "data_potential", "dissipation")}
             | {k: self.comm.allreduce(state[k], op=MPI.MAX) for k in ("force_evaluations", "max_step_evaluations")},
             "statistics": dataclasses.asdict(self.stats) | {"wall_seconds": self._wall_seconds()},
             "pair_statistics": self.pair_stats.state(),
@@ -356,6 +360,8 @@ class DynamicRun:
         }
         if error is None:
             summary["checkpoint"] = checkpoint.DIRECTORY
+        if self.frictional:
+            summary["dissipation"] = stepper.dissipation  # D at the end (contact/friction.py)
         if self.obstacles is not None:
             summary["contact_candidate_facets"] = self.obstacles.num_facets
             summary["obstacle_facets_scheme_b_rule"] = self.obstacles.scheme_b_rule

@@ -58,6 +58,7 @@ from dolfinx_dem.memm_state import (
     CONTACT_J,
     CONTACT_S,
     DATA_POTENTIAL,
+    DISSIPATION,
     EXTERNAL,
     KINETIC,
     LIFT_J,
@@ -110,11 +111,13 @@ class Diagnostics:
     pseudo_energy: float  # pseudo_kinetic + the potential the force derives from (energies()["potential"])
     work: float = 0.0  # the work W^n done by time-dependent data and prescribed bodies since t0 (MEMM's docstring)
     momentum: np.ndarray | None = None
+    dissipation: float = 0.0  # D^n, the energy friction dissipated since t0 (contact/friction.py)
 
     @property
     def balance(self) -> float:
-        """E^n - W^n: constant in exact arithmetic (the pseudo-energy itself with constant data)."""
-        return self.pseudo_energy - self.work
+        """E^n + D^n - W^n: constant in exact arithmetic (the pseudo-energy itself with constant
+        data and without friction)."""
+        return self.pseudo_energy + self.dissipation - self.work
 
     @property
     def mechanical(self) -> float:
@@ -172,12 +175,15 @@ class MEMM:
         self.max_step_evaluations = 0
         self.budget = 0.0
         self.work = 0.0  # W^n, see the module docstring
+        self.dissipation = 0.0  # D^n, contact/friction.py
         self._data_potential = 0.0  # phi(u^n, t_n), global
         self._load_power = 0.0  # this process's v^{n+1/2} . int L dt of the step
         self._patches: list = []  # (scatter, patch values of u^n) of each contact model, see contact_patch_values
 
         self.dem = problem.dem
         self._state = StepState(problem.dem, self.dt)
+        #: the contact models with friction (``add_friction``)
+        self._frictional = [c for c in problem.contacts if c.friction is not None]
         self._initialised = False
 
     @property
@@ -230,6 +236,7 @@ class MEMM:
         v0.destroy()
         self._state.restart(self.t0)
         self.work, self._load_power, self._data_potential = 0.0, 0.0, None
+        self.dissipation = 0.0
         self._initialised = True
         diag = self._diagnostics()
         self.budget = diag.mechanical
@@ -246,6 +253,8 @@ class MEMM:
         if refresh:
             self.u.axpy(self.dt, self.v_next)  # (35a) here: y^{n+1} from u^{n+1} by a true product
         self._state.advance_rows(refresh)
+        for contact in self._frictional:  # T^n into the impulse, its dissipation (contact/friction.py)
+            self._state.sums[DISSIPATION] += contact.add_friction(self._state, impulse)
         self._state.update(impulse, advance=not refresh)  # (35a), (35b)
         self._patches = []  # u^{n+1}: gathered again
         self.n += 1
@@ -306,6 +315,7 @@ class MEMM:
         if self.dem.data.time_dependent:
             sums[LOAD_POWER] += self._load_power
         s = self._state.reduce(self.t)
+        self.dissipation += s[DISSIPATION]
         if self.does_work:
             if self._data_potential is not None:
                 self.work += s[LOAD_POWER] + s[DATA_POTENTIAL] - self._data_potential
@@ -316,7 +326,7 @@ class MEMM:
         return Diagnostics(step=self.n, t=self.t, kinetic=s[KINETIC], elastic=elastic, stabilisation=stabilisation,
                            external=external, pseudo_kinetic=s[PSEUDO],
                            pseudo_energy=s[PSEUDO] + elastic + stabilisation + external, work=self.work,
-                           momentum=s[MOMENTUM : MOMENTUM + self.problem.d].copy())
+                           momentum=s[MOMENTUM : MOMENTUM + self.problem.d].copy(), dissipation=self.dissipation)
 
     def contact_patch_values(self) -> list[np.ndarray]:
         """The patch values of u^n of each contact model (``problem.contacts``), gathered once
@@ -358,7 +368,9 @@ class MEMM:
             external=e["external"],
             pseudo_kinetic=pseudo_kinetic,
             pseudo_energy=pseudo_kinetic + e["potential"],
+            work=self.work,
             momentum=momentum,
+            dissipation=self.dissipation,
         )
 
     def check_stability(self, diag: Diagnostics):
@@ -402,14 +414,14 @@ class MEMM:
         return {
             "u": self.u, "v_prev": self.v_prev, "v_next": self.v_next,
             "t0": self.t0, "n": self.n, "dt": self.dt, "budget": self.budget,
-            "work": self.work, "data_potential": self._data_potential,
+            "work": self.work, "data_potential": self._data_potential, "dissipation": self.dissipation,
             "force_evaluations": self.force_evaluations, "max_step_evaluations": self.max_step_evaluations,
             "recurrence": self._state.recurrence(),
         }
 
     def restore(self, u: np.ndarray, v_prev: np.ndarray, v_next: np.ndarray, t0: float, n: int,
                 budget: float, work: float, data_potential: float | None, force_evaluations: int,
-                max_step_evaluations: int,
+                max_step_evaluations: int, dissipation: float = 0.0,
                 recurrence: dict[str, np.ndarray] | None = None) -> None:
         """Continue from a ``state()``: this process's entries of the vectors (arrays), the
         scalars as stored. With the ``recurrence`` of the same rows (same partition) the next
@@ -419,7 +431,7 @@ class MEMM:
         self.u.array[:], self.v_prev.array[:], self.v_next.array[:] = u, v_prev, v_next
         self._patches = []
         self.t0, self.n, self.budget = float(t0), int(n), float(budget)
-        self.work, self._data_potential = float(work), data_potential
+        self.work, self._data_potential, self.dissipation = float(work), data_potential, float(dissipation)
         self.force_evaluations, self.max_step_evaluations = int(force_evaluations), int(max_step_evaluations)
         self._initialised = True
         if recurrence is not None:

@@ -31,11 +31,11 @@ _REVERSE = dict(addv=PETSc.InsertMode.ADD_VALUES, mode=PETSc.ScatterMode.REVERSE
 #: models' (this process's parts of their energy changes, set by MEMM before ``reduce``), the
 #: step's work of time-dependent data, v^{n+1/2} . int L dt (added by MEMM), and of prescribed
 #: bodies, -v_p^{n+1/2} . I_p (added by ``update``), and the data potential
-#: (``BoundaryData.data_potential``); the total momentum sum_c m_c vbar_c at t_n (3 slots,
-#: d used); then the momentum of each free body at v^{n+1/2} (d per body, and d for the cells of
-#: clamped bodies).
+#: (``BoundaryData.data_potential``); the step's frictional dissipation (added by MEMM); the
+#: total momentum sum_c m_c vbar_c at t_n (3 slots, d used); then the momentum of each free body
+#: at v^{n+1/2} (d per body, and d for the cells of clamped bodies).
 (ROWS_S, ROWS_J, KINETIC, PSEUDO, EXTERNAL, LIFT_S, LIFT_J, CONTACT_S, CONTACT_J, LOAD_POWER, DATA_POTENTIAL,
- MOMENTUM) = range(12)
+ DISSIPATION, MOMENTUM) = range(13)
 MOMENTA = MOMENTUM + 3
 
 
@@ -158,6 +158,15 @@ class StepState:
         self._pass[id(x), id(z)](0.0 if refresh else 1.0, 1.0 / self.dt if refresh else 1.0)
         if self._parallel:
             z.ghostUpdate(**_REVERSE)
+
+    def velocities(self, dofs: np.ndarray, impulse: PETSc.Vec) -> tuple[np.ndarray, ...]:
+        """At the owned dofs ``dofs``, after ``advance_rows``: v^{n-1/2}, v^{n+1/2}, the v^{n+3/2}
+        that ``update`` would make with ``impulse``, and the dofs' masses (contact/friction.py)."""
+        z_old, z_new = self._z
+        force_integral = impulse.array_r[dofs] - 0.5 * self.dt**2 * (z_old.array_r[dofs] + z_new.array_r[dofs])
+        minv = self.problem.inverse_mass.array_r[dofs]
+        v_prev = self.v_prev.array_r[dofs]
+        return v_prev, self.v_next.array_r[dofs], v_prev + 2.0 * minv * force_integral, self.problem.mass.array_r[dofs]
 
     def update(self, impulse: PETSc.Vec | None, advance: bool):
         """v^{n+3/2} = v^{n-1/2} + 2 M^-1 (impulse - dt^2/2 (z^n + z^{n+1})), u += dt v^{n+1/2} if

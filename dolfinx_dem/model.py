@@ -183,7 +183,8 @@ def build(scene: Mapping, comm: MPI.Comm = MPI.COMM_WORLD) -> DEMProblem:
     dem = DEMDiscretisation(mesh, material, scheme, dirichlet, body_force, tractions, cell_tags, prescribed, candidates)
     contacts = []
     if obstacle_facets:
-        contacts.append(RigidContact(dem, [HalfSpace(ob["point"], ob["normal"], facets, ob.get("tolerance", 0.0))
+        contacts.append(RigidContact(dem, [HalfSpace(ob["point"], ob["normal"], facets, ob.get("tolerance", 0.0),
+                                                     friction=ob.get("friction", 0.0))
                                            for ob, facets in zip(scene["obstacles"], obstacle_facets)]))
     if pair_facets is not None:
         c = scene["contact"]

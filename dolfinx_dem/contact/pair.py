@@ -125,6 +125,7 @@ class PairContact:
     The pair list is ``pair_list`` (pair_list.py), the outputs ``outputs`` (pair_outputs.py)."""
 
     tracks_momentum = True
+    friction = None  # frictionless (contact/protocol.py)
 
     def __init__(self, dem, facets, self_contact: bool = False, skin: float | None = None,
                  tolerance: float = 0.0, tag: int | None = None):

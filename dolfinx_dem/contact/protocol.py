@@ -31,6 +31,8 @@ class ContactModel(Protocol):
     dem: object  # the DEMDiscretisation it acts on
     scatter: object  # the PatchScatter of its patch dofs (a pair list round may make a new one)
     tracks_momentum: bool  # whether a run's series report the total momentum with its outputs
+    friction: object | None  # its Coulomb friction (contact/friction.py), None if frictionless: then MEMM
+    # calls ``add_friction(state, impulse)`` at every step (rigid.RigidContact.add_friction)
 
     def prepare(self, u: PETSc.Vec, v: PETSc.Vec | None = None, dt: float = 0.0,
                 up: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray | None]:

@@ -36,6 +36,7 @@ from petsc4py import PETSc
 
 from dolfinx_dem.conditions import facet_indices
 from dolfinx_dem.contact import candidates
+from dolfinx_dem.contact.friction import CellFriction
 from dolfinx_dem.contact.patch import PatchScatter
 from dolfinx_dem.contact.rigid_statics import RigidStatics
 from dolfinx_dem.errors import InputError
@@ -84,13 +85,15 @@ class HalfSpace:
     """Rigid obstacle {x : (x - point) . normal < 0}; ``normal`` points from the obstacle into the
     free space. ``facets`` are the candidate facets of the body: process-local facet indices or
     a DOLFINx MeshTags (with ``tag``, its facets of that value; conditions.facet_indices);
-    ``tolerance`` (m, >= 0) is how far a body vertex may lie inside at t = 0."""
+    ``tolerance`` (m, >= 0) is how far a body vertex may lie inside at t = 0; ``friction`` the
+    Coulomb coefficient mu >= 0 (contact/friction.py; 0: frictionless)."""
 
     point: Sequence[float]
     normal: Sequence[float]
     facets: np.ndarray
     tolerance: float = 0.0
     tag: int | None = None
+    friction: float = 0.0
 
 
 class RigidContact:
@@ -120,6 +123,13 @@ class RigidContact:
                 raise InputError(f"obstacle {k}: the normal is zero")
             if not (np.isfinite(ob.tolerance) and ob.tolerance >= 0):
                 raise InputError(f"obstacle {k}: the gap tolerance must be >= 0, got {ob.tolerance}")
+            mu = ob.friction
+            if not (isinstance(mu, (int, float)) and not isinstance(mu, bool) and np.isfinite(mu) and mu >= 0):
+                raise InputError(f"obstacle {k}: the friction coefficient must be a finite number >= 0, "
+                                 f"got {ob.friction!r}")
+            if ob.friction > 0 and d == 1:
+                raise InputError(f"obstacle {k}: friction acts along the obstacle's plane, which a 1D body "
+                                 "does not have (friction = 0 in 1D)")
             normals.append(n / np.linalg.norm(n))
             points.append(p)
             inside = (geom.cell_vertices[: dem.n_owned].reshape(-1, d) - p) @ normals[-1]
@@ -212,6 +222,21 @@ class RigidContact:
             own_row=own_rows.astype(np.int8), elastic=self._is_elastic_row.astype(np.int8))
         self._arena = arena()
         self._patch_force = np.zeros(len(self.scatter))
+        mu = np.array([float(ob.friction) for ob in obstacles])[obstacle]
+        scheme_b = (mu > 0) & ~np.isin(self.facets, rec.scheme_a_facets)
+        k = self.comm.allreduce(int(obstacle[scheme_b].min(initial=len(obstacles))), op=MPI.MIN)
+        if k < len(obstacles):  # on every process
+            raise InputError(
+                f"obstacle {k}: friction needs scheme A candidates (method dem-A): with scheme B the facets' normal "
+                "reactions change sign from one facet to the next, and a Coulomb bound on each over-counts the normal "
+                "force (docs/theory.md, Friction)")
+        #: Coulomb friction on the own facets' cells (None: frictionless), contact/friction.py
+        self.friction = None
+        if self.comm.allreduce(bool((mu > 0).any()), op=MPI.LOR):
+            own = slice(0, self.num_own)
+            self.friction = CellFriction(d, self.cells[own], self.normals[own], mu[own], obstacle[own],
+                                         self.num_obstacles)
+        self._normal_impulse = np.zeros(self.num_own)  # of the last force integral, for the friction
         self._grad_weights = (
             geom.facet_area_normals[self.cells, geom.facet_local[self.facets, 0]] / geom.cell_volumes[self.cells, None]
         )
@@ -361,12 +386,19 @@ class RigidContact:
         ``dem_rigid_force_integral``)."""
         self._check_patch(up, vp)
         pieces = lib.dem_rigid_force_integral(self._kernel.c, pointer(up), pointer(vp), float(dt), self._arena,
-                                              pointer(self._patch_force))
+                                              pointer(self._patch_force), pointer(self._normal_impulse))
         if pieces < 0:
             raise MemoryError("the rigid contact's force integral kernel ran out of memory")
         self.scatter.add(self._patch_force, out)
         self.evaluations += pieces
         return pieces
+
+    def add_friction(self, state, impulse: PETSc.Vec) -> float:
+        """impulse += the step's frictional impulses T^n on this process's owned dofs, from the
+        normal impulses of the step's ``force_integral`` and the velocities of ``state`` (a
+        memm_state.StepState after its ``advance_rows``); returns this process's dissipation
+        -v^{n+1/2} . T^n >= 0 (contact/friction.py). Frictionless: 0, nothing added."""
+        return 0.0 if self.friction is None else self.friction.apply(self._normal_impulse, state, impulse)
 
     # -- outputs -------------------------------------------------------------------------------
     def facet_displacements(self, up: np.ndarray) -> np.ndarray:
@@ -416,24 +448,36 @@ class RigidContact:
         """The smallest gap ``contact_gap`` (``contact_gap``), ``contact_pressure`` (the obstacles'
         total normal force over the area of the facets in contact, exactly 0 with every gap
         open), in 1D the position ``tip_position`` of the contact end, and the force of each
-        obstacle k on the body, ``contact_force_obstacle<k>_<x|y|z>`` (``force_sums``)."""
+        obstacle k on the body, ``contact_force_obstacle<k>_<x|y|z>`` (``force_sums``). With
+        friction, the mean tangential force of each obstacle over the last step,
+        ``friction_force_obstacle<k>_<x|y|z>`` (its impulse T^n over dt), and ``slipping_facets``,
+        the facets at the Coulomb limit in that step (0 at the first row)."""
         xyz = "xyz"[: self.d]
+        friction = () if self.friction is None else (
+            tuple(f"friction_force_obstacle{k}_{c}" for k in range(self.num_obstacles) for c in xyz)
+            + ("slipping_facets",))
         return (
             ("contact_gap", "contact_pressure")
             + (("tip_position",) if self.d == 1 else ())
             + tuple(f"contact_force_obstacle{k}_{c}" for k in range(self.num_obstacles) for c in xyz)
+            + friction
         )
 
     def output_sums(self, up: np.ndarray) -> np.ndarray:
-        """This process's part of the sums of the outputs: ``force_sums``."""
-        return self.force_sums(up)
+        """This process's part of the sums of the outputs: ``force_sums``, then with friction the
+        last step's tangential forces and slipping facets."""
+        sums = self.force_sums(up)
+        if self.friction is not None:
+            sums = np.concatenate([sums, self.friction.forces.ravel(), [self.friction.slipping]])
+        return sums
 
     def output_values(self, up: np.ndarray, sums: np.ndarray) -> list[float]:
         """The values of ``output_columns`` from the reduced ``output_sums`` (collective)."""
         n = self.num_obstacles * self.d
         forces, normal, area = sums[:n], sums[n], sums[n + 1]
         gap, x = self.contact_gap(up)
-        return [gap, normal / area if area > 0 else 0.0] + ([x] if self.d == 1 else []) + list(forces)
+        return ([gap, normal / area if area > 0 else 0.0] + ([x] if self.d == 1 else []) + list(forces)
+                + list(sums[n + 2:]))
 
     def statics(self) -> RigidStatics:
         """The statics interface (contact/rigid_statics.py), made once."""

@@ -227,7 +227,7 @@ void dem_arena_free(dem_arena *work);
 /* ---- contact with rigid obstacles (rigid.c) --------------------------------------------- */
 
 int64_t dem_rigid_force_integral(const dem_rigid *c, const double *up, const double *vp, double dt, dem_arena *arena,
-                                 double *out);
+                                 double *out, double *normal);
 int64_t dem_rigid_energy(const dem_rigid *c, const double *up, dem_arena *arena, double *energy);
 
 /* ---- outputs (outputs.c) ---------------------------------------------------------------- */

@@ -70,10 +70,11 @@ DEM_INLINE double negative_part_integral(double g0, double slope, double dt)
  * int_0^dt (F - F_free)(up + tau vp) dtau of this process's own rows and facets. The gaps are
  * affine along the flight; the rows' part Z g^- is integrated in closed form, each touching own
  * facet's coefficient y_f . (a - delta) on the pieces cut by the events of the candidates it
- * shares rows with (G's columns), by the midpoint rule: exact. Returns the largest number of
- * pieces of a facet, or -1 if memory ran out. */
+ * shares rows with (G's columns), by the midpoint rule: exact. normal (n_own values, or NULL):
+ * each own facet's normal impulse, the integral of its coefficient (0 out of contact). Returns
+ * the largest number of pieces of a facet, or -1 if memory ran out. */
 int64_t dem_rigid_force_integral(const dem_rigid *c, const double *restrict up, const double *restrict vp, double dt,
-                                 dem_arena *arena, double *restrict out)
+                                 dem_arena *arena, double *restrict out, double *restrict normal)
 {
   const int64_t nc = c->Rn.n_rows, n_own = c->n_own;
   arena_start(arena);
@@ -100,6 +101,9 @@ int64_t dem_rigid_force_integral(const dem_rigid *c, const double *restrict up, 
     }
   }
   csr_apply(&c->Z, nint, NULL, out);
+  if (normal)
+    for (int64_t f = 0; f < n_own; ++f)
+      normal[f] = 0.0;
   if (nt == 0)
     return 1;
 
@@ -172,6 +176,8 @@ int64_t dem_rigid_force_integral(const dem_rigid *c, const double *restrict up, 
       terms[a] = length[t * width + a] * coefficient * active;
     }
     integral[t] = pairwise_sum(terms, width, 1);
+    if (normal)
+      normal[f] = integral[t];
   }
   /* out += RnT_own[:, touching] integral */
   const dem_csr *RnT = &c->RnT;

@@ -149,6 +149,7 @@ SCHEMA = {
         "normal": lambda k, v, d: _vector(k, v, d),
         "boundary": lambda k, v, d: v if isinstance(v, int) and not isinstance(v, bool) else _string(k, v),
         "tolerance": lambda k, v, d: _number(k, v, nonnegative=True),
+        "friction": lambda k, v, d: _number(k, v, nonnegative=True),
     }],
     "contact": {
         "boundary": lambda k, v, d: [x if isinstance(x, int) and not isinstance(x, bool) else _string(f"{k}[{i}]", x)

@@ -99,6 +99,10 @@ def check_static(scene: Mapping) -> None:
     for section in ("time", "initial"):
         if section in scene:
             raise SceneError(f"a static scene ('statics' table) takes no '{section}' table")
+    for k, obstacle in enumerate(scene.get("obstacles", [])):
+        if obstacle.get("friction", 0.0) > 0:
+            raise SceneError(f"scene key 'obstacles[{k}].friction': statics with friction is not implemented (friction "
+                             "is path dependent: a dynamic scene integrates it)")
     for section, keys in DYNAMIC_ONLY.items():
         for key in (k for k in keys if k in scene.get(section, {})):
             raise SceneError(f"scene key '{section}.{key}' applies to dynamic scenes: a static scene computes and "

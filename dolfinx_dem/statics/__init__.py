@@ -105,6 +105,9 @@ def minimise_energy(
         raise InputError(f"gradient_rtol must lie in (0, 1), got {gradient_rtol}")
     if len(problem.contacts) > 1:
         raise InputError("minimise_energy takes rigid obstacles or contact between bodies, not both")
+    if any(c.friction is not None for c in problem.contacts):
+        raise InputError("minimise_energy: statics with friction is not implemented (friction is path dependent: "
+                         "integrate it in time with MEMM)")
     models = [c.statics() for c in problem.contacts]
     if not models:
         check_held(dem, fixed_mean, fixed_rotation)

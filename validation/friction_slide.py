@@ -1,0 +1,162 @@
+"""Coulomb friction on a rigid plane (contact/friction.py): an elastic block on a slope, against the
+rigid-body law, and a block held by friction.
+
+The block [0, 1] x [0, 0.5] m (E = 1e4 Pa, nu = 0.3, rho = 1 kg/m^3, plane strain, scheme A, a
+"crossed" mesh of nx x nx/2 squares) lies on the plane y = 0 under gravity g = 10 m/s^2 tilted by
+the slope's angle t, from rest at zero height (so it also vibrates normally, its weight
+suddenly applied).
+
+- Sliding (tan t > mu): the mean velocity along the slope against the rigid body's
+  g (sin t - mu cos t) (a line fitted after 0.1 s, to 0.6 s); the spread of the bottom cells'
+  velocity along the slope about the mean (the standard deviation of vbar - mean over the last
+  half); the energy balance max |E + D - E0| over the largest mechanical energy (or D if larger);
+  the smallest increment of D.
+- Held (tan t < mu): the block starts in its frictionless static equilibrium under the normal
+  part of gravity (``minimise_energy``), then the load along the slope is applied: how far the
+  contact cells move along the plane after the first step, and the first step with a facet at
+  the Coulomb limit.
+- The stable step: the sliding block (tan t = 0.577) run for 0.5 s at dt = f times the bound
+  ``stable_time_step()``, f = 1, 1.04, ..., 1.16, without friction and with mu = 0.1 and 0.3:
+  the largest f the stability monitor let complete.
+
+    .venv/bin/python validation/friction_slide.py --out docs/validation/friction.json
+    .venv/bin/python validation/friction_slide.py --quick --out OUT.json   # mu = 0.1 on 16 x 8 squares
+
+It writes the JSON and, next to it, the Markdown page (``--out``'s stem + .md). One process.
+"""
+
+import argparse
+import json
+import pathlib
+import time
+
+import numpy as np
+from mpi4py import MPI
+
+from dolfinx_dem import meshes
+from dolfinx_dem.contact import HalfSpace, RigidContact
+from dolfinx_dem.discretisation import DEMDiscretisation
+from dolfinx_dem.errors import InstabilityError
+from dolfinx_dem.material import ElasticMaterial
+from dolfinx_dem.memm import MEMM
+from dolfinx_dem.problem import DEMProblem
+from dolfinx_dem.statics import minimise_energy
+
+G, MASS = 10.0, 0.5
+BLOCK = ElasticMaterial(E=1e4, nu=0.3, rho=1.0)
+
+
+def block(mu: float, gravity, nx: int) -> DEMProblem:
+    mesh, _, tags = meshes.create_rectangle(MPI.COMM_WORLD, [0.0, 0.0], [1.0, 0.5], [nx, nx // 2], "crossed")
+    dem = DEMDiscretisation(mesh, BLOCK, "A", body_force=list(BLOCK.rho * np.asarray(gravity)))
+    return DEMProblem(dem, [RigidContact(dem, [HalfSpace([0.0, 0.0], [0.0, 1.0], tags.find(meshes.YMIN),
+                                                         friction=mu)])])
+
+
+def run(mu: float, tan: float, nx: int, t_end: float, settled: bool) -> dict:
+    start = time.perf_counter()
+    t = np.arctan(tan)
+    problem = block(mu, [G * np.sin(t), -G * np.cos(t)], nx)
+    dem, contact = problem.dem, problem.contacts[0]
+    u0 = minimise_energy(block(0.0, [0.0, -G * np.cos(t)], nx), fixed_mean=[0]).u if settled else dem.create_vector()
+    stepper = MEMM(problem, 0.5 * dem.stable_time_step())
+    first = stepper.initialise(u0, dem.create_vector())
+    cells = contact.cells[: contact.num_own]
+    n = round(t_end / stepper.dt)
+    times, mean, balance, dissipation = np.empty(n), np.empty(n), np.empty(n), np.empty(n)
+    largest = first.mechanical
+    bottom, bottom_x = np.empty((n, len(cells))), np.empty((n, len(cells)))
+    first_slip = None
+    for k in range(n):
+        diag = stepper.step()
+        times[k], mean[k], balance[k], dissipation[k] = diag.t, diag.momentum[0] / MASS, diag.balance, diag.dissipation
+        largest = max(largest, diag.mechanical)
+        bottom[k] = stepper.v_next.array_r.reshape(-1, 2)[cells, 0]
+        bottom_x[k] = stepper.u.array_r.reshape(-1, 2)[cells, 0]
+        if first_slip is None and contact.friction is not None and contact.friction.slipping:
+            first_slip = k + 1
+    scale = max(largest, dissipation[-1])  # the largest mechanical energy, or D
+    out = {"mu": mu, "tan": tan, "nx": nx, "cells": dem.geometry.num_cells_global, "steps": n, "dt": stepper.dt,
+           "balance_error": float(np.abs(balance - first.balance).max() / scale),
+           "min_dissipation_increment": float(np.diff(np.r_[0.0, dissipation]).min()),
+           "dissipation": float(dissipation[-1]), "first_slip_step": first_slip,
+           "wall_time_s": time.perf_counter() - start}
+    if settled:
+        out["drift_after_first_step"] = float(np.abs(bottom_x - bottom_x[0]).max())
+    else:
+        late = times > 0.1
+        a = np.polyfit(times[late], mean[late], 1)[0]
+        exact = G * (np.sin(t) - mu * np.cos(t))  # mu = 0: frictionless
+        vbar = 0.5 * (bottom[1:] + bottom[:-1]) - 0.5 * (mean[1:] + mean[:-1])[:, None]
+        out |= {"acceleration": float(a), "exact": float(exact), "relative_error": float(a / exact - 1),
+                "bottom_velocity_spread": float(vbar[n // 2:].std())}
+    return out
+
+
+def stable_factor(mu: float, nx: int) -> float:
+    """The largest f of 1, 1.04, ..., 1.16 at which the sliding block runs 0.5 s with dt = f times
+    the stable-step bound (the monitor's verdict)."""
+    t, largest = np.radians(30.0), 0.0
+    for f in (1.0, 1.04, 1.08, 1.12, 1.16):
+        problem = block(mu, [G * np.sin(t), -G * np.cos(t)], nx)
+        stepper = MEMM(problem, f * problem.dem.stable_time_step())
+        stepper.initialise(problem.dem.create_vector(), problem.dem.create_vector())
+        try:
+            for _ in range(round(0.5 / stepper.dt)):
+                stepper.step()
+        except InstabilityError:
+            break
+        largest = f
+    return largest
+
+
+def page(results: dict) -> str:
+    lines = ["# Friction: a block sliding down a slope and a block held by it", "",
+             f"Written by `validation/friction_slide.py` (one process). Command: `{results['command']}`.", "",
+             "The block and the measures: the script's docstring. Scheme A, CFL 0.5 of the bound.", "",
+             "## Sliding from rest, dropped at zero height (tan t = 0.577, t = 30 deg)", "",
+             "| mu | cells | acceleration (m/s^2) | g (sin t - mu cos t) | error | bottom cells' velocity spread (m/s)"
+             " | balance error | smallest D increment | wall (s) |", "|---" * 9 + "|"]
+    for r in results["sliding"]:
+        lines.append(f"| {r['mu']:g} | {r['cells']} | {r['acceleration']:.4f} | {r['exact']:.4f} | "
+                     f"{100 * r['relative_error']:+.2f} % | {r['bottom_velocity_spread']:.3f} | {r['balance_error']:.1e} | "
+                     f"{r['min_dissipation_increment']:.1e} | {r['wall_time_s']:.1f} |")
+    lines += ["", "## Held by friction (mu = 0.5), from the settled state", "",
+              "| tan t | cells | steps | contact cells' drift after the first step (m) | first step with a facet "
+              "at the Coulomb limit | D at the end (J/m) | balance error |", "|---" * 7 + "|"]
+    for r in results["held"]:
+        lines.append(f"| {r['tan']:g} | {r['cells']} | {r['steps']} | {r['drift_after_first_step']:.2e} | "
+                     f"{r['first_slip_step'] or 'none'} | {r['dissipation']:.2e} | {r['balance_error']:.1e} |")
+    lines += ["", "## The stable step with and without friction (sliding, 16 x 8 squares)", "",
+              "| mu | largest stable dt / bound |", "|---|---|"]
+    lines += [f"| {mu} | {f:g} |" for mu, f in results["stable_factor"].items()]
+    return "\n".join(lines) + "\n"
+
+
+def main():
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--mus", type=float, nargs="+", default=[0.0, 0.05, 0.1, 0.2, 0.3])
+    parser.add_argument("--meshes", type=int, nargs="+", default=[16, 32], help="squares along the block")
+    parser.add_argument("--quick", action="store_true", help="mu = 0.1 on 16 x 8 squares; the stable step for 0, 0.1")
+    parser.add_argument("--out", type=pathlib.Path, required=True)
+    args = parser.parse_args()
+    if args.quick:
+        args.mus, args.meshes = [0.1], [16]
+    results = {"command": "validation/friction_slide.py --mus " + " ".join(f"{m:g}" for m in args.mus)
+               + " --meshes " + " ".join(str(n) for n in args.meshes), "sliding": [], "held": []}
+    for nx in args.meshes:
+        for mu in args.mus:
+            results["sliding"].append(run(mu, np.tan(np.radians(30.0)), nx, 0.6, settled=False))
+            print(json.dumps(results["sliding"][-1]), flush=True)
+    for tan in (0.05, 0.2):
+        results["held"].append(run(0.5, tan, args.meshes[0], 0.3, settled=True))
+        print(json.dumps(results["held"][-1]), flush=True)
+    results["stable_factor"] = {f"{mu:g}": stable_factor(mu, args.meshes[0])
+                                for mu in ((0.0, 0.1) if args.quick else (0.0, 0.1, 0.3))}
+    print(results["stable_factor"], flush=True)
+    args.out.write_text(json.dumps(results, indent=1) + "\n")
+    args.out.with_suffix(".md").write_text(page(results))
+
+
+if __name__ == "__main__":
+    main()
