@@ -15,6 +15,12 @@ suddenly applied).
   part of gravity (``minimise_energy``), then the load along the slope is applied: how far the
   contact cells move along the plane after the first step, and the first step with a facet at
   the Coulomb limit.
+- Rolling: a disc (R = 0.1 m, E = 1e6 Pa, mesh size h) settled on the plane by frictionless
+  statics, launched at v0 = 0.05 m/s without spin, mu = 0.5: when its contact point stops
+  slipping (the rigid-body slip v + omega R below 1 % of v0) against t* = v0 / (3 mu g), and its
+  speed at t* against 2/3 v0 (the disc turns by a few mrad: small strain).
+- 3D: a block [0, 1]^2 x [0, 0.5] on z = 0 (6 x 6 x 3 cubes of six tetrahedra), gravity tilted
+  by 30 degrees towards a direction 30 degrees from x: its acceleration against the rigid law.
 - The stable step: the sliding block (tan t = 0.577) run for 0.5 s at dt = f times the bound
   ``stable_time_step()``, f = 1, 1.04, ..., 1.16, without friction and with mu = 0.1 and 0.3:
   the largest f the stability monitor let complete.
@@ -41,6 +47,8 @@ from dolfinx_dem.material import ElasticMaterial
 from dolfinx_dem.memm import MEMM
 from dolfinx_dem.problem import DEMProblem
 from dolfinx_dem.statics import minimise_energy
+
+R_DISC, V0 = 0.1, 0.05
 
 G, MASS = 10.0, 0.5
 BLOCK = ElasticMaterial(E=1e4, nu=0.3, rho=1.0)
@@ -93,6 +101,74 @@ def run(mu: float, tan: float, nx: int, t_end: float, settled: bool) -> dict:
     return out
 
 
+def roll(h: float, mu: float = 0.5) -> dict:
+    start = time.perf_counter()
+    mesh, _, tags = meshes.create_disc(MPI.COMM_WORLD, [0.0, R_DISC], R_DISC, h)
+    material = ElasticMaterial(E=1e6, nu=0.3, rho=1.0)
+
+    def disc(friction):
+        dem = DEMDiscretisation(mesh, material, "A", body_force=[0.0, -G])
+        boundary = tags.find(1)
+        lower = boundary[dem.geometry.facet_centres[boundary, 1] <= R_DISC]
+        return DEMProblem(dem, [RigidContact(dem, [HalfSpace([0.0, 0.0], [0.0, 1.0], lower, tolerance=1e-9,
+                                                             friction=friction)])])
+
+    u0 = minimise_energy(disc(0.0), fixed_mean=[0], fixed_rotation=True).u
+    problem = disc(mu)
+    dem = problem.dem
+    stepper = MEMM(problem, 0.5 * dem.stable_time_step())
+    v = dem.create_vector()
+    v.array.reshape(-1, 2)[:, 0] = V0
+    first = stepper.initialise(u0, v)
+    m = dem.mass.array_r[::2]
+    x0 = dem.geometry.cell_centres[: dem.n_owned, :2]
+    t_star = V0 / (3 * mu * G)
+    times, speed, slip, balance = [], [], [], 0.0
+    for _ in range(round(2 * t_star / stepper.dt)):
+        diag = stepper.step()
+        vbar = 0.5 * (stepper.v_prev.array_r + stepper.v_next.array_r).reshape(-1, 2)
+        x = x0 + stepper.u.array_r.reshape(-1, 2)
+        r = x - m @ x / m.sum()
+        omega = (m * (r[:, 0] * vbar[:, 1] - r[:, 1] * vbar[:, 0])).sum() / (m * (r**2).sum(axis=1)).sum()
+        times.append(diag.t)
+        speed.append(m @ vbar[:, 0] / m.sum())
+        slip.append(speed[-1] + omega * R_DISC)
+        balance = max(balance, abs(diag.balance - first.balance) / max(diag.mechanical, diag.dissipation))
+    times, speed, slip = map(np.array, (times, speed, slip))
+    stops = float(times[np.argmax(slip < 0.01 * V0)])
+    at_t_star = float(np.interp(t_star, times, speed))
+    return {"h": h, "mu": mu, "cells": dem.geometry.num_cells_global, "t_star": t_star, "slip_stops": stops,
+            "slip_stops_error": stops / t_star - 1, "speed_at_t_star": at_t_star,
+            "speed_error": at_t_star / (2 / 3 * V0) - 1, "balance_error": balance, "dissipation": diag.dissipation,
+            "rigid_dissipation": float(0.5 * m.sum() * V0**2 / 3), "wall_time_s": time.perf_counter() - start}
+
+
+def slide3d(mu: float, nx: int = 6) -> dict:
+    start = time.perf_counter()
+    t, phi = np.radians(30.0), np.radians(30.0)
+    along = np.array([np.cos(phi), np.sin(phi), 0.0])
+    mesh, _, tags = meshes.create_box(MPI.COMM_WORLD, [0.0, 0.0, 0.0], [1.0, 1.0, 0.5], [nx, nx, nx // 2])
+    dem = DEMDiscretisation(mesh, BLOCK, "A", body_force=list(G * np.sin(t) * along + [0.0, 0.0, -G * np.cos(t)]))
+    contact = RigidContact(dem, [HalfSpace([0.0, 0.0, 0.0], [0.0, 0.0, 1.0], tags.find(meshes.ZMIN), friction=mu)])
+    stepper = MEMM(DEMProblem(dem, [contact]), 0.5 * dem.stable_time_step())
+    first = stepper.initialise(dem.create_vector(), dem.create_vector())
+    times, velocity, balance, scale = [], [], [], first.mechanical
+    for _ in range(round(0.4 / stepper.dt)):
+        diag = stepper.step()
+        times.append(diag.t)
+        velocity.append(diag.momentum / MASS)
+        balance.append(diag.balance)
+        scale = max(scale, diag.mechanical, diag.dissipation)
+    times, velocity = np.array(times), np.array(velocity)
+    late = times > 0.1
+    a = np.array([np.polyfit(times[late], velocity[late, i], 1)[0] for i in range(3)])
+    exact = G * (np.sin(t) - mu * np.cos(t)) * along
+    return {"mu": mu, "cells": dem.geometry.num_cells_global, "acceleration": a.tolist(), "exact": exact.tolist(),
+            "relative_error": float(np.linalg.norm(a - exact) / np.linalg.norm(exact)),
+            "balance_error": float(np.abs(np.array(balance) - first.balance).max() / scale),
+            "wall_time_s": time.perf_counter() - start}
+
+
 def stable_factor(mu: float, nx: int) -> float:
     """The largest f of 1, 1.04, ..., 1.16 at which the sliding block runs 0.5 s with dt = f times
     the stable-step bound (the monitor's verdict)."""
@@ -127,6 +203,23 @@ def page(results: dict) -> str:
     for r in results["held"]:
         lines.append(f"| {r['tan']:g} | {r['cells']} | {r['steps']} | {r['drift_after_first_step']:.2e} | "
                      f"{r['first_slip_step'] or 'none'} | {r['dissipation']:.2e} | {r['balance_error']:.1e} |")
+    lines += ["", "## A disc launched sliding without spin (mu = 0.5, v0 = 0.05 m/s, E = 1e6 Pa)", "",
+              "| h (m) | cells | slip stops (ms) | t* (ms) | error | speed at t* (m/s) | 2/3 v0 | error | D (J/m) "
+              "| rigid D | balance error |", "|---" * 11 + "|"]
+    for r in results["rolling"]:
+        lines.append(f"| {r['h']:g} | {r['cells']} | {1e3 * r['slip_stops']:.4f} | {1e3 * r['t_star']:.4f} | "
+                     f"{100 * r['slip_stops_error']:+.2f} % | {r['speed_at_t_star']:.5f} | {2 / 3 * V0:.5f} | "
+                     f"{100 * r['speed_error']:+.2f} % | {r['dissipation']:.4e} | {r['rigid_dissipation']:.4e} | "
+                     f"{r['balance_error']:.1e} |")
+    if results["sliding3d"]:
+        lines += ["", "## 3D: a block sliding down a slope, 30 degrees from x (6 x 6 x 3 cubes)", "",
+                  "| mu | cells | acceleration (m/s^2) | g (sin t - mu cos t) along the slope | error | balance error |",
+                  "|---" * 6 + "|"]
+        for r in results["sliding3d"]:
+            a = ", ".join(f"{x:.4f}" for x in r["acceleration"])
+            e = ", ".join(f"{x:.4f}" for x in r["exact"])
+            lines.append(f"| {r['mu']:g} | {r['cells']} | ({a}) | ({e}) | {100 * r['relative_error']:.2f} % | "
+                         f"{r['balance_error']:.1e} |")
     lines += ["", "## The stable step with and without friction (sliding, 16 x 8 squares)", "",
               "| mu | largest stable dt / bound |", "|---|---|"]
     lines += [f"| {mu} | {f:g} |" for mu, f in results["stable_factor"].items()]
@@ -151,6 +244,9 @@ def main():
     for tan in (0.05, 0.2):
         results["held"].append(run(0.5, tan, args.meshes[0], 0.3, settled=True))
         print(json.dumps(results["held"][-1]), flush=True)
+    results["rolling"] = [roll(h) for h in ((0.01,) if args.quick else (0.01, 0.005))]
+    results["sliding3d"] = [] if args.quick else [slide3d(mu) for mu in (0.1, 0.2)]
+    print(results["rolling"], results["sliding3d"], flush=True)
     results["stable_factor"] = {f"{mu:g}": stable_factor(mu, args.meshes[0])
                                 for mu in ((0.0, 0.1) if args.quick else (0.0, 0.1, 0.3))}
     print(results["stable_factor"], flush=True)

@@ -223,7 +223,9 @@ class RigidContact:
         self._arena = arena()
         self._patch_force = np.zeros(len(self.scatter))
         mu = np.array([float(ob.friction) for ob in obstacles])[obstacle]
-        scheme_b = (mu > 0) & ~np.isin(self.facets, rec.scheme_a_facets)
+        # scheme B chosen for the candidates (dem-B, dem-AB); scheme A's own fallback to scheme B on
+        # cells with several Neumann facets (corners and edges, reconstruction.py) is kept
+        scheme_b = (mu > 0) & ~np.isin(self.facets, rec.scheme_a_facets) & ~np.isin(self.cells, rec.multi_neumann_cells)
         k = self.comm.allreduce(int(obstacle[scheme_b].min(initial=len(obstacles))), op=MPI.MIN)
         if k < len(obstacles):  # on every process
             raise InputError(
