@@ -1,5 +1,5 @@
 """Coulomb friction on the cells of contact facets, with an exact energy balance (docs/theory.md,
-"Friction").
+"Friction on rigid obstacles").
 
 MEMM with a frictional impulse T^n over the step [t_n, t_{n+1}],
 
@@ -9,8 +9,8 @@ changes the pseudo-energy by E^{n+1} - E^n = v^{n+1/2} . T^n (memm.py: I^n is th
 of the conservative force). With the dissipation D^{n+1} = D^n - v^{n+1/2} . T^n, E^n + D^n - W^n
 is conserved to rounding, whatever T^n is; Coulomb's law is a choice of T^n that makes every
 increment of D non-negative. Each candidate facet f in contact with an obstacle of unit normal n
-over the step carries a normal impulse N_f >= 0 (the integral of its reaction, ``force_integral``)
-and gives its cell c a tangential impulse tau_f in the set
+over the step carries a normal impulse N_f (the integral of its reaction, ``force_integral``; a
+facet with N_f <= 0 gives none) and gives its cell c a tangential impulse tau_f in the set
 
     K_f = {tau : tau . n = 0, |tau| <= mu N_f, tau . w_c <= 0},
 

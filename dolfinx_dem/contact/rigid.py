@@ -231,7 +231,7 @@ class RigidContact:
             raise InputError(
                 f"obstacle {k}: friction needs scheme A candidates (method dem-A): with scheme B the facets' normal "
                 "reactions change sign from one facet to the next, and a Coulomb bound on each over-counts the normal "
-                "force (docs/theory.md, Friction)")
+                "force (docs/theory.md, Friction on rigid obstacles)")
         #: Coulomb friction on the own facets' cells (None: frictionless), contact/friction.py
         self.friction = None
         if self.comm.allreduce(bool((mu > 0).any()), op=MPI.LOR):
