@@ -336,8 +336,9 @@ def test_friction_slide_quick_follows_coulomb_and_keeps_the_stable_step(tmp_path
     """The block sliding down a 30 degree slope at mu = 0.1 (16 x 8 squares): its acceleration
     within 0.2 % of g (sin t - mu cos t) (measured +0.005 %), the balance to 1e-13, D never
     decreasing; held at tan t = 0.05 < mu = 0.5 it does not move at all; a disc launched sliding
-    rolls from t* = v0 / (3 mu g) at 2/3 v0; friction leaves the stable step where it was (1.08
-    times the bound, measured); docs/validation/friction.md."""
+    rolls from t* = v0 / (3 mu g) at 2/3 v0; a 3D block slides down an oblique slope at the rigid
+    law; friction leaves the stable step where it was (1.08 times the bound, measured);
+    docs/validation/friction.md."""
     _quick("validation/friction_slide.py", "--out", str(tmp_path / "f.json"))
     data = json.loads((tmp_path / "f.json").read_text())
     (sliding,), (held, _) = data["sliding"], data["held"]
@@ -346,4 +347,8 @@ def test_friction_slide_quick_follows_coulomb_and_keeps_the_stable_step(tmp_path
     assert data["stable_factor"]["0.1"] == data["stable_factor"]["0"] >= 1.0
     (rolling,) = data["rolling"]  # h = 0.01: slip stops at t* +2.1 %, the speed then -1.1 % (measured)
     assert abs(rolling["slip_stops_error"]) < 0.05 and abs(rolling["speed_error"]) < 0.02
+    assert rolling["balance_error"] < 1e-12
+    (block3d,) = data["sliding3d"]  # along the oblique slope: 0.18 % off (measured)
+    assert block3d["relative_error"] < 0.01 and block3d["balance_error"] < 1e-13
+    assert block3d["min_dissipation_increment"] >= 0.0
     assert (tmp_path / "f.md").read_text().startswith("# Friction")
