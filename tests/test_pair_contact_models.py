@@ -180,22 +180,24 @@ def test_contact_table_needs_a_dem_scene():
         scenes.validate(static | {"method": "fem-P2"})
 
 
+def mesh_disc_over_block(gmsh, height: float) -> None:
+    """Meshes (in the open gmsh model) a disc of radius 0.1 (facets 0.015, tag 1) whose lowest
+    point is ``height`` above the block [-0.3, 0.3] x [-0.2, 0] (facets 0.05, tag 2)."""
+    disc = gmsh.model.occ.addDisk(0.0, 0.1 + height, 0.0, 0.1, 0.1)
+    block = gmsh.model.occ.addRectangle(-0.3, -0.2, 0.0, 0.6, 0.2)
+    gmsh.model.occ.synchronize()
+    for tag, (surface, h) in enumerate(((disc, 0.015), (block, 0.05)), start=1):
+        gmsh.model.addPhysicalGroup(2, [surface], tag)
+        gmsh.model.mesh.setSize(gmsh.model.getBoundary([(2, surface)], recursive=True), h)
+    gmsh.model.mesh.generate(2)
+
+
 def disc_over_block(height: float, comm=MPI.COMM_WORLD, skin: float | None = None):
-    """Scheme A, nu = 0.3: a disc of radius 0.1 (facets 0.015) whose lowest point is ``height``
-    above a block of facets 0.05. Pairs of a disc facet far round the disc and a block facet
-    have cos^2 of the disc facet's angle to n below kappa = nu: eq. (23)-(24) are not well posed
-    for them (D <= 0 for some). ``skin``: one Verlet skin for all facets (default per facet)."""
-
-    def build(gmsh):
-        disc = gmsh.model.occ.addDisk(0.0, 0.1 + height, 0.0, 0.1, 0.1)
-        block = gmsh.model.occ.addRectangle(-0.3, -0.2, 0.0, 0.6, 0.2)
-        gmsh.model.occ.synchronize()
-        for tag, (surface, h) in enumerate(((disc, 0.015), (block, 0.05)), start=1):
-            gmsh.model.addPhysicalGroup(2, [surface], tag)
-            gmsh.model.mesh.setSize(gmsh.model.getBoundary([(2, surface)], recursive=True), h)
-        gmsh.model.mesh.generate(2)
-
-    mesh = gmsh_mesh(comm, build)
+    """Scheme A, nu = 0.3: the disc over the block of ``mesh_disc_over_block``. Pairs of a disc
+    facet far round the disc and a block facet have cos^2 of the disc facet's angle to n below
+    kappa = nu: eq. (23)-(24) are not well posed for them (D <= 0 for some). ``skin``: one Verlet
+    skin for all facets (default per facet)."""
+    mesh = gmsh_mesh(comm, lambda gmsh: mesh_disc_over_block(gmsh, height))
     dem = DEMDiscretisation(mesh, ElasticMaterial(E=100.0, nu=0.3, rho=100.0), "A")
     facets = meshes.locate_boundary_facets(mesh, lambda x: (x[1] <= 0.1 + height) & (x[1] >= -1e-9))
     return DEMProblem(dem, [PairContact(dem, facets, skin=skin)])
@@ -259,13 +261,7 @@ def test_a_run_reports_the_pairs_that_use_the_scheme_b_rule(tmp_path, capsys):
     gmsh.initialize()
     try:
         gmsh.option.setNumber("General.Terminal", 0)
-        disc = gmsh.model.occ.addDisk(0.0, 0.22, 0.0, 0.1, 0.1)
-        block = gmsh.model.occ.addRectangle(-0.3, -0.2, 0.0, 0.6, 0.2)
-        gmsh.model.occ.synchronize()
-        for tag, (surface, h) in enumerate(((disc, 0.015), (block, 0.05)), start=1):
-            gmsh.model.addPhysicalGroup(2, [surface], tag)
-            gmsh.model.mesh.setSize(gmsh.model.getBoundary([(2, surface)], recursive=True), h)
-        gmsh.model.mesh.generate(2)
+        mesh_disc_over_block(gmsh, 0.02)
         gmsh.write(str(tmp_path / "disc_block.msh"))
     finally:
         gmsh.finalize()
