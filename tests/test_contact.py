@@ -113,6 +113,22 @@ def test_the_force_integral_over_a_flight_is_its_energy_change(scheme):
     assert events >= 4 and pieces >= 2
 
 
+def test_the_compiled_rigid_contact_refuses_patch_values_of_another_size():
+    """The kernels read as many values as the patch has dofs: shorter arrays or other types
+    raise before any is read."""
+    problem = plate("A")
+    c = problem.contacts[0]
+    u = problem.dem.create_vector()
+    up, vp = c.prepare(u, u, 1e-3)
+    out = problem.dem.create_vector()
+    for bad in (up[:-1], np.append(up, 0.0), up.astype(np.float32)):
+        with pytest.raises(ValueError, match="float64 dofs"):
+            c.force_integral(bad, vp, 1e-3, out)
+        with pytest.raises(ValueError, match="float64 dofs"):
+            c.energy_correction(bad)
+    c.force_integral(up, vp, 1e-3, out)
+
+
 @pytest.mark.parametrize("scheme", ["A", "B"])
 def test_energy_and_reconstruction_are_continuous_across_the_switch(scheme):
     """A strained bar (energy 0.42 J) moved rigidly so that its contact facet's gap is
