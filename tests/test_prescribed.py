@@ -343,3 +343,16 @@ def test_a_static_scene_with_a_prescribed_disc_reports_its_reaction(tmp_path):
     assert series["t"] == 0.0105 and np.isclose(series["prescribed_disc_displacement_y"], -0.0105, rtol=1e-14, atol=0)
     with pytest.raises(scenes.SceneError, match="'statics.time' must be a finite number"):
         scenes.validate(static_indentation(0.0) | {"statics": {"time": "1"}})
+
+
+def test_friction_on_a_prescribed_body_is_refused():
+    """Its cells have no mass for the friction law to stop: friction there is an error, not
+    silently none."""
+    from dolfinx_dem.contact import HalfSpace, RigidContact
+
+    mesh, tags, facet_tags = _rectangle_tags(MPI.COMM_WORLD, lambda c: np.ones_like(c))
+    dem = DEMDiscretisation(mesh, MATERIAL, "A", cell_tags=tags, prescribed=[PrescribedBody(1, velocity=[0.0, -1.0])])
+    bottom = facet_tags.find(meshes.YMIN)
+    assert RigidContact(dem, [HalfSpace([0.0, 0.0], [0.0, 1.0], bottom)]).friction is None
+    with pytest.raises(ValueError, match="friction on a prescribed body's facets is not implemented"):
+        RigidContact(dem, [HalfSpace([0.0, 0.0], [0.0, 1.0], bottom, friction=0.3)])

@@ -232,6 +232,12 @@ class RigidContact:
                 f"obstacle {k}: friction needs scheme A candidates (method dem-A): with scheme B the facets' normal "
                 "reactions change sign from one facet to the next, and a Coulomb bound on each over-counts the normal "
                 "force (docs/theory.md, Friction on rigid obstacles)")
+        own = slice(0, self.num_own)
+        prescribed = (mu[own] > 0) & np.isin(self.cells[own] * d, dem.prescribed.dofs)
+        k = self.comm.allreduce(int(obstacle[own][prescribed].min(initial=len(obstacles))), op=MPI.MIN)
+        if k < len(obstacles):  # their cells have no mass for the law to stop: an error, not no friction
+            raise InputError(f"obstacle {k}: friction on a prescribed body's facets is not implemented (its motion is "
+                             "given; remove the facets from the candidates or the friction)")
         #: Coulomb friction on the own facets' cells (None: frictionless), contact/friction.py
         self.friction = None
         if self.comm.allreduce(bool((mu > 0).any()), op=MPI.LOR):
