@@ -191,7 +191,9 @@ def ball(h: float):
     (the nearest can have a neighbour further out but lower): gravity has no moment about that point,
     the one the ball stands on, as the disc stands on its lowest facet's centre. Standing on three
     facet centres instead, the ball would roll over the leading one, off its centroid's foot, and
-    climb: its normal force, and friction, would rise with h."""
+    climb: its normal force, and friction, would rise with h. Frictionless statics holds its mean
+    x and y; its rotations about that point cost nothing and gravity does not load them, so CG,
+    from u = 0, leaves them out."""
     mesh, _, tags = meshes.create_balls(MPI.COMM_WORLD, [([0.0, 0.0, R_DISC], R_DISC)], h)
     centres = _compat.facet_cell_and_vertices(mesh, tags.find(1))[1].mean(axis=1)
     cells = _compat.owned_cell_nodes(mesh)[1]
