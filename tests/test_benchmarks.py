@@ -337,8 +337,9 @@ def test_friction_slide_quick_follows_coulomb_and_keeps_the_stable_step(tmp_path
     within 0.2 % of g (sin t - mu cos t) (measured +0.005 %), the balance to 1e-13, D never
     decreasing; held at tan t = 0.05 < mu = 0.5 it does not move at all; a disc launched sliding
     rolls from t* = v0 / (3 mu g) at 2/3 v0; a 3D block slides down an oblique slope at the rigid
-    law; friction leaves the stable step where it was (1.08 times the bound, measured);
-    docs/validation/friction.md."""
+    law; friction leaves the stable step where it was (1.08 times the bound, measured); a ball
+    launched sliding rolls from t* = 2 v0 / (7 mu g) at 5/7 v0, and runs at the stable-step bound
+    with friction as without; docs/validation/friction.md."""
     _quick("validation/friction_slide.py", "--out", str(tmp_path / "f.json"))
     data = json.loads((tmp_path / "f.json").read_text())
     (sliding,), (held, _) = data["sliding"], data["held"]
@@ -351,4 +352,15 @@ def test_friction_slide_quick_follows_coulomb_and_keeps_the_stable_step(tmp_path
     (block3d,) = data["sliding3d"]  # along the oblique slope: 0.18 % off (measured)
     assert block3d["relative_error"] < 0.01 and block3d["balance_error"] < 1e-13
     assert block3d["min_dissipation_increment"] >= 0.0
+    (ball,) = data["rolling3d"]  # h = 0.02: slip stops at t* +4.7 %; the speed at t* -0.07 %, then -5.0 % (measured)
+    assert abs(ball["slip_stops_error"]) < 0.06 and abs(ball["speed_error"]) < 0.01
+    assert abs(ball["rolling_speed_error"]) < 0.07 and ball["slipping_while_sliding"] >= 1
+    # against the rigid law with the contact cell's lever: -1.0 % (the 1 % threshold) and -0.35 % (measured)
+    assert abs(ball["cell_slip_stops_error"]) < 0.02
+    assert abs(ball["rolling_speed"] / ball["rolling_speed_cell"] - 1) < 0.01
+    assert ball["balance_error"] < 1e-13 and ball["min_dissipation_increment"] >= 0.0
+    (stability,) = data["stability3d"]  # the ball at h = 0.03 at the bound: no energy grows, with friction or not
+    assert [r["f"] for r in stability["0"]] == [r["f"] for r in stability["0.5"]] == [1.0]
+    assert all(r["stable"] and r["largest_mechanical"] < (1 + 1e-9) * r["initial_mechanical"]
+               for r in stability["0"] + stability["0.5"])
     assert (tmp_path / "f.md").read_text().startswith("# Friction")
