@@ -24,8 +24,11 @@ touching pairs of cell c. D_p majorises the pairs' Delassus operator (its rows' 
 slips at mu N_p) in the first round, exactly as the obstacle law. Every round is a function of the
 previous one's impulses only (Gauss-Seidel sweeps would need a partition-independent order of the
 pairs, a global colouring): the result does not depend on the partition beyond rounding. They stop
-when no impulse changes by more than ``CONVERGED`` times the largest bound mu N_p (an Allreduce
-per round), or after ``MAX_ROUNDS`` (counted: ``unconverged``; the balance holds all the same).
+when no cell's summed impulse changes by more than ``CONVERGED`` times the largest bound mu N_p
+(an Allreduce per round; the impulses' components that move no cell do not count), or after
+``MAX_ROUNDS`` (counted: ``unconverged``; the balance holds all the same, the stick is then not
+exact). Pairs alone on their cells converge in one round; a non-matching interface, whose cells
+have several partners, takes hundreds (docs/theory.md).
 
 Distributed: the pair is handled by the owner of its facet i (the facet of the smaller global
 number); the processes that list it send their own rows' parts of N_p there. The velocities of the
@@ -42,10 +45,10 @@ from dolfinx_dem.contact.friction import STICK_ROUNDING, project
 from dolfinx_dem.contact.patch import PatchScatter
 from dolfinx_dem.errors import InputError, StateError
 
-#: Rounds stop when no impulse changes by more than this fraction of the largest bound mu N_p.
+#: Rounds stop when no cell's summed impulse changes by more than this fraction of the largest bound mu N_p.
 CONVERGED = 1e-13
 #: At most this many rounds a step (``PairFriction.unconverged`` counts the steps that reach it).
-MAX_ROUNDS = 200
+MAX_ROUNDS = 1000
 
 
 def frictional(mu, dem, bodies: np.ndarray) -> bool:
