@@ -2,12 +2,14 @@
 non-negative dissipation at every step, the total momentum, a block sliding on a clamped body at
 mu g, the same results on 1, 2 and 3 processes, mu = 0 as frictionless, and the errors."""
 
+import signal
+
 import numpy as np
 import pytest
 from mpi4py import MPI
 from pair_scenes import SOFT, two_discs
 
-from dolfinx_dem import meshes, model, scenes
+from dolfinx_dem import meshes, model, runcontrol, scenes, simulation
 from dolfinx_dem.conditions import DirichletBC
 from dolfinx_dem.contact import PairContact
 from dolfinx_dem.discretisation import DEMDiscretisation
@@ -148,3 +150,39 @@ def test_errors():
     scene["contact"] = {"boundary": ["y <= 0.2"], "friction": 0.3}
     with pytest.raises(SceneError, match="contact.friction"):
         scenes.validate(scene)
+
+
+def test_a_scene_with_friction_between_bodies_reports_it_and_resumes_bit_identical(tmp_path, monkeypatch):
+    """The oblique two-disks scene (h = 0.03) with ``contact.friction``: the series has
+    ``dissipation``, ``balance`` (to 1e-13 of the kinetic energy), the tangential force between
+    the bodies and the slipping pairs; interrupted during the impact and resumed, the run writes
+    the same bytes."""
+    scene = scenes.load("two-disks")
+    scene["mesh"]["h"] = 0.03
+    scene["contact"]["friction"] = 0.3
+    scene["initial"]["velocity"] = ["where(x < 0.25, 0.3, -0.3)", "where(x < 0.25, 0.1, -0.1)"]
+    scene["time"]["end"] = 0.1
+    scene["output"]["every"] = 1
+    full = simulation.run(scene, tmp_path / "full", MPI.COMM_WORLD, quiet=True)
+    series = np.genfromtxt(tmp_path / "full" / "series.csv", delimiter=",", names=True)
+    assert {"dissipation", "balance", "friction_force_0_1_x", "friction_force_0_1_y",
+            "slipping_pairs"} <= set(series.dtype.names)
+    assert np.abs(series["balance"] - series["balance"][0]).max() < 1e-13 * series["kinetic"][0]
+    assert np.diff(series["dissipation"]).min() >= 0.0 and full["dissipation"] == series["dissipation"][-1] > 0
+    # body 1 slides down past body 0: the force on body 0 points down the y axis
+    assert series["friction_force_0_1_y"].min() < 0.0 and series["friction_force_0_1_y"].max() == 0.0
+    assert full["friction_negative_normal_fraction"] == 0.0
+
+    calls, stop = [0], full["n_steps"] // 2
+    assert series["dissipation"][stop] > 0  # interrupted while the disks slide
+
+    def requested(self):
+        calls[0] += 1
+        self.signal = signal.SIGINT if calls[0] >= stop else 0
+        return calls[0] >= stop
+
+    monkeypatch.setattr(runcontrol.Interrupts, "requested", requested)
+    assert simulation.run(scene, tmp_path / "parts", MPI.COMM_WORLD, quiet=True)["status"] == "interrupted"
+    monkeypatch.undo()
+    assert simulation.resume(tmp_path / "parts", MPI.COMM_WORLD, quiet=True)["status"] == "completed"
+    assert (tmp_path / "parts" / "series.csv").read_bytes() == (tmp_path / "full" / "series.csv").read_bytes()
