@@ -186,3 +186,22 @@ def test_a_scene_with_friction_between_bodies_reports_it_and_resumes_bit_identic
     monkeypatch.undo()
     assert simulation.resume(tmp_path / "parts", MPI.COMM_WORLD, quiet=True)["status"] == "completed"
     assert (tmp_path / "parts" / "series.csv").read_bytes() == (tmp_path / "full" / "series.csv").read_bytes()
+
+
+def test_friction_between_balls_in_3d_balances_the_energy(tmp_path):
+    """The two-balls scene (h = 0.05, refined to 0.02 at the contact) meeting obliquely with mu = 0.3:
+    E + D within 1e-13 of the kinetic energy at every step (measured 2.8e-15 at h = 0.05), D never
+    decreasing, pairs slipping, the momentum kept to rounding."""
+    scene = scenes.load("two-balls")
+    scene["mesh"].update(h=0.05, refine_h=0.02)
+    scene["contact"]["friction"] = 0.3
+    scene["initial"]["velocity"] = ["where(x < 0.25, 0.3, -0.3)", "where(x < 0.25, 0.1, -0.1)",
+                                    "where(x < 0.25, 0.05, -0.05)"]
+    scene["time"]["end"] = 0.15
+    scene["output"] = {"every": 10**9}
+    summary = simulation.run(scene, tmp_path / "balls", MPI.COMM_WORLD, quiet=True)
+    series = np.genfromtxt(tmp_path / "balls" / "series.csv", delimiter=",", names=True)
+    assert np.abs(series["balance"] - series["balance"][0]).max() < 1e-13 * series["kinetic"][0]
+    assert np.diff(series["dissipation"]).min() >= 0.0 and summary["dissipation"] > 0.0
+    assert series["slipping_pairs"].max() > 0 and summary["momentum_rel_change"] < 1e-13
+    assert {"friction_force_0_1_x", "friction_force_0_1_y", "friction_force_0_1_z"} <= set(series.dtype.names)

@@ -54,7 +54,8 @@ clipped only at the Gauss nodes of its own pieces and interpolated at the compon
 
 Broad phase: the Verlet list of the pairs and the exchange of candidate facets between processes
 are pair_list.py's; the overlap geometry overlap.py's, the correction directions directions.py's,
-the state at a displacement and the flight pair_state.py's, the outputs pair_outputs.py's.
+the state at a displacement and the flight pair_state.py's, the outputs pair_outputs.py's,
+Coulomb friction between the bodies (``friction``) pair_friction.py's.
 ``prepare`` checks both ends of the coming step (the flight is affine); every evaluation checks
 that the list is valid for its displacements and raises otherwise (never a silently incomplete
 list); so does a step that moves a facet by more than half its skin.
