@@ -13,7 +13,7 @@ from dolfinx_dem import meshes, model, runcontrol, scenes, simulation
 from dolfinx_dem.conditions import DirichletBC
 from dolfinx_dem.contact import PairContact
 from dolfinx_dem.discretisation import DEMDiscretisation
-from dolfinx_dem.errors import InputError, SceneError
+from dolfinx_dem.errors import InputError, SceneError, StateError
 from dolfinx_dem.material import ElasticMaterial
 from dolfinx_dem.memm import MEMM
 from dolfinx_dem.problem import DEMProblem
@@ -130,7 +130,7 @@ def test_a_block_sliding_on_a_clamped_body_slows_at_mu_g():
 
 def test_errors():
     """A bad coefficient, friction on a prescribed body, statics with friction (Python and
-    scene)."""
+    scene), a quadrature other than the midpoint rule's exact integral."""
     dem, facets = two_discs()
     for mu in (-0.1, float("nan"), "0.3", True):
         with pytest.raises(InputError, match="friction coefficient"):
@@ -141,6 +141,10 @@ def test_errors():
     problem = DEMProblem(dem, [PairContact(dem, facets, friction=0.3)])
     with pytest.raises(InputError, match="statics with friction"):
         minimise_energy(problem)
+    stepper = MEMM(problem, 0.2 * dem.stable_time_step(), quadrature="gauss-legendre-2")
+    stepper.initialise(dem.create_vector(), oblique(dem.geometry.cell_centres[: dem.n_owned]).ravel())
+    with pytest.raises(StateError, match="midpoint"):  # the normal impulses come from the exact integral
+        stepper.step()
     scene = scenes.load("indentation")
     scene["contact"]["friction"] = 0.3
     with pytest.raises(InputError, match="prescribed body"):
