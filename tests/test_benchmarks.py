@@ -364,3 +364,17 @@ def test_friction_slide_quick_follows_coulomb_and_keeps_the_stable_step(tmp_path
     assert all(r["stable"] and r["largest_mechanical"] < (1 + 1e-9) * r["initial_mechanical"]
                for r in stability["0"] + stability["0.5"])
     assert (tmp_path / "f.md").read_text().startswith("# Friction")
+
+
+def test_friction_bodies_quick_balances_the_energy_through_friction(tmp_path):
+    """The oblique two-disks (h = 0.03, to 0.3 s) and the billiard (to 4 s) with mu = 0.3 between the
+    bodies: E + D within 1e-13 of the largest mechanical energy at every step (measured 2.3e-15 and
+    1.3e-15), D never decreasing and growing (1.8 % and 0.009 % of the initial kinetic energy,
+    measured), the disks' total momentum 0 to rounding; docs/validation/friction_bodies.md."""
+    _quick("validation/friction_bodies.py", "--out", str(tmp_path / "f.json"))
+    disks, billiard = json.loads((tmp_path / "f.json").read_text())["runs"]
+    for r in (disks, billiard):
+        assert r["balance_error"] < 1e-13 and r["min_dissipation_increment"] >= 0.0
+        assert r["dissipation_over_initial_kinetic"] > 0.0 and r["max_slipping_pairs"] > 0
+    assert disks["dissipation_over_initial_kinetic"] > 0.01 and disks["momentum_error"] < 1e-14
+    assert (tmp_path / "f.md").read_text().startswith("# Friction between bodies")

@@ -144,7 +144,7 @@ def screen_flight(pair_list: PairList, uc: np.ndarray, vp: np.ndarray, dt: float
 
 
 def integrate_flight(pair_list: PairList, patch: Struct, gauss: Struct, work, up: np.ndarray, flight: Struct,
-                     result: np.ndarray) -> int:
+                     result: np.ndarray, normal: np.ndarray | None = None) -> int:
     """result += int_0^dt (F - F_free)(u + tau v) dtau at the patch dofs, for the screened pairs
     ``touching`` of the flight of free facet displacements uc + tau vc (patch values up + tau vp;
     ``flight``: the struct of ``screen_flight``, which holds them but up), in one compiled call
@@ -156,9 +156,10 @@ def integrate_flight(pair_list: PairList, patch: Struct, gauss: Struct, work, up
     2 d - 1: the d-point rule ``gauss`` is exact; a pair's overlap clipped at the nodes of its own
     pieces only and interpolated at its component's; the rows' term -Q^T Z int c dtau on the own
     rows the touching pairs' z_p touch (a = Q u + q + tau Q v there: no sliced Q or Z) and the
-    pairs' term -int (z_p . (a + delta_a)) dc_p/du dtau at the facets."""
+    pairs' term -int (z_p . (a + delta_a)) dc_p/du dtau at the facets. ``normal`` (one per listed
+    pair, or None): += this process's part of each touching pair's normal impulse (pair_friction.py)."""
     pieces = lib.dem_pair_force_integral(pair_list.c_pairs.c, patch.c, pointer(up), flight.c, gauss.c, work,
-                                         pointer(result))
+                                         pointer(result), pointer(normal))
     if pieces < 0:
         raise KernelMemoryError("contact between bodies: out of memory in the force integral of a step")
     return pieces

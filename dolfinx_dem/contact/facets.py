@@ -21,15 +21,17 @@ from dolfinx_dem.kernels import Struct, csr, lib, pointer
 @dataclasses.dataclass
 class CandidateFacets:
     """Candidate facets (local ones first, then ghosts): global facet number ``key``, owner,
-    body, barycentre, outward unit normal, measure |f| (``length``: an area in 3D), vertex
-    coordinates (``ends``), global vertex numbers, scheme A
-    data (the tensor C a_f / |c| of ``directions.correction_directions``), and the free reconstruction
-    u_f = R_f u + lift as d rows of M (global dof, value) entries (dof -1: padding)."""
+    body, the global dof of its cell's first component (``cell_dof``, for the pair friction),
+    barycentre, outward unit normal, measure |f| (``length``: an area in 3D), vertex coordinates
+    (``ends``), global vertex numbers, scheme A data (the tensor C a_f / |c| of
+    ``directions.correction_directions``), and the free reconstruction u_f = R_f u + lift as d rows
+    of M (global dof, value) entries (dof -1: padding)."""
 
     key: np.ndarray  # (n,)
     index: np.ndarray  # (n,) the facet's number among all candidates (own facets numbered by rank)
     owner: np.ndarray  # (n,)
     body: np.ndarray  # (n,)
+    cell_dof: np.ndarray  # (n,)
     centre: np.ndarray  # (n, d)
     normal: np.ndarray  # (n, d)
     length: np.ndarray  # (n,)
@@ -42,7 +44,7 @@ class CandidateFacets:
     lift: np.ndarray  # (n, d)
 
     FLOATS = ("centre", "normal", "length", "ends", "Ca", "R_values", "lift")
-    INTS = ("key", "index", "owner", "body", "vertex_ids", "scheme_a", "R_dofs")
+    INTS = ("key", "index", "owner", "body", "cell_dof", "vertex_ids", "scheme_a", "R_dofs")
 
     def __len__(self) -> int:
         return len(self.key)
@@ -104,6 +106,7 @@ def candidate_records(dem, f: np.ndarray, cell: np.ndarray, numbers: np.ndarray)
     Ca = np.einsum("nijkl,nl->nijk", C, an) / geom.cell_volumes[cell, None, None, None]
     return CandidateFacets(
         key=geom.facet_global[f], index=numbers, owner=geom.cell_owner[cell], body=geom.cell_bodies[cell],
+        cell_dof=dem.columns[cell * d],
         centre=geom.facet_centres[f], normal=an / length[:, None], length=length,
         ends=geom.cell_vertices[cell][mask].reshape(n, d, d),
         vertex_ids=geom.cell_vertex_ids[cell][mask].reshape(n, d), scheme_a=scheme_a,

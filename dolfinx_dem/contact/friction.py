@@ -39,6 +39,22 @@ from petsc4py import PETSc
 STICK_ROUNDING = 1e-12
 
 
+def project(tau: np.ndarray, w: np.ndarray, n: np.ndarray, limit: np.ndarray, rounding: np.ndarray) -> np.ndarray:
+    """tau (k, d) := its projection onto K = {tau . n = 0, |tau| <= limit, tau . w <= 0} (in place),
+    a half-disc through its centre: onto the half-space (only where the slip speed |w| exceeds
+    ``rounding``: a stuck contact has no direction to oppose), its plane, then the disc. Returns
+    where the disc bound acted (slip at the Coulomb limit)."""
+    speed = np.linalg.norm(w, axis=1)
+    slipping = speed > rounding
+    unit = np.divide(w, speed[:, None], out=np.zeros_like(w), where=slipping[:, None])
+    tau -= np.maximum(np.einsum("ki,ki->k", tau, unit), 0.0)[:, None] * unit  # tau . w <= 0
+    tau -= np.einsum("ki,ki->k", tau, n)[:, None] * n
+    size = np.linalg.norm(tau, axis=1)
+    slip = size > limit
+    tau[slip] *= (limit[slip] / size[slip])[:, None]
+    return slip
+
+
 class CellFriction:
     """Coulomb friction (module docstring) of the own candidate facets of a contact model: their
     cells ``cells`` (owned, local), the obstacles' unit normals ``normals`` (n, d), the friction
@@ -78,18 +94,10 @@ class CellFriction:
             n = self.normals[facets]
             tau = -0.5 * mass * (v_free - np.einsum("ki,ki->k", v_free, n)[:, None] * n)
             w = v_flight - np.einsum("ki,ki->k", v_flight, n)[:, None] * n
-            speed = np.linalg.norm(w, axis=1)
             # a stuck cell keeps a slip speed of the rounding of its velocities' sums: 0 for the law
             rounding = STICK_ROUNDING * (np.linalg.norm(v_prev, axis=1) + np.linalg.norm(v_flight, axis=1)
                                          + np.linalg.norm(v_free, axis=1))
-            slipping = speed > rounding
-            unit = np.divide(w, speed[:, None], out=np.zeros_like(w), where=slipping[:, None])
-            tau -= np.maximum(np.einsum("ki,ki->k", tau, unit), 0.0)[:, None] * unit  # tau . w <= 0
-            tau -= np.einsum("ki,ki->k", tau, n)[:, None] * n
-            limit = self.mu[facets] * normal[facets]
-            size = np.linalg.norm(tau, axis=1)
-            slip = size > limit
-            tau[slip] *= (limit[slip] / size[slip])[:, None]
+            slip = project(tau, w, n, self.mu[facets] * normal[facets], rounding)
             values[dofs] += tau.ravel()
             dissipation += float(np.maximum(-np.einsum("ki,ki->k", v_flight, tau), 0.0).sum())
             np.add.at(self.forces, self.group[facets], tau)

@@ -54,7 +54,8 @@ clipped only at the Gauss nodes of its own pieces and interpolated at the compon
 
 Broad phase: the Verlet list of the pairs and the exchange of candidate facets between processes
 are pair_list.py's; the overlap geometry overlap.py's, the correction directions directions.py's,
-the state at a displacement and the flight pair_state.py's, the outputs pair_outputs.py's.
+the state at a displacement and the flight pair_state.py's, the outputs pair_outputs.py's,
+Coulomb friction between the bodies (``friction``) pair_friction.py's.
 ``prepare`` checks both ends of the coming step (the flight is affine); every evaluation checks
 that the list is valid for its displacements and raises otherwise (never a silently incomplete
 list); so does a step that moves a facet by more than half its skin.
@@ -84,6 +85,7 @@ from dolfinx_dem.contact.events import (
 )
 from dolfinx_dem.contact.facets import FacetRows, candidate_records
 from dolfinx_dem.contact.overlap import overlap
+from dolfinx_dem.contact.pair_friction import PairFriction, frictional
 from dolfinx_dem.contact.pair_list import PairList
 from dolfinx_dem.contact.pair_outputs import PairOutputs
 from dolfinx_dem.contact.pair_statics import PairStatics
@@ -122,13 +124,13 @@ class PairContact:
     skin : one Verlet-list margin (m) for every facet; default each facet's own diameter about its
         barycentre (its length in 2D).
     tolerance : how far facets may interpenetrate at t = 0 (m).
+    friction : the Coulomb coefficient mu >= 0 between the bodies (pair_friction.py; 0: frictionless).
     The pair list is ``pair_list`` (pair_list.py), the outputs ``outputs`` (pair_outputs.py)."""
 
     tracks_momentum = True
-    friction = None  # frictionless (contact/protocol.py)
 
     def __init__(self, dem, facets, self_contact: bool = False, skin: float | None = None,
-                 tolerance: float = 0.0, tag: int | None = None):
+                 tolerance: float = 0.0, tag: int | None = None, friction: float = 0.0):
         geom, d = dem.geometry, dem.d
         if d not in (2, 3):
             raise InputError(f"contact between deformable bodies is implemented in 2D and 3D, not {d}D")
@@ -206,6 +208,8 @@ class PairContact:
         self.pair_list = PairList(self.comm, local, self.num_own, Q, row_dofs, FacetRows(QF[touched], d),
                                   dem.create_vector(), self.self_contact, rigid, skin)
         self._check_no_overlap_at_rest()
+        #: Coulomb friction between the bodies (None: frictionless), contact/pair_friction.py
+        self.friction = PairFriction(self, friction) if frictional(friction, dem, local.body[: self.num_own]) else None
 
     def _check_no_overlap_at_rest(self) -> None:
         """Bodies that interpenetrate at u = 0 by more than ``tolerance`` are an input error."""
@@ -439,6 +443,7 @@ class PairContact:
         flight = self._flight
         if flight is None or flight.up is not up or flight.vp is not vp or flight.dt != dt:
             raise StateError("force_integral needs the patch values that prepare(u, v, dt) returned for this step")
+        normal = None if self.friction is None else self.friction.start(len(self.listed), flight.quiet)
         if flight.quiet:  # no pair touches during the step, on any process
             return 0
         # The pairs whose c_p may not vanish during the step (``free_flight``, in ``prepare``): the
@@ -449,10 +454,15 @@ class PairContact:
             if len(result) != self.pair_list.Rc.c.n_cols:
                 raise StateError("the force integral's patch and the facets' reconstructions disagree")
             pieces = integrate_flight(self.pair_list, self._c_patch, self._c_gauss, self._work, up, flight.screen,
-                                      result)
+                                      result, normal)
         self.scatter.add_zeroed(out)
         self.evaluations += len(self._gauss[0]) * pieces
         return len(self._gauss[0]) * pieces
+
+    def add_friction(self, state, impulse: PETSc.Vec) -> float:
+        """impulse += the step's frictional impulses; returns this process's dissipation (>= 0;
+        ``PairFriction.apply``, collective). Frictionless: 0, nothing added."""
+        return 0.0 if self.friction is None else self.friction.apply(state, impulse)
 
     # -- outputs (pair_outputs.py) ------------------------------------------------------------------
     def gradient_correction(self, up: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -498,3 +508,4 @@ class PairContact:
             self.pair_list.scheme_b_rule = np.asarray(state["scheme_b_rule"], dtype=np.int64)
             self.pair_list.rebuilds, self.evaluations, self.pair_list.exchanges = (int(x) for x in state["counters"])
             self.seconds = float(state["seconds"][0])
+

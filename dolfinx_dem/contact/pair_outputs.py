@@ -172,17 +172,25 @@ class PairOutputs:
         interpenetration ``penetration`` of the contact reconstructions (``penetration``), and the
         force of body j on body i for each pair i < j of bodies with candidate facets,
         ``contact_force_<i>_<j>_<x|y|z>`` (``pair_forces``; bodies numbered as
-        ``geometry.compute_bodies``, from 0)."""
+        ``geometry.compute_bodies``, from 0). With friction, the mean tangential force of body j on
+        body i over the last step, ``friction_force_<i>_<j>_<x|y|z>`` (its impulse over dt), and
+        ``slipping_pairs``, the touching pairs at the Coulomb limit in that step (0 at the first row)."""
         pc = self.contact
         xyz = "xyz"[: pc.d]
+        friction = () if pc.friction is None else (
+            tuple(f"friction_force_{i}_{j}_{c}" for i, j in pc.body_pairs for c in xyz) + ("slipping_pairs",))
         return ("contact_force", "penetration") + tuple(
             f"contact_force_{i}_{j}_{c}" for i, j in pc.body_pairs for c in xyz
-        )
+        ) + friction
 
     def output_sums(self, up: np.ndarray) -> np.ndarray:
         """This process's part of the sums of the outputs: the pair forces, the contact force and
-        the count of closed pairs (``closed_count``)."""
-        return np.concatenate([self.pair_forces(up).ravel(), [self.contact_force_part(up), self.closed_count(up)]])
+        the count of closed pairs (``closed_count``); with friction the last step's tangential forces
+        and slipping pairs after the pair forces."""
+        friction = self.contact.friction
+        extra = () if friction is None else (friction.forces.ravel(), [friction.slipping])
+        return np.concatenate([self.pair_forces(up).ravel(), *extra, [self.contact_force_part(up),
+                                                                      self.closed_count(up)]])
 
     def output_values(self, up: np.ndarray, sums: np.ndarray) -> list[float]:
         """The values of ``output_columns`` from the reduced ``output_sums``: the penetration's

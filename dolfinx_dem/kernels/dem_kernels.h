@@ -221,7 +221,8 @@ void dem_piecewise_midpoints(int64_t n_times, const int64_t *rows, const double 
 void dem_pair_facet_forces(const dem_pairs *pairs, int64_t n, const int64_t *p, const double *mu, const double *g,
                            const double *w, const double *dw, double *out);
 int64_t dem_pair_force_integral(const dem_pairs *pairs, const dem_patch *patch, const double *up,
-                                const dem_flight *flight, const dem_gauss *gauss, dem_arena *work, double *result);
+                                const dem_flight *flight, const dem_gauss *gauss, dem_arena *work, double *result,
+                                double *impulse);
 void dem_arena_free(dem_arena *work);
 
 /* ---- contact with rigid obstacles (rigid.c) --------------------------------------------- */

@@ -450,11 +450,14 @@ static void pairs_term(int64_t n, const int64_t *restrict p, const dem_pairs *pa
  * point Gauss rule integrates them exactly. A pair's w and dw are clipped at the nodes of its
  * own pieces only (overlap_own) and interpolated at its component's nodes (interpolate_own).
  * The sums run in the order of the pairs, of each CSR row's entries and of the nodes (the rows
- * in the order the pairs first touch them). Returns the largest number of non-empty pieces of a
- * component, or -1 if memory ran out. */
+ * in the order the pairs first touch them). impulse (one per listed pair, or NULL): += this
+ * process's part of each touching pair's normal impulse int -mu_p w_p dtau, the integral of the
+ * normal force facet i exerts on facet j along n (its own rows' share of mu_p: the parts add up
+ * to the pair's impulse over the processes; the pair friction's N_p). Returns the largest number
+ * of non-empty pieces of a component, or -1 if memory ran out. */
 int64_t dem_pair_force_integral(const dem_pairs *pairs, const dem_patch *patch, const double *restrict up,
                                 const dem_flight *flight, const dem_gauss *gauss, dem_arena *arena,
-                                double *restrict result)
+                                double *restrict result, double *restrict impulse)
 {
   const int32_t d = pairs->d, n_tau = 1 + 2 * d * d, n_own = n_tau + 1, n_gauss = gauss->n;
   const int64_t n = flight->n_touching, *restrict p = flight->touching;
@@ -598,6 +601,9 @@ int64_t dem_pair_force_integral(const dem_pairs *pairs, const dem_patch *patch, 
 
   rows_term(n, p, &pairs->z, slot, n_rows, rows, &patch->Q, &at, zc, result);
   pairs_term(n, p, pairs, za, &at, mu, work, facet_force, pairs_sum, result);
+  if (impulse) /* mu holds the weights: the Gauss sums of -mu w */
+    for (int64_t e = 0; e < n_nodes; ++e)
+      impulse[entry[e]] -= mu[e] * w[e];
   status = pieces;
 
 done:

@@ -158,6 +158,7 @@ SCHEMA = {
         "tolerance": lambda k, v, d: _number(k, v, nonnegative=True),
         "skin": lambda k, v, d: _number(k, v, positive=True),
         "max_penetration": lambda k, v, d: _number(k, v, positive=True),
+        "friction": lambda k, v, d: _number(k, v, nonnegative=True),
     },
     "prescribed": [{
         "tag": lambda k, v, d: _integer(k, v, minimum=0),

@@ -103,6 +103,9 @@ def check_static(scene: Mapping) -> None:
         if obstacle.get("friction", 0.0) > 0:
             raise SceneError(f"scene key 'obstacles[{k}].friction': statics with friction is not implemented (friction "
                              "is path dependent: a dynamic scene integrates it)")
+    if scene.get("contact", {}).get("friction", 0.0) > 0:
+        raise SceneError("scene key 'contact.friction': statics with friction is not implemented (friction is path "
+                         "dependent: a dynamic scene integrates it)")
     for section, keys in DYNAMIC_ONLY.items():
         for key in (k for k in keys if k in scene.get(section, {})):
             raise SceneError(f"scene key '{section}.{key}' applies to dynamic scenes: a static scene computes and "
