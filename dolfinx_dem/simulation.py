@@ -1,8 +1,9 @@
 """Run a scene: the one path from a scene to its outputs, scene -> model -> runner -> writers.
 
 - ``model.py``: the mesh, the DEM discretisation and its contact models, the probes;
-- the runners: ``dynamics.DynamicRun`` (MEMM), ``static_simulation.StaticRun`` (statics, or the
-  FEM reference); each builds its model and checks the input when constructed;
+- the runners: ``dynamics.DynamicRun`` (MEMM), ``fem.scene_run.FEMP1Run`` (method ``fem-P1``, the
+  explicit FEM peer), ``static_simulation.StaticRun`` (statics, or the FEM reference); each
+  builds its model and checks the input when constructed;
 - the writers (``io.py``, ``plotting.py``): only once everything is checked does a runner touch
   the output folder (``io.OutputDirectory``: a folder holding another run is refused unless
   ``overwrite``).
@@ -28,6 +29,7 @@ from mpi4py import MPI
 from dolfinx_dem import io
 from dolfinx_dem.dynamics import DynamicRun
 from dolfinx_dem.errors import InputError
+from dolfinx_dem.fem.scene_run import FEMP1Run
 from dolfinx_dem.model import Probes, build, contact_columns, contact_values  # noqa: F401 (public API)
 from dolfinx_dem.static_simulation import StaticRun
 
@@ -46,6 +48,10 @@ def run(scene: Mapping, out: str | pathlib.Path, comm: MPI.Comm = MPI.COMM_WORLD
     output.check()
     if "statics" in scene:
         return StaticRun(scene, comm).run(output)
+    if scene.get("method") == "fem-P1":
+        if checkpoint_every is not None:
+            raise InputError("method 'fem-P1' writes no checkpoints (drop --checkpoint-every)")
+        return FEMP1Run(scene, comm, quiet=quiet).run(output)
     return DynamicRun(scene, comm, quiet=quiet, checkpoint_every=checkpoint_every).run(output)
 
 
