@@ -110,7 +110,8 @@ class PenaltyCentralDifference(FEMCentralDifference):
 
     def __init__(self, mesh, E, nu, rho, clamped_facets, dt, *, body_force=None, obstacles: Sequence = (),
                  tractions: Sequence = (), **kwargs):
-        self._contact = self._K_free = None  # the base computes a first acceleration before the contact exists
+        # None until made: the base computes a first acceleration before the contact exists
+        self._contact = self._K_free = self._strain_energy = None
         # the base computes dt_stable; the step is checked below, with the contact
         super().__init__(mesh, E, nu, rho, clamped_facets, cfl=1.0, allow_unstable=True, **kwargs)
         self.dt = check_positive("dt (time step)", dt(self.dt_stable) if callable(dt) else dt)
@@ -226,6 +227,19 @@ class PenaltyCentralDifference(FEMCentralDifference):
         lam = _largest_eigenvalue(self.comm, Kp, self._inverse_mass)
         Kp.destroy()
         return 2.0 / np.sqrt(lam)
+
+    def energies(self) -> tuple[float, float]:
+        """(kinetic, elastic) energy in J, summed over ranks: ``1/2 v.m v`` and the strain energy
+        ``1/2 int sigma(u) : eps(u)``, equal to ``1/2 u.K u`` but summed from the strains: for a
+        body far from its reference (a bar in flight) u.K u cancels terms of order K |u|^2, and
+        its rounding would differ between process counts."""
+        if self._strain_energy is None:
+            self._strain_energy = dolfinx.fem.form(0.5 * ufl.action(ufl.action(self._k, self.u), self.u))
+        v, w = _compat.petsc_vec(self.v), self._work
+        w.pointwiseMult(v, self.lumped_mass)
+        kinetic = 0.5 * v.dot(w)
+        elastic = self.comm.allreduce(dolfinx.fem.assemble_scalar(self._strain_energy), op=MPI.SUM)
+        return float(kinetic), float(elastic)
 
     # -- contact ---------------------------------------------------------------------------------
     def _gaps(self) -> np.ndarray:
