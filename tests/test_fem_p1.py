@@ -173,3 +173,31 @@ def test_facet_nodes_are_the_facet_vertices():
     x = node_coordinates(V)[facet_nodes(V, facets)]  # (n, 3, 3)
     _, facet_x, _ = _compat.facet_cell_and_vertices(mesh, facets)
     assert np.allclose(np.sort(x, axis=1), np.sort(facet_x, axis=1))
+
+
+@pytest.mark.mpi
+def test_a_suddenly_applied_traction_on_a_clamped_bar(tempdir):
+    """Traction T at the free end of a clamped bar (L = c = E = 1) from rest: the tip swings
+    between 0 and 2 T L / E with period 4 and mean T L / E; the clamp's reaction is 0, -2 T, 0
+    (arrival of the wave at t = 1, its return at t = 3), of mean -T. With output.animation."""
+    T = 0.01
+    scene = {
+        "name": "pulled", "method": "fem-P1",
+        "mesh": {"type": "interval", "x0": 0.0, "x1": 1.0, "n": 50},
+        "material": {"E": 1.0, "nu": 0.0, "rho": 1.0},
+        "dirichlet": [{"boundary": "left", "name": "clamp"}],
+        "tractions": [{"boundary": "right", "value": [T]}],
+        "time": {"end": 4.0, "cfl": 0.5},
+        "probes": [{"name": "tip", "point": [1.0], "component": 0}],
+        "output": {"every": 100, "animation": True},
+    }
+    summary, data = _run(scene, tempdir, "pulled")
+    t, tip, reaction = data["t"], data["tip"], data["reaction_clamp_x"]
+    mean = np.trapz(tip, t) / 4.0
+    assert mean == pytest.approx(T, rel=0.01)
+    assert tip.max() == pytest.approx(2 * T, rel=0.1) and t[np.argmax(tip)] == pytest.approx(2.0, abs=0.1)
+    assert np.trapz(reaction, t) / 4.0 == pytest.approx(-T, rel=0.02)
+    assert np.abs(reaction[t < 0.8]).max() < 1e-3 * T  # the wave has not reached the clamp
+    assert summary["pseudo_energy_rel_drift"] < 1e-12  # -F.u counted in the energy
+    if MPI.COMM_WORLD.rank == 0:
+        assert (pathlib.Path(tempdir) / "pulled" / "animation.gif").stat().st_size > 0

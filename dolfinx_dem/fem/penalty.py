@@ -11,18 +11,20 @@ method ``fem-P1`` (fem/scene_run.py).
   of the penalty energy ``1/2 kappa_i max(0, -g_i)^2``.
 
 The penalty stiffness is the nodal-mass and time-step ("soft constraint") choice
-``kappa_i = PENALTY_FACTOR m_i / dt^2``: it does not depend on E or on the mesh size, it is the
-stiffest spring the node carries at the step of the elastic scheme (a free node on a spring of
-stiffness kappa is stable while ``kappa < 4 m / dt^2``), and the penetration ``p dt^2 / (s m)``
-vanishes as dt^2 / h at a fixed contact pressure p, so the scheme converges to the Signorini
-condition. With every candidate active, ``lambda_max(m^-1 (K + kappa P)) <= lambda_max(m^-1 K)
-+ s / dt^2``, so any ``dt <= dt_stable sqrt(1 - s / 4)`` is stable (0.866 dt_stable for s = 1); the
-solver checks the step against SLEPc's ``lambda_max`` of ``m^-1 (K + kappa P)`` (every candidate
-active, :attr:`dt_stable_contact`), and refuses a larger step.
+``kappa_i = PENALTY_FACTOR m_i / dt^2`` (s = 1): it does not depend on E or on the mesh size, it
+is a quarter of the stiffest spring a free node carries at the step of the elastic scheme (a
+node on a spring of stiffness kappa is stable while ``kappa < 4 m / dt^2``), and the penetration
+``p A_i dt^2 / (s m_i)`` under a contact pressure p (A_i the node's share of the contact area,
+m_i ~ rho A_i h) vanishes as dt^2 / h, so the scheme converges to the Signorini condition. With
+every candidate active, ``lambda_max(m^-1 (K + kappa P)) <= lambda_max(m^-1 K) + s / dt^2``
+(Weyl's inequality on the symmetric ``m^-1/2 (K + kappa P) m^-1/2``), so any
+``dt < dt_stable sqrt(1 - s / 4)`` is stable (0.866 dt_stable for s = 1); the solver checks the
+step against SLEPc's ``lambda_max`` of ``m^-1 (K + kappa P)`` (every candidate active,
+:attr:`dt_stable_contact`), and refuses a larger step.
 
 Energy: without contact the scheme conserves ``modified_energy`` exactly; the penalty energy is
 piecewise quadratic in u, so at the steps where a node enters or leaves the obstacle the
-central-difference scheme makes an O(dt) error in the energy: it is not conserved exactly
+central-difference scheme makes an error in the energy: it is not conserved exactly
 (docs/scenes.md gives the measured figures).
 
 Distributed: a process computes the gaps and forces of its owned candidate nodes (the ghosts are

@@ -199,8 +199,10 @@ class FEMP1Run:
     def _cell_values(self, function, space) -> np.ndarray:
         """The owned cells' DG0 values of ``function`` interpolated into ``space``, in cell order."""
         f = dolfinx.fem.Function(space)
-        f.interpolate(function) if isinstance(function, dolfinx.fem.Function) else _compat.interpolate_expression(
-            f, function)
+        if isinstance(function, dolfinx.fem.Function):
+            f.interpolate(function)
+        else:
+            _compat.interpolate_expression(f, function)
         bs = space.dofmap.index_map_bs
         return f.x.array.reshape(-1, bs)[_compat.cell_dofs(space)[: self.n_cells]]
 
@@ -258,25 +260,33 @@ class FEMP1Run:
                                        "writes no checkpoint and cannot be resumed")
                 if self.comm.rank == 0 and not self.quiet:
                     print(f"dolfinx-dem: interrupted by {interrupts.name}", file=sys.stderr, flush=True)
-            self._pictures(directory)
+            self._pictures(directory, animation=status != "interrupted")
             summary = self._summary(status)
             io.write_summary(directory / "summary.json", self.comm, summary)
         return summary
 
-    def _pictures(self, directory: pathlib.Path):
+    def _pictures(self, directory: pathlib.Path, animation: bool):
+        """``final.png``, and with ``output.animation`` ``animation.gif`` (as the DEM's runs)."""
         output = self.scene.get("output", {})
         scale = output.get("picture_scale", 1.0)
         obstacles = [(ob["point"], ob["normal"]) for ob in self.scene.get("obstacles", [])]
         fields = self.fields()
         u = fields["displacement"].x.array.reshape(-1, self.d)[_compat.cell_dofs(self._vector)[: self.n_cells]]
+        scalar = _compat.cell_dofs(self._scalar)[: self.n_cells]
         if self.d == 1:
-            stress = fields["stress_xx"].x.array[_compat.cell_dofs(self._scalar)[: self.n_cells]]
-            plotting.plot_bar(self.mesh, u, stress, directory / "final.png", self.solver.t, obstacles)
+            plotting.plot_bar(self.mesh, u, fields["stress_xx"].x.array[scalar], directory / "final.png",
+                              self.solver.t, obstacles)
         else:
-            vm = fields["von_mises"].x.array[_compat.cell_dofs(self._scalar)[: self.n_cells]]
-            plotting.plot_cell_field(self.mesh, u, vm, directory / "final.png", "von Mises stress (Pa)", scale,
-                                     obstacles, None, plotting.picture_caption(self.scene["name"], self.solver.t,
-                                                                               scale))
+            plotting.plot_cell_field(self.mesh, u, fields["von_mises"].x.array[scalar], directory / "final.png",
+                                     "von Mises stress (Pa)", scale, obstacles, None,
+                                     plotting.picture_caption(self.scene["name"], self.solver.t, scale))
+        if animation and output.get("animation") and not plotting.too_large(self.mesh):
+            xdmf, gif = directory / "solution.xdmf", directory / "animation.gif"
+            if self.d == 1:
+                io.call_on_root(self.comm, plotting.animate_bar, xdmf, gif, obstacles)
+            else:
+                io.call_on_root(self.comm, plotting.animate_solution, xdmf, gif, "von_mises",
+                                "von Mises stress (Pa)", scale, obstacles)
 
     def _summary(self, status: str) -> dict:
         s = self.solver
