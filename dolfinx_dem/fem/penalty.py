@@ -54,12 +54,13 @@ from dolfinx_dem.fem.elastodynamics import FEMCentralDifference, _largest_eigenv
 PENALTY_FACTOR = 1.0
 
 
-def facet_areas(mesh, facets: np.ndarray) -> np.ndarray:
-    """Measures of the process-local facets (m^2, m in 2D, 1 for the points of a 1D mesh)."""
-    tdim = mesh.topology.dim
+def facet_areas(V, facets: np.ndarray) -> np.ndarray:
+    """Measures of process-local facets (m^2, m in 2D, 1 for the points of a 1D mesh) from the
+    coordinates of their P1 nodes (``facet_nodes``)."""
+    tdim = V.mesh.topology.dim
     if tdim == 1:
         return np.ones(len(facets))
-    x = mesh.geometry.x[dolfinx.mesh.entities_to_geometry(mesh, tdim - 1, facets, False)]
+    x = node_coordinates(V)[facet_nodes(V, facets)]  # (n, tdim, gdim)
     if tdim == 2:
         return np.linalg.norm(x[:, 1] - x[:, 0], axis=1)
     return 0.5 * np.linalg.norm(np.cross(x[:, 1] - x[:, 0], x[:, 2] - x[:, 0]), axis=1)
@@ -187,7 +188,7 @@ class PenaltyCentralDifference(FEMCentralDifference):
             n = np.asarray(normal, dtype=float)
             n = n / np.linalg.norm(n)
             own = owned_facets(mesh, np.asarray(facets, dtype=np.int32))
-            share = facet_areas(mesh, own) / mesh.topology.dim  # each vertex's share of its facet
+            share = facet_areas(V, own) / mesh.topology.dim  # each vertex's share of its facet
             marker.x.array[:] = 0.0
             values = marker.x.array.reshape(-1, d)
             np.add.at(values[:, 0], facet_nodes(V, own).ravel(), np.repeat(share, mesh.topology.dim))
