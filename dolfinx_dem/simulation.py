@@ -21,6 +21,7 @@ here too, for scripts that drive the model themselves.
 
 from __future__ import annotations
 
+import json
 import pathlib
 from collections.abc import Mapping
 
@@ -60,6 +61,9 @@ def resume(folder: str | pathlib.Path, comm: MPI.Comm = MPI.COMM_WORLD,
            checkpoint_every: int | None = None) -> dict:
     """Continue the dynamic run held in ``folder`` from its checkpoint, appending to its outputs;
     returns the summary. ``overrides`` may only change ``time.end``."""
+    summary = pathlib.Path(folder) / "summary.json"
+    if io.call_on_root(comm, lambda: summary.is_file() and json.loads(summary.read_text()).get("method") == "fem-P1"):
+        raise InputError(f"{folder} holds a fem-P1 run, which writes no checkpoint and cannot be resumed")
     output = io.OutputDirectory(folder, comm, resume=True)
     output.check()
     return DynamicRun.resume(folder, comm, overrides, quiet, checkpoint_every).run(output)

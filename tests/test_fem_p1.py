@@ -42,6 +42,7 @@ def test_bar_impact_matches_the_exact_signorini_bar(tempdir):
     assert list(data.dtype.names) == ["t", "kinetic", "elastic", "stabilisation", "external", "pseudo_energy",
                                       "penalty", "contact_gap", "contact_pressure", "tip_position",
                                       "contact_force_obstacle0_x"]
+    assert np.array_equal(t, np.arange(801) * dt)  # t = n dt, as the DEM's
     contact = t[data["contact_pressure"] > 0]
     assert abs(contact[0] - 0.5) <= 1.01 * dt and abs(contact[-1] - 7.0 / 6.0) <= 4 * dt, (contact[0], contact[-1])
     assert np.abs(data["tip_position"] - exact.impact_tip_position(t)).max() < 0.12
@@ -153,6 +154,10 @@ def test_fem_p1_is_for_dynamic_scenes_without_checkpoints(tmp_path):
     with pytest.raises(InputError, match="fem-P1.*no checkpoints"):
         simulation.run(scenes.load("bar-impact", {"method": "fem-P1"}), tmp_path / "b", MPI.COMM_SELF,
                        quiet=True, checkpoint_every=10)
+    simulation.run(scenes.load("bar-impact", {"method": "fem-P1", "time.end": 0.01}), tmp_path / "c", MPI.COMM_SELF,
+                   quiet=True)
+    with pytest.raises(InputError, match="fem-P1 run.*cannot be resumed"):
+        simulation.resume(tmp_path / "c", MPI.COMM_SELF, {"time.end": 0.02}, quiet=True)
 
 
 def test_a_node_inside_the_obstacle_at_the_start_is_an_error(tmp_path):

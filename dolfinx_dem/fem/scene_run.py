@@ -136,6 +136,11 @@ class FEMP1Run:
         self.stepping_seconds = 0.0
         self.setup_seconds = comm.allreduce(time.perf_counter() - self.wall, op=MPI.MAX)
 
+    @property
+    def t(self) -> float:
+        """The time of the current step, n dt (as the DEM's, rather than the solver's sum of steps)."""
+        return self.step * self.dt
+
     # -- set-up ----------------------------------------------------------------------------------
     def _reaction_groups(self, dirichlet) -> list[np.ndarray]:
         """Owned nodes of each Dirichlet condition; a node in several goes to the first."""
@@ -185,7 +190,7 @@ class FEMP1Run:
     def _row(self, energies) -> list[float]:
         kinetic, elastic, external, penalty, pseudo, _ = energies
         s = self.solver
-        row = [s.t, kinetic, elastic, 0.0, external, pseudo] + ([penalty] if self.obstacles else [])
+        row = [self.t, kinetic, elastic, 0.0, external, pseudo] + ([penalty] if self.obstacles else [])
         row += list(s.reactions(self.groups).ravel()) if self.groups else []
         if self.obstacles:
             contact = s.contact_outputs()
@@ -242,15 +247,15 @@ class FEMP1Run:
                     self.step += 1
                     energies = self._energies()
                     if not all(math.isfinite(e) for e in energies):
-                        raise InputError(f"fem-P1 blew up at step {self.step} (t = {self.solver.t:.6g})")
+                        raise InputError(f"fem-P1 blew up at step {self.step} (t = {self.t:.6g})")
                     self.stats.drift = max(self.stats.drift, abs(energies[4] - self.stats.pseudo_energy_initial))
                     self.stats.scale = max(self.stats.scale, energies[5])
                     last = self.step == self.n_steps
                     if self.step % self.series_every == 0 or last:
                         series.write(self._row(energies))
                     if self.step % self.every == 0 or last:
-                        solution.write(self.solver.t, self.fields())
-                    progress.update(self.step, self.solver.t, self.stats.relative_drift, True)
+                        solution.write(self.t, self.fields())
+                    progress.update(self.step, self.t, self.stats.relative_drift, True)
                     if interrupts.requested():
                         status = "interrupted"
                         break
@@ -275,11 +280,11 @@ class FEMP1Run:
         scalar = _compat.cell_dofs(self._scalar)[: self.n_cells]
         if self.d == 1:
             plotting.plot_bar(self.mesh, u, fields["stress_xx"].x.array[scalar], directory / "final.png",
-                              self.solver.t, obstacles)
+                              self.t, obstacles)
         else:
             plotting.plot_cell_field(self.mesh, u, fields["von_mises"].x.array[scalar], directory / "final.png",
                                      "von Mises stress (Pa)", scale, obstacles, None,
-                                     plotting.picture_caption(self.scene["name"], self.solver.t, scale))
+                                     plotting.picture_caption(self.scene["name"], self.t, scale))
         if animation and output.get("animation") and not plotting.too_large(self.mesh):
             xdmf, gif = directory / "solution.xdmf", directory / "animation.gif"
             if self.d == 1:
@@ -299,7 +304,7 @@ class FEMP1Run:
             "n_steps": self.step,
             "dt": self.dt,
             "dt_stable": s.dt_stable,
-            "t_end": s.t,
+            "t_end": self.t,
             "wall_time_s": time.perf_counter() - self.wall,
             "setup_time_s": self.setup_seconds,
             "stepping_time_s": self.comm.allreduce(self.stepping_seconds, op=MPI.MAX),
