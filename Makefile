@@ -138,6 +138,7 @@ bench: setup
 	$(PYTHON) benchmarks/bench_wave2d.py
 	$(PYTHON) benchmarks/bench_contact_scaling.py --out docs/bench/contact_scaling.json
 	$(PYTHON) benchmarks/bench_contact3d.py --out docs/bench/contact3d.json
+	$(PYTHON) benchmarks/bench_femp1.py --out docs/bench/femp1.json
 	$(PYTHON) benchmarks/bench_parallel.py --out docs/bench/parallel.json
 
 # The validation studies of docs/validation/README.md (~1.5 h alone): each writes its JSON and

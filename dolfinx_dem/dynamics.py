@@ -386,9 +386,8 @@ def time_step(dem: DEMDiscretisation, time_spec: Mapping) -> float:
     if "dt" in time_spec:
         dt, key = time_spec["dt"], f"time.dt = {time_spec['dt']:g}"
     else:
-        limit = time_spec["cfl"] * dem.stable_time_step(time_spec.get("stable_step", "bound"))
-        exponent = math.floor(math.log10(limit)) - 3
-        dt = time_spec["end"] / math.ceil(time_spec["end"] / (math.floor(limit / 10.0**exponent) * 10.0**exponent))
+        dt = round_time_step(time_spec["cfl"] * dem.stable_time_step(time_spec.get("stable_step", "bound")),
+                             time_spec["end"])
         key = f"time.cfl = {time_spec['cfl']:g} (dt = {dt:.4g} s)"
     if dt > dem.unstable_time_step():
         raise InputError(f"{key} is beyond MEMM's stability limit 2 / sqrt(lambda_max(M^-1 K)): it exceeds "
@@ -396,6 +395,13 @@ def time_step(dem: DEMDiscretisation, time_spec: Mapping) -> float:
                          f"Set time.dt = {dividing_time_step(time_spec['end'], 0.5 * dem.stable_time_step())}, or "
                          "time.cfl <= 1")
     return dt
+
+
+def round_time_step(limit: float, end: float) -> float:
+    """The step ``limit`` floored to 4 significant digits (so that every process count takes the
+    same steps), then shortened to divide ``end``."""
+    exponent = math.floor(math.log10(limit)) - 3
+    return end / math.ceil(end / (math.floor(limit / 10.0**exponent) * 10.0**exponent))
 
 
 def dividing_time_step(end: float, at_most: float) -> float:

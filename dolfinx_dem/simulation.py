@@ -1,8 +1,9 @@
 """Run a scene: the one path from a scene to its outputs, scene -> model -> runner -> writers.
 
 - ``model.py``: the mesh, the DEM discretisation and its contact models, the probes;
-- the runners: ``dynamics.DynamicRun`` (MEMM), ``static_simulation.StaticRun`` (statics, or the
-  FEM reference); each builds its model and checks the input when constructed;
+- the runners: ``dynamics.DynamicRun`` (MEMM), ``fem.scene_run.FEMP1Run`` (method ``fem-P1``, the
+  explicit FEM peer), ``static_simulation.StaticRun`` (statics, or the FEM reference); each
+  builds its model and checks the input when constructed;
 - the writers (``io.py``, ``plotting.py``): only once everything is checked does a runner touch
   the output folder (``io.OutputDirectory``: a folder holding another run is refused unless
   ``overwrite``).
@@ -20,6 +21,7 @@ here too, for scripts that drive the model themselves.
 
 from __future__ import annotations
 
+import json
 import pathlib
 from collections.abc import Mapping
 
@@ -28,6 +30,7 @@ from mpi4py import MPI
 from dolfinx_dem import io
 from dolfinx_dem.dynamics import DynamicRun
 from dolfinx_dem.errors import InputError
+from dolfinx_dem.fem.scene_run import FEMP1Run
 from dolfinx_dem.model import Probes, build, contact_columns, contact_values  # noqa: F401 (public API)
 from dolfinx_dem.static_simulation import StaticRun
 
@@ -46,6 +49,10 @@ def run(scene: Mapping, out: str | pathlib.Path, comm: MPI.Comm = MPI.COMM_WORLD
     output.check()
     if "statics" in scene:
         return StaticRun(scene, comm).run(output)
+    if scene.get("method") == "fem-P1":
+        if checkpoint_every is not None:
+            raise InputError("method 'fem-P1' writes no checkpoints (drop --checkpoint-every)")
+        return FEMP1Run(scene, comm, quiet=quiet).run(output)
     return DynamicRun(scene, comm, quiet=quiet, checkpoint_every=checkpoint_every).run(output)
 
 
@@ -54,6 +61,9 @@ def resume(folder: str | pathlib.Path, comm: MPI.Comm = MPI.COMM_WORLD,
            checkpoint_every: int | None = None) -> dict:
     """Continue the dynamic run held in ``folder`` from its checkpoint, appending to its outputs;
     returns the summary. ``overrides`` may only change ``time.end``."""
+    summary = pathlib.Path(folder) / "summary.json"
+    if io.call_on_root(comm, lambda: summary.is_file() and json.loads(summary.read_text()).get("method") == "fem-P1"):
+        raise InputError(f"{folder} holds a fem-P1 run, which writes no checkpoint and cannot be resumed")
     output = io.OutputDirectory(folder, comm, resume=True)
     output.check()
     return DynamicRun.resume(folder, comm, overrides, quiet, checkpoint_every).run(output)

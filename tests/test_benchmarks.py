@@ -63,6 +63,15 @@ def test_bench_signorini_dem_stability_sweep(tmp_path, monkeypatch):
     assert run["stable"] and run["energy_rel_error_max"] < 1e-12
 
 
+def test_bench_femp1_quick(tmp_path):
+    _quick("benchmarks/bench_femp1.py", "--out", str(tmp_path / "femp1.json"))
+    data = json.loads((tmp_path / "femp1.json").read_text())
+    for method in ("dem-A", "fem-P1"):
+        assert data["results"][method]["steps"] == 800  # 2 rounds of 400 steps
+        assert 0 < data["results"][method]["median_contact_step_us"] < 1e4
+    assert data["ratio_dem_over_fem"] > 0
+
+
 def test_bench_study_quick(tmp_path):
     _quick("benchmarks/bench_study.py", "--out", str(tmp_path), timeout=600)
     data = json.loads((tmp_path / "results.json").read_text())

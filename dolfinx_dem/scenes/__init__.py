@@ -70,7 +70,7 @@ def _field(key, v, d):
 
 
 MESH_TYPES = ("interval", "rectangle", "box", "disc", "discs", "balls", "file")
-METHODS = ("dem-A", "dem-B", "dem-AB", "fem-P2")
+METHODS = ("dem-A", "dem-B", "dem-AB", "fem-P1", "fem-P2")
 QUADRATURES = ("midpoint", "gauss-legendre-1", "gauss-legendre-2", "gauss-legendre-3", "gauss-legendre-5")
 
 #: Allowed keys per section; values are validators (key, value, d) -> value.
@@ -311,6 +311,8 @@ def validate(scene: Mapping, mesh_dimension: int | None = None) -> dict:
     check_names(scene)
     if "statics" in scene:
         check_static(scene)
+        if scene.get("method") == "fem-P1":
+            raise SceneError("method 'fem-P1' (the explicit FEM peer) is available for dynamic scenes only")
     else:
         _validate_time(scene)
         if scene.get("method") == "fem-P2":
