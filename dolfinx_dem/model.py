@@ -77,7 +77,7 @@ def create_mesh(comm: MPI.Comm, spec: Mapping):
     return mesh, cell_tags, tags, names
 
 
-def _boundary_facets(mesh, tags, names, boundary, key="dirichlet.boundary") -> np.ndarray:
+def boundary_facets(mesh, tags, names, boundary, key="dirichlet.boundary") -> np.ndarray:
     """Process-local boundary facets of a scene's ``boundary`` entry: "all", a condition on the
     coordinates, an integer facet tag, or a name of ``names`` (see ``create_mesh``)."""
     if boundary == "all":
@@ -155,7 +155,7 @@ def build(scene: Mapping, comm: MPI.Comm = MPI.COMM_WORLD) -> DEMProblem:
             if isinstance(value[0], str)
             else value
         )
-        facets = _boundary_facets(mesh, tags, names, bc.get("boundary", "all"), f"{section}[{i}].boundary")
+        facets = boundary_facets(mesh, tags, names, bc.get("boundary", "all"), f"{section}[{i}].boundary")
         return facets, field, bc.get("time_dependent", False)
 
     dirichlet = [
@@ -167,11 +167,11 @@ def build(scene: Mapping, comm: MPI.Comm = MPI.COMM_WORLD) -> DEMProblem:
     body_force = loads.get("body_force")
     if "gravity" in loads:
         body_force = [material.rho * g for g in loads["gravity"]]  # one material (scenes.materials)
-    obstacle_facets = [_boundary_facets(mesh, tags, names, ob["boundary"], f"obstacles[{k}].boundary")
+    obstacle_facets = [boundary_facets(mesh, tags, names, ob["boundary"], f"obstacles[{k}].boundary")
                        for k, ob in enumerate(scene.get("obstacles", []))]
     pair_facets = None
     if "contact" in scene:
-        pair_facets = np.unique(np.concatenate([_boundary_facets(mesh, tags, names, b, f"contact.boundary[{k}]")
+        pair_facets = np.unique(np.concatenate([boundary_facets(mesh, tags, names, b, f"contact.boundary[{k}]")
                                                 for k, b in enumerate(scene["contact"]["boundary"])]))
     # dem-AB: scheme A, but scheme B on the contact candidates
     scheme = scene["method"].split("-")[1]

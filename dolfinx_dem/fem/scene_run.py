@@ -89,12 +89,12 @@ class FEMP1Run:
         self.mesh, self.d = mesh, mesh.topology.dim
         d = self.d
         self.material = material = scenes.materials(scene)
-        dirichlet = [model._boundary_facets(mesh, tags, names, bc.get("boundary", "all"), f"dirichlet[{i}].boundary")
+        dirichlet = [model.boundary_facets(mesh, tags, names, bc.get("boundary", "all"), f"dirichlet[{i}].boundary")
                      for i, bc in enumerate(scene.get("dirichlet", []))]
-        tractions = [(model._boundary_facets(mesh, tags, names, bc["boundary"], f"tractions[{i}].boundary"),
+        tractions = [(model.boundary_facets(mesh, tags, names, bc["boundary"], f"tractions[{i}].boundary"),
                       bc["value"]) for i, bc in enumerate(scene.get("tractions", []))]
         obstacles = [(ob["point"], ob["normal"],
-                      model._boundary_facets(mesh, tags, names, ob["boundary"], f"obstacles[{k}].boundary"),
+                      model.boundary_facets(mesh, tags, names, ob["boundary"], f"obstacles[{k}].boundary"),
                       ob.get("tolerance", 0.0)) for k, ob in enumerate(scene.get("obstacles", []))]
         loads = scene.get("loads", {})
         body_force = [material.rho * g for g in loads["gravity"]] if "gravity" in loads else loads.get("body_force")
