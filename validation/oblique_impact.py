@@ -4,9 +4,11 @@ theory of Maw, Barber and Fawcett (Wear 38 (1976) 101-114; J. Lubr. Technol. 103
 
 The body (R = 0.1 m, E = 100 Pa, nu = 0.3, rho = 100 kg/m^3, so c = sqrt(E/rho) = 1 m/s; scheme A;
 plane strain in 2D) starts a gap of 0.005 R above the wall y = 0 (2D) or z = 0 (3D), without
-spin, at the normal speed V_n = 0.01 m/s (V_n / c = 0.01: small strain) and a tangential speed
-V_t = psi1 mu V_n along x; the facets of its lower half are the wall's candidates, friction mu.
-The mesh has size h, refined to h_min within 2 h_min + 0.3 R of the first contact point. The run
+spin, at the normal speed V_n (``--vn``, 0.001 m/s: V_n / c = 0.001, small strain and a small
+rotation during the contact, which the small-displacement kinematics needs: the page's speed
+table) and a tangential speed V_t = psi1 mu V_n along x; the facets of its lower half are the
+wall's candidates, friction mu. The mesh has size h = 5 h_min (at most 0.01 m in 2D, 0.025 m in
+3D), refined to h_min within 2 h_min + 0.3 R of the first contact point. The run
 ends 0.25 contact durations after the last facet left the wall. Measured from the body's rigid
 motion after the impact: the centre of mass velocity (the total momentum over the mass, exact)
 and the spin omega = I^-1 L, L = sum_c m_c r_c x v_c about the centre of mass and I the cells'
@@ -29,6 +31,8 @@ normal speed e V_n:
     .venv/bin/python validation/oblique_impact.py --out docs/validation/oblique_impact.json
     .venv/bin/python validation/oblique_impact.py --quick --out OUT.json   # one 2D gross-slip impact
 
+The disc: gross slip on four contact meshes, on the finest with mu = 0.1 and 0.2 too, at other
+speeds, and a sweep of psi1; the ball: gross slip on two contact meshes and a sweep on the first.
 It writes the JSON, the Markdown page and the figure next to it (``--out``'s stem + .md, .png).
 One process.
 """
@@ -126,10 +130,10 @@ def impact(d: int, psi1: float, mu: float, h: float, h_min: float, cfl: float = 
             "dissipation": float(dissipation[-1]), "wall_time_s": time.perf_counter() - start}
 
 
-#: Chung and Ooi's benchmark test 5 (sphere, e = 1, mu = 0.3), its finite-element points (Wu,
-#: Thornton and Li's analysis, as plotted by Chung and Ooi 2011): psi1 = V_t / (mu V_n) against
-#: psi2 = v_cp' / (mu V_n') and Omega = |omega'| R / (mu V_n), read off their figure (the
-#: digitised points distributed with the Kratos DEMApplication's benchmark 5, rounded).
+#: Chung and Ooi's benchmark test 5 (Granular Matter 13 (2011) 643-656; a sphere, e = 1, mu = 0.3):
+#: the finite-element points of their figure, psi1 = V_t / (mu V_n) against psi2 = v_cp' / (mu V_n')
+#: and Omega = |omega'| R / (mu V_n), as digitised in the Kratos Multiphysics DEMApplication's
+#: benchmark data (benchmark5_graph1.dat, benchmark5_graph2.dat, series "FEM"), rounded to 0.01.
 REFERENCE_3D = {
     "psi2": [(0.01, -0.03), (0.27, -0.03), (0.59, -0.03), (0.88, -0.08), (1.19, -0.21), (1.55, -0.37),
              (1.92, -0.63), (2.31, -0.95), (2.79, -1.25), (3.32, -1.52), (3.97, -1.72), (4.76, -1.71),
@@ -194,7 +198,7 @@ HEAD = ("| h, h_min (m) | cells | mu | psi1 | V_n (m/s) | contact steps | e | -d
 
 
 GROSS_TEXT = """Where every contact facet slides throughout the impact, the tangential impulse is mu times the
-normal one to the rounding of the slip test, the rigid body's Coulomb impulse. The spin misses the
+normal one (to 1e-6 or better), the rigid body's Coulomb impulse. The spin misses the
 rigid disc's (for the measured impulse) by an amount that shrinks with the approach speed, not with
 the mesh (the speed table): the DEM's kinematics is small-displacement, and the disc's linearised
 rotation during the contact, about theta = omega T / 2, moves the contact's reference points off the
@@ -207,23 +211,34 @@ within a step: the tangential impulse then falls below mu N. A smaller time step
 It looks like a friction-driven instability of the discrete sliding contact (its finest modes first);
 the balance and the sign of every dissipation increment hold throughout."""
 
+BALL_TEXT = """The ball slides by the Coulomb impulse too (-dv_t / (mu dv_n) within a few 1e-5 of 1) and spins as
+the rigid ball within 1.2 to 1.5 %. Its normal restitution exceeds 1 by less than 1 %, growing with the
+spin (the sweep's e): with the small-displacement kinematics a linearised rotation by theta is free of
+strain but stretches the body radially by about theta^2 R / 2, against the wall (a reading)."""
+
 SWEEP_TEXT = """The rigid body (dashed) rolls off the wall below the gross-slip onset psi1 = (1 + e) k, k = 1 + m R^2 / I
-= 3, with its contact point at rest (psi2 = 0). The elastic disc does what Maw, Barber and Fawcett's
-theory predicts for a sphere: its contact point springs back (psi2 < 0) at moderate incidence, most
-near 2/3 of the onset, its spin exceeds the rolling value, and gross slip (-dv_t / (mu dv_n) = 1) sets
-in near the rigid onset, after which psi2 and Omega follow the rigid body's lines. Their theory is for
-circular (Hertz) contacts with Mindlin's tangential compliance, kappa = 2 (1 - nu) / (2 - nu) times the
-normal one; no closed form holds for a disc, whose line-contact compliances depend on the body's size
-(logarithmically). The 2D curve is therefore compared by its shape: both axes scaled by the rigid
-body's onset 2k (k = 3 disc, 7/2 ball), against the finite-element points for a sphere of Chung and
-Ooi's benchmark test 5 (Granular Matter 13 (2011) 643-656, mu = 0.3, e = 1; the points of their figure
-as digitised in the Kratos Multiphysics DEMApplication's benchmark data, benchmark5_graph1.dat and
-benchmark5_graph2.dat, series "FEM", rounded to 0.01). Their normalisation is this page's: psi1 =
-V_t / (mu V_n), psi2 = v_cp' / (mu V_n'), Omega = R |omega'| / (mu V_n). Maw, Barber and Fawcett's own
-curves (their figures) were not available as numbers. The two normalised curves nearly coincide; a
-reading, not a theory: the plane-strain Flamant kernels of a normal and a tangential line load have
-the same coefficient 2 (1 - nu^2) / (pi E), so the disc's compliance ratio is about 1 and its k times
-that ratio, 3, is near the sphere's 7/2 kappa = 2.88 (nu = 0.3), the parameter that sets the shape of
+(3 disc, 7/2 ball), its contact point at rest (psi2 = 0). The elastic bodies do what Maw, Barber and
+Fawcett's theory predicts for a sphere: the contact point springs back (psi2 < 0) at moderate incidence,
+most near 2/3 of the onset, the spin exceeds the rolling value, and gross slip (-dv_t / (mu dv_n) = 1)
+sets in near the rigid onset (their onset for the sphere, psi1 = 7 - 1 / kappa = 5.79 at nu = 0.3, the
+dotted line), after which psi2 and Omega follow the rigid body's lines.
+
+The reference: the finite-element points for a sphere of Chung and Ooi's benchmark test 5 (Granular
+Matter 13 (2011) 643-656; mu = 0.3, e = 1), as digitised in the Kratos Multiphysics DEMApplication's
+benchmark data (benchmark5_graph1.dat and benchmark5_graph2.dat, series "FEM"), rounded to 0.01, with
+this page's normalisation: psi1 = V_t / (mu V_n), psi2 = v_cp' / (mu V_n'), Omega = R |omega'| / (mu V_n).
+The ball's table interpolates them at its psi1 (within their range). Maw, Barber and Fawcett's own
+curves (their figures) were not available as numbers. The ball follows the reference from psi1 = 3 on,
+through the spring-back and the onset of gross slip; below, its contact zone (a few cells across on
+this coarse mesh) cannot resolve the stick zone and its micro-slip annulus, and the ball's contact
+point springs back less than the reference's.
+
+No closed form holds for a disc: its line-contact compliances depend (logarithmically) on the body's
+size, so there is no constant tangential-to-normal ratio kappa. The disc's curve is compared by its
+shape, both axes scaled by the rigid body's onset 2k: it nearly coincides with the sphere's. A reading,
+not a theory: the plane-strain Flamant kernels of a normal and a tangential line load have the same
+coefficient 2 (1 - nu^2) / (pi E), so the disc's compliance ratio is about 1 and its k times that
+ratio, 3, is near the sphere's 7/2 kappa = 2.88 (nu = 0.3), the parameter that sets the shape of
 Maw's curves."""
 
 
@@ -238,7 +253,7 @@ def page(results: dict, png: str) -> str:
              "measured tangential impulse); balance error: max |(E + D - W) - (E + D - W)_0| over the largest "
              "mechanical energy, at every step.", ""]
     for d, name in ((2, "Disc (2D, plane strain)"), (3, "Ball (3D)")):
-        sections = [("gross slip under refinement", results[f"gross{d}d"], GROSS_TEXT if d == 2 else ""),
+        sections = [("gross slip under refinement", results[f"gross{d}d"], GROSS_TEXT if d == 2 else BALL_TEXT),
                     ("gross slip on the finest mesh against the friction coefficient", results.get(f"friction{d}d"), ""),
                     ("gross slip against the approach speed (small-displacement kinematics)", results.get(f"speeds{d}d"),
                      "")]
@@ -258,9 +273,10 @@ def page(results: dict, png: str) -> str:
             for r in rows:
                 p2, om = rigid(K[d], r["restitution"], np.array(r["psi1"]))
                 ref = ""
-                if d == 3:  # the reference's points interpolated at psi1
-                    ref = "".join(f"{np.interp(r['psi1'], *np.array(REFERENCE_3D[key]).T):.2f} | "
-                                  for key in ("psi2", "Omega"))
+                if d == 3:  # the reference's points interpolated at psi1, within their range
+                    points = (np.array(REFERENCE_3D[key]).T for key in ("psi2", "Omega"))
+                    ref = "".join(f"{np.interp(r['psi1'], x, y):.2f} | " if x[0] <= r["psi1"] <= x[-1] else "- | "
+                                  for x, y in points)
                 lines.append(f"| {r['psi1']:g} | {r['restitution']:.4f} | {r['tangential_ratio']:.4f} | "
                              f"{r['tangential_restitution']:.4f} | {r['psi2']:.3f} | {float(p2):.3f} | "
                              f"{r['Omega']:.3f} | {float(om):.3f} | {ref}{r['balance_error']:.1e} | "
