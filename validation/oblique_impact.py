@@ -189,11 +189,12 @@ def chart(results: dict, path: pathlib.Path) -> None:
 
 def _row(r: dict) -> str:
     return (f"| {r['h']:g}, {r['h_min']:g} | {r['cells']} | {r['mu']:g} | {r['psi1']:g} | {r['vn']:g} | "
+            f"{r['dt']:.3g} | "
             f"{r['contact_steps']} | {r['restitution']:.4f} | {r['tangential_ratio']:.5f} | {r['spin_ratio']:.4f} | "
             f"{r['balance_error']:.1e} | {r['min_dissipation_increment']:.1e} | {r['wall_time_s']:.1f} |")
 
 
-HEAD = ("| h, h_min (m) | cells | mu | psi1 | V_n (m/s) | contact steps | e | -dv_t / (mu dv_n) | spin / rigid | "
+HEAD = ("| h, h_min (m) | cells | mu | psi1 | V_n (m/s) | dt (s) | contact steps | e | -dv_t / (mu dv_n) | spin / rigid | "
         "balance error | smallest D increment | wall (s) |")
 
 
@@ -207,7 +208,8 @@ vertical through the centre, a torque of about N theta R against the friction's 
 Not everywhere: with mu = 0.3 on the finest contact mesh (less with mu = 0.2, not with mu = 0.1), and
 with mu = 0.3 at the larger speeds, the tangential velocities of the contact cells start to oscillate at
 the mesh scale during the contact, with a growing amplitude, until cells stop (stick) or slide back
-within a step: the tangential impulse then falls below mu N. A smaller time step does not remove it.
+within a step: the tangential impulse then falls below mu N. A smaller time step does not remove it
+(the CFL table).
 It looks like a friction-driven instability of the discrete sliding contact (its finest modes first);
 the balance and the sign of every dissipation increment hold throughout."""
 
@@ -255,6 +257,7 @@ def page(results: dict, png: str) -> str:
     for d, name in ((2, "Disc (2D, plane strain)"), (3, "Ball (3D)")):
         sections = [("gross slip under refinement", results[f"gross{d}d"], GROSS_TEXT if d == 2 else BALL_TEXT),
                     ("gross slip on the finest mesh against the friction coefficient", results.get(f"friction{d}d"), ""),
+                    ("gross slip on the finest mesh with a smaller time step", results.get(f"cfl{d}d"), ""),
                     ("gross slip against the approach speed (small-displacement kinematics)", results.get(f"speeds{d}d"),
                      "")]
         if not any(rows for _, rows, _ in sections) and not results[f"sweep{d}d"]:
@@ -262,7 +265,7 @@ def page(results: dict, png: str) -> str:
         lines += [f"## {name}", ""]
         for title, rows, text in sections:
             if rows:
-                lines += [f"### {title[0].upper() + title[1:]}", "", HEAD, "|---" * 12 + "|"]
+                lines += [f"### {title[0].upper() + title[1:]}", "", HEAD, "|---" * 13 + "|"]
                 lines += [_row(r) for r in rows] + [""] + ([text, ""] if text else [])
         rows = results[f"sweep{d}d"]
         if rows:
@@ -298,6 +301,8 @@ def main():
                         help="h_min (m) of the ball's gross-slip runs; h = 5 h_min, at most 0.025")
     parser.add_argument("--mus", type=float, nargs="*", default=[0.1, 0.2],
                         help="other friction coefficients for the disc's gross-slip run on the finest mesh")
+    parser.add_argument("--cfls", type=float, nargs="*", default=[0.2],
+                        help="other CFL numbers for the disc's gross-slip run on the finest mesh")
     parser.add_argument("--speeds", type=float, nargs="*", default=[0.01, 0.003, 0.0003],
                         help="other normal speeds for the disc's gross-slip run on the sweep's mesh")
     parser.add_argument("--sweep", type=float, nargs="*",
@@ -310,24 +315,25 @@ def main():
     parser.add_argument("--out", type=pathlib.Path, required=True)
     args = parser.parse_args()
     if args.quick:
-        args.levels, args.levels3d, args.mus, args.speeds, args.sweep, args.sweep3d = [0.004], [], [], [], [], []
+        args.levels, args.levels3d, args.mus, args.cfls, args.speeds, args.sweep, args.sweep3d = [0.004], [], [], [], [], [], []
     if args.sweep3d and not args.levels3d:
         parser.error("--sweep3d runs on the first of --levels3d: give one")
     listed = {name: " ".join(f"{x:g}" for x in getattr(args, name)) for name in
-              ("levels", "levels3d", "mus", "speeds", "sweep", "sweep3d")}
+              ("levels", "levels3d", "mus", "cfls", "speeds", "sweep", "sweep3d")}
     results = {"command": "validation/oblique_impact.py " + ("--quick" if args.quick else " ".join(
         [f"--mu {args.mu:g} --vn {args.vn:g} --gross {args.gross:g}"]
         + [f"--{name} {value}" for name, value in listed.items()]
         + [f"--sweep-level {args.sweep_level:g} --cfl {args.cfl:g}"])),
         "mu": args.mu, "vn": args.vn, "cfl": args.cfl, "nu": NU, "R": R}
 
-    def run(d, psi1, h_min, vn=args.vn, mu=args.mu):
-        out = impact(d, psi1, mu, min(H[d], 5 * h_min), h_min, args.cfl, vn)
+    def run(d, psi1, h_min, vn=args.vn, mu=args.mu, cfl=args.cfl):
+        out = impact(d, psi1, mu, min(H[d], 5 * h_min), h_min, cfl, vn)
         print(json.dumps(out), flush=True)
         return out
 
     results["gross2d"] = [run(2, args.gross, h) for h in args.levels]
     results["friction2d"] = [run(2, args.gross, args.levels[-1], mu=mu) for mu in args.mus]
+    results["cfl2d"] = [run(2, args.gross, args.levels[-1], cfl=cfl) for cfl in args.cfls]
     results["speeds2d"] = [run(2, args.gross, args.sweep_level, v) for v in args.speeds]
     results["sweep2d"] = [run(2, p, args.sweep_level) for p in args.sweep]
     results["gross3d"] = [run(3, args.gross, h) for h in args.levels3d]
