@@ -420,7 +420,11 @@ def page(results: dict) -> str:
               "mechanical energy rose 1.04, 1.06, 1.21 and 5.4 times the initial one at f = 1.01, 1.02, 1.03 and "
               "1.04 (friction damped it again; the monitor stopped f = 1.04), against 1.000 without friction up to "
               "f = 1.04; both blew up at 1.05. Friction can bring the stable step down towards the bound; it did not "
-              "bring it below in any run."]
+              "bring it below in any run.",
+              "", "## Oblique impact on a rigid wall", "",
+              "A disc and a ball hitting a rigid wall obliquely, in gross slip and across the normalised incidence",
+              "of Maw, Barber and Fawcett, with the balance at every step: [oblique_impact.md](oblique_impact.md)",
+              "(`validation/oblique_impact.py`). Friction between bodies: [friction_bodies.md](friction_bodies.md)."]
     return "\n".join(lines) + "\n"
 
 
