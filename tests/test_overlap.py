@@ -163,16 +163,15 @@ def test_projected_simplices_by_their_formulas(d):
     assert np.allclose(project(F, j, i, t), X, rtol=0, atol=1e-15)
     S = Simplices.of(X)
     if d == 2:  # the faces are the vertices, each facing away from the other
-        end, m, size = X, X - X[:, ::-1], np.ones((300, 2))
+        m, size = X - X[:, ::-1], np.ones((300, 2))
     else:
-        end = X[:, [1, 2, 0]]
-        e = end - X
+        e = X[:, [1, 2, 0]] - X  # the edges, each from its vertex to the next
         a, b = X[:, 1] - X[:, 0], X[:, 2] - X[:, 0]
         sign = np.sign(a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0])[:, None, None]
         assert (sign > 0).sum() > 100 and (sign < 0).sum() > 100
         m, size = sign * np.stack([e[..., 1], -e[..., 0]], axis=2), np.linalg.norm(e, axis=2)
     nu = m / np.linalg.norm(m, axis=2)[..., None]
-    for got, want in ((S.end, end), (S.m, m), (S.nu, nu), (S.size, size)):
+    for got, want in ((S.m, m), (S.nu, nu), (S.size, size)):
         assert np.allclose(got, want, rtol=0, atol=1e-15)
     # outward: each face's normal points away from the opposite vertex (3D) or the other one (2D)
     opposite = X[:, [2, 0, 1]] if d == 3 else X[:, ::-1]

@@ -39,13 +39,11 @@ def tangents(n: np.ndarray) -> np.ndarray:
 @dataclasses.dataclass(frozen=True)
 class Simplices:
     """Facets projected on their pair's plane: (d-1)-simplices (segments in 2D, triangles in 3D)
-    with vertices X (P, d, d-1). Face k (a vertex in 2D, the edge X_k X_k+1 in 3D) runs from X_k
-    to ``end`` (X_k itself in 2D); m_k is its outward normal in the plane, unnormalised so
-    that m_k . (X_k+1 - X_k) is exactly 0 (ties are detected exactly), nu_k = m_k / |m_k|, and
-    ``size`` its measure (1 for a vertex)."""
+    with vertices X (P, d, d-1). Face k is the vertex X_k in 2D, the edge X_k X_k+1 in 3D; m_k is
+    its outward normal in the plane, unnormalised so that m_k . (X_k+1 - X_k) is exactly 0 (ties
+    are detected exactly), nu_k = m_k / |m_k|, and ``size`` its measure (1 for a vertex)."""
 
     X: np.ndarray
-    end: np.ndarray
     m: np.ndarray
     nu: np.ndarray
     size: np.ndarray
@@ -55,9 +53,9 @@ class Simplices:
         """The simplices of vertices X (the compiled ``dem_simplices_of``; segments: the faces are
         the vertices, each facing away from the other)."""
         X = np.ascontiguousarray(X, dtype=np.float64)  # the layout of the kernel ``dem_overlap``
-        end, m, nu, size = np.empty_like(X), np.empty_like(X), np.empty_like(X), np.empty(X.shape[:2])
-        lib.dem_simplices_of(len(X), X.shape[1], pointer(X), pointer(end), pointer(m), pointer(nu), pointer(size))
-        return Simplices(X, end, m, nu, size)
+        m, nu, size = np.empty_like(X), np.empty_like(X), np.empty(X.shape[:2])
+        lib.dem_simplices_of(len(X), X.shape[1], pointer(X), pointer(m), pointer(nu), pointer(size))
+        return Simplices(X, m, nu, size)
 
     @functools.cached_property
     def struct(self) -> Struct:

@@ -200,7 +200,7 @@ int64_t dem_pair_rows(const dem_facet_rows *QF, int64_t n_pairs, int32_t d, cons
 
 void dem_pair_project(int64_t n, int32_t d, const int64_t *f, const int64_t *origin, const double *ends,
                       const double *centre, const double *t, double *X);
-void dem_simplices_of(int64_t n, int32_t d, const double *X, double *end, double *m, double *nu, double *size);
+void dem_simplices_of(int64_t n, int32_t d, const double *X, double *m, double *nu, double *size);
 void dem_pair_separations(int64_t n, int32_t d, const dem_simplices *A, const dem_simplices *B, double margin,
                           double *out);
 void dem_overlap(int64_t n, int32_t dim, const int64_t *p, const dem_simplices *A, const dem_simplices *B,

@@ -22,22 +22,21 @@ void dem_pair_project(int64_t n, int32_t d, const int64_t *restrict f, const int
       }
 }
 
-/* pair_contact._Simplices.of: for n (d-1)-simplices with vertices X (n x d x (d - 1)), face k's
- * end (the next vertex in 3D, X_k in 2D), outward normal m_k (unnormalised: in 3D the edge turned
- * by the orientation's sign, in 2D X_k - X_other), nu_k = m_k / |m_k| (0 if m_k = 0) and size (the
- * edge's length in 3D, 1 in 2D); every norm sqrt(sum of squares) in order, as numpy's. */
-void dem_simplices_of(int64_t n, int32_t d, const double *restrict X, double *restrict end, double *restrict m,
-                      double *restrict nu, double *restrict size)
+/* overlap.Simplices.of: for n (d-1)-simplices with vertices X (n x d x (d - 1)), face k's
+ * outward normal m_k (unnormalised: in 3D the edge X_k X_k+1 turned by the orientation's sign, in
+ * 2D X_k - X_other), nu_k = m_k / |m_k| (0 if m_k = 0) and size (the edge's length in 3D, 1 in
+ * 2D); every norm sqrt(sum of squares) in order, as numpy's. */
+void dem_simplices_of(int64_t n, int32_t d, const double *restrict X, double *restrict m, double *restrict nu,
+                      double *restrict size)
 {
   for (int64_t p = 0; p < n; ++p)
   {
     const double *x = X + p * d * (d - 1);
-    double *e_ = end + p * d * (d - 1), *m_ = m + p * d * (d - 1), *nu_ = nu + p * d * (d - 1);
+    double *m_ = m + p * d * (d - 1), *nu_ = nu + p * d * (d - 1);
     if (d == 2)
     {
       for (int32_t k = 0; k < 2; ++k)
       {
-        e_[k] = x[k];
         m_[k] = x[k] - x[1 - k];
         size[p * 2 + k] = 1.0;
         const double norm = sqrt(m_[k] * m_[k]);
@@ -50,7 +49,6 @@ void dem_simplices_of(int64_t n, int32_t d, const double *restrict X, double *re
     for (int32_t k = 0; k < 3; ++k)
     {
       const int32_t next = (k + 1) % 3;
-      e_[2 * k] = x[2 * next], e_[2 * k + 1] = x[2 * next + 1];
       const double e0 = x[2 * next] - x[2 * k], e1 = x[2 * next + 1] - x[2 * k + 1];
       m_[2 * k] = sign * e1, m_[2 * k + 1] = sign * -e0;
       size[p * 3 + k] = sqrt(e0 * e0 + e1 * e1);
