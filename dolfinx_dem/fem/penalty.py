@@ -89,7 +89,7 @@ def node_coordinates(V) -> np.ndarray:
     mesh = V.mesh
     n = mesh.topology.dim + 1
     x = np.empty((V.dofmap.index_map.size_local + V.dofmap.index_map.num_ghosts, mesh.geometry.dim))
-    nodes = mesh.geometry.dofmap.array.reshape(-1, n)
+    nodes = _compat.cell_geometry_nodes(mesh)
     x[_compat.cell_dofs(V).reshape(-1, n)] = mesh.geometry.x[nodes, : mesh.geometry.dim]
     return x
 
