@@ -102,6 +102,7 @@ class PairFriction:
         self.forces = np.zeros((len(contact.body_pairs), self.d))  # the last step's per body pair / dt
         self.slipping = 0  # handled pairs at the Coulomb limit at the last step
         self.rounds = 0  # the most rounds of a step so far
+        self.round_counts = np.zeros(MAX_ROUNDS + 1, dtype=np.int64)  # the steps with friction by their rounds
         self.unconverged = 0  # steps that reached MAX_ROUNDS
         #: this process's sums of the handled pairs' N_p > 0 and of -N_p < 0 (what the positive part drops)
         self.normal_sums = np.zeros(2)
@@ -192,10 +193,16 @@ class PairFriction:
         relative = _tangential(v_free[ci] - v_free[cj], n)
         tau, slip, rounds, converged = self._rounds(relative, D, w, n, limit, rounding, ci, cj)
         self.rounds = max(self.rounds, rounds)
+        self.round_counts[rounds] += 1
         self.unconverged += not converged
         self._scatter.add(self._cell_impulses(tau, ci, cj, reduce=False).ravel(), impulse)
         self._outputs(a, tau, slip, state.dt)
         return float(np.maximum(-np.einsum("ki,ki->k", w, tau), 0.0).sum())
+
+    def median_rounds(self) -> float:
+        """The median of the rounds over the steps that ran them so far (0 without any)."""
+        counts = np.repeat(np.arange(MAX_ROUNDS + 1), self.round_counts)
+        return float(np.median(counts)) if len(counts) else 0.0
 
     def _rounds(self, relative, D, w, n, limit, rounding, ci, cj) -> tuple[np.ndarray, np.ndarray, int, bool]:
         """The impulses of K closest to sticking (module docstring): Nesterov-accelerated projected
