@@ -12,8 +12,9 @@ c' (the total linear momentum is unchanged), tau_p in
     K_p = {tau : tau . n = 0, |tau| <= mu N_p, tau . w_p <= 0},   w_p = P_n (v_c - v_c')^{n+1/2},
 
 so that the pair's dissipation -w_p . tau_p is non-negative and sum_p -w_p . tau_p = -v^{n+1/2} . T^n.
-The impulses are those of K = prod K_p closest to sticking: they minimise the quadratic
-q(tau) = sum_p tau_p . (r_p + w_p^{after}(tau)) / 2 over K, r_p = P_n (v_c - v_c')^{n+3/2, free},
+The impulses are those of K = prod K_p closest to sticking: they minimise the cells' kinetic
+energy after the step over K, up to a constant twice the quadratic
+q(tau) = sum_p tau_p . (r_p + w_p^{after}(tau)) / 2, r_p = P_n (v_c - v_c')^{n+3/2, free},
 whose gradient is each pair's relative tangential velocity after the step w_p^{after} = P_n (v_c
 - v_c')^{n+3/2} (its Hessian is the pairs' Delassus operator A = 2 P B^T M^-1 B P, T = B tau the
 cells' summed impulses). The minimiser's T is unique (q is strictly convex in T), and a pair
@@ -42,8 +43,9 @@ projection x', in K: every pair's dissipation is non-negative whatever the round
 The rounds stop when every pair's projected gradient step from x', D_p |proj_{K_p}(x'_p -
 w_p^{after}(x') / D_p) - x'_p| (for a stuck pair its relative velocity after the step), is below
 ``CONVERGED`` times the pair's stick threshold, ``STICK_ROUNDING`` times the sum of its cells'
-velocities' sizes (one Allreduce; the stop is then exact stick: the next step sees the pair's
-relative velocity w_p below the threshold, and the half-space tau . w_p <= 0 does not act on it;
+velocities' sizes (an Allreduce of the largest excess per round, and one of the restart's sum;
+the stop is then exact stick: the next step, whose threshold is of the same size, sees the pair's
+relative velocity w_p below it, and the half-space tau . w_p <= 0 does not act on it;
 a looser stop leaves stuck pairs a residual w_p above it, and the half-space then releases those
 whose stick impulse points along it, measured as a creep in docs/theory.md), or after
 ``MAX_ROUNDS`` (counted: ``unconverged``; the balance holds all the same, the stick is then not
