@@ -43,7 +43,7 @@ projection x', in K: every pair's dissipation is non-negative whatever the round
 The rounds stop when every pair's projected gradient step from x', D_p |proj_{K_p}(x'_p -
 w_p^{after}(x') / D_p) - x'_p| (for a stuck pair its relative velocity after the step), is below
 ``CONVERGED`` times the pair's stick threshold, ``STICK_ROUNDING`` times the sum of its cells'
-velocities' sizes (an Allreduce of the largest excess per round, and one of the restart's sum;
+velocities' sizes (one Allreduce per round sums the pairs above it, exactly, and the restart's sum;
 the stop is then exact stick: the next step, whose threshold is of the same size, sees the pair's
 relative velocity w_p below it, and the half-space tau . w_p <= 0 does not act on it;
 a looser stop leaves stuck pairs a residual w_p above it, and the half-space then releases those
@@ -223,12 +223,13 @@ class PairFriction:
             g_step = after(self._cell_impulses(step, ci, cj, reduce=True))
             trial = step - g_step / D[:, None]  # the projected gradient step from the iterate: its size is
             project(trial, w, n, limit, rounding)  # the relative velocity a stuck pair keeps after the step
-            excess = D * np.linalg.norm(trial - step, axis=1) - CONVERGED * rounding
-            converged = self.comm.allreduce(float(excess.max(initial=0.0)), op=MPI.MAX) <= 0.0
+            unsettled = D * np.linalg.norm(trial - step, axis=1) > CONVERGED * rounding
+            # with O'Donoghue and Candes' gradient restart's sum: the step from y turns against the move from x
+            local = [float(unsettled.sum()), float(np.einsum("k,ki,ki->", D, y - step, step - x))]
+            unsettled, turn = self.comm.allreduce(np.array(local), op=MPI.SUM)
+            converged = unsettled == 0.0
             if converged or rounds == MAX_ROUNDS:
                 return step, slip, rounds, converged
-            # O'Donoghue and Candes' gradient restart: the step from y turns against the move from x
-            turn = self.comm.allreduce(float(np.einsum("k,ki,ki->", D, y - step, step - x)), op=MPI.SUM)
             if turn > 0.0:
                 beta, theta = 0.0, 1.0
             else:
