@@ -34,7 +34,7 @@ each pair's own projection onto K_p. Plain projected Jacobi rounds (beta = 0) co
 lambda_min(D^-1 A) per round, about 0.96 on a non-matching interface (a chain of pairs along it
 whose Delassus operator is a path graph's); the acceleration makes that about 1 - sqrt(lambda_min)
 (docs/theory.md measures the rounds). Every round is a function of the previous ones' impulses and
-of global sums and maxima of scalars: no Gauss-Seidel order of the pairs (which would need a
+of global sums of scalars: no Gauss-Seidel order of the pairs (which would need a
 partition-independent colouring), so the result does not depend on the partition beyond rounding
 (the restart's sum is formed in a partition-dependent order: a decision at a sum within rounding of
 0 can differ, which moves the impulses by the tolerance below). The returned impulses are the last
@@ -87,7 +87,7 @@ def frictional(mu, dem, bodies: np.ndarray) -> bool:
 
 
 def _tangential(x: np.ndarray, n: np.ndarray) -> np.ndarray:
-    """The parts of the rows of ``x`` normal to the rows of the unit normals ``n``' planes."""
+    """The rows of ``x`` projected on the planes normal to the rows of ``n`` (unit normals)."""
     return x - np.einsum("ki,ki->k", x, n)[:, None] * n
 
 
@@ -210,8 +210,8 @@ class PairFriction:
         """The impulses of K closest to sticking (module docstring): Nesterov-accelerated projected
         gradient rounds in the metric of the split masses D (APGD), restarted where the step from
         the extrapolated point turns against the last move; (the impulses, where they are at the
-        Coulomb limit, the rounds, whether they converged). ``relative``: the pairs' P_n (v_c -
-        v_c')^{n+3/2} without friction; the gradient of the rounds' quadratic is the same with them."""
+        Coulomb limit, the rounds, whether they converged). ``relative``: the pairs' r_p (module
+        docstring), the gradient at tau = 0."""
         d, m = self.d, self._mass
         after = lambda T: relative + 2.0 * _tangential(T[ci] / m[ci, None] - T[cj] / m[cj, None], n)  # noqa: E731
         x, g_x = np.zeros((len(D), d)), relative  # the iterate (in K) and its gradient w^{after}
@@ -226,8 +226,8 @@ class PairFriction:
             unsettled = D * np.linalg.norm(trial - step, axis=1) > CONVERGED * rounding
             # with O'Donoghue and Candes' gradient restart's sum: the step from y turns against the move from x
             local = [float(unsettled.sum()), float(np.einsum("k,ki,ki->", D, y - step, step - x))]
-            unsettled, turn = self.comm.allreduce(np.array(local), op=MPI.SUM)
-            converged = unsettled == 0.0
+            count, turn = self.comm.allreduce(np.array(local), op=MPI.SUM)
+            converged = count == 0.0
             if converged or rounds == MAX_ROUNDS:
                 return step, slip, rounds, converged
             if turn > 0.0:
