@@ -147,7 +147,8 @@ class PairContactStatistics:
         if c.friction is not None:  # contact/pair_friction.py: its rounds, and what N_p's positive part drops
             f = c.friction
             positive, negative = comm.allreduce(f.normal_sums, op=MPI.SUM)
-            out.update(friction_max_rounds=f.rounds, friction_unconverged_steps=f.unconverged,
+            out.update(friction_max_rounds=f.rounds, friction_median_rounds=f.median_rounds(),
+                       friction_unconverged_steps=f.unconverged,
                        friction_negative_normal_fraction=negative / positive if positive > 0 else 0.0)
         if self.free:
             out["momentum_rel_change"] = self.momentum_change / self.p_scale if self.p_scale > 0 else 0.0

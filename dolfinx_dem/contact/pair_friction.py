@@ -12,23 +12,45 @@ c' (the total linear momentum is unchanged), tau_p in
     K_p = {tau : tau . n = 0, |tau| <= mu N_p, tau . w_p <= 0},   w_p = P_n (v_c - v_c')^{n+1/2},
 
 so that the pair's dissipation -w_p . tau_p is non-negative and sum_p -w_p . tau_p = -v^{n+1/2} . T^n.
-The impulses are those of K = prod K_p closest to sticking: they minimise the kinetic energy of
-the relative tangential velocities after the step, |P_n (v_c - v_c')^{n+3/2}|, over K, by projected
-Jacobi rounds with split masses (Tonge, Benevolenski and Voroshilov, ACM TOG 31, 2012): from tau = 0,
+The impulses are those of K = prod K_p closest to sticking: they minimise the cells' kinetic
+energy after the step over K, up to a constant twice the quadratic
+q(tau) = sum_p tau_p . (r_p + w_p^{after}(tau)) / 2, r_p = P_n (v_c - v_c')^{n+3/2, free},
+whose gradient is each pair's relative tangential velocity after the step w_p^{after} = P_n (v_c
+- v_c')^{n+3/2} (its Hessian is the pairs' Delassus operator A = 2 P B^T M^-1 B P, T = B tau the
+cells' summed impulses). The minimiser's T is unique (q is strictly convex in T), and a pair
+strictly inside K_p has w_p^{after} = 0: it sticks. They come from
+accelerated projected gradient rounds (APGD: Nesterov's method with adaptive restart, Mazhar,
+Heyn, Negrut and Tasora, ACM TOG 34(3), 2015) in the metric of the split masses (Tonge,
+Benevolenski and Voroshilov, ACM TOG 31, 2012), from tau = x = y = 0:
 
-    tau_p <- proj_{K_p}(tau_p - w_p^{after} / D_p),   D_p = 2 (k_c / m_c + k_c' / m_c'),
+    x' = proj_K(y - w^{after}(y) / D),   D_p = 2 (k_c / m_c + k_c' / m_c'),
+    y = x' + beta (x' - x),   beta from Nesterov's sequence theta, reset to 0 (theta = 1) when
+    sum_p D_p (y_p - x'_p) . (x'_p - x_p) > 0 (the gradient restart of O'Donoghue and Candes,
+    Found. Comput. Math. 15, 2015: the step turns against the last move),
 
-with w_p^{after} = P_n (v_c - v_c')^{n+3/2} for the current impulses and k_c the number of
-touching pairs of cell c. D_p majorises the pairs' Delassus operator (its rows' sums of
-|2 P_n P_n' / m| are at most D_p), so the rounds converge; a pair alone on its cells sticks (or
-slips at mu N_p) in the first round, exactly as the obstacle law. Every round is a function of the
-previous one's impulses only (Gauss-Seidel sweeps would need a partition-independent order of the
-pairs, a global colouring): the result does not depend on the partition beyond rounding. They stop
-when no cell's summed impulse changes by more than ``CONVERGED`` times the largest bound mu N_p
-(an Allreduce per round; the impulses' components that move no cell do not count), or after
+k_c the number of touching pairs of cell c. D_p majorises A (Gershgorin: its rows' sums of
+|2 P_n P_n' / m| are at most D_p), so 1/D is a safe step and the projection in the metric of D is
+each pair's own projection onto K_p. Plain projected Jacobi rounds (beta = 0) contract by 1 -
+lambda_min(D^-1 A) per round, about 0.96 on a non-matching interface (a chain of pairs along it
+whose Delassus operator is a path graph's); the acceleration makes that about 1 - sqrt(lambda_min)
+(docs/theory.md measures the rounds). Every round is a function of the previous ones' impulses and
+of global sums of scalars: no Gauss-Seidel order of the pairs (which would need a
+partition-independent colouring), so the result does not depend on the partition beyond rounding
+(the restart's sum is formed in a partition-dependent order: a decision at a sum within rounding of
+0 can differ, which moves the impulses by the tolerance below). The returned impulses are the last
+projection x', in K: every pair's dissipation is non-negative whatever the rounds did.
+
+The rounds stop when every pair's projected gradient step from x', D_p |proj_{K_p}(x'_p -
+w_p^{after}(x') / D_p) - x'_p| (for a stuck pair its relative velocity after the step), is below
+``CONVERGED`` times the pair's stick threshold, ``STICK_ROUNDING`` times the sum of its cells'
+velocities' sizes (one Allreduce per round sums the pairs above it, exactly, and the restart's sum;
+the stop is then exact stick: the next step, whose threshold is of the same size, sees the pair's
+relative velocity w_p below it, and the half-space tau . w_p <= 0 does not act on it;
+a looser stop leaves stuck pairs a residual w_p above it, and the half-space then releases those
+whose stick impulse points along it, measured as a creep in docs/theory.md), or after
 ``MAX_ROUNDS`` (counted: ``unconverged``; the balance holds all the same, the stick is then not
-exact). Pairs alone on their cells converge in one round; a non-matching interface, whose cells
-have several partners, takes hundreds (docs/theory.md).
+exact). A pair alone on its cells gets the obstacle law's answer in the first round, and the
+rounds stop there when all pairs are alone.
 
 Distributed: the pair is handled by the owner of its facet i (the facet of the smaller global
 number); the processes that list it send their own rows' parts of N_p there. The velocities of the
@@ -45,8 +67,9 @@ from dolfinx_dem.contact.friction import STICK_ROUNDING, project
 from dolfinx_dem.contact.patch import PatchScatter
 from dolfinx_dem.errors import InputError, StateError
 
-#: Rounds stop when no cell's summed impulse changes by more than this fraction of the largest bound mu N_p.
-CONVERGED = 1e-13
+#: Rounds stop when every pair's projected gradient step (its relative velocity left, if stuck) is below
+#: this fraction of its stick threshold (``STICK_ROUNDING`` times its cells' speeds).
+CONVERGED = 1e-2
 #: At most this many rounds a step (``PairFriction.unconverged`` counts the steps that reach it).
 MAX_ROUNDS = 1000
 
@@ -63,6 +86,11 @@ def frictional(mu, dem, bodies: np.ndarray) -> bool:
     return mu > 0
 
 
+def _tangential(x: np.ndarray, n: np.ndarray) -> np.ndarray:
+    """The rows of ``x`` projected on the planes normal to the rows of ``n`` (unit normals)."""
+    return x - np.einsum("ki,ki->k", x, n)[:, None] * n
+
+
 class PairFriction:
     """Coulomb friction of coefficient ``mu`` > 0 between the bodies of a ``PairContact``
     ``contact`` (module docstring)."""
@@ -76,6 +104,7 @@ class PairFriction:
         self.forces = np.zeros((len(contact.body_pairs), self.d))  # the last step's per body pair / dt
         self.slipping = 0  # handled pairs at the Coulomb limit at the last step
         self.rounds = 0  # the most rounds of a step so far
+        self.round_counts = np.zeros(MAX_ROUNDS + 1, dtype=np.int64)  # the steps with friction by their rounds
         self.unconverged = 0  # steps that reached MAX_ROUNDS
         #: this process's sums of the handled pairs' N_p > 0 and of -N_p < 0 (what the positive part drops)
         self.normal_sums = np.zeros(2)
@@ -160,26 +189,54 @@ class PairFriction:
         k = self._sum_at_cells(counts)[:, 0]
         m = self._mass
         D = 2.0 * (k[ci] / m[ci] + k[cj] / m[cj]) if len(a) else np.zeros(0)
-        tangential = lambda x: x - np.einsum("ki,ki->k", x, n)[:, None] * n  # noqa: E731
-        w = tangential(v_next[ci] - v_next[cj])
+        w = _tangential(v_next[ci] - v_next[cj], n)
         speeds = [np.linalg.norm(x, axis=1) for x in (v_prev, v_next, v_free)]
         rounding = STICK_ROUNDING * sum(s[ci] + s[cj] for s in speeds)
-        scale = self.comm.allreduce(float(limit.max(initial=0.0)), op=MPI.MAX)
-        relative = tangential(v_free[ci] - v_free[cj])
-        tau, T, rounds = np.zeros((len(a), d)), np.zeros_like(v_free), 0
-        while True:  # T: the impulses' sums at the cells, over all processes
-            rounds += 1
-            tau = tau - (relative + 2.0 * tangential(T[ci] / m[ci, None] - T[cj] / m[cj, None])) / D[:, None]
-            slip = project(tau, w, n, limit, rounding)
-            last, T = T, self._cell_impulses(tau, ci, cj, reduce=True)
-            change = self.comm.allreduce(float(np.abs(T - last).max(initial=0.0)), op=MPI.MAX)
-            if change <= CONVERGED * scale or rounds == MAX_ROUNDS:
-                break
+        relative = _tangential(v_free[ci] - v_free[cj], n)
+        tau, slip, rounds, converged = self._rounds(relative, D, w, n, limit, rounding, ci, cj)
         self.rounds = max(self.rounds, rounds)
-        self.unconverged += change > CONVERGED * scale
+        self.round_counts[rounds] += 1
+        self.unconverged += not converged
         self._scatter.add(self._cell_impulses(tau, ci, cj, reduce=False).ravel(), impulse)
         self._outputs(a, tau, slip, state.dt)
         return float(np.maximum(-np.einsum("ki,ki->k", w, tau), 0.0).sum())
+
+    def median_rounds(self) -> float:
+        """The median of the rounds over the steps that ran them so far (0 without any)."""
+        counts = np.repeat(np.arange(MAX_ROUNDS + 1), self.round_counts)
+        return float(np.median(counts)) if len(counts) else 0.0
+
+    def _rounds(self, relative, D, w, n, limit, rounding, ci, cj) -> tuple[np.ndarray, np.ndarray, int, bool]:
+        """The impulses of K closest to sticking (module docstring): Nesterov-accelerated projected
+        gradient rounds in the metric of the split masses D (APGD), restarted where the step from
+        the extrapolated point turns against the last move; (the impulses, where they are at the
+        Coulomb limit, the rounds, whether they converged). ``relative``: the pairs' r_p (module
+        docstring), the gradient at tau = 0."""
+        d, m = self.d, self._mass
+        after = lambda T: relative + 2.0 * _tangential(T[ci] / m[ci, None] - T[cj] / m[cj, None], n)  # noqa: E731
+        x, g_x = np.zeros((len(D), d)), relative  # the iterate (in K) and its gradient w^{after}
+        y, g_y, theta, rounds = x, g_x, 1.0, 0  # the extrapolated point and its gradient (linear in it)
+        while True:
+            rounds += 1
+            step = y - g_y / D[:, None]
+            slip = project(step, w, n, limit, rounding)
+            g_step = after(self._cell_impulses(step, ci, cj, reduce=True))
+            trial = step - g_step / D[:, None]  # the projected gradient step from the iterate: its size is
+            project(trial, w, n, limit, rounding)  # the relative velocity a stuck pair keeps after the step
+            unsettled = D * np.linalg.norm(trial - step, axis=1) > CONVERGED * rounding
+            # with O'Donoghue and Candes' gradient restart's sum: the step from y turns against the move from x
+            local = [float(unsettled.sum()), float(np.einsum("k,ki,ki->", D, y - step, step - x))]
+            count, turn = self.comm.allreduce(np.array(local), op=MPI.SUM)
+            converged = count == 0.0
+            if converged or rounds == MAX_ROUNDS:
+                return step, slip, rounds, converged
+            if turn > 0.0:
+                beta, theta = 0.0, 1.0
+            else:
+                following = 0.5 * theta * (np.sqrt(theta**2 + 4.0) - theta)
+                beta, theta = theta * (1.0 - theta) / (theta**2 + following), following
+            y, g_y = step + beta * (step - x), g_step + beta * (g_step - g_x)
+            x, g_x = step, g_step
 
     def _cell_impulses(self, tau: np.ndarray, ci: np.ndarray, cj: np.ndarray, reduce: bool) -> np.ndarray:
         """+tau on the cells ci, -tau on cj, at the scatter's cells (summed over the processes if
