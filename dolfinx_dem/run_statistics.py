@@ -111,7 +111,16 @@ class PairContactStatistics:
             "p_scale": self.p_scale,
             "output_seconds": self.output_seconds,
             "p0": self.p0,
+            "friction": self._friction_state(),
         }
+
+    def _friction_state(self) -> list | None:
+        """The friction model's counters (contact/pair_friction.py): its most rounds, its steps at
+        the cap and the sums of N_p's positive and negative parts over every process (collective)."""
+        f = self.contact.friction if self.contact is not None else None
+        if f is None:
+            return None
+        return [f.rounds, f.unconverged, *self.contact.comm.allreduce(f.normal_sums, op=MPI.SUM).tolist()]
 
     def restore(self, state: Mapping, stepper: MEMM):
         self.first_contact, self.penetration = state["first_contact"], state["penetration"]
@@ -119,6 +128,10 @@ class PairContactStatistics:
         self.momentum_change, self.p_scale = state["momentum_change"], state["p_scale"]
         self.output_seconds = state["output_seconds"]
         self.p0 = state["p0"]
+        if state["friction"] is not None:  # the sums continue on one process, they are reduced in the summary
+            f = self.contact.friction
+            f.rounds, f.unconverged = state["friction"][:2]
+            f.normal_sums = np.array(state["friction"][2:]) if self.contact.comm.rank == 0 else np.zeros(2)
         if self.contact is not None and self.first_contact is None:
             self.previous = stepper.u.copy()
 
