@@ -114,13 +114,16 @@ class PairContactStatistics:
             "friction": self._friction_state(),
         }
 
-    def _friction_state(self) -> list | None:
+    def _friction_state(self) -> dict | None:
         """The friction model's counters (contact/pair_friction.py): its most rounds, its steps at
-        the cap and the sums of N_p's positive and negative parts over every process (collective)."""
+        the cap, the sums of N_p's positive and negative parts over every process (collective) and
+        the steps by their rounds (nonzero counts as [rounds, steps])."""
         f = self.contact.friction if self.contact is not None else None
         if f is None:
             return None
-        return [f.rounds, f.unconverged, *self.contact.comm.allreduce(f.normal_sums, op=MPI.SUM).tolist()]
+        sums = self.contact.comm.allreduce(f.normal_sums, op=MPI.SUM).tolist()
+        counts = [[int(r), int(f.round_counts[r])] for r in np.flatnonzero(f.round_counts)]
+        return {"rounds": f.rounds, "unconverged": f.unconverged, "normal_sums": sums, "round_counts": counts}
 
     def restore(self, state: Mapping, stepper: MEMM):
         self.first_contact, self.penetration = state["first_contact"], state["penetration"]
@@ -129,9 +132,12 @@ class PairContactStatistics:
         self.output_seconds = state["output_seconds"]
         self.p0 = state["p0"]
         if state["friction"] is not None:  # the sums continue on one process, they are reduced in the summary
-            f = self.contact.friction
-            f.rounds, f.unconverged = state["friction"][:2]
-            f.normal_sums = np.array(state["friction"][2:]) if self.contact.comm.rank == 0 else np.zeros(2)
+            f, saved = self.contact.friction, state["friction"]
+            f.rounds, f.unconverged = saved["rounds"], saved["unconverged"]
+            f.normal_sums = np.array(saved["normal_sums"]) if self.contact.comm.rank == 0 else np.zeros(2)
+            f.round_counts[:] = 0
+            for r, steps in saved["round_counts"]:
+                f.round_counts[r] = steps
         if self.contact is not None and self.first_contact is None:
             self.previous = stepper.u.copy()
 
