@@ -14,7 +14,7 @@ obstacles"): the contact opens at the mesh scale under friction.
   the law (not energy-consistent, for the diagnosis only): a friction -mu N_f e_x on every facet
   in contact, whatever the cell's velocity (no stick/slip decision, no half-space), given to the
   cell as the law does or through the facet's free reconstruction (R_f^T tau, the rows of the
-  normal reaction).
+  normal reaction); and the law itself moved to the facet (``Recorded.facet_law``) on the three meshes.
 - The disc's oblique impact of validation/oblique_impact.py (psi1 = 30, mu = 0.3, h_min =
   0.002 m, V_n = 0.01 m/s, where friction delivers 0.85 mu N) and mu = 1e-9: the facets in
   contact per step of the contact, and the holes (facets out of contact between two in contact).
@@ -40,7 +40,7 @@ sys.path.insert(0, str(pathlib.Path(__file__).parent))
 import friction_slide  # noqa: E402
 import oblique_impact  # noqa: E402
 
-from dolfinx_dem.contact.friction import CellFriction  # noqa: E402
+from dolfinx_dem.contact.friction import STICK_ROUNDING, CellFriction  # noqa: E402
 from dolfinx_dem.contact.rigid import RigidContact  # noqa: E402
 from dolfinx_dem.memm import MEMM  # noqa: E402
 
@@ -48,30 +48,53 @@ NU = 0.3
 
 
 class Recorded(CellFriction):
-    """The law, recording per step each facet's N_f, w_c, the free velocity and tau_f (along x)."""
+    """The law (``replace`` None), or a diagnostic replacement, recording per step each facet's N_f
+    and its cell's w_c, free velocity and tau_f along x (tau_f: the law's only)."""
 
     def __init__(self, base: CellFriction, replace: str | None = None, contact=None):
         self.__dict__.update(base.__dict__)
         self.replace, self.contact, self.log = replace, contact, []
+        if contact is not None:  # the x rows (the floor's tangent) of the own facets' free reconstruction
+            R = contact._R_free
+            self.rows = (R if isinstance(R, np.ndarray) else R.toarray())[: 2 * contact.num_own: 2]
 
     def apply(self, normal, state, impulse):
         dofs = self.dofs.ravel()
         _, w, free, _ = (a.reshape(-1, self.d) for a in state.velocities(dofs, impulse))
         before = impulse.array[dofs].copy()
+        dissipation = 0.0
         if self.replace is None:
             dissipation = super().apply(normal, state, impulse)
-        else:  # diagnostic: -mu N_f e_x on the facets in contact
-            tau = np.zeros((len(normal), self.d))
-            tau[:, 0] = -self.mu * np.maximum(normal, 0.0)
+        elif self.replace == "facet law":
+            dissipation = self.facet_law(normal, state, impulse)
+        else:  # -mu N_f e_x on the facets in contact
+            tau = -self.mu * np.maximum(normal, 0.0)
             if self.replace == "cell":
-                impulse.array[dofs] += tau.ravel()
+                impulse.array[dofs[::2]] += tau
             else:
-                R = self.contact._R_free
-                R = R if isinstance(R, np.ndarray) else R.toarray()
-                self.contact.scatter.add(R[: self.contact.num_own * self.d].T @ tau.ravel(), impulse)
-            dissipation = 0.0
+                self.contact.scatter.add(self.rows.T @ tau, impulse)
         tau = (impulse.array[dofs] - before).reshape(-1, self.d)
         self.log.append(np.c_[normal, w[:, 0], free[:, 0], tau[:, 0]])
+        return dissipation
+
+    def facet_law(self, normal, state, impulse) -> float:
+        """The law at the facet (one process): slip w_f = R_f v^{n+1/2} . e_x, impulse R_f^T e_x tau_f,
+        the stick impulse with the facet's effective mass (R_f M^-1 R_f^T)^-1, the facets one after
+        the other (Gauss-Seidel), each seeing the impulses before."""
+        patch = self.contact.scatter.dofs
+        v_prev, v_flight, v_free, mass = state.velocities(patch, impulse)
+        v_free, total, dissipation = v_free.copy(), np.zeros(len(patch)), 0.0
+        for f in np.flatnonzero(normal > 0):
+            row = self.rows[f]
+            w, tau = row @ v_flight, -0.5 * (row @ v_free) / (row @ (row / mass))
+            rounding = STICK_ROUNDING * (np.abs(row) @ (np.abs(v_prev) + np.abs(v_flight) + np.abs(v_free)))
+            if abs(w) > rounding and tau * w > 0:
+                tau = 0.0
+            tau = float(np.clip(tau, -self.mu[f] * normal[f], self.mu[f] * normal[f]))
+            v_free += 2.0 * row / mass * tau
+            total += row * tau
+            dissipation += -w * tau
+        impulse.array[patch] += total
         return dissipation
 
 
@@ -175,7 +198,7 @@ def page(results: dict) -> str:
              "spread (m/s) | friction / mu N | mu N: at the limit | stuck | would reverse |",
              "|---|---|---|---|---|---|---|---|---|---|---|"]
     for r in results["block"]:
-        split = ("| - | - | - | - |" if r["law"] != "law" else  # -mu N_f e_x by construction
+        split = ("| - | - | - | - |" if r["law"] != "law" else  # not the cells' impulses
                  f"| {r['delivered']:.3f} | {r['bound_at_limit']:.3f} | {r['bound_stuck']:.3f} | "
                  f"{r['bound_reversing']:.3f} |")
         lines.append(f"| {r['mu']:g} | {r['nx']} x {r['nx'] // 2} | {r['cfl']:g} | {r['law']} | "
@@ -207,6 +230,8 @@ def main():
     results["block"].append(block(0.3, 32, cfl=0.125))
     results["block"].append(block(0.3, 32, replace="cell"))
     results["block"].append(block(0.3, 32, replace="facet"))
+    for nx in (16, 32, 64):
+        results["block"].append(block(0.3, nx, replace="facet law"))
     results["impact"] = [impact(0.3), impact(1e-9)]
     results["continuum"] = {str(mu): growing_wave(mu) for mu in (0.3, 0.5, 0.9, 1.0, 1.1, 1.2, 1.5)}
     args.out.write_text(json.dumps(results, indent=1))
