@@ -14,7 +14,11 @@ obstacles"): the contact opens at the mesh scale under friction.
   the law (not energy-consistent, for the diagnosis only): a friction -mu N_f e_x on every facet
   in contact, whatever the cell's velocity (no stick/slip decision, no half-space), given to the
   cell as the law does or through the facet's free reconstruction (R_f^T tau, the rows of the
-  normal reaction); and the law itself moved to the facet (``Recorded.facet_law``) on the three meshes.
+  normal reaction); the law itself moved to the facet (``Recorded.facet_law``) on the three meshes;
+  a friction -mu e_x times the weight's share of each facet (m g cos t over the number of base
+  facets), in contact or not ("constant": no dependence on N_f); the law with its bound mu N_f
+  replaced by mu times a running mean of N_f^+ over k steps ("memory k": Nt += (N_f^+ - Nt) / k,
+  on every facet, in contact or not), k = 10 and 50 (and 10 on 64 x 32).
 - The disc's oblique impact of validation/oblique_impact.py (psi1 = 30, mu = 0.3, h_min =
   0.002 m, V_n = 0.01 m/s, where friction delivers 0.85 mu N) and mu = 1e-9: the facets in
   contact per step of the contact, and the holes (facets out of contact between two in contact).
@@ -56,6 +60,7 @@ class Recorded(CellFriction):
     def __init__(self, base: CellFriction, replace: str | None = None, contact=None):
         self.__dict__.update(base.__dict__)
         self.replace, self.contact, self.log = replace, contact, []
+        self.mean, self.share = None, 0.0  # "memory k": the running mean of N_f^+; "constant": m g cos t / n
         if contact is not None:  # the x rows (the floor's tangent) of the own facets' free reconstruction
             R = contact._R_free
             self.rows = (R if isinstance(R, np.ndarray) else R.toarray())[: 2 * contact.num_own: 2]
@@ -67,6 +72,12 @@ class Recorded(CellFriction):
         dissipation = 0.0
         if self.replace is None:
             dissipation = super().apply(normal, state, impulse)
+        elif self.replace.startswith("memory"):  # the law, its bound from the running mean of N_f^+
+            self.mean = np.maximum(normal, 0.0) if self.mean is None else self.mean
+            self.mean += (np.maximum(normal, 0.0) - self.mean) / float(self.replace.split()[1])
+            dissipation = super().apply(self.mean.copy(), state, impulse)
+        elif self.replace == "constant":  # -mu e_x times the weight's share of each facet, in contact or not
+            impulse.array[dofs[::2]] -= self.mu * self.share * state.dt
         elif self.replace == "facet law":
             dissipation = self.facet_law(normal, state, impulse)
         else:  # -mu N_f e_x on the facets in contact
@@ -106,6 +117,7 @@ def block(mu: float, nx: int, cfl: float = 0.5, replace: str | None = None) -> d
     problem = friction_slide.block(mu, [friction_slide.G * np.sin(t), -friction_slide.G * np.cos(t)], nx)
     dem, contact = problem.dem, problem.contacts[0]
     contact.friction = Recorded(contact.friction, replace, contact)
+    contact.friction.share = friction_slide.MASS * friction_slide.G * np.cos(t) / contact.num_own
     stepper = MEMM(problem, cfl * dem.stable_time_step())
     stepper.initialise(dem.create_vector(), dem.create_vector())
     times, mean = [], []
@@ -200,7 +212,7 @@ def page(results: dict) -> str:
              "spread (m/s) | friction / mu N | mu N: at the limit | stuck | would reverse |",
              "|---|---|---|---|---|---|---|---|---|---|---|"]
     for r in results["block"]:
-        split = ("| - | - | - | - |" if r["law"] != "law" else  # not the cells' impulses
+        split = ("| - | - | - | - |" if r["law"] != "law" else  # not the law's impulses against N_f
                  f"| {r['delivered']:.3f} | {r['bound_at_limit']:.3f} | {r['bound_stuck']:.3f} | "
                  f"{r['bound_reversing']:.3f} |")
         lines.append(f"| {r['mu']:g} | {r['nx']} x {r['nx'] // 2} | {r['cfl']:g} | {r['law']} | "
@@ -242,6 +254,9 @@ def main():
         results["block"].append(block(0.3, 32, replace="facet"))
         for nx in (16, 32, 64):
             results["block"].append(block(0.3, nx, replace="facet law"))
+        results["block"].append(block(0.3, 32, replace="constant"))
+        for replace, nx in (("memory 10", 32), ("memory 50", 32), ("memory 10", 64)):
+            results["block"].append(block(0.3, nx, replace=replace))
         results["impact"] = [impact(0.3), impact(1e-9)]
         results["continuum"] = {str(mu): growing_wave(mu) for mu in (0.3, 0.5, 0.9, 1.0, 1.1, 1.2, 1.5)}
     args.out.write_text(json.dumps(results, indent=1))
