@@ -21,7 +21,9 @@ obstacles"): the contact opens at the mesh scale under friction.
   on every facet, in contact or not), k = 10 and 50 (and 10 on 64 x 32).
 - The disc's oblique impact of validation/oblique_impact.py (psi1 = 30, mu = 0.3, h_min =
   0.002 m, V_n = 0.01 m/s, where friction delivers 0.85 mu N) and mu = 1e-9: the facets in
-  contact per step of the contact, and the holes (facets out of contact between two in contact).
+  contact per step of the contact, and the holes (facets out of contact between two in contact);
+  with "memory 10", and so on the finest mesh of the validation (h_min = 0.0005 m, V_n = 0.001 m/s,
+  0.82 mu N with the law).
 - The continuum: steady sliding of an elastic half-plane (plane strain, nu = 0.3) on a rigid flat
   with Coulomb friction, u_n = 0 and sigma_nt = -+ mu sigma_nn on the surface: the smallest mu
   with a growing surface wave exp(i k (x - xi c_s t)), Im xi > 0 (decaying into the body).
@@ -147,20 +149,21 @@ def block(mu: float, nx: int, cfl: float = 0.5, replace: str | None = None) -> d
             "wall_time_s": time.perf_counter() - start}
 
 
-def impact(mu: float) -> dict:
-    """The disc's gross-slip impact at h_min = 0.002 m, V_n = 0.01 m/s: its contact facets per step."""
+def impact(mu: float, replace: str | None = None, h_min: float = 0.002, vn: float = 0.01) -> dict:
+    """The disc's gross-slip impact (psi1 = 30) with the law or ``replace`` (``Recorded``): its
+    tangential impulse over mu N and its contact facets per step."""
     start = time.perf_counter()
     logs = []
 
     class Recording(RigidContact):
         def __init__(self, dem, obstacles):
             super().__init__(dem, obstacles)
-            self.friction = Recorded(self.friction)
+            self.friction = Recorded(self.friction, replace, self)
             logs.append((self.friction, dem.geometry.cell_centres[self.cells[: self.num_own], 0]))
 
     oblique_impact.RigidContact = Recording
     try:
-        out = oblique_impact.impact(2, 30.0, mu, 0.01, 0.002, 0.5, 0.01)
+        out = oblique_impact.impact(2, 30.0, mu, min(0.01, 5 * h_min), h_min, 0.5, vn)
     finally:
         oblique_impact.RigidContact = RigidContact
     friction, x = logs[0]
@@ -169,7 +172,8 @@ def impact(mu: float) -> dict:
     first = np.argmax(touching, axis=1)
     last = touching.shape[1] - 1 - np.argmax(touching[:, ::-1], axis=1)
     holes = (last - first + 1 - touching.sum(axis=1))[steps]
-    return {"mu": mu, "tangential_ratio": out["tangential_ratio"], "contact_steps": int(steps.sum()),
+    return {"mu": mu, "law": replace or "law", "h_min": h_min, "vn": vn, "tangential_ratio": out["tangential_ratio"],
+            "contact_steps": int(steps.sum()),
             "facets_in_contact": float(touching[steps].sum(axis=1).mean()),
             "largest_in_contact": int(touching.sum(axis=1).max()),
             "steps_with_holes": int((holes > 0).sum()), "holes": float(holes.mean()),
@@ -218,12 +222,12 @@ def page(results: dict) -> str:
         lines.append(f"| {r['mu']:g} | {r['nx']} x {r['nx'] // 2} | {r['cfl']:g} | {r['law']} | "
                      f"{100 * r['relative_error']:+.2f} % | {r['in_contact']:.3f} | {r['velocity_spread']:.3f} " + split)
     if results["impact"]:
-        lines += ["", "## The disc's oblique impact (psi1 = 30, h_min = 0.002 m, V_n = 0.01 m/s)", "",
-                  "| mu | -dv_t / (mu dv_n) | contact steps | facets in contact (mean) | largest | steps with "
-                  "holes | holes (mean) |", "|---|---|---|---|---|---|---|"]
+        lines += ["", "## The disc's oblique impact (psi1 = 30)", "",
+                  "| mu | h_min (m) | V_n (m/s) | law | -dv_t / (mu dv_n) | contact steps | facets in contact (mean) "
+                  "| largest | steps with holes | holes (mean) |", "|---|---|---|---|---|---|---|---|---|---|"]
     for r in results["impact"]:
         ratio = f"{r['tangential_ratio']:.4f}" if r["mu"] > 1e-6 else "-"
-        lines.append(f"| {r['mu']:g} | {ratio} | {r['contact_steps']} | "
+        lines.append(f"| {r['mu']:g} | {r['h_min']:g} | {r['vn']:g} | {r['law']} | {ratio} | {r['contact_steps']} | "
                      f"{r['facets_in_contact']:.2f} | {r['largest_in_contact']} | {r['steps_with_holes']} | "
                      f"{r['holes']:.2f} |")
     lines += ["", "## The continuum (plane strain, nu = 0.3)", "",
@@ -257,7 +261,8 @@ def main():
         results["block"].append(block(0.3, 32, replace="constant"))
         for replace, nx in (("memory 10", 32), ("memory 50", 32), ("memory 10", 64)):
             results["block"].append(block(0.3, nx, replace=replace))
-        results["impact"] = [impact(0.3), impact(1e-9)]
+        results["impact"] = [impact(0.3), impact(1e-9), impact(0.3, "memory 10"),
+                             impact(0.3, "memory 10", h_min=0.0005, vn=0.001)]
         results["continuum"] = {str(mu): growing_wave(mu) for mu in (0.3, 0.5, 0.9, 1.0, 1.1, 1.2, 1.5)}
     args.out.write_text(json.dumps(results, indent=1))
     args.out.with_suffix(".md").write_text(page(results))
