@@ -210,8 +210,10 @@ with mu = 0.3 at the larger speeds, the tangential velocities of the contact cel
 the mesh scale during the contact, with a growing amplitude, until cells stop (stick) or slide back
 within a step: the tangential impulse then falls below mu N. A smaller time step does not remove it
 (the CFL table).
-It looks like a friction-driven instability of the discrete sliding contact (its finest modes first);
-the balance and the sign of every dissipation increment hold throughout."""
+Friction opens the contact at the mesh scale (facets out of contact between facets in contact, never
+without friction; measured in friction_chatter.md): a friction-induced instability of the discrete
+contact, not of the law's stick/slip rule nor of the continuum (docs/theory.md, Friction on rigid
+obstacles); the balance and the sign of every dissipation increment hold throughout."""
 
 BALL_TEXT = """The ball slides by the Coulomb impulse too (-dv_t / (mu dv_n) within a few 1e-5 of 1) and spins as
 the rigid ball within 1.2 to 1.5 %. Its normal restitution exceeds 1 by less than 1 %, growing with the
