@@ -28,7 +28,7 @@ def test_cattaneo_mindlin_stick_zone_on_a_coarse_disc(tmp_path):
     balances the load, the slip facets carry mu p, and the stick zone's half-width (moment measure
     of mu p - q) is within 4 % of c = a sqrt(1 - Q / (mu P)), a the contact half-width of the same
     solution (measured 1.0364 of it; docs/validation/cattaneo_mindlin.md). Its value is the same on
-    1 and 2 processes (the states are distributed)."""
+    1, 2 and 3 processes (the states are distributed; measured to 3e-12)."""
     comm = MPI.COMM_WORLD
     folder = comm.bcast(str(tmp_path), root=0)
     scene = _hertz(tangential_body_force=[0.5 * MU * LOAD, 0.0], increments=5)
@@ -42,7 +42,7 @@ def test_cattaneo_mindlin_stick_zone_on_a_coarse_disc(tmp_path):
     assert 1 - 1e-8 < low <= high < 1 + 1e-8
     P = summary["contact_force"]
     c_exact = summary["contact_half_width"] * np.sqrt(1 - Q / (MU * P))
-    assert friction["stick_half_width"] / c_exact == pytest.approx(1.0364, abs=0.005)
+    assert friction["stick_half_width"] / c_exact == pytest.approx(1.0364139012, rel=1e-9)  # 1, 2, 3 processes
     assert abs(friction["stick_half_width"] / c_exact - 1) < 0.04
     assert len(friction["state_iterations"]) == 5 and max(friction["state_iterations"]) <= 10
     if comm.rank == 0:

@@ -62,7 +62,8 @@ class Iterate:
 class ActiveSetNewton:
     """Minimises the potential of ``problem`` (a DEMProblem) with the contact model's statics
     interface ``model`` at the load time t, from u (updated in place), in the subspace
-    ``constraints``, with the linear solver ``linear`` (module docstring)."""
+    ``constraints``, with the linear solver ``linear`` (module docstring); ``load``: a constant
+    force added to the problem's (statics with friction: the tangential load and the slip forces)."""
 
     def __init__(self, problem, model, t: float, constraints: Constraints, linear: LinearSolver,
                  gradient_rtol: float, curvature: bool, load: PETSc.Vec | None = None):

@@ -28,7 +28,8 @@ work of the loads and of the slip forces, with the stick dofs held: the active-s
 frictionless statics (active_set.py; the obstacles' normal contact stays its active set). The
 states and bounds are then updated from the solution: a stick cell whose |T_c| exceeds mu N_c
 slips along T_c; a slip cell that moved against its force (sigma_c s_c < 0, beyond the rounding
-of the increment's slips) sticks; a cell entering contact sticks; N_c is recomputed. The
+of the increment's slips) sticks; a cell entering contact (free in that solve) sticks if it did
+not move along t in the increment, else slips against its motion; N_c is recomputed. The
 iteration ends when no state changes and the bounds have settled to ``bound_rtol``: the states
 and the solution then satisfy the incremental Coulomb law exactly (to those tolerances), i.e.
 they are the incremental Coulomb solution. A set of states that comes back (cycling) or no
@@ -144,7 +145,7 @@ class _Cells:
         normal = contact.reactions(u, active)
         normal[it.pinned] = contact.statics().own_values(-it.multipliers, it.pinned)[it.pinned]
         normal = np.maximum(normal[self.facets], 0.0)
-        return normal, np.bincount(self.of_facet, self.mu * normal, len(self.cells))
+        return normal, np.bincount(self.of_facet, self.mu * normal, len(self.cells)).astype(float)  # float if empty
 
 
 def tangential_load(dem, b: np.ndarray, cells: _Cells) -> PETSc.Vec:
@@ -299,7 +300,7 @@ def load_tangentially(problem: DEMProblem, body_force, increments: int, fixed_me
         in_contact=comm.allreduce(len(it.active) + len(it.pinned), op=MPI.SUM),
         wall_time_s=time.perf_counter() - wall, active=it.active, pinned=it.pinned, kink_forces=-it.multipliers,
         force=force)
-    per_cell = np.bincount(cells.of_facet, states.normal, len(cells.cells))[cells.of_facet]
+    per_cell = np.bincount(cells.of_facet, states.normal, len(cells.cells)).astype(float)[cells.of_facet]
     share = np.divide(states.normal, per_cell, out=np.zeros_like(per_cell), where=per_cell > 0)
     slip = (u.array - start.array)[cells.dofs][cells.of_facet]
     resultant = comm.allreduce(unit.array.reshape(-1, d).sum(axis=0), op=MPI.SUM)
