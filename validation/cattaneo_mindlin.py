@@ -97,9 +97,43 @@ def page(data: dict) -> str:
             f"| {r['c_extent_over_exact']:.4f} | {r['c_over_exact_formula_a']:.4f} "
             f"| {r['force_over_load'] - 1:.1e} | {min(ratio):.10f} - {max(ratio):.10f} "
             f"| {max(r['state_iterations'])} (max) | {r['wall_time_s']:.1f} |")
-    lines += ["", "Reproduce:", "",
+    lines += ["", *findings(data["runs"]), "", "Reproduce:", "",
               "    .venv/bin/python validation/cattaneo_mindlin.py --out docs/validation/cattaneo_mindlin.json", ""]
     return "\n".join(lines)
+
+
+def findings(runs: list[dict]) -> list[str]:
+    """The page's reading of the table (the full study's rows; the quick run has only the first)."""
+    def pick(**key):
+        return [r for r in runs if all(r[k] == v for k, v in key.items())]
+
+    default = pick(h=0.015, refine_h=None, nu=0.25)
+    if not default:
+        return []
+    (d,) = default
+    refined = pick(h=0.015, nu=0.25, ratio=0.5, increments=10)[1:]
+    stiff = pick(nu=0.49)
+    worst_force = max(abs(r["force_over_load"] - 1) for r in runs)
+    worst_ratio = max(abs(x - 1) for r in runs for x in r["slip_traction_ratio"])
+    fmt = ", ".join
+    refined_c = fmt(f"{r['c_over_exact']:.4f}" for r in refined)
+    stiff_c = fmt(f"{r['c_over_exact']:.4f}" for r in stiff)
+    return [
+        f"At the default mesh (h = 0.015 m, {d['contact_facets']} facets in contact) c / c_ex = "
+        f"{d['c_over_exact']:.4f} ({100 * (d['c_over_exact'] - 1):+.1f} %), {d['c_over_exact_formula_a']:.4f} with "
+        "the Hertz formula's a (the DEM's a on this mesh is itself below it, docs/validation/hertz.md). Refining "
+        f"the contact zone (h_r = {fmt(str(r['refine_h']) for r in refined)} m: "
+        f"{fmt(str(r['contact_facets']) for r in refined)} facets) gives c / c_ex = "
+        f"{refined_c}: the error halves with h_r (first order) "
+        "towards 1. The classical solution has no normal-tangential coupling (Dundurs' beta = 0); the disc on "
+        "the rigid plane has beta = (1 - 2 nu) / (2 (1 - nu)) = 0.33 at nu = 0.25 and 0.02 at nu = 0.49, "
+        f"where c / c_ex = {stiff_c} at h_r = "
+        f"{fmt(str(r['refine_h']) for r in stiff)} m: no closer to 1, so on these meshes the coupling's effect "
+        "is below the discretisation error (the DEM is less accurate near incompressibility: its a falls "
+        "further below Hertz's). The obstacle's tangential force balances Q to "
+        f"{worst_force:.0e} and the slip facets carry |q| = mu p to {worst_ratio:.0e} (the iteration's bound "
+        "tolerance 1e-10) in every run; 20 increments give the same c as 10 (monotone loading).",
+    ]
 
 
 def main() -> None:
