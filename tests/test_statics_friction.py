@@ -103,3 +103,35 @@ def test_statics_with_friction_is_2d():
     scene["statics"]["tangential_body_force"] = [1e5, 0.0, 0.0]
     with pytest.raises(SceneError, match="'statics.tangential_body_force': statics with friction is implemented in 2D"):
         scenes.validate(scene, 3)
+
+
+def test_the_solution_satisfies_the_incremental_coulomb_law():
+    """Q = 0.6 mu P in 4 increments (h = 0.02): stick facets have not moved along the plane since
+    the normal step and carry |q| <= mu p, slip facets moved along the load (q opposes it) and
+    carry mu p; the tangential forces balance the load."""
+    problem = model.build(_hertz(tangential_body_force=[1.0, 0.0]), MPI.COMM_WORLD)
+    r = load_tangentially(problem, [0.6 * MU * LOAD, 0.0], 4, (0,), True)
+    touching = r.normal > 0
+    stick, slip = r.stick, touching & ~r.stick
+    comm = MPI.COMM_WORLD
+    assert comm.allreduce(int(stick.sum())) >= 2 and comm.allreduce(int(slip.sum())) >= 2
+    assert (r.slip[stick] == 0.0).all() and (r.slip[slip] > 0).all()
+    assert (np.abs(r.tangential[stick]) <= MU * r.normal[stick] * (1 + 1e-9)).all()
+    assert np.allclose(-r.tangential[slip], MU * r.normal[slip], rtol=1e-8)
+    assert comm.allreduce(float(r.tangential.sum())) == pytest.approx(-r.tangential_load[0], rel=1e-10)
+    assert [k.factor for k in r.increments] == [0.25, 0.5, 0.75, 1.0]
+    assert r.increments[-1].friction_force == pytest.approx(-r.tangential_load[0], rel=1e-10)
+
+
+def test_states_that_do_not_settle_are_an_error():
+    problem = model.build(_hertz(tangential_body_force=[1.0, 0.0]), MPI.COMM_WORLD)
+    with pytest.raises(StaticsError, match="the friction states did not converge in 1 iterations"):
+        load_tangentially(problem, [0.5 * MU * LOAD, 0.0], 2, (0,), True, state_iterations=1)
+
+
+def test_frictional_obstacles_on_two_lines_are_an_error():
+    scene = _hertz(tangential_body_force=[1.0, 0.0])
+    scene["obstacles"].append({"point": [0.0, 0.5], "normal": [0.0, -1.0], "boundary": "y >= 0.3",
+                               "friction": MU})
+    with pytest.raises(InputError, match="one frictional obstacle line"):
+        load_tangentially(model.build(scene, MPI.COMM_WORLD), [1e5, 0.0], 3)
