@@ -6,15 +6,14 @@ path here is the classical one of Cattaneo and Mindlin:
 1. the normal load (the problem's own data at the load time t) on *frictionless* obstacles:
    ``minimise_energy``'s solution. Classically the normal load raises no tangential traction
    (Dundurs' beta = 0); a body on a rigid plane with beta != 0 would lock some in if friction
-   acted while the contact grows. The frictionless start is the classical reference state and
-   is the same whatever the loading history of the normal load was (it has none).
+   acted while the contact grows. The frictionless start is the classical reference state.
 2. the tangential body force b, applied in n equal increments b_k = (k / n) b, each solved as
    the incremental Coulomb problem from the previous increment's solution u_{k-1}.
 
 As in the dynamics (contact/friction.py), friction acts on the cell c of each candidate facet in
 contact, along the obstacle's tangent t (the obstacles' normals lie along a coordinate axis, so
 t is the other axis), and the slip is the cell's tangential displacement increment
-s_c = t . (u_c - u_{k-1,c}). Its bound is mu N_c, N_c = sum of mu_f N_f over the cell's facets in
+s_c = t . (u_c - u_{k-1,c}). Its bound is mu N_c = sum of mu_f N_f over the cell's facets in
 contact (N_f the normal reaction, ``RigidContact.reactions``, or the force of a facet held on a
 kink). Each cell in contact is in one of two states:
 
@@ -27,9 +26,10 @@ Given the states and the bounds N_c, the increment is a minimisation of the pote
 work of the loads and of the slip forces, with the stick dofs held: the active-set Newton of
 frictionless statics (active_set.py; the obstacles' normal contact stays its active set). The
 states and bounds are then updated from the solution: a stick cell whose |T_c| exceeds mu N_c
-slips along T_c; a slip cell that moved against its force (sigma_c s_c < 0, beyond the rounding
-of the increment's slips) sticks; a cell entering contact (free in that solve) sticks if it did
-not move along t in the increment, else slips against its motion; N_c is recomputed. The
+slips, its force keeping its direction (sigma_c = -sign T_c); a slip cell that moved against
+its force (sigma_c s_c < 0, beyond the rounding of the increment's slips) sticks; a cell
+entering contact (free in that solve) sticks if it did not move along t in the increment, else
+slips against its motion; N_c is recomputed. The
 iteration ends when no state changes and the bounds have settled to ``bound_rtol``: the states
 and the solution then satisfy the incremental Coulomb law exactly (to those tolerances), i.e.
 they are the incremental Coulomb solution. A set of states that comes back (cycling) or no
@@ -96,8 +96,9 @@ class FrictionResult:
     in proportion to N_f; along the obstacle's tangent axis ``axis``), ``stick`` (bool) and
     ``slip`` (the cell's tangential displacement over the path since the normal step, m).
     ``static``: the last Newton solve, as ``minimise_energy`` reports it (its ``force`` with the
-    loads; ``iterations`` and ``linear_iterations`` summed over the path, the normal step's
-    included); ``tangential_load`` the applied load's resultant (N/m)."""
+    loads, its ``energy`` the potential minus the tangential load's work - the slip forces are
+    dissipative, not in it -, ``iterations`` and ``linear_iterations`` summed over the path, the
+    normal step's included); ``tangential_load`` the applied load's resultant (N/m)."""
 
     u: PETSc.Vec
     static: StaticResult
