@@ -39,6 +39,7 @@ from dolfinx_dem.contact import PairContact, RigidContact
 from dolfinx_dem.errors import SceneError
 from dolfinx_dem.run_statistics import peak_rss_mb
 from dolfinx_dem.statics import check_held, minimise_energy
+from dolfinx_dem.statics.friction import load_tangentially
 
 
 def _top_point(dem) -> list[float]:
@@ -108,8 +109,16 @@ class StaticRun:
         scene, comm, dem, problem = self.scene, self.comm, self.dem, self.problem
         options = scene["statics"]
         t = options.get("time", 0.0)
-        result = minimise_energy(problem, options.get("fixed_mean", ()), options.get("fixed_rotation", False),
-                                 options.get("rtol", 1e-12), gradient_rtol=options.get("gradient_rtol", 1e-10), t=t)
+        friction = None
+        if "tangential_body_force" in options:  # the load path of statics with friction (statics/friction.py)
+            friction = load_tangentially(problem, options["tangential_body_force"], options.get("increments", 10),
+                                         options.get("fixed_mean", ()), options.get("fixed_rotation", False),
+                                         options.get("rtol", 1e-12), t=t)
+            result = friction.static
+        else:
+            result = minimise_energy(problem, options.get("fixed_mean", ()), options.get("fixed_rotation", False),
+                                     options.get("rtol", 1e-12), gradient_rtol=options.get("gradient_rtol", 1e-10),
+                                     t=t)
         u = result.u
         probes = self.probes
         energies = problem.energies(u, t)
@@ -151,6 +160,8 @@ class StaticRun:
         if self.obstacles is not None:
             axis = obstacles[0] if dem.d == 3 and len(obstacles) == 1 else None
             summary.update(_contact_summary(self.obstacles, u, result, directory / "contact_pressure.csv", axis))
+        if friction is not None:
+            summary["friction"] = _friction_summary(self.obstacles, friction, directory / "contact_traction.csv")
         if dem.d == 1:
             plotting.plot_bar(
                 dem.mesh,
@@ -303,6 +314,54 @@ def _contact_summary(c: RigidContact, u, result, path: pathlib.Path, axis=None) 
 
     summary = io.call_on_root(comm, figures)
     summary["kink_facets"] = comm.allreduce(len(result.pinned), op=MPI.SUM)
+    return summary
+
+
+def _friction_summary(c: RigidContact, result, path: pathlib.Path) -> dict:
+    """The figures of statics with friction (statics/friction.py) and the file of the frictional
+    facets' positions, pressures p, tangential tractions q (along the tangent axis) and states.
+    ``stick_half_width`` is the moment measure (``hertz.contact_half_width_moments``) of the
+    traction deficit mu p - |q| (q taken against the load), zero on the slip zone: in the
+    Cattaneo-Mindlin solution it is mu p0 (c / a) sqrt(1 - x^2 / c^2) on the stick zone |x| < c,
+    whose moment measure is exactly c. ``stick_half_width_extent`` is half the extent of the stick
+    facets, ``slip_traction_ratio`` the range of |q| / (mu p) over the slip facets (1 by the law,
+    to the iteration's tolerance)."""
+    comm, geom = c.comm, c.dem.geometry
+    own = c.facets[: c.num_own][result.facets]
+    areas = geom.facet_areas[own]
+    along = geom.facet_centres[own][:, result.axis]
+    ends = _facet_vertices(geom, own)[..., result.axis]
+    direction = np.sign(result.tangential_load[result.axis])
+    parts = comm.gather((along, ends.min(axis=1), ends.max(axis=1), areas, result.normal, result.tangential,
+                         result.stick, result.mu), root=0)
+
+    def figures():
+        x, x0, x1, area, N, T, stick, mu = (np.concatenate(a) for a in zip(*parts))
+        touching = N > 0
+        order = np.argsort(x)
+        np.savetxt(path, np.c_[x, N / area, T / area, stick][order], delimiter=",", header="x,pressure,traction,stick",
+                   comments="", fmt="%.17g")
+        deficit = np.where(touching, mu * N + direction * T, 0.0)
+        slip = touching & ~stick
+        ratio = -direction * T[slip] / (mu[slip] * N[slip])
+        out = {
+            "stick_facets": int((touching & stick).sum()),
+            "slip_facets": int(slip.sum()),
+            "stick_half_width_extent": float(0.5 * (x1[stick].max() - x0[stick].min())) if stick.any() else 0.0,
+            "slip_traction_ratio": [float(ratio.min()), float(ratio.max())] if slip.any() else [],
+        }
+        if (deficit > 0).sum() >= 3:
+            moments = hertz.facet_pressure_moments(x0, x1, deficit)
+            out["stick_half_width"] = hertz.contact_half_width_moments(*moments)[0]
+        return out
+
+    summary = io.call_on_root(comm, figures)
+    summary.update({
+        "increments": len(result.increments),
+        "state_iterations": [k.state_iterations for k in result.increments],
+        "tangential_load": result.tangential_load.tolist(),
+        "friction_force": result.increments[-1].friction_force,
+    })
     return summary
 
 

@@ -107,7 +107,8 @@ def test_friction_errors():
         block(-0.1, [0.0, -G])
     with pytest.raises(InputError, match="friction needs scheme A candidates"):
         block(0.2, [0.0, -G], scheme="B")
-    with pytest.raises(InputError, match="statics with friction is not implemented"):
+    with pytest.raises(InputError, match="friction is path dependent: statics with friction on rigid obstacles takes a "
+                       "load path"):
         minimise_energy(block(0.2, [0.0, -G]), fixed_mean=[0])
     mesh, _, tags = meshes.create_interval(MPI.COMM_WORLD, 10, 0.0, 1.0)
     dem = DEMDiscretisation(mesh, BLOCK, "A")

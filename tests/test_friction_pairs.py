@@ -259,7 +259,7 @@ def test_errors():
         mesh, _, _ = meshes.create_interval(MPI.COMM_WORLD, 4, 0.0, 1.0)
         PairContact(DEMDiscretisation(mesh, SOFT, "A"), np.array([0], dtype=np.int32), friction=0.3)
     problem = DEMProblem(dem, [PairContact(dem, facets, friction=0.3)])
-    with pytest.raises(InputError, match="statics with friction"):
+    with pytest.raises(InputError, match="friction is path dependent"):
         minimise_energy(problem)
     stepper = MEMM(problem, 0.2 * dem.stable_time_step(), quadrature="gauss-legendre-2")
     stepper.initialise(dem.create_vector(), oblique(dem.geometry.cell_centres[: dem.n_owned]).ravel())

@@ -177,6 +177,8 @@ SCHEMA = {
         "rtol": lambda k, v, d: _number(k, v, positive=True),
         "gradient_rtol": lambda k, v, d: _number(k, v, positive=True),
         "time": lambda k, v, d: _number(k, v),
+        "tangential_body_force": lambda k, v, d: _vector(k, v, d),
+        "increments": lambda k, v, d: _integer(k, v, minimum=1),
     },
     "output": {
         "every": lambda k, v, d: _integer(k, v),

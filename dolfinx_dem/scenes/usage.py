@@ -30,8 +30,8 @@ DYNAMIC_ONLY = {"output": ("every", "series_every", "animation"), "contact": ("m
 
 
 def check_used(scene: Mapping, d: int | None) -> None:
-    """A SceneError for a ``[mesh]`` key its type does not read, or a ``plane`` or
-    ``statics.fixed_rotation`` outside 2D."""
+    """A SceneError for a ``[mesh]`` key its type does not read, or a ``plane``,
+    ``statics.fixed_rotation`` or ``statics.tangential_body_force`` outside 2D."""
     mesh = scene["mesh"]
     used = MESH_KEYS.get(mesh.get("type"), ())
     unused = [k for k in mesh if k != "type" and k not in used]
@@ -48,6 +48,9 @@ def check_used(scene: Mapping, d: int | None) -> None:
                                  f"this scene is {d}D")
         if scene.get("statics", {}).get("fixed_rotation"):
             raise SceneError(f"scene key 'statics.fixed_rotation' holds the rotation of a 2D body; this scene is {d}D")
+        if "tangential_body_force" in scene.get("statics", {}):
+            raise SceneError(f"scene key 'statics.tangential_body_force': statics with friction is implemented in 2D; "
+                             f"this scene is {d}D")
 
 
 def check_names(scene: Mapping) -> None:
@@ -102,13 +105,21 @@ def check_static(scene: Mapping) -> None:
     for section in ("time", "initial"):
         if section in scene:
             raise SceneError(f"a static scene ('statics' table) takes no '{section}' table")
-    for k, obstacle in enumerate(scene.get("obstacles", [])):
-        if obstacle.get("friction", 0.0) > 0:
-            raise SceneError(f"scene key 'obstacles[{k}].friction': statics with friction is not implemented (friction "
-                             "is path dependent: a dynamic scene integrates it)")
+    statics = scene.get("statics", {})
+    frictional = [k for k, obstacle in enumerate(scene.get("obstacles", [])) if obstacle.get("friction", 0.0) > 0]
+    if frictional and "tangential_body_force" not in statics:
+        raise SceneError(f"scene key 'obstacles[{frictional[0]}].friction': friction is path dependent, a static scene "
+                         "with friction takes its load path: the normal load, then 'statics.tangential_body_force' "
+                         "in 'statics.increments' steps (statics/friction.py; or a dynamic scene integrates it)")
+    if "tangential_body_force" in statics and not frictional:
+        raise SceneError("scene key 'statics.tangential_body_force': the tangential load path is for obstacles with "
+                         "friction > 0; this scene has none")
+    if "increments" in statics and "tangential_body_force" not in statics:
+        raise SceneError("scene key 'statics.increments': the increments of 'statics.tangential_body_force', "
+                         "which this scene does not give")
     if scene.get("contact", {}).get("friction", 0.0) > 0:
-        raise SceneError("scene key 'contact.friction': statics with friction is not implemented (friction is path "
-                         "dependent: a dynamic scene integrates it)")
+        raise SceneError("scene key 'contact.friction': statics with friction between bodies is not implemented "
+                         "(statics takes friction on rigid obstacles in 2D; a dynamic scene integrates it)")
     for section, keys in DYNAMIC_ONLY.items():
         for key in (k for k in keys if k in scene.get(section, {})):
             raise SceneError(f"scene key '{section}.{key}' applies to dynamic scenes: a static scene computes and "

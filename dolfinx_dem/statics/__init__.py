@@ -70,6 +70,7 @@ def minimise_energy(
     gradient_rtol: float = 1e-10,
     curvature: bool = True,
     t: float = 0.0,
+    normal_step: bool = False,
 ) -> StaticResult:
     """Minimise the potential energy of ``problem`` at the load time t (module docstring).
 
@@ -90,6 +91,8 @@ def minimise_energy(
         False: the Gauss-Newton part always.
     t : the load time (s): the Dirichlet and traction values of time t (those declared time
         dependent), and the prescribed bodies held at their translation U(t).
+    normal_step : the first step of statics with friction (statics/friction.py): the obstacles'
+        friction does not act (the normal load is applied on frictionless obstacles).
     """
     if not isinstance(problem, DEMProblem):
         raise InputError(f"minimise_energy takes a DEMProblem, got {type(problem).__name__} (wrap a discretisation "
@@ -105,9 +108,9 @@ def minimise_energy(
         raise InputError(f"gradient_rtol must lie in (0, 1), got {gradient_rtol}")
     if len(problem.contacts) > 1:
         raise InputError("minimise_energy takes rigid obstacles or contact between bodies, not both")
-    if any(c.friction is not None for c in problem.contacts):
-        raise InputError("minimise_energy: statics with friction is not implemented (friction is path dependent: "
-                         "integrate it in time with MEMM)")
+    if not normal_step and any(c.friction is not None for c in problem.contacts):
+        raise InputError("minimise_energy: friction is path dependent: statics with friction on rigid obstacles "
+                         "takes a load path (statics.friction.load_tangentially), or integrate it in time with MEMM")
     models = [c.statics() for c in problem.contacts]
     if not models:
         check_held(dem, fixed_mean, fixed_rotation)

@@ -62,11 +62,13 @@ class Iterate:
 class ActiveSetNewton:
     """Minimises the potential of ``problem`` (a DEMProblem) with the contact model's statics
     interface ``model`` at the load time t, from u (updated in place), in the subspace
-    ``constraints``, with the linear solver ``linear`` (module docstring)."""
+    ``constraints``, with the linear solver ``linear`` (module docstring); ``load``: a constant
+    force added to the problem's (statics with friction: the tangential load and the slip forces)."""
 
     def __init__(self, problem, model, t: float, constraints: Constraints, linear: LinearSolver,
-                 gradient_rtol: float, curvature: bool):
+                 gradient_rtol: float, curvature: bool, load: PETSc.Vec | None = None):
         self.problem, self.model, self.t = problem, model, t
+        self.load = load  # an extra constant external force f (V gains -f . u; statics/friction.py)
         self.dem, self.comm = problem.dem, problem.comm
         self.constraints, self.linear = constraints, linear
         self.gradient_rtol = gradient_rtol
@@ -90,12 +92,15 @@ class ActiveSetNewton:
     # -- the potential and its force -------------------------------------------------------------
     def potential(self, u: PETSc.Vec) -> float:
         self.model.prepare(u)
-        return self.problem.energies(u, self.t)["potential"]
+        potential = self.problem.energies(u, self.t)["potential"]
+        return potential if self.load is None else potential - self.load.dot(u)
 
     def lagrangian_force(self, u: PETSc.Vec, it: Iterate, out: PETSc.Vec, project_it: bool = True) -> None:
         """out = -grad V_A(u) - sum_C mu_c grad g_c, projected unless not ``project_it``."""
         self.dem.force(u, self.t, out)
         self.model.add_force(u, out, it.active)
+        if self.load is not None:
+            out.axpy(1.0, self.load)
         if len(it.multipliers):
             for m, g in zip(it.multipliers, self.model.constraint_gradients(u, it.pinned)):
                 out.axpy(-m, g)
@@ -103,11 +108,15 @@ class ActiveSetNewton:
             project(out, self.constraints)
 
     # -- the iteration -------------------------------------------------------------------------------
-    def run(self, u: PETSc.Vec, norm0: float, max_iterations: int) -> tuple[Iterate, float]:
-        """Iterate from u to the minimum; returns the final iterate and its gradient norm."""
+    def run(self, u: PETSc.Vec, norm0: float, max_iterations: int,
+            piece: np.ndarray | None = None) -> tuple[Iterate, float]:
+        """Iterate from u to the minimum, from the model's ``start_piece`` or ``piece`` (the
+        candidates touching at a u in contact: statics/friction.py); returns the final iterate and
+        its gradient norm."""
         model, dem = self.model, self.dem
         rhs, step, trial = (dem.create_vector() for _ in range(3))
-        it = Iterate(model.start_piece(u), np.empty(0, dtype=np.int64), np.zeros(0), np.zeros(0))
+        it = Iterate(model.start_piece(u) if piece is None else piece, np.empty(0, dtype=np.int64), np.zeros(0),
+                     np.zeros(0))
         history, norm = [it.active], norm0
         for iteration in range(1, max_iterations + 1):
             it.iterations = iteration
@@ -165,6 +174,8 @@ class ActiveSetNewton:
             it.multipliers = np.zeros(0)
             self.dem.force(u, self.t, rhs)
             self.model.add_force(u, rhs, it.active)
+            if self.load is not None:
+                rhs.axpy(1.0, self.load)
             project(rhs, self.constraints)
             try:
                 self._solve(u, it, exact, rhs, step, iteration)
