@@ -431,13 +431,14 @@ def test_cattaneo_mindlin_quick_reproduces_its_page(tmp_path):
     """The hertz disc with friction mu = 0.3 under Q = mu P / 2 at h = 0.02 (10 increments): the
     stick zone's half-width within 5 % of a sqrt(1 - Q / (mu P)) (measured +3.6 %), the
     obstacle's tangential force equal to Q and the slip facets' traction mu p (to the
-    iteration's tolerance), the figures of the page's first row; docs/validation/cattaneo_mindlin.md."""
+    iteration's tolerance), the figures of the page's first row (to 1e-3: Debian 13's gmsh meshes
+    the disc differently, 1.03650 against 1.03641); docs/validation/cattaneo_mindlin.md."""
     _quick("validation/cattaneo_mindlin.py", "--out", str(tmp_path / "c.json"))
     (run,) = json.loads((tmp_path / "c.json").read_text())["runs"]
     documented = _documented("cattaneo_mindlin.json")["runs"][0]
     assert (run["h"], run["refine_h"], run["increments"]) == (documented["h"], documented["refine_h"], 10)
     assert abs(run["c_over_exact"] - 1) < 0.05
-    assert run["c_over_exact"] == pytest.approx(documented["c_over_exact"], rel=1e-8)
+    assert run["c_over_exact"] == pytest.approx(documented["c_over_exact"], rel=1e-3)
     assert abs(run["force_over_load"] - 1) < 1e-9
     assert all(abs(r - 1) < 1e-8 for r in run["slip_traction_ratio"]) and run["slip_facets"] >= 1
     assert (tmp_path / "c.md").read_text().startswith("# Cattaneo-Mindlin")

@@ -22,13 +22,19 @@ def _hertz(h=0.02, **statics):
     return scene
 
 
+def _stick_ratio(summary):
+    """The stick zone's half-width over c = a sqrt(1 - Q / (mu P)) of a run's summary."""
+    Q, P = summary["friction"]["tangential_load"][0], summary["contact_force"]
+    return summary["friction"]["stick_half_width"] / (summary["contact_half_width"] * np.sqrt(1 - Q / (MU * P)))
+
+
 @pytest.mark.mpi
 def test_cattaneo_mindlin_stick_zone_on_a_coarse_disc(tmp_path):
     """Q = mu P / 2 in 5 increments on the hertz disc at h = 0.02: the obstacle's tangential force
     balances the load, the slip facets carry mu p, and the stick zone's half-width (moment measure
     of mu p - q) is within 4 % of c = a sqrt(1 - Q / (mu P)), a the contact half-width of the same
     solution (measured 1.0364 of it; docs/validation/cattaneo_mindlin.md). Its value is the same on
-    1, 2 and 3 processes (the states are distributed; measured to 3e-12)."""
+    2 or 3 processes as on one to 1e-9 (the states are distributed; measured to 3e-12)."""
     comm = MPI.COMM_WORLD
     folder = comm.bcast(str(tmp_path), root=0)
     scene = _hertz(tangential_body_force=[0.5 * MU * LOAD, 0.0], increments=5)
@@ -40,10 +46,11 @@ def test_cattaneo_mindlin_stick_zone_on_a_coarse_disc(tmp_path):
     assert friction["slip_facets"] >= 1 and friction["stick_facets"] >= 3
     low, high = friction["slip_traction_ratio"]
     assert 1 - 1e-8 < low <= high < 1 + 1e-8
-    P = summary["contact_force"]
-    c_exact = summary["contact_half_width"] * np.sqrt(1 - Q / (MU * P))
-    assert friction["stick_half_width"] / c_exact == pytest.approx(1.0364139012, rel=1e-9)  # 1, 2, 3 processes
-    assert abs(friction["stick_half_width"] / c_exact - 1) < 0.04
+    ratio = _stick_ratio(summary)
+    assert abs(ratio - 1) < 0.04
+    if comm.size > 1:  # the same run on one process (Debian 12's mesh: 1.0364139012; 13's: 1.0364967998)
+        alone = simulation.run(scene, folder + "/alone", MPI.COMM_SELF) if comm.rank == 0 else None
+        assert ratio == pytest.approx(comm.bcast(alone and _stick_ratio(alone), root=0), rel=1e-9)
     assert len(friction["state_iterations"]) == 5 and max(friction["state_iterations"]) <= 10
     if comm.rank == 0:
         data = np.loadtxt(folder + "/cm/contact_traction.csv", delimiter=",", skiprows=1)
