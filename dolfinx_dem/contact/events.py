@@ -7,7 +7,7 @@ integrated by Gauss-Legendre on each piece.
 from __future__ import annotations
 
 import dataclasses
-import functools
+from typing import NamedTuple
 
 import numpy as np
 
@@ -24,8 +24,7 @@ def gauss_legendre(d: int) -> tuple[np.ndarray, np.ndarray]:
     return 0.5 + 0.5 * x, 0.5 * weights
 
 
-@dataclasses.dataclass(frozen=True)
-class Flight:
+class Flight(NamedTuple):
     """The free flight u + tau v, 0 <= tau <= dt, that ``PairContact.prepare`` checked valid for
     a step: the patch values ``up``, ``vp`` of u and v, its screen (``screen_flight``'s struct:
     the free facet velocities vc and the screened pairs that may touch during it, which the
@@ -39,8 +38,7 @@ class Flight:
     quiet: bool
 
 
-@dataclasses.dataclass(frozen=True)
-class ScreenedFlight:
+class ScreenedFlight(NamedTuple):
     """The last flight's screen (``dem_flight``: its candidates, the pairs near closing at its
     end) and the list it screened: the state at the flight's end reads its candidates only."""
 
@@ -65,60 +63,54 @@ class ClosedPairs:
 
 
 class PairState:
-    """The contact state at one displacement (patch values ``up``), on first use, in one compiled
-    call (``dem_pair_end_state``): the free facet displacements ``uc``, whether the list is stale
-    there (``moved``), and, if it is not, the ``ClosedPairs``. The energy of a step's end, the
-    outputs there and the next step's flight share it (``PairContact.state``).
+    """The contact state at one displacement (patch values ``up``), computed when it is made, in
+    one compiled call (``dem_pair_end_state``): the free facet displacements ``uc``, whether the
+    list is stale there (``moved``), and, if it is not, the ``ClosedPairs``. The energy of a
+    step's end, the outputs there and the next step's flight share it (``PairContact.state``).
 
     The state reads the last flight's candidates if they hold here (bit 1 of its screen: the only
     pairs that may be closed, when every facet lies within half the slack of the flight's end, as
     at the step's end, where uc = R u^{n+1} and the flight's end uc^n + dt vc differ by rounding);
-    else every listed pair is screened."""
+    else every listed pair is screened (``candidates``: the pairs screened, None: every listed
+    pair). Plain attributes, no descriptors: a state is made at every step."""
+
+    __slots__ = ("pair_list", "listed", "up", "uc", "moved", "candidates", "_closed", "_state")
 
     def __init__(self, pair_list: PairList, patch: Struct, work, end: ScreenedFlight | None, up: np.ndarray):
+        self.pair_list, self.listed = pair_list, pair_list.pairs
+        flight = end.flight if end is not None and end.pairs is self.listed else None
         # a read-only array (MEMM's shared patch values) is kept as it is: ``PairContact.state``
         # then knows it by identity; another is copied, since its caller may change it
-        self.pair_list, self.listed, self._patch, self._work = pair_list, pair_list.pairs, patch, work
-        self._flight = end.flight if end is not None and end.pairs is self.listed else None
         self.up = up if not up.flags.writeable else up.copy()
-
-    @functools.cached_property
-    def _computed(self) -> tuple:
-        """(uc, moved, candidates, ClosedPairs or None if moved, the kernels' struct), computed
-        right away: a step's end needs it for its energy."""
-        L, d, flight = self.listed, self.pair_list.d, self._flight
-        n = len(L)
-        uc = np.empty((len(self.pair_list.lift), d))
+        d, n = pair_list.d, len(self.listed)
+        self.uc = uc = np.empty((len(pair_list.lift), d))  # the free facet displacements (``free_displacements``)
         state = Struct("dem_pair_state", closed=np.empty(n, dtype=np.int64), g=np.empty(n), w=np.empty(n),
                        dw=np.empty((n, d)), c=np.empty(n), mu=np.empty(n))
-        k = lib.dem_pair_end_state(self.pair_list.c_pairs.c, self._patch.c, pointer(self.up),
-                                   ffi.NULL if flight is None else flight.c, self._work, pointer(uc), state.c)
+        k = lib.dem_pair_end_state(pair_list.c_pairs.c, patch.c, pointer(self.up),
+                                   ffi.NULL if flight is None else flight.c, work, pointer(uc), state.c)
         if k == -1:
             raise KernelMemoryError("contact between bodies: out of memory in the contact state")
         a, s = state.arrays, state.c
-        closed = None if k == -2 else ClosedPairs(a["closed"][:k], a["g"][:k], a["w"][:k], a["dw"][:k], a["c"][:k],
-                                                  a["mu"][:k], (float(s.energy[0]), float(s.energy[1])),
-                                                  float(s.mu_w))
-        candidates = flight.arrays["candidates"][: flight.c.n_candidates] if s.from_flight else None
-        return uc, k == -2, candidates, closed, state
+        self.moved = k == -2  # the list is stale here (``PairList.moved``)
+        self._closed = None if self.moved else ClosedPairs(
+            a["closed"][:k], a["g"][:k], a["w"][:k], a["dw"][:k], a["c"][:k], a["mu"][:k],
+            (float(s.energy[0]), float(s.energy[1])), float(s.mu_w))
+        self.candidates = flight.arrays["candidates"][: flight.c.n_candidates] if s.from_flight else None
+        self._state = state
 
-    uc = property(lambda self: self._computed[0], doc="The free facet displacements (``free_displacements``).")
-    moved = property(lambda self: self._computed[1], doc="Whether the list is stale here (``PairList.moved``).")
-    candidates = property(lambda self: self._computed[2], doc="The pairs screened (None: every listed pair).")
-
-    @functools.cached_property
+    @property
     def pairs(self) -> ClosedPairs:
-        """The closed pairs (raises, caching nothing, where the list is stale)."""
+        """The closed pairs (raises where the list is stale)."""
         if self.moved:
             self.pair_list.check_listed(self.uc)  # raises
-        return self._computed[3]
+        return self._closed
 
     @property
     def kernel_state(self) -> Struct:
         """The state for the kernels (``dem_pair_state``; raises where the list is stale)."""
         if self.moved:
             self.pair_list.check_listed(self.uc)  # raises
-        return self._computed[4]
+        return self._state
 
 
 def screen_flight(pair_list: PairList, uc: np.ndarray, vp: np.ndarray, dt: float,
