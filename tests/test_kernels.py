@@ -250,7 +250,8 @@ def test_facet_forces_corrections_body_forces_and_penetration_are_their_formulas
     on facet i, its opposite on j), dem_pair_facet_corrections (c / |f| e_f on each facet),
     dem_pair_body_forces (the forces between bodies, signed for the lower-numbered body) and
     dem_pair_penetration (each facet's overlap-weighted reconstructed gap, or its least depth behind the
-    partners around its nearest)."""
+    partners around its nearest). Their work and output arrays are overwritten (NaN on entry here):
+    the outputs reuse them from step to step."""
     rng = np.random.default_rng(7)
     d, n_facets = 3, 6
     pairs = _pairs(rng, n_facets, 5, d)
@@ -273,7 +274,7 @@ def test_facet_forces_corrections_body_forces_and_penetration_are_their_formulas
     assert np.allclose(out, expected, rtol=1e-13, atol=1e-15)
 
     length = rng.random(n_facets) + 0.5
-    out, work = np.zeros((n_facets, d)), np.zeros((n_facets, d))
+    out, work = np.full((n_facets, d), np.nan), np.full((n_facets, d), np.nan)  # overwritten by the kernel
     lib.dem_pair_facet_corrections(pairs.c, state.c, pointer(length), pointer(work), pointer(out))
     expected = np.zeros((n_facets, d))
     np.add.at(expected, i[closed], (c / length[i[closed]])[:, None] * a["e_i"][closed])
@@ -293,7 +294,7 @@ def test_facet_forces_corrections_body_forces_and_penetration_are_their_formulas
     assert np.allclose(out, expected, rtol=1e-13, atol=1e-15)
 
     centre, uf = rng.standard_normal((n_facets, d)), rng.standard_normal((n_facets, d))
-    sums = np.zeros((2, n_facets))
+    sums = np.full((2, n_facets), np.nan)  # overwritten by the kernel
     weight, mean = sums
     normals, reach = rng.standard_normal((n_facets, d)), 0.2 * rng.random(n_facets)
     depth, scale, worst = np.zeros(4), np.zeros(4), np.empty(2)

@@ -11,6 +11,7 @@ from pair_scenes import SOFT, approach, two_blocks, two_discs
 
 from dolfinx_dem import meshes, model
 from dolfinx_dem.contact import PairContact
+from dolfinx_dem.contact.pair_outputs import PairOutputs
 from dolfinx_dem.discretisation import DEMDiscretisation
 from dolfinx_dem.memm import MEMM
 from dolfinx_dem.problem import DEMProblem
@@ -273,7 +274,9 @@ def test_evaluations_refuse_a_stale_pair_list():
 def test_blocks_collide_with_exact_energy_and_bounded_penetration():
     """Two blocks colliding: the triangulations are not mirror images, so the facets slide a
     little against each other and eq. (31) leaves a gap of the order of the slip times the cell
-    gap (measured: about 0.25 of the deepest cell gap); the energy stays exact."""
+    gap (measured: about 0.25 of the deepest cell gap); the energy stays exact. The outputs,
+    which keep their arrays from step to step (and remake them when a list round changes the known
+    facets), give at every step what outputs made afresh give."""
     dem, facets = two_blocks()
     problem = DEMProblem(dem, [PairContact(dem, facets)])
     c = problem.find(PairContact)
@@ -286,7 +289,12 @@ def test_blocks_collide_with_exact_energy_and_bounded_penetration():
         drift = max(drift, abs(diag.pseudo_energy - first.pseudo_energy) / first.mechanical)
         up = c.patch_values(stepper.u)
         deepest = min(deepest, dem.comm.allreduce(c.outputs.pair_states(up)[0].min(initial=np.inf), op=MPI.MIN))
-        penetration = max(penetration, c.outputs.penetration(up)[0])
+        depth = c.outputs.penetration(up)
+        penetration = max(penetration, depth[0])
+        fresh = PairOutputs(c, None)
+        assert fresh.penetration(up) == depth
+        assert np.array_equal(fresh.facet_corrections(up), c.outputs.facet_corrections(up))
+        assert np.array_equal(fresh.output_sums(up), c.outputs.output_sums(up))
     assert deepest < -1e-3  # the cell gaps do go negative: the contact is active
     assert penetration < 0.3 * -deepest
     assert drift < 1e-13

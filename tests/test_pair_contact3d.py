@@ -224,6 +224,38 @@ def test_the_state_at_a_steps_end_screens_the_flights_candidates_only_where_they
             assert np.array_equal(np.asarray(a), np.asarray(b))
 
 
+def test_the_step_arrays_of_a_list_are_reused_and_a_stale_use_raises():
+    """A pair list's flight screen and contact state live in arrays made once per list
+    (``events.StepWork``): a later state takes the state arrays (the earlier state's closed pairs,
+    copies, stay; its kernel arrays raise, and the reused struct's count and sums start again), a
+    later flight the screen's (the force integral of the earlier one raises; ``prepare`` again and
+    it runs)."""
+    from dolfinx_dem.contact.events import PairState
+    from dolfinx_dem.errors import StateError
+
+    problem = two_boxes(MPI.COMM_SELF)
+    dem = problem.dem
+    c = problem.find(PairContact)
+    u, v = cell_vector(dem, lambda x: oblique(x, 0.01)), cell_vector(dem, oblique)
+    dt, out = 0.004, dem.create_vector()
+    up, vp = c.prepare(u, v, dt)
+    first = c.state(up)
+    closed = dataclasses.astuple(first.pairs)
+    assert len(closed[0]) > 20 and closed[6][0] > 0  # closed pairs, a positive elastic energy change
+    rest = PairState(c.pair_list, c._c_patch, c._work, None, c.patch_values(dem.create_vector()))
+    assert len(rest.pairs.closed) == 0 and rest.pairs.energy == (0.0, 0.0) and rest.pairs.mu_w == 0.0
+    assert rest.kernel_state.c.n == 0
+    for a, b in zip(closed, dataclasses.astuple(first.pairs)):
+        assert np.array_equal(np.asarray(a), np.asarray(b))
+    with pytest.raises(StateError, match="later state"):
+        assert first.kernel_state is None  # raises before
+    c.free_flight(first.uc, vp, dt)  # a later flight of the same list
+    with pytest.raises(StateError, match="later one"):
+        c.force_integral(up, vp, dt, out)
+    up, vp = c.prepare(u, v, dt)
+    assert c.force_integral(up, vp, dt, out) > 0 and out.norm() > 0
+
+
 @pytest.mark.mpi
 def test_cubes_collide_obliquely_with_exact_energy_on_any_number_of_processes():
     """Two tetrahedral cubes meet obliquely and slide against each other (the overlaps change

@@ -75,14 +75,7 @@ from petsc4py import PETSc
 from dolfinx_dem import bodies as _bodies
 from dolfinx_dem.conditions import facet_indices
 from dolfinx_dem.contact import candidates
-from dolfinx_dem.contact.events import (
-    Flight,
-    PairState,
-    ScreenedFlight,
-    gauss_legendre,
-    integrate_flight,
-    screen_flight,
-)
+from dolfinx_dem.contact.events import Flight, PairState, gauss_legendre, integrate_flight, screen_flight
 from dolfinx_dem.contact.facets import FacetRows, candidate_records
 from dolfinx_dem.contact.overlap import overlap
 from dolfinx_dem.contact.pair_friction import PairFriction, frictional
@@ -324,7 +317,7 @@ class PairContact:
         # velocities and the screen are computed once per step), and whether no pair touches
         # anywhere during it
         quiet = not (drifted_anywhere or may_touch)
-        self._flight = Flight(up, vp, float(dt), self._end.flight, quiet) if moving else None
+        self._flight = Flight(up, vp, float(dt), self._end, quiet) if moving else None
         return up, vp
 
     def _touching_keys(self, at: PairState) -> np.ndarray:
@@ -386,7 +379,7 @@ class PairContact:
         None); the screen is kept for the state at the flight's end (``PairState``)."""
         vc, k, ratio, touching, flight = screen_flight(self.pair_list, uc, vp, dt, screen)
         if touching is not None:
-            self._end = ScreenedFlight(self.listed, flight)
+            self._end = flight
         return vc, (k, ratio), touching
 
     def gaps(self, p, ui, uj) -> np.ndarray:
@@ -450,10 +443,11 @@ class PairContact:
         # others add exact zeros, and splitting their neighbours at their events would only cost.
         result = self.scatter.zeroed()  # the kernel sums into the scatter's own array
         pieces = 0
-        if flight.screen.c.n_touching:
+        screen = flight.screen.flight  # raises if a later flight of the list was screened since
+        if screen.c.n_touching:
             if len(result) != self.pair_list.Rc.c.n_cols:
                 raise StateError("the force integral's patch and the facets' reconstructions disagree")
-            pieces = integrate_flight(self.pair_list, self._c_patch, self._c_gauss, self._work, up, flight.screen,
+            pieces = integrate_flight(self.pair_list, self._c_patch, self._c_gauss, self._work, up, screen,
                                       result, normal)
         self.scatter.add_zeroed(out)
         self.evaluations += len(self._gauss[0]) * pieces

@@ -101,6 +101,7 @@ class PairList:
         self.template = template  # a zero vector of the dof layout (the scatters' source)
         self.scatter = None  # the patch scatter, made by the list rounds (``_remake_scatters``)
         self._candidate_scatter = None  # the scatter of values of the known facets (``candidate_values``)
+        self.step_work = None  # the per-step arrays of the current list (``events.StepWork``), made on first use
         self.build(local.lift.copy())  # the free facet displacements at u = 0: R 0 + lift
 
     def build(self, uc: np.ndarray, stale: bool = True, exchange: bool = True):

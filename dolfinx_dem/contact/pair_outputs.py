@@ -23,25 +23,35 @@ class PairOutputs:
         self.contact = contact
         self._grad_weights = grad_weights  # a_f / |c| of the local facets' cells (eq. (8))
         self.penetration_ratio = 0.0  # of the last output_values
-        self._reach = (None, None)  # (the known facets, facets.reach of them)
+        self._facets = (None, None)  # (the known facets, their ``_FacetWork``): remade with each list build
+
+    def _work(self) -> _FacetWork:
+        """The outputs' arrays of the known facets (their C pointers made once per list build)."""
+        pc = self.contact
+        F = pc.facets_all
+        if self._facets[0] is not F:  # the known facets change with each list build
+            self._facets = (F, _FacetWork(F, pc.num_own, pc.d))
+        return self._facets[1]
+
+    def _corrections(self, up: np.ndarray) -> np.ndarray:
+        """``facet_corrections`` of every known facet, in the outputs' own array (valid until the
+        next call)."""
+        pc, work = self.contact, self._work()
+        lib.dem_pair_facet_corrections(pc.pair_list.c_pairs.c, pc.state(up).kernel_state.c, work.p_length,
+                                       work.p_spare, work.p_corrections)
+        return work.corrections
 
     def facet_corrections(self, up: np.ndarray) -> np.ndarray:
         """u_f - u_f^free of the local facets (eq. (31), directions of
         ``directions.correction_directions``), (n_local, d): complete for the own facets (every
         pair of an own facet is listed here)."""
-        pc = self.contact
-        F, at = pc.facets_all, pc.state(up)
-        delta, work = np.zeros((len(F), pc.d)), np.zeros((len(F), pc.d))  # c_p = 0 off the closed pairs
-        lib.dem_pair_facet_corrections(
-            pc.pair_list.c_pairs.c, at.kernel_state.c, pointer(F.length), pointer(work), pointer(delta)
-        )
-        return delta[: len(pc.facets)]
+        return self._corrections(up)[: len(self.contact.facets)].copy()
 
     def gradient_correction(self, up: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(owned cells, change of their gradient (eq. (8))) of the own candidates, (n, d, d)."""
         pc = self.contact
         own = slice(0, pc.num_own)
-        return pc.cells[own], np.einsum("ni,nj->nij", self.facet_corrections(up)[own], self._grad_weights[own])
+        return pc.cells[own], np.einsum("ni,nj->nij", self._corrections(up)[own], self._grad_weights[own])
 
     def penetration(self, up: np.ndarray) -> tuple[float, float]:
         """Largest interpenetration of the contact-aware facet reconstructions, as (depth in m,
@@ -57,15 +67,13 @@ class PairOutputs:
         around the nearest one (``dem_pair_penetration``): in a hole it lies behind all of them,
         beside a convex body in front of one. The corrections of the partners come from their
         owners (a scatter over the candidates)."""
-        pc = self.contact
-        F, at, n = pc.facets_all, pc.state(up), pc.num_own
-        uf = at.uc + pc.pair_list.candidate_values(self.facet_corrections(up)[:n])
-        if self._reach[0] is not F:  # the known facets change with each list build
-            self._reach = (F, reach(F))
-        worst = np.empty(2)
-        lib.dem_pair_penetration(pc.pair_list.c_pairs.c, at.kernel_state.c, pointer(F.centre), pointer(uf),
-                                 pointer(F.normal), pointer(self._reach[1]), n, pointer(np.zeros((2, len(F)))),
-                                 pointer(np.empty(n)), pointer(np.empty(n)), pointer(np.empty(n)), pointer(worst))
+        pc, work = self.contact, self._work()
+        at, n = pc.state(up), pc.num_own
+        np.add(at.uc, pc.pair_list.candidate_values(self._corrections(up)[:n]), out=work.uf)
+        lib.dem_pair_penetration(pc.pair_list.c_pairs.c, at.kernel_state.c, work.p_centre, work.p_uf, work.p_normal,
+                                 work.p_reach, n, work.p_sums, work.p_nearest, work.p_depth, work.p_scale,
+                                 work.p_worst)
+        worst = work.worst.copy()
         pc.comm.Allreduce(MPI.IN_PLACE, worst, op=MPI.MAX)
         return float(worst[0]), float(worst[1])
 
@@ -150,22 +158,22 @@ class PairOutputs:
             mu = L.ZT @ (L.Q @ up + pc.row_lift + L.Z @ cp)
             state = Struct("dem_pair_state", n=len(p), closed=p, g=g, w=w, dw=dw, c=cp, mu=mu)
         out = np.zeros((len(pc.body_pairs), pc.d))
+        self._body_forces(state, out)
+        return out
+
+    def _body_forces(self, state: Struct, out: np.ndarray) -> None:
+        """out (n_body_pairs d, C-contiguous) += the forces between the bodies of the pairs of
+        ``state`` (``dem_pair_body_forces``; ``pair_forces``)."""
+        pc = self.contact
         if state.c.n == 0:
-            return out
-        missing = lib.dem_pair_body_forces(
-            pc.pair_list.c_pairs.c,
-            state.c,
-            pointer(pc.pair_list.facet_bodies),
-            len(pc.body_pair_index),
-            pointer(pc.body_pair_index),
-            pointer(out),
-        )
+            return
+        missing = lib.dem_pair_body_forces(pc.pair_list.c_pairs.c, state.c, pointer(pc.pair_list.facet_bodies),
+                                           len(pc.body_pair_index), pointer(pc.body_pair_index), pointer(out))
         if missing:  # every body with a candidate facet is in ``body_pairs``: a broken invariant
             raise StateError(
                 f"contact between bodies: {missing} touching pairs join bodies that have no body pair "
                 "(bodies without candidate facets?)"
             )
-        return out
 
     def output_columns(self) -> tuple[str, ...]:
         """The summed normal contact force ``contact_force`` (``contact_force``), the largest
@@ -186,11 +194,16 @@ class PairOutputs:
     def output_sums(self, up: np.ndarray) -> np.ndarray:
         """This process's part of the sums of the outputs: the pair forces, the contact force and
         the count of closed pairs (``closed_count``); with friction the last step's tangential forces
-        and slipping pairs after the pair forces."""
-        friction = self.contact.friction
-        extra = () if friction is None else (friction.forces.ravel(), [friction.slipping])
-        return np.concatenate([self.pair_forces(up).ravel(), *extra, [self.contact_force_part(up),
-                                                                      self.closed_count(up)]])
+        and slipping pairs after the pair forces. One array, the pair forces summed into it."""
+        pc = self.contact
+        friction, at, m = pc.friction, pc.state(up), len(pc.body_pairs) * pc.d
+        sums = np.zeros(m + (0 if friction is None else m + 1) + 2)
+        self._body_forces(at.kernel_state, sums[:m])
+        if friction is not None:
+            sums[m : 2 * m] = friction.forces.ravel()
+            sums[2 * m] = friction.slipping
+        sums[-2:] = self.contact_force_part(up), self.closed_count(up)
+        return sums
 
     def output_values(self, up: np.ndarray, sums: np.ndarray) -> list[float]:
         """The values of ``output_columns`` from the reduced ``output_sums``: the penetration's
@@ -204,3 +217,22 @@ class PairOutputs:
         pc = self.contact
         g, w = self.pair_states(up)
         return pc.comm.allreduce(float(g[w > 0].min(initial=np.inf)), op=MPI.MIN)
+
+
+class _FacetWork:
+    """The per-step outputs' arrays of one set of known facets ``F`` (``n_own`` own ones first)
+    and their C pointers, made once per list build: each step's outputs then allocate nothing
+    (the kernels overwrite them)."""
+
+    def __init__(self, F, n_own: int, d: int):
+        n = len(F)
+        self.corrections, self.spare = np.empty((n, d)), np.empty((n, d))  # dem_pair_facet_corrections
+        self.uf, self.worst = np.empty((n, d)), np.empty(2)  # dem_pair_penetration's
+        self.reach = reach(F)
+        arrays = {"length": F.length, "corrections": self.corrections, "spare": self.spare, "centre": F.centre,
+                  "uf": self.uf, "normal": F.normal, "reach": self.reach, "sums": np.empty((2, n)),
+                  "nearest": np.empty(n_own), "depth": np.empty(n_own), "scale": np.empty(n_own),
+                  "worst": self.worst}
+        self._arrays = arrays  # kept alive with their pointers
+        for name, array in arrays.items():
+            setattr(self, "p_" + name, pointer(array))

@@ -285,13 +285,16 @@ done:
  * more; else the contact state (pair_state), screening only the last flight's candidates if
  * every facet lies within slack / 2 of its end (uc + dt vc of ``last``; pairs->end_slack2;
  * state->from_flight = 1; none closed if there are none), every listed pair otherwise (last
- * NULL: no flight). Returns the number of closed pairs, -2 (stale) or -1 (out of memory). */
+ * NULL: no flight). state may hold an earlier state (its count and sums are reset). Returns the
+ * number of closed pairs, -2 (stale) or -1 (out of memory). */
 int64_t dem_pair_end_state(const dem_pairs *pairs, const dem_patch *patch, const double *restrict up,
                            const dem_flight *last, dem_arena *work, double *restrict uc, dem_pair_state *state)
 {
   const int64_t n_facets = pairs->n_facets;
   const int32_t d = pairs->d;
   double ratio[2];
+  state->n = 0; /* the struct may hold an earlier state: its sums start again */
+  state->energy[0] = state->energy[1] = state->mu_w = 0.0;
   dem_csr_apply(&pairs->R, up, pairs->lift, uc);
   if (last) /* how far uc lies from the end of the last flight */
     worst_motion(n_facets, d, last->uc, last->vc, last->dt, uc, NULL, ratio + 1);

@@ -7,11 +7,13 @@
  * pairs p of the state (facets (i, j), c_p = w g^-), out[f] = sum over the pairs with i = f of
  * (c_p / |f|) e_i plus sum over those with j = f of (c_p / |f|) e_j, each sum in the order of
  * the pairs and the two added last (the bits of two bincounts). length: the known facets'
- * measures |f|; out and work: n_facets x d, zero on entry. */
+ * measures |f|; out and work: n_facets x d, overwritten. */
 void dem_pair_facet_corrections(const dem_pairs *pairs, const dem_pair_state *state, const double *restrict length,
                                 double *restrict work, double *restrict out)
 {
   const int32_t d = pairs->d;
+  memset(out, 0, (size_t)(pairs->n_facets * d) * sizeof *out);
+  memset(work, 0, (size_t)(pairs->n_facets * d) * sizeof *work);
   const int64_t *restrict i = pairs->i, *restrict j = pairs->j, *restrict p = state->closed;
   const double *restrict e_i = pairs->e_i, *restrict e_j = pairs->e_j, *restrict c = state->c;
   for (int64_t k = 0; k < state->n; ++k)
@@ -111,7 +113,7 @@ DEM_INLINE void behind_partners(const int32_t d, const dem_pairs *pairs, const d
  * each of the first n_own known facets inside the other body (depth, n_own), from their
  * reconstructed barycentres y = x + u (centre: x, uf: u, n_facets x d). A facet with closed pairs
  * p of the state (g < 0) with w_p > 0: the overlap-weighted mean over them of the reconstructed
- * gap (y_j - y_i) . n_p, negated (sums: 2 x n_facets, zero on entry: the weights, then the weighted
+ * gap (y_j - y_i) . n_p, negated (sums: 2 x n_facets, overwritten: the weights, then the weighted
  * gaps). Any other
  * facet f: the least of its depths -(y_f - y_o) . n_o behind the planes of its listed partners o
  * around the nearest one (those within the nearest's distance plus twice their two reaches;
@@ -132,6 +134,7 @@ void dem_pair_penetration(const dem_pairs *pairs, const dem_pair_state *state, c
   double *restrict weight = sums, *restrict mean = sums + pairs->n_facets;
   const int64_t *restrict i = pairs->i, *restrict j = pairs->j, *restrict p = state->closed;
   const double *restrict normal = pairs->normal, *restrict w = state->w;
+  memset(sums, 0, (size_t)(2 * pairs->n_facets) * sizeof *sums);
   for (int64_t k = 0; k < state->n; ++k)
   {
     if (!(w[k] > 0))
