@@ -36,10 +36,10 @@ from mpi4py import MPI
 
 from dolfinx_dem import hertz, io, model, plotting
 from dolfinx_dem.contact import PairContact, RigidContact
-from dolfinx_dem.errors import SceneError
+from dolfinx_dem.errors import InputError, SceneError
 from dolfinx_dem.run_statistics import peak_rss_mb
 from dolfinx_dem.statics import check_held, minimise_energy
-from dolfinx_dem.statics.friction import load_tangentially
+from dolfinx_dem.statics.friction import check_load_path, load_tangentially
 
 
 def _top_point(dem) -> list[float]:
@@ -89,8 +89,14 @@ class StaticRun:
         if self.pairs is not None and dem.d != 2:
             raise SceneError("a static scene with contact between bodies ('contact' table) is implemented "
                                     "in 2D, not 3D")
+        statics = scene["statics"]
         if not problem.contacts:  # a free rigid motion is an error before the output folder is touched
-            check_held(dem, scene["statics"].get("fixed_mean", ()), scene["statics"].get("fixed_rotation", False))
+            check_held(dem, statics.get("fixed_mean", ()), statics.get("fixed_rotation", False))
+        if "tangential_body_force" in statics:  # so is a load path of statics with friction it cannot take
+            try:
+                check_load_path(problem, statics["tangential_body_force"], statics.get("increments", 10))
+            except InputError as err:
+                raise SceneError(f"scene key 'statics.tangential_body_force': {err}") from None
         self.top = model.Probes(problem, [{"name": "top", "point": _top_point(dem), "component": dem.d - 1}])
         self.probes = model.Probes(problem, scene.get("probes", []))
         self.setup_seconds = comm.allreduce(time.perf_counter() - self.wall, op=MPI.MAX)
@@ -241,6 +247,10 @@ class StaticRun:
 def _fem_problem(scene: Mapping) -> dict:
     """The ``solve_hertz`` arguments (R, body_force, dim, refine) of a ``fem-P2`` scene, which
     must be one of the Hertz problems of fem/hertz.py."""
+    frictional = [k for k, obstacle in enumerate(scene.get("obstacles", [])) if obstacle.get("friction", 0.0) > 0]
+    if frictional:
+        raise SceneError(f"scene key 'obstacles[{frictional[0]}].friction': method 'fem-P2' (the Hertz reference) "
+                         "is frictionless; statics with friction takes a DEM method (dem-A, dem-B or dem-AB)")
     mesh, loads = scene["mesh"], scene.get("loads", {})
     force = loads.get("body_force", [0.0, 0.0, 0.0])
     horizontal, f = force[:-1], -force[-1]

@@ -66,7 +66,7 @@ from dolfinx_dem.statics import StaticResult, minimise_energy
 from dolfinx_dem.statics.active_set import ActiveSetNewton, Iterate
 from dolfinx_dem.statics.linear import Constraints, LinearSolver
 
-__all__ = ["FrictionIncrement", "FrictionResult", "load_tangentially"]
+__all__ = ["FrictionIncrement", "FrictionResult", "check_load_path", "load_tangentially"]
 
 #: The slip s_c of a slip cell counts as against its force only beyond this fraction of the
 #: increment's largest slip (rounding of a cell on the edge of the stick zone).
@@ -240,19 +240,15 @@ def _increment(problem, model, cells: _Cells, previous: PETSc.Vec, u: PETSc.Vec,
                        f"{settled}); try more increments")
 
 
-def load_tangentially(problem: DEMProblem, body_force, increments: int, fixed_mean=(), fixed_rotation: bool = False,
-                      rtol: float = 1e-12, max_iterations: int = 50, state_iterations: int = 50,
-                      bound_rtol: float = 1e-10, t: float = 0.0) -> FrictionResult:
-    """The load path of the module docstring: the normal load (``minimise_energy`` on frictionless
-    obstacles, with ``fixed_mean`` and ``fixed_rotation``), then the tangential load of the body
-    force ``body_force`` (N/m^3: force per unit area in 2D) moved onto the obstacle's line, in
-    ``increments`` equal increments, each the incremental Coulomb solution."""
-    wall = time.perf_counter()
+def check_load_path(problem: DEMProblem, body_force, increments: int) -> tuple[RigidContact, np.ndarray, _Cells]:
+    """An InputError unless ``problem`` and the load path (``load_tangentially``'s arguments) are
+    one this module solves; (the frictional contact, the body force, its frictional cells). Known
+    at set-up: a scene run checks it before its output folder is written."""
     contact = problem.find(RigidContact) if isinstance(problem, DEMProblem) else None
     if contact is None or contact.friction is None or len(problem.contacts) != 1:
         raise InputError("load_tangentially takes a DEMProblem whose only contact model is a RigidContact with "
                          "friction (an obstacle with friction > 0)")
-    dem, d, comm = problem.dem, problem.d, problem.comm
+    d = problem.d
     if d != 2:
         raise InputError(f"statics with friction is implemented in 2D, this problem is {d}D")
     b = np.asarray(body_force, dtype=float)
@@ -264,6 +260,19 @@ def load_tangentially(problem: DEMProblem, body_force, increments: int, fixed_me
     if b @ cells.normal != 0.0:
         raise InputError(f"the tangential body force {b.tolist()} must be parallel to the obstacle (normal "
                          f"{cells.normal.tolist()}): the normal load is the problem's own")
+    return contact, b, cells
+
+
+def load_tangentially(problem: DEMProblem, body_force, increments: int, fixed_mean=(), fixed_rotation: bool = False,
+                      rtol: float = 1e-12, max_iterations: int = 50, state_iterations: int = 50,
+                      bound_rtol: float = 1e-10, t: float = 0.0) -> FrictionResult:
+    """The load path of the module docstring: the normal load (``minimise_energy`` on frictionless
+    obstacles, with ``fixed_mean`` and ``fixed_rotation``), then the tangential load of the body
+    force ``body_force`` (N/m^3: force per unit area in 2D) moved onto the obstacle's line, in
+    ``increments`` equal increments, each the incremental Coulomb solution."""
+    wall = time.perf_counter()
+    contact, b, cells = check_load_path(problem, body_force, increments)
+    dem, d, comm = problem.dem, problem.d, problem.comm
     normal_step = minimise_energy(problem, fixed_mean, fixed_rotation, rtol, max_iterations, t=t,
                                   normal_step=True)
     u = normal_step.u
