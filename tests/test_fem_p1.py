@@ -170,7 +170,7 @@ def test_a_node_inside_the_obstacle_at_the_start_is_an_error(tmp_path):
 def test_facet_nodes_are_the_facet_vertices():
     """The local facet -> P1 node map (fem/penalty.py) agrees with the mesh geometry."""
     from dolfinx_dem import _compat
-    from dolfinx_dem.fem.penalty import facet_nodes, node_coordinates
+    from dolfinx_dem.fem.common import facet_nodes, node_coordinates
 
     mesh, _, _ = meshes.create_box(MPI.COMM_SELF, [0, 0, 0], [1, 2, 3], [2, 3, 2])
     V = _compat.create_vector_space(mesh, "Lagrange", 1)
