@@ -33,9 +33,9 @@ is preferred) without a second code path.
   obstacles' set-up check, which knows its springs in advance; the pairs' are known only when
   they touch).
 * **Search.** A broad phase bounded and correct: the pairs are those of a node and a facet of
-  another body whose centroid lies within ``reach + depth + 2 skin`` of the node (a cKDTree of the
-  facet centroids), reach the largest centroid-vertex distance of the facets, depth = skin =
-  reach; the list is rebuilt when a candidate node has moved by more than skin / 2 since it was
+  another body whose centroid lies within ``reach_f + depth + 2 skin`` of the node (a cKDTree of
+  the facet centroids), reach_f the facet's largest centroid-vertex distance, depth = skin = half
+  the largest reach; the list is rebuilt when a candidate node has moved by more than skin / 2 since it was
   made. Between builds every facet whose closest point is within ``depth`` of a node is listed, so
   a node deeper than ``depth`` behind its nearest listed facet is an error (contact no longer
   resolved by the mesh), never a missed facet.
@@ -107,6 +107,7 @@ class NodeFacetPenalty:
             self.pair_index[a, b] = self.pair_index[b, a] = k
         self.builds = 0
         self._list_u = None  # the candidate nodes' displacements when the list was made
+        self._last = (None, None)  # (the candidate nodes' displacements, their ``state``)
 
     def _orientation(self, V, facets: np.ndarray) -> np.ndarray:
         """+1 or -1 per facet: the sign that makes ``_normals`` point out of the facet's cell."""
@@ -133,15 +134,20 @@ class NodeFacetPenalty:
     def _build(self, u: np.ndarray) -> None:
         X = self.x0[self.facets] + u[self.facets]
         centroid = X.mean(axis=1)
-        self.reach = float(np.linalg.norm(X - centroid[:, None], axis=2).max())
-        self.depth = self.skin = self.reach
+        reach = np.linalg.norm(X - centroid[:, None], axis=2).max(axis=1)
+        self.depth = self.skin = 0.5 * float(reach.max())
         tree = scipy.spatial.cKDTree(centroid)
         slaves = self.nodes[~self.held[self.nodes]]
-        near = tree.query_ball_point(self.x0[slaves] + u[slaves], self.reach + self.depth + 2.0 * self.skin)
-        s = np.repeat(slaves, [len(f) for f in near])
-        f = np.fromiter((k for part in near for k in part), dtype=np.int64, count=len(s))
-        other = self.body[s] != self.facet_body[f]
-        self.s, self.f = s[other], f[other]
+        xs = self.x0[slaves] + u[slaves]
+        near = tree.query_ball_point(xs, float(reach.max()) + self.depth + 2.0 * self.skin)
+        k = np.repeat(np.arange(len(slaves)), [len(f) for f in near])
+        f = np.fromiter((j for part in near for j in part), dtype=np.int64, count=len(k))
+        s = slaves[k]
+        # each facet's own reach: its closest point within depth of the node puts its centroid within
+        # reach_f + depth, and the list holds while nothing moved by more than skin / 2
+        keep = (self.body[s] != self.facet_body[f]) & (
+            np.linalg.norm(xs[k] - centroid[f], axis=1) <= reach[f] + self.depth + 2.0 * self.skin)
+        self.s, self.f = s[keep], f[keep]
         m = self.mass
         self.kappa = PAIR_PENALTY_FACTOR / (self.dt**2 * (1.0 / m[self.s] + 1.0 / m[self.facets[self.f]].min(axis=1)))
         self._list_u = u[self.nodes].copy()
@@ -150,17 +156,18 @@ class NodeFacetPenalty:
     # -- narrow phase ----------------------------------------------------------------------------
     def state(self, u: np.ndarray) -> dict:
         """The active pairs at the node displacements ``u`` (n_nodes, d): slave ``s``, facet nodes
-        ``a`` (n, d), shape values ``N``, normal ``n``, gap ``g`` < 0, stiffness ``kappa``."""
+        ``a`` (n, d), shape values ``N``, normal ``n``, gap ``g`` < 0, stiffness ``kappa`` (kept for
+        the next call at the same displacements: a step's force, energy and outputs)."""
+        un = u[self.nodes]
+        if self._last[0] is not None and np.array_equal(un, self._last[0]):
+            return self._last[1]
         if self._list_u is None or np.linalg.norm(u[self.nodes] - self._list_u, axis=1).max() > 0.5 * self.skin:
             self._build(u)
         s, fa = self.s, self.facets[self.f]
         X = self.x0[fa] + u[fa]
         n = self.sign[self.f, None] * self._normals(X)
         r = self.x0[s] + u[s] - X[:, 0]
-        E = X[:, 1:] - X[:, :1]  # (P, d-1, d) edges from vertex 0
-        G = np.einsum("pki,pli->pkl", E, E)
-        xi = np.linalg.solve(G, np.einsum("pki,pi->pk", E, r)[..., None])[..., 0]
-        N = np.concatenate([1.0 - xi.sum(axis=1, keepdims=True), xi], axis=1)
+        N = self._shape_values(X, r)
         g = np.einsum("pi,pi->p", n, r)
         inside = np.flatnonzero((N >= 0).all(axis=1))
         # per slave, its inside facet of largest g: sort by slave, then g descending
@@ -173,8 +180,24 @@ class NodeFacetPenalty:
             raise InputError(f"contact between bodies is no longer resolved: a node lies {deepest:.4g} m behind the "
                              f"nearest facet of another body, more than a facet's size ({self.depth:.4g} m); lower "
                              "time.cfl")
-        return {"s": s[p], "a": fa[p], "N": N[p], "n": n[p], "g": g[p], "kappa": self.kappa[p], "facet_body":
-                self.facet_body[self.f[p]]}
+        state = {"s": s[p], "a": fa[p], "N": N[p], "n": n[p], "g": g[p], "kappa": self.kappa[p],
+                 "facet_body": self.facet_body[self.f[p]]}
+        self._last = (un.copy(), state)
+        return state
+
+    def _shape_values(self, X: np.ndarray, r: np.ndarray) -> np.ndarray:
+        """The P1 shape values (barycentric coordinates) of the projections of the points
+        ``X[:, 0] + r`` on the planes of the facets X, (n, d)."""
+        e1 = X[:, 1] - X[:, 0]
+        if self.d == 2:
+            xi = np.einsum("pi,pi->p", e1, r) / np.einsum("pi,pi->p", e1, e1)
+            return np.stack([1.0 - xi, xi], axis=1)
+        e2 = X[:, 2] - X[:, 0]
+        a, b, c = (np.einsum("pi,pi->p", *v) for v in ((e1, e1), (e1, e2), (e2, e2)))
+        r1, r2 = np.einsum("pi,pi->p", e1, r), np.einsum("pi,pi->p", e2, r)
+        det = a * c - b * b  # the Gram determinant, 4 area^2 > 0
+        xi1, xi2 = (c * r1 - b * r2) / det, (a * r2 - b * r1) / det
+        return np.stack([1.0 - xi1 - xi2, xi1, xi2], axis=1)
 
     def energy(self, u: np.ndarray) -> float:
         """``sum_p 1/2 kappa_p g_p^2`` over the active pairs (J; J/m in 2D)."""
