@@ -126,7 +126,10 @@ def test_one_two_and_three_processes_give_the_same_series(name, end, tmp_path):
 
 
 @pytest.mark.parametrize("name, overrides, key", [
-    ("two-disks", {}, "contact"),
+    ("two-disks", {"contact.self_contact": True}, "contact.self_contact"),
+    ("two-disks", {"contact.friction": 0.3}, "contact.friction"),
+    ("two-disks", {"contact.skin": 0.01}, "contact.skin"),
+    ("two-disks", {"contact.max_penetration": 0.5}, "contact.max_penetration"),
     ("bar-impact", {"material.eta": 900.0}, "material.eta"),
     ("bar-impact", {"time.quadrature": "gauss-legendre-2"}, "time.quadrature"),
     ("bar-impact", {"obstacles[0].friction": 0.3}, "obstacles[0].friction"),

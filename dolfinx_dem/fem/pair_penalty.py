@@ -34,8 +34,8 @@ is preferred) without a second code path.
   they touch).
 * **Search.** A broad phase bounded and correct: the pairs are those of a node and a facet of
   another body whose centroid lies within ``reach_f + depth + 2 skin`` of the node (a cKDTree of
-  the facet centroids), reach_f the facet's largest centroid-vertex distance, depth = skin = half
-  the largest reach; the list is rebuilt when a candidate node has moved by more than skin / 2 since it was
+  the facet centroids), reach_f the facet's largest centroid-vertex distance, depth the largest
+  reach, skin half of it; the list is rebuilt when a candidate node has moved by more than skin / 2 since it was
   made. Between builds every facet whose closest point is within ``depth`` of a node is listed, so
   a node deeper than ``depth`` behind its nearest listed facet is an error (contact no longer
   resolved by the mesh), never a missed facet.
@@ -135,7 +135,8 @@ class NodeFacetPenalty:
         X = self.x0[self.facets] + u[self.facets]
         centroid = X.mean(axis=1)
         reach = np.linalg.norm(X - centroid[:, None], axis=2).max(axis=1)
-        self.depth = self.skin = 0.5 * float(reach.max())
+        self.depth = float(reach.max())
+        self.skin = 0.5 * self.depth
         tree = scipy.spatial.cKDTree(centroid)
         slaves = self.nodes[~self.held[self.nodes]]
         xs = self.x0[slaves] + u[slaves]
@@ -178,8 +179,8 @@ class NodeFacetPenalty:
         deepest = float(-g[p].min(initial=0.0))
         if deepest > self.depth:
             raise InputError(f"contact between bodies is no longer resolved: a node lies {deepest:.4g} m behind the "
-                             f"nearest facet of another body, more than a facet's size ({self.depth:.4g} m); lower "
-                             "time.cfl")
+                             f"nearest facet of another body, more than the largest facet's reach ({self.depth:.4g} "
+                             "m, centroid to vertex): lower time.cfl")
         state = {"s": s[p], "a": fa[p], "N": N[p], "n": n[p], "g": g[p], "kappa": self.kappa[p],
                  "facet_body": self.facet_body[self.f[p]]}
         self._last = (un.copy(), state)
@@ -240,7 +241,7 @@ class NodeFacetPenalty:
         forces = np.zeros((len(self.body_pairs), self.d))
         k = self.pair_index[bs, bf]
         np.add.at(forces, k, np.where((bs < bf)[:, None], f, -f))
-        return [float(-np.sum(st["kappa"] * st["g"])), float(-st["g"].min(initial=0.0)), *forces.ravel()]
+        return [0.0 - float(np.sum(st["kappa"] * st["g"])), 0.0 - float(st["g"].min(initial=0.0)), *forces.ravel()]
 
     def output_columns(self) -> tuple[str, ...]:
         xyz = "xyz"[: self.d]
