@@ -2,7 +2,9 @@
 
 ``FEMP1Run(scene, comm)`` reads the same scene as ``dynamics.DynamicRun`` and runs it on the
 scene's own mesh with :class:`~dolfinx_dem.fem.penalty.PenaltyCentralDifference`: P1 Lagrange,
-lumped mass, central differences, node-on-obstacle penalty contact with the ``[[obstacles]]``.
+lumped mass, central differences, node-on-obstacle penalty contact with the ``[[obstacles]]`` and
+node-to-facet penalty contact between the bodies of ``[contact]`` (fem/pair_penalty.py, one
+process).
 It writes the DEM's outputs (``summary.json``, ``series.csv``, ``solution.xdmf``, ``final.png``)
 with the DEM's column names, so that a scene is compared by changing one word:
 
@@ -13,6 +15,8 @@ with the DEM's column names, so that a scene is compared by changing one word:
 - with obstacles, a ``penalty`` column (the penalty energy, included in ``pseudo_energy``) and
   the rigid contact's columns (``contact_gap``, ``contact_pressure``, ``tip_position`` in 1D,
   ``contact_force_obstacle<k>_<x|y|z>``) measured at the candidate nodes;
+- with ``[contact]``, the ``penalty`` column and the DEM's columns of contact between bodies
+  (``contact_force``, ``penetration``, ``contact_force_<i>_<j>_<x|y|z>``, ``momentum_<x|y|z>``);
 - ``reaction_<i>_<x|y|z>`` of the Dirichlet conditions, then the probes: the P1 displacement at
   the probe's point;
 - the solution's DG0 fields (cell averages of the P1 fields, the von Mises stress of the cell).
