@@ -110,6 +110,9 @@ class FEMP1Run:
                       ob.get("tolerance", 0.0)) for k, ob in enumerate(scene.get("obstacles", []))]
         pairs = None
         if "contact" in scene:
+            if self.d == 1:
+                raise SceneError("scene key 'contact': contact between bodies is implemented in 2D and 3D, not 1D "
+                                 "(method 'fem-P1')")
             if comm.size > 1:
                 raise SceneError("scene key 'contact': contact between bodies runs on one process for the FEM peer "
                                  f"(method 'fem-P1'), not {comm.size}")
