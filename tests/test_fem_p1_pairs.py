@@ -43,6 +43,32 @@ def test_pair_force_is_the_gradient_of_the_penalty_energy(name, h):
         assert slope == pytest.approx(-np.sum(force * w), rel=1e-6)
 
 
+def test_the_stable_step_bound_bounds_the_largest_eigenvalue():
+    """lambda_max(m^-1 (K + K_c)) of two overlapping discs (K_c = sum_p kappa_p b_p b_p^T, b_p = (n,
+    -N_a n)), dense, against ``eigenvalue_bound``."""
+    run = FEMP1Run(_overlapping("two-disks", 0.02, 0.0125), MPI.COMM_SELF, quiet=True)
+    solver, pairs = run.solver, run.solver._pairs
+    st = pairs.state(solver._node_displacements().copy())
+    d = 2
+    n_dofs = len(pairs.mass) * d
+    K = np.zeros((n_dofs, n_dofs))
+    rows, cols, values = solver._K.getValuesCSR()
+    for i in range(n_dofs):
+        K[i, cols[rows[i]:rows[i + 1]]] = values[rows[i]:rows[i + 1]]
+    for s, a, N, n, kappa in zip(st["s"], st["a"], st["N"], st["n"], st["kappa"]):
+        b = np.zeros(n_dofs)
+        b[s * d:(s + 1) * d] = n
+        for node, share in zip(a, N):
+            b[node * d:(node + 1) * d] -= share * n
+        K += kappa * np.outer(b, b)
+    w = 1.0 / np.sqrt(np.repeat(pairs.mass, d))
+    largest = np.linalg.eigvalsh(w[:, None] * K * w[None, :]).max()
+    bound = pairs.eigenvalue_bound(st)
+    assert largest <= bound
+    assert largest > 4.0 / solver.dt_stable**2 * (1 + 1e-3)  # the springs count
+    assert bound < 2.0 * largest  # and the bound is not loose
+
+
 def test_an_initial_overlap_beyond_the_tolerance_is_an_error():
     with pytest.raises(InputError, match="inside another body at t = 0.*contact.tolerance"):
         FEMP1Run(_overlapping("two-disks", 0.02, 0.011, tolerance=0.0), MPI.COMM_SELF, quiet=True)

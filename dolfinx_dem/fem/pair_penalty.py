@@ -219,13 +219,19 @@ class NodeFacetPenalty:
         force[self.held] = 0.0
         out += force
 
-    def _check_step(self, st: dict) -> None:
+    def eigenvalue_bound(self, st: dict) -> float:
+        """An upper bound of lambda_max(m^-1 (K + K_c)), K_c the springs of the active pairs ``st``
+        (their normals held): ``4 / dt_stable^2 + max_i sum_{p at i} kappa_p |c_{p,i}| sum_j |c_{p,j}|``
+        (module docstring)."""
         m = self.mass
         nodes = np.concatenate([st["s"][:, None], st["a"]], axis=1)
         c = np.concatenate([np.ones((len(st["s"]), 1)), st["N"]], axis=1) / np.sqrt(m[nodes])
         rows = np.bincount(nodes.ravel(), (st["kappa"][:, None] * c * c.sum(axis=1, keepdims=True)).ravel(),
                            minlength=len(m))
-        bound = 4.0 / self.dt_stable**2 + rows.max()
+        return 4.0 / self.dt_stable**2 + rows.max()
+
+    def _check_step(self, st: dict) -> None:
+        bound = self.eigenvalue_bound(st)
         if self.dt**2 * bound >= 4.0:
             raise InputError(f"the time step dt = {self.dt:.6g} s is not proved stable with the contact between bodies "
                              f"(kappa = {PAIR_PENALTY_FACTOR:g} / (dt^2 (1/m_s + 1/m_a)) per node-facet pair: the "
