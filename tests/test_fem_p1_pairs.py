@@ -104,7 +104,10 @@ def test_two_disks_against_dem_a(tmp_path):
     assert 0.3 + impulse / mass == pytest.approx(-0.253, abs=3e-3)  # the rebound, slower than 0.3 m/s
     assert summary["momentum_rel_change"] < 1e-12
     assert np.abs(data["momentum_x"] - data["momentum_x"][0]).max() < 1e-12
-    assert summary["first_contact_time"] == pytest.approx(start)
+    # within the step: the discs' poles are vertices, they touch at 0.02 / 0.6 s
+    assert start - summary["dt"] <= summary["first_contact_time"] <= start
+    assert summary["first_contact_time"] == pytest.approx(0.02 / 0.6, abs=1e-12)
+    assert summary["first_contact_time"] == pytest.approx(results["dem-A"][0]["first_contact_time"], abs=1e-12)
     assert summary["max_penetration"] == pytest.approx(data["penetration"].max())
     assert 0 < summary["max_penetration"] < 0.005
     # the pairs' normal forces sum to at least the force between the discs, nearly all along x (head-on)

@@ -157,7 +157,7 @@ class NodeFacetPenalty:
     # -- narrow phase ----------------------------------------------------------------------------
     def state(self, u: np.ndarray) -> dict:
         """The active pairs at the node displacements ``u`` (n_nodes, d): slave ``s``, facet nodes
-        ``a`` (n, d), shape values ``N``, normal ``n``, gap ``g`` < 0, stiffness ``kappa`` (kept for
+        ``a`` (n, d) of facet ``f``, shape values ``N``, normal ``n``, gap ``g`` < 0, stiffness ``kappa`` (kept for
         the next call at the same displacements: a step's force, energy and outputs)."""
         un = u[self.nodes]
         if self._last[0] is not None and np.array_equal(un, self._last[0]):
@@ -181,10 +181,22 @@ class NodeFacetPenalty:
             raise InputError(f"contact between bodies is no longer resolved: a node lies {deepest:.4g} m behind the "
                              f"nearest facet of another body, more than the largest facet's reach ({self.depth:.4g} "
                              "m, centroid to vertex): lower time.cfl")
-        state = {"s": s[p], "a": fa[p], "N": N[p], "n": n[p], "g": g[p], "kappa": self.kappa[p],
-                 "facet_body": self.facet_body[self.f[p]]}
+        state = {"s": s[p], "f": self.f[p], "a": fa[p], "N": N[p], "n": n[p], "g": g[p], "kappa": self.kappa[p]}
         self._last = (un.copy(), state)
         return state
+
+    def touch_time(self, u0: np.ndarray, u1: np.ndarray, dt: float) -> float | None:
+        """For a step of length dt from the displacements ``u0`` (no pair active) to ``u1``: the
+        time in [0, dt] at which the first pair active at ``u1`` closed its gap (the gap taken
+        affine along the step, as the DEM's ``touch_time``); None if no pair is active."""
+        st = self.state(u1)
+        if len(st["g"]) == 0:
+            return None
+        s, fa = st["s"], self.facets[st["f"]]
+        X = self.x0[fa] + u0[fa]
+        n = self.sign[st["f"], None] * self._normals(X)
+        g0 = np.maximum(np.einsum("pi,pi->p", n, self.x0[s] + u0[s] - X[:, 0]), 0.0)
+        return float(dt * (g0 / (g0 - st["g"])).min())
 
     def _shape_values(self, X: np.ndarray, r: np.ndarray) -> np.ndarray:
         """The P1 shape values (barycentric coordinates) of the projections of the points
@@ -243,7 +255,7 @@ class NodeFacetPenalty:
         ``contact_force_<i>_<j>_<x|y|z>`` for each pair i < j of ``body_pairs``."""
         st = self.state(u)
         f = -(st["kappa"] * st["g"])[:, None] * st["n"]  # on the slave's body, from the facet's
-        bs, bf = self.body[st["s"]], st["facet_body"]
+        bs, bf = self.body[st["s"]], self.facet_body[st["f"]]
         forces = np.zeros((len(self.body_pairs), self.d))
         k = self.pair_index[bs, bf]
         np.add.at(forces, k, np.where((bs < bf)[:, None], f, -f))

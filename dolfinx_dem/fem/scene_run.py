@@ -139,6 +139,7 @@ class FEMP1Run:
         self.obstacles = bool(obstacles)
         self.pairs = self.solver._pairs
         self._p0 = None  # the momentum at t = 0 (``_record_pairs``)
+        self.first_contact = None  # the time a pair first touched (``NodeFacetPenalty.touch_time``)
         self.p_scale = self.solver.momentum(absolute=True).sum()
         reactions = tuple(f"reaction_{bc.get('name', i)}_{c}" for i, bc in enumerate(scene.get("dirichlet", []))
                           for c in "xyz"[:d])
@@ -235,16 +236,19 @@ class FEMP1Run:
         return row
 
     def _record_pairs(self, contact: list[float], momentum: np.ndarray) -> None:
-        """The pair contact's summary figures at a series row: the first time a pair is active (at
-        the row's resolution, not interpolated within the step as the DEM's), the largest
-        penetration, and the largest change of the total momentum over sum |m v| at t = 0."""
+        """The pair contact's summary figures at a series row: the largest penetration, and the
+        largest change of the total momentum over sum |m v| at t = 0."""
         if self._p0 is None:
             self._p0 = momentum
-            self.first_contact, self.penetration, self.momentum_change = None, 0.0, 0.0
-        if self.first_contact is None and contact[0] > 0:
-            self.first_contact = self.t
+            self.penetration, self.momentum_change = 0.0, 0.0
         self.penetration = max(self.penetration, contact[1])
         self.momentum_change = max(self.momentum_change, float(np.abs(momentum - self._p0).max()))
+
+    def _before_step(self) -> np.ndarray | None:
+        """The displacements before a step while no pair has touched (for ``touch_time``)."""
+        if self.pairs is None or self.first_contact is not None:
+            return None
+        return self.solver._node_displacements().copy()
 
     def _cell_values(self, function, space) -> np.ndarray:
         """The owned cells' DG0 values of ``function`` interpolated into ``space``, in cell order."""
@@ -286,10 +290,14 @@ class FEMP1Run:
                 solution.write(0.0, self.fields())
                 progress = runcontrol.Progress(self.comm, self.n_steps, self.quiet)
                 while self.step < self.n_steps:
+                    before = self._before_step()
                     tic = time.process_time()
                     self.solver.step()
                     self.stepping_seconds += time.process_time() - tic
                     self.step += 1
+                    if before is not None:
+                        tau = self.pairs.touch_time(before, self.solver._node_displacements(), self.dt)
+                        self.first_contact = None if tau is None else self.t - self.dt + tau
                     energies = self._energies()
                     if not all(math.isfinite(e) for e in energies):
                         raise InputError(f"fem-P1 blew up at step {self.step} (t = {self.t:.6g})")
