@@ -35,10 +35,12 @@ is preferred) without a second code path.
 * **Search.** A broad phase bounded and correct: the pairs are those of a node and a facet of
   another body whose centroid lies within ``reach_f + depth + 2 skin`` of the node (a cKDTree of
   the facet centroids), reach_f the facet's largest centroid-vertex distance, depth the largest
-  reach, skin half of it; the list is rebuilt when a candidate node has moved by more than skin / 2 since it was
-  made. Between builds every facet whose closest point is within ``depth`` of a node is listed, so
-  a node deeper than ``depth`` behind its nearest listed facet is an error (contact no longer
-  resolved by the mesh), never a missed facet.
+  reach, skin half of it; the list is rebuilt when a candidate node has moved by more than
+  skin / 2 since it was made. Between builds every facet whose closest point is within ``depth``
+  of a node is listed, so a node deeper than ``depth`` behind its nearest listed facet is an
+  error (contact no longer resolved by the mesh), never a missed facet. What it cannot see is a
+  node that crosses more than about two facet sizes of the other body within one step
+  (tunnelling, v dt > h: a speed above the wave speed times the CFL number).
 
 One process only: the list is local and serial (a node and its facets on one process); a run
 on more processes is refused by fem/scene_run.py naming the key ``contact``.
