@@ -113,9 +113,8 @@ class PenaltyCentralDifference(FEMCentralDifference):
                 raise InputError(f"a candidate node lies {-worst:.6g} m inside its obstacle at t = 0 (more than "
                                  "the obstacle's tolerance)")
         if pairs is not None:
-            self._pairs = NodeFacetPenalty(self.V, pairs[0], self.lumped_mass.array_r.reshape(-1, d)[:, 0],
-                                           self._held(), self.dt, self.dt_stable)
-            depth = self._pairs.outputs(self._node_displacements())[1]
+            self._pairs = NodeFacetPenalty(self.V, pairs[0], self.lumped_mass, self._held(), self.dt, self.dt_stable)
+            depth = self._pairs.outputs(_compat.petsc_vec(self.u))[1]
             if depth > pairs[1]:
                 raise InputError(f"a candidate node lies {depth:.6g} m inside another body at t = 0 (more than "
                                  "contact.tolerance)")
@@ -194,10 +193,11 @@ class PenaltyCentralDifference(FEMCentralDifference):
 
     def _held(self) -> np.ndarray:
         """Whether each owned node is clamped (it takes no contact force)."""
-        held = np.zeros(self.V.dofmap.index_map.size_local * self.d, dtype=bool)
+        n = self.V.dofmap.index_map.size_local * self.d
+        held = np.zeros(n, dtype=bool)
         for bc in self._bcs:
-            dofs, first_ghost = bc.dof_indices()
-            held[dofs[:first_ghost]] = True
+            dofs = bc.dof_indices()[0]
+            held[dofs[dofs < n]] = True  # the owned ones (not all before the count it returns in DOLFINx 0.5)
         return held.reshape(-1, self.d).any(axis=1)
 
     def _stable_step_with_contact(self) -> float:
@@ -243,15 +243,11 @@ class PenaltyCentralDifference(FEMCentralDifference):
         u = _compat.petsc_vec(self.u).array_r.reshape(-1, self.d)[c["nodes"]]
         return c["offset"] + np.einsum("ni,ni->n", c["normals"], u)
 
-    def _node_displacements(self) -> np.ndarray:
-        """u per node (block), (n_nodes, d), read-only."""
-        return _compat.petsc_vec(self.u).array_r.reshape(-1, self.d)
-
     def _residual(self, out: PETSc.Vec) -> PETSc.Vec:
         """``F - K u`` plus the penalty forces, zero on the clamped rows."""
         super()._residual(out)
         if self._pairs is not None:
-            self._pairs.add_forces(self._node_displacements(), out.array.reshape(-1, self.d))
+            self._pairs.add_forces(_compat.petsc_vec(self.u), out.array.reshape(-1, self.d))
         if self._contact is not None:
             c = self._contact
             r = c["kappa"] * np.maximum(-self._gaps(), 0.0)
@@ -262,7 +258,7 @@ class PenaltyCentralDifference(FEMCentralDifference):
     def penalty_energy(self) -> float:
         """``sum_i 1/2 kappa_i max(0, -g_i)^2`` of the obstacles plus the pairs' penalty energy
         (fem/pair_penalty.py) (J), summed over ranks."""
-        energy = 0.0 if self._pairs is None else self._pairs.energy(self._node_displacements())
+        energy = 0.0 if self._pairs is None else self._pairs.energy(_compat.petsc_vec(self.u))
         if self._contact is not None:
             g = np.maximum(-self._gaps(), 0.0)
             energy += float(0.5 * np.dot(self._contact["kappa"], g * g))

@@ -113,9 +113,6 @@ class FEMP1Run:
             if self.d == 1:
                 raise SceneError("scene key 'contact': contact between bodies is implemented in 2D and 3D, not 1D "
                                  "(method 'fem-P1')")
-            if comm.size > 1:
-                raise SceneError("scene key 'contact': contact between bodies runs on one process for the FEM peer "
-                                 f"(method 'fem-P1'), not {comm.size}")
             pairs = (np.unique(np.concatenate([
                 model.boundary_facets(mesh, tags, names, b, f"contact.boundary[{k}]")
                 for k, b in enumerate(scene["contact"]["boundary"])])), scene["contact"].get("tolerance", 0.0))
@@ -140,6 +137,7 @@ class FEMP1Run:
         self.pairs = self.solver._pairs
         self._p0 = None  # the momentum at t = 0 (``_record_pairs``)
         self.first_contact = None  # the time a pair first touched (``NodeFacetPenalty.touch_time``)
+        self._u_before = None  # ``_before_step``'s vector
         self.p_scale = self.solver.momentum(absolute=True).sum()
         reactions = tuple(f"reaction_{bc.get('name', i)}_{c}" for i, bc in enumerate(scene.get("dirichlet", []))
                           for c in "xyz"[:d])
@@ -226,7 +224,7 @@ class FEMP1Run:
             self.stats.min_gap = min(self.stats.min_gap, contact[0])
             row += contact
         if self.pairs is not None:
-            contact = self.pairs.outputs(s._node_displacements())
+            contact = self.pairs.outputs(_compat.petsc_vec(s.u))
             momentum = s.momentum()
             self._record_pairs(contact, momentum)
             row += contact + list(momentum)
@@ -244,11 +242,17 @@ class FEMP1Run:
         self.penetration = max(self.penetration, contact[1])
         self.momentum_change = max(self.momentum_change, float(np.abs(momentum - self._p0).max()))
 
-    def _before_step(self) -> np.ndarray | None:
-        """The displacements before a step while no pair has touched (for ``touch_time``)."""
+    def _before_step(self) -> PETSc.Vec | None:
+        """The displacements before a step while no pair has touched (for ``touch_time``), in one
+        vector kept for the run (petsc4py frees a vector of a parallel run only at garbage
+        collection: a copy per step would keep one per step)."""
         if self.pairs is None or self.first_contact is not None:
             return None
-        return self.solver._node_displacements().copy()
+        u = _compat.petsc_vec(self.solver.u)
+        if self._u_before is None:
+            self._u_before = u.duplicate()
+        u.copy(self._u_before)
+        return self._u_before
 
     def _cell_values(self, function, space) -> np.ndarray:
         """The owned cells' DG0 values of ``function`` interpolated into ``space``, in cell order."""
@@ -296,7 +300,7 @@ class FEMP1Run:
                     self.stepping_seconds += time.process_time() - tic
                     self.step += 1
                     if before is not None:
-                        tau = self.pairs.touch_time(before, self.solver._node_displacements(), self.dt)
+                        tau = self.pairs.touch_time(before, _compat.petsc_vec(self.solver.u), self.dt)
                         self.first_contact = None if tau is None else self.t - self.dt + tau
                     energies = self._energies()
                     if not all(math.isfinite(e) for e in energies):
@@ -376,8 +380,8 @@ class FEMP1Run:
             summary["dt_stable_contact"] = s.dt_stable_contact
         if self.pairs is not None:
             summary.update({
-                "contact_candidate_facets": len(self.pairs.facets),
-                "contact_pairs_listed": len(self.pairs.s),
+                "contact_candidate_facets": self.pairs.num_facets,
+                "contact_pairs_listed": self.pairs.num_pairs(),
                 "contact_list_rebuilds": self.pairs.builds,
                 "first_contact_time": self.first_contact,
                 "max_penetration": self.penetration,
