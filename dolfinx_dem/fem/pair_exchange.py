@@ -106,14 +106,22 @@ class KnownFacets:
         self._coordinates.array[:] = x0[: imap.size_local].ravel()
         self._scatter = self._seq = None
 
+    def _own_positions(self, u: PETSc.Vec) -> np.ndarray:
+        """The vertex positions of this process's own candidate facets at ``u``, (n, d, d)."""
+        with u.localForm() as local:
+            return self._x0[self._own] + local.array_r.reshape(-1, self.d)[self._own]
+
+    def largest_own_reach(self, u: PETSc.Vec) -> float:
+        """The largest centroid-vertex distance of this process's own candidate facets at ``u``."""
+        X = self._own_positions(u)
+        return float(np.linalg.norm(X - X.mean(axis=1)[:, None], axis=2).max(initial=0.0))
+
     def exchange(self, u: PETSc.Vec, box: np.ndarray, radius: float) -> None:
         """Collective: each process receives the candidate facets whose centroid (at ``u``) lies
         within ``radius`` of its ``box`` (2, d): lower and upper corners of its nodes (empty:
         +inf, -inf)."""
         d = self.d
-        with u.localForm() as local:
-            ul = local.array_r.reshape(-1, d)
-            centroid = (self._x0[self._own] + ul[self._own]).mean(axis=1)
+        centroid = self._own_positions(u).mean(axis=1)
         boxes = self.comm.allgather(box)
         sends = []
         for lo, hi in boxes:

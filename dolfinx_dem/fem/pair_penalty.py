@@ -150,11 +150,7 @@ class NodeFacetPenalty:
         """The pairs of the slaves (displacements ``us``) and the known facets near them."""
         d = self.d
         k = self.known
-        with u.localForm() as local:  # the reach of the owned facets, for depth and skin
-            ul = local.array_r.reshape(-1, d)
-            X = k._x0[k._own] + ul[k._own]
-        reach = np.linalg.norm(X - X.mean(axis=1)[:, None], axis=2).max(axis=1, initial=0.0)
-        self.depth = self.comm.allreduce(float(reach.max(initial=0.0)), op=MPI.MAX)
+        self.depth = self.comm.allreduce(k.largest_own_reach(u), op=MPI.MAX)
         self.skin = 0.5 * self.depth
         xs = self.x_slaves + us
         radius = 2.0 * self.depth + 2.0 * self.skin  # the largest reach + depth + 2 skin

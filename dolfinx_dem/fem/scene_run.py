@@ -3,8 +3,7 @@
 ``FEMP1Run(scene, comm)`` reads the same scene as ``dynamics.DynamicRun`` and runs it on the
 scene's own mesh with :class:`~dolfinx_dem.fem.penalty.PenaltyCentralDifference`: P1 Lagrange,
 lumped mass, central differences, node-on-obstacle penalty contact with the ``[[obstacles]]`` and
-node-to-facet penalty contact between the bodies of ``[contact]`` (fem/pair_penalty.py, one
-process).
+node-to-facet penalty contact between the bodies of ``[contact]`` (fem/pair_penalty.py).
 It writes the DEM's outputs (``summary.json``, ``series.csv``, ``solution.xdmf``, ``final.png``)
 with the DEM's column names, so that a scene is compared by changing one word:
 
