@@ -37,24 +37,31 @@ def _vector(run, values):
     return v
 
 
+@pytest.mark.mpi
 @pytest.mark.parametrize("name, h", [("two-disks", 0.02), ("two-balls", 0.05)])
 def test_pair_force_is_the_gradient_of_the_penalty_energy(name, h):
-    run = FEMP1Run(_overlapping(name, h, 0.0125), MPI.COMM_SELF, quiet=True)
+    """On any number of processes: the energy and the slopes summed over them."""
+    comm = MPI.COMM_WORLD
+    run = FEMP1Run(_overlapping(name, h, 0.0125), comm, quiet=True)
     pairs = run.solver._pairs
+
+    def energy(values):
+        return comm.allreduce(pairs.energy(_vector(run, values)), op=MPI.SUM)
+
     u = _compat.petsc_vec(run.solver.u).array_r.reshape(-1, run.d).copy()
-    rng = np.random.default_rng(1)
+    rng = np.random.default_rng(1 + comm.rank)
     u += 1e-4 * rng.standard_normal(u.shape)  # off the symmetric position
     force = np.zeros_like(u)
     pairs.add_forces(_vector(run, u), force)
-    active = pairs.state(_vector(run, u))
-    assert len(active["g"]) > 4 and pairs.energy(_vector(run, u)) > 0
+    assert comm.allreduce(len(pairs.state(_vector(run, u))["g"]), op=MPI.SUM) > 4 and energy(u) > 0
     # momentum: the forces on the nodes and on the facets' nodes cancel to rounding
-    assert np.abs(force.sum(axis=0)).max() <= 1e-13 * np.abs(force).sum()
+    total = comm.allreduce(force.sum(axis=0), op=MPI.SUM)
+    assert np.abs(total).max() <= 1e-13 * comm.allreduce(np.abs(force).sum(), op=MPI.SUM)
     eps = 1e-7
     for _ in range(3):
         w = rng.standard_normal(u.shape)
-        slope = (pairs.energy(_vector(run, u + eps * w)) - pairs.energy(_vector(run, u - eps * w))) / (2 * eps)
-        assert slope == pytest.approx(-np.sum(force * w), rel=1e-6)
+        slope = (energy(u + eps * w) - energy(u - eps * w)) / (2 * eps)
+        assert slope == pytest.approx(-comm.allreduce(np.sum(force * w), op=MPI.SUM), rel=1e-6)
 
 
 def test_the_stable_step_bound_bounds_the_largest_eigenvalue():
@@ -85,9 +92,10 @@ def test_the_stable_step_bound_bounds_the_largest_eigenvalue():
     assert bound < 2.0 * largest  # and the bound is not loose
 
 
+@pytest.mark.mpi
 def test_an_initial_overlap_beyond_the_tolerance_is_an_error():
     with pytest.raises(InputError, match="inside another body at t = 0.*contact.tolerance"):
-        FEMP1Run(_overlapping("two-disks", 0.02, 0.011, tolerance=0.0), MPI.COMM_SELF, quiet=True)
+        FEMP1Run(_overlapping("two-disks", 0.02, 0.011, tolerance=0.0), MPI.COMM_WORLD, quiet=True)
 
 
 def _contact(summary, data):
@@ -133,17 +141,20 @@ def test_two_disks_against_dem_a(tmp_path):
     assert summary["pseudo_energy_rel_drift"] < 0.01
 
 
-def test_a_step_the_bound_does_not_prove_stable_is_an_error(tmp_path):
+@pytest.mark.mpi
+def test_a_step_the_bound_does_not_prove_stable_is_an_error(tempdir):
+    """Raised on every process (the bound is reduced), as the next error."""
     scene = scenes.load("two-disks", {"method": "fem-P1", "mesh.h": 0.02, "time.cfl": 0.95, "time.end": 0.1})
     with pytest.raises(InputError, match="not proved stable with the contact between bodies.*time.cfl"):
-        simulation.run(scene, tmp_path / "out", MPI.COMM_SELF, quiet=True)
+        simulation.run(scene, pathlib.Path(tempdir) / "out", MPI.COMM_WORLD, quiet=True)
 
 
-def test_contact_deeper_than_the_facets_is_an_error(tmp_path):
+@pytest.mark.mpi
+def test_contact_deeper_than_the_facets_is_an_error(tempdir):
     scene = scenes.load("two-disks", {"method": "fem-P1", "mesh.h": 0.02, "time.end": 0.1})
     scene["initial"]["velocity"] = ["where(x < 0.25, 30.0, -30.0)", "0"]
     with pytest.raises(InputError, match="no longer resolved.*lower time.cfl"):
-        simulation.run(scene, tmp_path / "out", MPI.COMM_SELF, quiet=True)
+        simulation.run(scene, pathlib.Path(tempdir) / "out", MPI.COMM_WORLD, quiet=True)
 
 
 @pytest.mark.skip_in_parallel
