@@ -215,3 +215,21 @@ def test_cradle_passes_the_momentum_on(tmp_path):
     assert force.min() < -0.01 * data["contact_force"].max() < 0  # ball 1 pushes ball 0 back
     assert np.abs(data["contact_force_0_1_y"]).max() < 0.05 * np.abs(force).max()
     assert summary["momentum_rel_change"] < 1e-12
+
+
+def test_obstacles_and_contact_between_bodies_together(tmp_path):
+    """The two discs on a floor under gravity: one ``penalty`` column, the obstacles' columns,
+    then the pairs'; the pairs' stable-step bound starts from the step with the obstacles'
+    springs (``dt_stable_contact``)."""
+    scene = scenes.load("two-disks", {"method": "fem-P1", "mesh.h": 0.02, "time.end": 0.3, "output.every": 10**6})
+    scene["obstacles"] = [{"point": [0.0, 2.17], "normal": [0.0, 1.0], "boundary": "all"}]
+    scene["loads"] = {"gravity": [0.0, -1.0]}
+    summary = simulation.run(scene, tmp_path / "out", MPI.COMM_SELF, quiet=True)
+    data = np.genfromtxt(tmp_path / "out" / "series.csv", delimiter=",", names=True)
+    assert data.dtype.names[5:] == ("pseudo_energy", "penalty", "contact_gap", "contact_pressure",
+                                    "contact_force_obstacle0_x", "contact_force_obstacle0_y", "contact_force",
+                                    "penetration", "contact_force_0_1_x", "contact_force_0_1_y", "momentum_x",
+                                    "momentum_y")
+    assert summary["min_contact_gap"] < 0 and data["contact_force_obstacle0_y"].max() > 0  # on the floor
+    assert data["contact_force"].max() > 0 and summary["first_contact_time"] == pytest.approx(0.02 / 0.6, abs=1e-12)
+    assert summary["pseudo_energy_rel_drift"] < 0.01

@@ -94,8 +94,9 @@ class NodeFacetPenalty:
     """The pair penalty of the process-local candidate ``facets`` of the P1 space ``V``; the module
     docstring gives the scheme. ``mass``: the lumped mass (a vector of V's layout); ``held``:
     the owned nodes that are clamped (no force); ``dt``, ``dt_stable``: the step and the stable
-    step without contact. The displacements ``u`` of every method are V's PETSc vector, ghosts
-    up to date; the methods are collective."""
+    step without contact between bodies (with the obstacles' springs, if any). The
+    displacements ``u`` of every method are V's PETSc vector, ghosts up to date; the methods
+    are collective."""
 
     def __init__(self, V, facets: np.ndarray, mass: PETSc.Vec, held: np.ndarray, dt: float, dt_stable: float):
         mesh = V.mesh

@@ -113,7 +113,9 @@ class PenaltyCentralDifference(FEMCentralDifference):
                 raise InputError(f"a candidate node lies {-worst:.6g} m inside its obstacle at t = 0 (more than "
                                  "the obstacle's tolerance)")
         if pairs is not None:
-            self._pairs = NodeFacetPenalty(self.V, pairs[0], self.lumped_mass, self._held(), self.dt, self.dt_stable)
+            # the stable step with the obstacles' springs (every candidate active): the pairs add theirs to it
+            self._pairs = NodeFacetPenalty(self.V, pairs[0], self.lumped_mass, self._held(), self.dt,
+                                           self.dt_stable_contact)
             depth = self._pairs.outputs(_compat.petsc_vec(self.u))[1]
             if depth > pairs[1]:
                 raise InputError(f"a candidate node lies {depth:.6g} m inside another body at t = 0 (more than "
