@@ -126,7 +126,10 @@ def test_one_two_and_three_processes_give_the_same_series(name, end, tmp_path):
 
 
 @pytest.mark.parametrize("name, overrides, key", [
-    ("two-disks", {}, "contact"),
+    ("two-disks", {"contact.self_contact": True}, "contact.self_contact"),
+    ("two-disks", {"contact.friction": 0.3}, "contact.friction"),
+    ("two-disks", {"contact.skin": 0.01}, "contact.skin"),
+    ("two-disks", {"contact.max_penetration": 0.5}, "contact.max_penetration"),
     ("bar-impact", {"material.eta": 900.0}, "material.eta"),
     ("bar-impact", {"time.quadrature": "gauss-legendre-2"}, "time.quadrature"),
     ("bar-impact", {"obstacles[0].friction": 0.3}, "obstacles[0].friction"),
@@ -170,7 +173,7 @@ def test_a_node_inside_the_obstacle_at_the_start_is_an_error(tmp_path):
 def test_facet_nodes_are_the_facet_vertices():
     """The local facet -> P1 node map (fem/penalty.py) agrees with the mesh geometry."""
     from dolfinx_dem import _compat
-    from dolfinx_dem.fem.penalty import facet_nodes, node_coordinates
+    from dolfinx_dem.fem.common import facet_nodes, node_coordinates
 
     mesh, _, _ = meshes.create_box(MPI.COMM_SELF, [0, 0, 0], [1, 2, 3], [2, 3, 2])
     V = _compat.create_vector_space(mesh, "Lagrange", 1)

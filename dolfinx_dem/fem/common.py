@@ -196,3 +196,31 @@ def lu_solver(comm: MPI.Comm, A: PETSc.Mat) -> PETSc.KSP:
 
 
 # --- time integration ---------------------------------------------------------------------------
+
+
+def facet_nodes(V, facets: np.ndarray) -> np.ndarray:
+    """The P1 nodes (blocks) of process-local facets, (n, tdim): a cell's P1 dofs follow the
+    order of its vertices (the topology's cell-vertex list), and a facet of a 1D mesh is a vertex.
+    Local (not collective, unlike ``locate_dofs_topological``)."""
+    mesh = V.mesh
+    tdim = mesh.topology.dim
+    mesh.topology.create_connectivity(tdim, 0)
+    c2v = mesh.topology.connectivity(tdim, 0).array
+    node_of_vertex = np.empty(c2v.max(initial=-1) + 1, dtype=np.int32)
+    node_of_vertex[c2v] = _compat.cell_dofs(V)
+    if tdim == 1:
+        return node_of_vertex[np.asarray(facets)].reshape(-1, 1)
+    mesh.topology.create_connectivity(tdim - 1, 0)
+    f2v = mesh.topology.connectivity(tdim - 1, 0).array.reshape(-1, tdim)
+    return node_of_vertex[f2v[np.asarray(facets)]]
+
+
+def node_coordinates(V) -> np.ndarray:
+    """Coordinates (n_nodes_local, gdim) of the nodes (blocks) of a vector P1 space on an affine mesh:
+    a cell's P1 dofs and its geometry nodes follow the same reference vertex order."""
+    mesh = V.mesh
+    n = mesh.topology.dim + 1
+    x = np.empty((V.dofmap.index_map.size_local + V.dofmap.index_map.num_ghosts, mesh.geometry.dim))
+    nodes = _compat.cell_geometry_nodes(mesh)
+    x[_compat.cell_dofs(V).reshape(-1, n)] = mesh.geometry.x[nodes, : mesh.geometry.dim]
+    return x

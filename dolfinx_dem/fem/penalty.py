@@ -47,8 +47,9 @@ from petsc4py import PETSc
 
 from dolfinx_dem import _compat
 from dolfinx_dem.errors import InputError
-from dolfinx_dem.fem.common import check_positive, owned_facets
+from dolfinx_dem.fem.common import check_positive, facet_nodes, node_coordinates, owned_facets
 from dolfinx_dem.fem.elastodynamics import FEMCentralDifference, _largest_eigenvalue
+from dolfinx_dem.fem.pair_penalty import NodeFacetPenalty
 
 #: s of kappa_i = s m_i / dt^2 (module docstring).
 PENALTY_FACTOR = 1.0
@@ -64,34 +65,6 @@ def facet_areas(V, facets: np.ndarray) -> np.ndarray:
     if tdim == 2:
         return np.linalg.norm(x[:, 1] - x[:, 0], axis=1)
     return 0.5 * np.linalg.norm(np.cross(x[:, 1] - x[:, 0], x[:, 2] - x[:, 0]), axis=1)
-
-
-def facet_nodes(V, facets: np.ndarray) -> np.ndarray:
-    """The P1 nodes (blocks) of process-local facets, (n, tdim): a cell's P1 dofs follow the
-    order of its vertices (the topology's cell-vertex list), and a facet of a 1D mesh is a vertex.
-    Local (not collective, unlike ``locate_dofs_topological``)."""
-    mesh = V.mesh
-    tdim = mesh.topology.dim
-    mesh.topology.create_connectivity(tdim, 0)
-    c2v = mesh.topology.connectivity(tdim, 0).array
-    node_of_vertex = np.empty(c2v.max(initial=-1) + 1, dtype=np.int32)
-    node_of_vertex[c2v] = _compat.cell_dofs(V)
-    if tdim == 1:
-        return node_of_vertex[np.asarray(facets)].reshape(-1, 1)
-    mesh.topology.create_connectivity(tdim - 1, 0)
-    f2v = mesh.topology.connectivity(tdim - 1, 0).array.reshape(-1, tdim)
-    return node_of_vertex[f2v[np.asarray(facets)]]
-
-
-def node_coordinates(V) -> np.ndarray:
-    """Coordinates (n_nodes_local, gdim) of the nodes (blocks) of a vector P1 space on an affine mesh:
-    a cell's P1 dofs and its geometry nodes follow the same reference vertex order."""
-    mesh = V.mesh
-    n = mesh.topology.dim + 1
-    x = np.empty((V.dofmap.index_map.size_local + V.dofmap.index_map.num_ghosts, mesh.geometry.dim))
-    nodes = _compat.cell_geometry_nodes(mesh)
-    x[_compat.cell_dofs(V).reshape(-1, n)] = mesh.geometry.x[nodes, : mesh.geometry.dim]
-    return x
 
 
 class PenaltyCentralDifference(FEMCentralDifference):
@@ -112,9 +85,9 @@ class PenaltyCentralDifference(FEMCentralDifference):
     """
 
     def __init__(self, mesh, E, nu, rho, clamped_facets, dt, *, body_force=None, obstacles: Sequence = (),
-                 tractions: Sequence = (), **kwargs):
+                 tractions: Sequence = (), pairs: tuple | None = None, **kwargs):
         # None until made: the base computes a first acceleration before the contact exists
-        self._contact = self._K_free = self._strain_energy = None
+        self._contact = self._pairs = self._K_free = self._strain_energy = None
         # the base computes dt_stable; the step is checked below, with the contact
         super().__init__(mesh, E, nu, rho, clamped_facets, cfl=1.0, allow_unstable=True, **kwargs)
         self.dt = check_positive("dt (time step)", dt(self.dt_stable) if callable(dt) else dt)
@@ -139,6 +112,14 @@ class PenaltyCentralDifference(FEMCentralDifference):
             if np.isfinite(worst):
                 raise InputError(f"a candidate node lies {-worst:.6g} m inside its obstacle at t = 0 (more than "
                                  "the obstacle's tolerance)")
+        if pairs is not None:
+            # the stable step with the obstacles' springs (every candidate active): the pairs add theirs to it
+            self._pairs = NodeFacetPenalty(self.V, pairs[0], self.lumped_mass, self._held(), self.dt,
+                                           self.dt_stable_contact)
+            depth = self._pairs.outputs(_compat.petsc_vec(self.u))[1]
+            if depth > pairs[1]:
+                raise InputError(f"a candidate node lies {depth:.6g} m inside another body at t = 0 (more than "
+                                 "contact.tolerance)")
         self._acceleration()
 
     # -- set-up ----------------------------------------------------------------------------------
@@ -176,13 +157,8 @@ class PenaltyCentralDifference(FEMCentralDifference):
         mesh, V, d = self.mesh, self.V, self.d
         fdim = mesh.topology.dim - 1
         mesh.topology.create_connectivity(fdim, 0)
-        n_owned = V.dofmap.index_map.size_local
         marker = dolfinx.fem.Function(V)
-        held = np.zeros(n_owned * d, dtype=bool)  # clamped dofs take no contact force
-        for bc in self._bcs:
-            dofs, first_ghost = bc.dof_indices()
-            held[dofs[:first_ghost]] = True
-        held = held.reshape(-1, d).any(axis=1)
+        held = self._held()
         nodes, index, normals, points, areas = [], [], [], [], []
         for k, (point, normal, facets, _) in enumerate(obstacles):
             n = np.asarray(normal, dtype=float)
@@ -217,6 +193,15 @@ class PenaltyCentralDifference(FEMCentralDifference):
             "tolerance": np.repeat([ob[3] for ob in obstacles], [len(a) for a in areas]),
         }
 
+    def _held(self) -> np.ndarray:
+        """Whether each owned node is clamped (it takes no contact force)."""
+        n = self.V.dofmap.index_map.size_local * self.d
+        held = np.zeros(n, dtype=bool)
+        for bc in self._bcs:
+            dofs = bc.dof_indices()[0]
+            held[dofs[dofs < n]] = True  # the owned ones (not all before the count it returns in DOLFINx 0.5)
+        return held.reshape(-1, self.d).any(axis=1)
+
     def _stable_step_with_contact(self) -> float:
         """2 / sqrt(lambda_max(m^-1 (K + kappa P))) with every candidate node in contact (SLEPc)."""
         c, d = self._contact, self.d
@@ -230,6 +215,15 @@ class PenaltyCentralDifference(FEMCentralDifference):
         lam = _largest_eigenvalue(self.comm, Kp, self._inverse_mass)
         Kp.destroy()
         return 2.0 / np.sqrt(lam)
+
+    def momentum(self, absolute: bool = False) -> np.ndarray:
+        """The total momentum ``sum_i m_i v_i`` (of ``|m_i v_i|`` with ``absolute``), (d,), summed
+        over ranks."""
+        n = self.V.dofmap.index_map.size_local
+        mv = (self.lumped_mass.array_r * _compat.petsc_vec(self.v).array_r[: n * self.d]).reshape(-1, self.d)
+        out = np.abs(mv).sum(axis=0) if absolute else mv.sum(axis=0)
+        self.comm.Allreduce(MPI.IN_PLACE, out, op=MPI.SUM)
+        return out
 
     def energies(self) -> tuple[float, float]:
         """(kinetic, elastic) energy in J, summed over ranks: ``1/2 v.m v`` and the strain energy
@@ -254,6 +248,8 @@ class PenaltyCentralDifference(FEMCentralDifference):
     def _residual(self, out: PETSc.Vec) -> PETSc.Vec:
         """``F - K u`` plus the penalty forces, zero on the clamped rows."""
         super()._residual(out)
+        if self._pairs is not None:
+            self._pairs.add_forces(_compat.petsc_vec(self.u), out.array.reshape(-1, self.d))
         if self._contact is not None:
             c = self._contact
             r = c["kappa"] * np.maximum(-self._gaps(), 0.0)
@@ -262,11 +258,13 @@ class PenaltyCentralDifference(FEMCentralDifference):
         return out
 
     def penalty_energy(self) -> float:
-        """``sum_i 1/2 kappa_i max(0, -g_i)^2`` (J), summed over ranks."""
-        if self._contact is None:
-            return 0.0
-        g = np.maximum(-self._gaps(), 0.0)
-        return self.comm.allreduce(float(0.5 * np.dot(self._contact["kappa"], g * g)), op=MPI.SUM)
+        """``sum_i 1/2 kappa_i max(0, -g_i)^2`` of the obstacles plus the pairs' penalty energy
+        (fem/pair_penalty.py) (J), summed over ranks."""
+        energy = 0.0 if self._pairs is None else self._pairs.energy(_compat.petsc_vec(self.u))
+        if self._contact is not None:
+            g = np.maximum(-self._gaps(), 0.0)
+            energy += float(0.5 * np.dot(self._contact["kappa"], g * g))
+        return self.comm.allreduce(energy, op=MPI.SUM)
 
     def contact_outputs(self) -> list[float]:
         """The DEM's rigid-contact series values (contact/rigid.py ``output_columns``): the smallest

@@ -2,7 +2,8 @@
 
 ``FEMP1Run(scene, comm)`` reads the same scene as ``dynamics.DynamicRun`` and runs it on the
 scene's own mesh with :class:`~dolfinx_dem.fem.penalty.PenaltyCentralDifference`: P1 Lagrange,
-lumped mass, central differences, node-on-obstacle penalty contact with the ``[[obstacles]]``.
+lumped mass, central differences, node-on-obstacle penalty contact with the ``[[obstacles]]`` and
+node-to-facet penalty contact between the bodies of ``[contact]`` (fem/pair_penalty.py).
 It writes the DEM's outputs (``summary.json``, ``series.csv``, ``solution.xdmf``, ``final.png``)
 with the DEM's column names, so that a scene is compared by changing one word:
 
@@ -13,6 +14,8 @@ with the DEM's column names, so that a scene is compared by changing one word:
 - with obstacles, a ``penalty`` column (the penalty energy, included in ``pseudo_energy``) and
   the rigid contact's columns (``contact_gap``, ``contact_pressure``, ``tip_position`` in 1D,
   ``contact_force_obstacle<k>_<x|y|z>``) measured at the candidate nodes;
+- with ``[contact]``, the ``penalty`` column and the DEM's columns of contact between bodies
+  (``contact_force``, ``penetration``, ``contact_force_<i>_<j>_<x|y|z>``, ``momentum_<x|y|z>``);
 - ``reaction_<i>_<x|y|z>`` of the Dirichlet conditions, then the probes: the P1 displacement at
   the probe's point;
 - the solution's DG0 fields (cell averages of the P1 fields, the von Mises stress of the cell).
@@ -40,6 +43,7 @@ from dolfinx_dem import _compat, io, model, plotting, runcontrol, scenes
 from dolfinx_dem.dynamics import round_time_step
 from dolfinx_dem.errors import InputError, SceneError
 from dolfinx_dem.fem.common import evaluate_at_points
+from dolfinx_dem.fem.pair_penalty import PAIR_PENALTY_FACTOR
 from dolfinx_dem.fem.penalty import PENALTY_FACTOR, PenaltyCentralDifference
 from dolfinx_dem.material import CellMaterials
 from dolfinx_dem.run_statistics import Statistics, peak_rss_mb
@@ -50,8 +54,15 @@ def check_scene(scene: Mapping) -> None:
     def refuse(key, why):
         raise SceneError(f"scene key '{key}': {why} (method 'fem-P1')")
 
-    if "contact" in scene:
-        refuse("contact", "contact between bodies is not implemented yet for the FEM peer")
+    contact = scene.get("contact", {})
+    if contact.get("self_contact"):
+        refuse("contact.self_contact", "self-contact is not implemented for the FEM peer")
+    if contact.get("friction", 0.0) > 0:
+        refuse("contact.friction", "friction is not implemented for the FEM peer")
+    for key in ("skin", "max_penetration"):
+        if key in contact:
+            refuse(f"contact.{key}", "a key of the DEM's pair list (the FEM peer's search and depth limit follow "
+                   "its facets, fem/pair_penalty.py)")
     for key in ("materials", "prescribed"):
         if key in scene:
             refuse(key, "not implemented for the FEM peer (one material, no prescribed bodies)")
@@ -96,6 +107,14 @@ class FEMP1Run:
         obstacles = [(ob["point"], ob["normal"],
                       model.boundary_facets(mesh, tags, names, ob["boundary"], f"obstacles[{k}].boundary"),
                       ob.get("tolerance", 0.0)) for k, ob in enumerate(scene.get("obstacles", []))]
+        pairs = None
+        if "contact" in scene:
+            if self.d == 1:
+                raise SceneError("scene key 'contact': contact between bodies is implemented in 2D and 3D, not 1D "
+                                 "(method 'fem-P1')")
+            pairs = (np.unique(np.concatenate([
+                model.boundary_facets(mesh, tags, names, b, f"contact.boundary[{k}]")
+                for k, b in enumerate(scene["contact"]["boundary"])])), scene["contact"].get("tolerance", 0.0))
         loads = scene.get("loads", {})
         body_force = [material.rho * g for g in loads["gravity"]] if "gravity" in loads else loads.get("body_force")
         initial = scene.get("initial", {})
@@ -107,19 +126,26 @@ class FEMP1Run:
         self.solver = PenaltyCentralDifference(
             mesh, material.E, material.nu, material.rho, np.concatenate([np.empty(0, np.int32), *dirichlet]),
             lambda limit: time_step(time_spec, limit), body_force=body_force, obstacles=obstacles,
-            tractions=tractions, initial_displacement=fields.get("displacement"),
+            tractions=tractions, pairs=pairs, initial_displacement=fields.get("displacement"),
             initial_velocity=fields.get("velocity"), plane_stress=material.plane == "stress")
         self.dt = self.solver.dt
         self.n_steps = max(1, round(time_spec["end"] / self.dt))
         self.groups = self._reaction_groups(dirichlet)
         self.probes = self._probes(scene.get("probes", []))
         self.obstacles = bool(obstacles)
+        self.pairs = self.solver._pairs
+        self._p0 = None  # the momentum at t = 0 (``_record_pairs``)
+        self.first_contact = None  # the time a pair first touched (``NodeFacetPenalty.touch_time``)
+        self._u_before = None  # ``_before_step``'s vector
+        self.p_scale = self.solver.momentum(absolute=True).sum()
         reactions = tuple(f"reaction_{bc.get('name', i)}_{c}" for i, bc in enumerate(scene.get("dirichlet", []))
                           for c in "xyz"[:d])
         contact = ((("contact_gap", "contact_pressure") + (("tip_position",) if d == 1 else ())
                     + tuple(f"contact_force_obstacle{k}_{c}" for k in range(len(obstacles)) for c in "xyz"[:d]))
                    if obstacles else ())
-        self.columns = (model.SERIES_COLUMNS + (("penalty",) if obstacles else ()) + reactions + contact
+        if self.pairs is not None:
+            contact += self.pairs.output_columns() + tuple(f"momentum_{c}" for c in "xyz"[:d])
+        self.columns = (model.SERIES_COLUMNS + (("penalty",) if obstacles or pairs else ()) + reactions + contact
                         + tuple(p["name"] for p in scene.get("probes", [])))
         if len(set(self.columns)) != len(self.columns):
             raise SceneError(f"probe names clash with the series columns of this scene: {self.columns}")
@@ -190,16 +216,42 @@ class FEMP1Run:
     def _row(self, energies) -> list[float]:
         kinetic, elastic, external, penalty, pseudo, _ = energies
         s = self.solver
-        row = [self.t, kinetic, elastic, 0.0, external, pseudo] + ([penalty] if self.obstacles else [])
+        row = [self.t, kinetic, elastic, 0.0, external, pseudo] + ([penalty] if self.obstacles or self.pairs else [])
         row += list(s.reactions(self.groups).ravel()) if self.groups else []
         if self.obstacles:
             contact = s.contact_outputs()
             self.stats.min_gap = min(self.stats.min_gap, contact[0])
             row += contact
+        if self.pairs is not None:
+            contact = self.pairs.outputs(_compat.petsc_vec(s.u))
+            momentum = s.momentum()
+            self._record_pairs(contact, momentum)
+            row += contact + list(momentum)
         if len(self.probes):
             values = evaluate_at_points(s.u, self.probes)
             row += list(values[np.arange(len(self.probes)), self.probe_components])
         return row
+
+    def _record_pairs(self, contact: list[float], momentum: np.ndarray) -> None:
+        """The pair contact's summary figures at a series row: the largest penetration, and the
+        largest change of the total momentum over sum |m v| at t = 0."""
+        if self._p0 is None:
+            self._p0 = momentum
+            self.penetration, self.momentum_change = 0.0, 0.0
+        self.penetration = max(self.penetration, contact[1])
+        self.momentum_change = max(self.momentum_change, float(np.abs(momentum - self._p0).max()))
+
+    def _before_step(self) -> PETSc.Vec | None:
+        """The displacements before a step while no pair has touched (for ``touch_time``), in one
+        vector kept for the run (petsc4py frees a vector of a parallel run only at garbage
+        collection: a copy per step would keep one per step)."""
+        if self.pairs is None or self.first_contact is not None:
+            return None
+        u = _compat.petsc_vec(self.solver.u)
+        if self._u_before is None:
+            self._u_before = u.duplicate()
+        u.copy(self._u_before)
+        return self._u_before
 
     def _cell_values(self, function, space) -> np.ndarray:
         """The owned cells' DG0 values of ``function`` interpolated into ``space``, in cell order."""
@@ -241,10 +293,14 @@ class FEMP1Run:
                 solution.write(0.0, self.fields())
                 progress = runcontrol.Progress(self.comm, self.n_steps, self.quiet)
                 while self.step < self.n_steps:
+                    before = self._before_step()
                     tic = time.process_time()
                     self.solver.step()
                     self.stepping_seconds += time.process_time() - tic
                     self.step += 1
+                    if before is not None:
+                        tau = self.pairs.touch_time(before, _compat.petsc_vec(self.solver.u), self.dt)
+                        self.first_contact = None if tau is None else self.t - self.dt + tau
                     energies = self._energies()
                     if not all(math.isfinite(e) for e in energies):
                         raise InputError(f"fem-P1 blew up at step {self.step} (t = {self.t:.6g})")
@@ -321,6 +377,17 @@ class FEMP1Run:
             summary["min_contact_gap"] = self.stats.min_gap
             summary["penalty_factor"] = PENALTY_FACTOR
             summary["dt_stable_contact"] = s.dt_stable_contact
+        if self.pairs is not None:
+            summary.update({
+                "contact_candidate_facets": self.pairs.num_facets,
+                "contact_pairs_listed": self.pairs.num_pairs(),
+                "contact_list_rebuilds": self.pairs.builds,
+                "first_contact_time": self.first_contact,
+                "max_penetration": self.penetration,
+                "pair_penalty_factor": PAIR_PENALTY_FACTOR,
+            })
+            if not self.groups:  # momentum is conserved without Dirichlet conditions
+                summary["momentum_rel_change"] = self.momentum_change / self.p_scale if self.p_scale > 0 else 0.0
         return summary
 
 

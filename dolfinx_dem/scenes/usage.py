@@ -93,9 +93,6 @@ def check_method(scene: Mapping) -> None:
     if "contact" in scene:
         if scene["method"] == "fem-P2":
             raise SceneError("contact between bodies ('contact' table) needs a DEM method (dem-A, dem-B or dem-AB)")
-        if scene["method"] == "fem-P1":
-            raise SceneError("scene key 'contact': contact between bodies is not implemented yet for method 'fem-P1' "
-                             "(the FEM peer runs rigid obstacles only); use a DEM method (dem-A, dem-B or dem-AB)")
         if "statics" in scene and scene.get("obstacles"):
             raise SceneError("a static scene takes obstacles or contact between bodies ('contact' table), not both")
 
