@@ -44,6 +44,7 @@ from dolfinx_dem.fem.common import (
     configure_lu,
     evaluate_at_points,
     lu_solver,
+    node_coordinates,
     stiffness_and_mass,
 )
 
@@ -97,7 +98,14 @@ class _FEMSolver:
             (self.v, initial_velocity, "initial_velocity"),
         ):
             if field is not None:
-                func.interpolate(_vector_field(field, gdim, name))
+                wrapped = _vector_field(field, gdim, name)
+                if degree == 1:  # at the mesh's own node coordinates: interpolate() pushes the reference
+                    # vertices forward with a rounding that differs from cell to cell, so a field that jumps
+                    # on a mesh line (billiard's velocity at its frame) would depend on the partition
+                    x = node_coordinates(self.V)
+                    func.x.array[:] = wrapped(np.pad(x, ((0, 0), (0, 3 - x.shape[1]))).T).T.ravel()
+                else:
+                    func.interpolate(wrapped)
                 self._apply_clamp(func)
 
     def _apply_clamp(self, func) -> None:
