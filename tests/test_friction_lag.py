@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 from helpers import CLI, mpi_env
 from mpi4py import MPI
-from test_friction import BLOCK, G, SLIDE, block, slide
+from test_friction import BLOCK, SLIDE, G, block, slide
 
 from dolfinx_dem import checkpoint, runcontrol, scenes, simulation
 from dolfinx_dem.contact.friction import LAG, CellFriction
