@@ -30,14 +30,15 @@ follows it; with scheme A the facet's reconstruction moves O(h) differently). ta
 of K_f closest to the stick impulse, the one that leaves the cell without tangential velocity
 after the step, tau*_f = -(m_c / 2) P_n v_c^{n+3/2, free} (``StepState.velocities``): if tau*
 lies in K_f the cell sticks (v^{n+3/2} tangential 0, exactly 0 dissipation: a body held by
-friction does not creep), otherwise it slips with |tau| <= mu N_f. K_f is a half-disc through its
+friction does not creep), otherwise it slips with |tau| <= mu Ntilde_f dt. K_f is a half-disc through its
 centre: the projection onto it is the projection onto the half-space, then onto the disc. A cell
 with several facets with a bound takes them one after the other (rounds), each seeing the
 impulses of the rounds before. A facet that leaves contact keeps a bound that decays as
 exp(-t / T_f): after its last contact step it can give at most mu Ntilde_f T_f more impulse.
 
-The law uses only a cell's own values: it is computed where the cell is owned and does not depend
-on the partition.
+The law uses only a cell's own values and its facets' Ntilde_f (updated from their own N_f): it is
+computed where the cell is owned and does not depend on the partition. Ntilde_f is state: the
+contact model checkpoints it with the cells (rigid.RigidContact.cell_state).
 """
 
 from __future__ import annotations
