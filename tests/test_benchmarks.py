@@ -343,7 +343,7 @@ def test_long_bounce_quick_keeps_the_dem_energy_and_ranks_the_fem(tmp_path):
 
 def test_friction_slide_quick_follows_coulomb_and_keeps_the_stable_step(tmp_path):
     """The block sliding down a 30 degree slope at mu = 0.1 (16 x 8 squares): its acceleration
-    within 0.2 % of g (sin t - mu cos t) (measured +0.005 %), the balance to 1e-13, D never
+    within 0.2 % of g (sin t - mu cos t) (measured +0.001 %), the balance to 1e-13, D never
     decreasing; held at tan t = 0.05 < mu = 0.5 it does not move at all; a disc launched sliding
     rolls from t* = v0 / (3 mu g) at 2/3 v0; a 3D block slides down an oblique slope at the rigid
     law; friction leaves the stable step where it was (1.08 times the bound, measured); a ball
@@ -358,7 +358,7 @@ def test_friction_slide_quick_follows_coulomb_and_keeps_the_stable_step(tmp_path
     (rolling,) = data["rolling"]  # h = 0.01: slip stops at t* +2.1 %, the speed then -1.1 % (measured)
     assert abs(rolling["slip_stops_error"]) < 0.05 and abs(rolling["speed_error"]) < 0.02
     assert rolling["balance_error"] < 1e-12
-    (block3d,) = data["sliding3d"]  # along the oblique slope: 0.18 % off (measured)
+    (block3d,) = data["sliding3d"]  # along the oblique slope: 0.19 % off (measured)
     assert block3d["relative_error"] < 0.01 and block3d["balance_error"] < 1e-13
     assert block3d["min_dissipation_increment"] >= 0.0
     (ball,) = data["rolling3d"]  # h = 0.02: slip stops at t* +4.7 %; the speed at t* -0.07 %, then -5.0 % (measured)
@@ -413,8 +413,8 @@ def test_friction_chatter_quick_measures_the_lagged_bound_against_the_instantane
 def test_oblique_impact_quick_slides_by_the_coulomb_impulse(tmp_path):
     """A disc hitting a rigid wall at V_t = 30 mu V_n (mu = 0.3, V_n / c = 0.001, 1077 cells on
     Debian 12, 1081 on 13: gmsh meshes it differently): in gross slip the tangential change of
-    the centre of mass velocity is mu times the normal one (measured 3e-15 and 6.4e-7) and the
-    spin the rigid disc's for that impulse (measured -1.4 %),
+    the centre of mass velocity is mu times the normal one (measured 1.1e-7 with the lagged bound) and
+    the spin the rigid disc's for that impulse (measured -1.4 %),
     the balance E + D - W to rounding at every step, D never decreasing;
     docs/validation/oblique_impact.md."""
     _quick("validation/oblique_impact.py", "--out", str(tmp_path / "o.json"))
