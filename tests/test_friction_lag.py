@@ -47,6 +47,7 @@ def test_the_lags_must_be_positive():
                      np.zeros(1, dtype=np.int64), 1)
 
 
+@pytest.mark.mpi
 def test_a_block_at_mu_0_3_slides_at_the_coulomb_rate_on_a_fine_contact_mesh():
     """32 x 16 squares, 30 degrees, mu = 0.3: the acceleration within 0.5 % of g (sin t - mu cos t)
     (measured -0.22 %; +12.3 % with the instantaneous bound mu N_f), the balance to 1e-13 of the
