@@ -5,8 +5,10 @@ Layout, in the run's output folder (docs/scenes.md, "Checkpoints and resume")::
     checkpoint/checkpoint.json          header (JSON), replaced atomically once the data are written
     checkpoint/step-<n>-<id>/cells-<r>.npz
                                         process r of the writing run: its owned cells' ``key``
-                                        (index in the input mesh), ``centre`` (barycentre) and
-                                        the state vectors ``u``, ``v_prev``, ``v_next`` (n_owned, d)
+                                        (index in the input mesh), ``centre`` (barycentre), the
+                                        state vectors ``u``, ``v_prev``, ``v_next`` (n_owned, d)
+                                        and the contact models' cell states (``contact<k>_<name>``,
+                                        (n_owned, k): friction's lagged normal forces)
     checkpoint/step-<n>-<id>/local-<r>.npz
                                         process r's arrays that only its partition can read: the
                                         energy-row recurrence of MEMM (``y``, ``z``, ``means``)
@@ -49,10 +51,11 @@ from dolfinx_dem._xdmf import fsync
 from dolfinx_dem.errors import CheckpointError
 from dolfinx_dem.io import call_on_root
 
-FORMAT = 8  # 2: per-process local files (the recurrence, contact states); no shared file; 3: MEMM work;
+FORMAT = 9  # 2: per-process local files (the recurrence, contact states); no shared file; 3: MEMM work;
 # 4: the pair contact's exchange counter; 5: the solution as one HDF5 file per output time (io.SolutionWriter);
 # 6: the largest penetration over the local facet diameter (run_statistics.PairContactStatistics); 7: MEMM's
-# frictional dissipation; 8: the counters of friction between bodies (run_statistics.PairContactStatistics)
+# frictional dissipation; 8: the contact models' cell states (friction's lagged normal forces); 9: the counters
+# of friction between bodies (run_statistics.PairContactStatistics)
 DIRECTORY = "checkpoint"
 HEADER = "checkpoint.json"
 VECTORS = ("u", "v_prev", "v_next")
@@ -143,18 +146,20 @@ def read_header(folder: pathlib.Path, comm: MPI.Comm) -> dict:
 
 
 def read_state(folder: pathlib.Path, comm: MPI.Comm, header: Mapping, keys: np.ndarray, centres: np.ndarray,
-               tolerance: float) -> dict[str, np.ndarray]:
-    """The vectors of the checkpoint for this process's cells ``keys`` (in their order),
-    whatever the number of processes that wrote it; the stored barycentres must lie within
-    ``tolerance`` of ``centres``."""
+               tolerance: float, cell_arrays: Mapping[str, tuple] | None = None) -> dict[str, np.ndarray]:
+    """The vectors of the checkpoint and its arrays ``cell_arrays`` (name: shape of a cell's row)
+    for this process's cells ``keys`` (in their order), whatever the number of processes that
+    wrote it; the stored barycentres must lie within ``tolerance`` of ``centres``."""
     data = pathlib.Path(folder) / DIRECTORY / header["data"]
-    stored = {name: [] for name in ("key", "centre", *VECTORS)}
+    cell_arrays = dict(cell_arrays or {})
+    stored = {name: [] for name in ("key", "centre", *VECTORS, *cell_arrays)}
     for r in range(comm.rank, header["processes"], comm.size):
         with np.load(data / f"cells-{r}.npz") as f:
             for name in stored:
                 stored[name].append(f[name])
     # a process may read no file (more processes now than then): empty rows of the right shapes
-    empty = {name: np.zeros((0,) + centres.shape[1:]) for name in stored} | {"key": np.zeros(0, dtype=np.int64)}
+    empty = ({name: np.zeros((0,) + centres.shape[1:]) for name in stored} | {"key": np.zeros(0, dtype=np.int64)}
+             | {name: np.zeros((0, *shape)) for name, shape in cell_arrays.items()})
     stored = {name: np.concatenate(a) if a else empty[name] for name, a in stored.items()}
     stored["key"] = stored["key"].astype(np.int64)
     n_global = comm.allreduce(len(keys), op=MPI.SUM)
@@ -163,7 +168,7 @@ def read_state(folder: pathlib.Path, comm: MPI.Comm, header: Mapping, keys: np.n
     if comm.allreduce(far, op=MPI.MAX) > tolerance:
         raise CheckpointError(f"the cells of the checkpoint in {folder} are not those of this mesh (a barycentre "
                               f"moved by {far:.3g}): it belongs to another mesh")
-    return {name: values[name] for name in VECTORS}
+    return {name: values[name] for name in (*VECTORS, *cell_arrays)}
 
 
 def read_local(folder: pathlib.Path, comm: MPI.Comm, header: Mapping, keys: np.ndarray) -> dict | None:

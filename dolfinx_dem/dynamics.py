@@ -122,7 +122,9 @@ class DynamicRun:
         keys = _compat.owned_original_cells(dem.V)
         centres = dem.geometry.cell_centres[: dem.n_owned]
         tolerance = 1e-9 * float(dem.geometry.facet_diameters.min())
-        vectors = checkpoint.read_state(folder, self.comm, header, keys, centres, tolerance)
+        cell_arrays = self._cell_state()
+        vectors = checkpoint.read_state(folder, self.comm, header, keys, centres, tolerance,
+                                        {name: a.shape[1:] for name, a in cell_arrays.items()})
         local = checkpoint.read_local(folder, self.comm, header, keys)  # None: another partition
         m = header["memm"]
         # the evaluation counters differ between processes (contact work is split per process):
@@ -144,6 +146,8 @@ class DynamicRun:
             contact.restore_state(
                 local and {name[len(prefix) :]: a for name, a in local.items() if name.startswith(prefix)}
             )
+            contact.restore_cell_state({name[len(prefix):]: a for name, a in vectors.items()
+                                        if name.startswith(prefix)})
         self.stats = Statistics(**header["statistics"])
         self.stats.resumes += 1
         self.pair_stats.restore(header["pair_statistics"], self.stepper)
@@ -270,7 +274,7 @@ class DynamicRun:
             for name, a in c.checkpoint_state().items()
         }
         local["memm_counters"] = np.array([state["force_evaluations"], state["max_step_evaluations"]], dtype=np.int64)
-        vectors = {name: state[name].array_r.reshape(-1, dem.d) for name in checkpoint.VECTORS}
+        vectors = {name: state[name].array_r.reshape(-1, dem.d) for name in checkpoint.VECTORS} | self._cell_state()
         self.solution.sync()
         checkpoint.write(
             directory,
@@ -281,6 +285,11 @@ class DynamicRun:
             vectors,
             local,
         )
+
+    def _cell_state(self) -> dict[str, np.ndarray]:
+        """The contact models' ``cell_state`` arrays as ``contact<k>_<name>``."""
+        contacts = enumerate(self.problem.contacts)
+        return {f"contact{k}_{name}": a for k, c in contacts for name, a in c.cell_state().items()}
 
     def _wall_seconds(self) -> float:
         """Wall time of the run so far, the earlier parts of a resumed run included."""

@@ -128,6 +128,10 @@ class CellMaterials:
         """eta of eq. (13) of ``cells``, (n,) (Pa)."""
         return self._per_cell([m.stabilisation for m in self.materials], cells)
 
+    def wave_speed(self, d: int, cells=None) -> np.ndarray:
+        """The P-wave speed (``ElasticMaterial.wave_speed``) of ``cells``, (n,) (m/s)."""
+        return self._per_cell([m.wave_speed(d) for m in self.materials], cells)
+
     def elasticity_tensor(self, d: int, cells=None) -> np.ndarray:
         """C of eq. (9) of ``cells``, (n, d, d, d, d)."""
         return self._per_cell([m.elasticity_tensor(d) for m in self.materials], cells)

@@ -8,11 +8,21 @@ MEMM with a frictional impulse T^n over the step [t_n, t_{n+1}],
 changes the pseudo-energy by E^{n+1} - E^n = v^{n+1/2} . T^n (memm.py: I^n is the exact integral
 of the conservative force). With the dissipation D^{n+1} = D^n - v^{n+1/2} . T^n, E^n + D^n - W^n
 is conserved to rounding, whatever T^n is; Coulomb's law is a choice of T^n that makes every
-increment of D non-negative. Each candidate facet f in contact with an obstacle of unit normal n
-over the step carries a normal impulse N_f (the integral of its reaction, ``force_integral``; a
-facet with N_f <= 0 gives none) and gives its cell c a tangential impulse tau_f in the set
+increment of D non-negative. Each candidate facet f on an obstacle of unit normal n carries over
+the step a normal impulse N_f (the integral of its reaction, ``force_integral``) and a lagged
+normal force Ntilde_f, which follows the step's mean normal force N_f^+ / dt with the time scale
+T_f = LAG h_f / c_f (h_f the facet's diameter, c_f its cell's P-wave speed):
 
-    K_f = {tau : tau . n = 0, |tau| <= mu N_f, tau . w_c <= 0},
+    Ntilde_f^{n+1} = Ntilde_f^n + (1 - exp(-dt / T_f)) (N_f^+ / dt - Ntilde_f^n),
+
+the exact step of dNtilde/dt = (N^+ - Ntilde) / T_f for a normal force constant over the step
+(Prakash and Clifton's lagged shear strength with a fixed time scale; the first step sets
+Ntilde_f = N_f^+ / dt: the initial state's history). A bound mu N_f taken from the same step's
+N_f feeds the friction back into the normal impulse and opens the contact at the mesh scale
+(docs/theory.md); the lag removes that feedback and vanishes under refinement (T_f ~ h_f), so the
+law tends to Coulomb's. The facet gives its cell c a tangential impulse tau_f in the set
+
+    K_f = {tau : tau . n = 0, |tau| <= mu Ntilde_f dt, tau . w_c <= 0},
 
 w_c the tangential part of the cell's velocity over the step, v_c^{n+1/2}: its dissipation
 -w_c . tau_f is non-negative by construction (the slip is measured at the cell: scheme B's facet
@@ -20,13 +30,15 @@ follows it; with scheme A the facet's reconstruction moves O(h) differently). ta
 of K_f closest to the stick impulse, the one that leaves the cell without tangential velocity
 after the step, tau*_f = -(m_c / 2) P_n v_c^{n+3/2, free} (``StepState.velocities``): if tau*
 lies in K_f the cell sticks (v^{n+3/2} tangential 0, exactly 0 dissipation: a body held by
-friction does not creep), otherwise it slips with |tau| <= mu N_f. K_f is a half-disc through its
+friction does not creep), otherwise it slips with |tau| <= mu Ntilde_f dt. K_f is a half-disc through its
 centre: the projection onto it is the projection onto the half-space, then onto the disc. A cell
-with several facets in contact takes them one after the other (rounds), each seeing the impulses
-of the rounds before.
+with several facets with a bound takes them one after the other (rounds), each seeing the
+impulses of the rounds before. A facet that leaves contact keeps a bound that decays as
+exp(-t / T_f): after its last contact step it can give at most mu Ntilde_f T_f more impulse.
 
-The law uses only a cell's own values: it is computed where the cell is owned and does not depend
-on the partition.
+The law uses only a cell's own values and its facets' Ntilde_f (updated from their own N_f): it is
+computed where the cell is owned and does not depend on the partition. Ntilde_f is state: the
+contact model checkpoints it with the cells (rigid.RigidContact.cell_state).
 """
 
 from __future__ import annotations
@@ -37,6 +49,10 @@ from petsc4py import PETSc
 #: Slip speeds up to this fraction of the sum of a cell's velocities' sizes are rounding (a stuck
 #: cell's tangential velocity is the rounding of v + 2 M^-1 (I + tau) = 0): the cell counts as stuck.
 STICK_ROUNDING = 1e-12
+
+#: The lag of the friction bound behind the normal force, in the times h_f / c_f a P wave takes to
+#: cross the facet (``CellFriction``; docs/theory.md, Friction on rigid obstacles)
+LAG = 2.0
 
 
 def project(tau: np.ndarray, w: np.ndarray, n: np.ndarray, limit: np.ndarray, rounding: np.ndarray) -> np.ndarray:
@@ -58,12 +74,18 @@ def project(tau: np.ndarray, w: np.ndarray, n: np.ndarray, limit: np.ndarray, ro
 class CellFriction:
     """Coulomb friction (module docstring) of the own candidate facets of a contact model: their
     cells ``cells`` (owned, local), the obstacles' unit normals ``normals`` (n, d), the friction
-    coefficients ``mu`` (n,) and each facet's obstacle ``group`` (n,) for the outputs."""
+    coefficients ``mu`` (n,), the lags T_f ``lag`` (n,) (s) and each facet's obstacle ``group``
+    (n,) for the outputs. Its state: ``normal_force``, the lagged normal forces Ntilde_f (n,)
+    (N, N/m in 2D), and ``started`` (whether a step has set them)."""
 
-    def __init__(self, d: int, cells: np.ndarray, normals: np.ndarray, mu: np.ndarray, group: np.ndarray,
-                 n_groups: int):
+    def __init__(self, d: int, cells: np.ndarray, normals: np.ndarray, mu: np.ndarray, lag: np.ndarray,
+                 group: np.ndarray, n_groups: int):
+        if not (np.isfinite(lag).all() and (lag > 0).all()):
+            raise ValueError("the friction bound's lags must be finite and > 0")
         self.d, self.n_groups = d, n_groups
-        self.mu, self.normals, self.group = mu, normals, group
+        self.mu, self.normals, self.group, self.lag = mu, normals, group, lag
+        self.normal_force = np.zeros(len(mu))
+        self.started = False
         self.dofs = cells[:, None] * d + np.arange(d)
         frictional = np.flatnonzero(mu > 0)
         order = frictional[np.argsort(cells[frictional], kind="stable")]
@@ -78,15 +100,30 @@ class CellFriction:
 
     def apply(self, normal: np.ndarray, state, impulse: PETSc.Vec) -> float:
         """Adds the step's tangential impulses to ``impulse`` (this process's owned entries), from
-        the facets' normal impulses ``normal`` and the step's velocities (``state``: a
-        memm_state.StepState after ``advance_rows``); returns the step's dissipation on this
-        process, -v^{n+1/2} . T^n (non-negative, summed over facets)."""
+        the facets' normal impulses ``normal`` (which update the lagged normal forces, ``lagged``)
+        and the step's velocities (``state``: a memm_state.StepState after ``advance_rows``);
+        returns the step's dissipation on this process, -v^{n+1/2} . T^n (non-negative, summed
+        over facets)."""
+        return self.bounded(self.mu * self.lagged(normal, state.dt) * state.dt, state, impulse)
+
+    def lagged(self, normal: np.ndarray, dt: float) -> np.ndarray:
+        """The lagged normal forces Ntilde_f after a step of normal impulses ``normal`` (module
+        docstring; updated in place, the first step sets them)."""
+        force = np.maximum(normal, 0.0) / dt
+        if self.started:
+            self.normal_force -= np.expm1(-dt / self.lag) * (force - self.normal_force)
+        else:
+            self.normal_force[:], self.started = force, True
+        return self.normal_force
+
+    def bounded(self, bound: np.ndarray, state, impulse: PETSc.Vec) -> float:
+        """``apply`` with the facets' bounds on |tau_f| ``bound`` (n,) (impulses; 0: no friction)."""
         self.forces[:] = 0.0
         self.slipping = 0
         dissipation = 0.0
         values = impulse.array
         for facets in self.rounds:
-            facets = facets[normal[facets] > 0]
+            facets = facets[bound[facets] > 0]
             if not len(facets):
                 continue
             dofs = self.dofs[facets].ravel()
@@ -97,7 +134,7 @@ class CellFriction:
             # a stuck cell keeps a slip speed of the rounding of its velocities' sums: 0 for the law
             rounding = STICK_ROUNDING * (np.linalg.norm(v_prev, axis=1) + np.linalg.norm(v_flight, axis=1)
                                          + np.linalg.norm(v_free, axis=1))
-            slip = project(tau, w, n, self.mu[facets] * normal[facets], rounding)
+            slip = project(tau, w, n, bound[facets], rounding)
             values[dofs] += tau.ravel()
             dissipation += float(np.maximum(-np.einsum("ki,ki->k", v_flight, tau), 0.0).sum())
             np.add.at(self.forces, self.group[facets], tau)

@@ -491,6 +491,13 @@ class PairContact:
                 "counters": np.array([self.rebuilds, self.evaluations, self.exchanges], dtype=np.int64),
                 "seconds": np.array([self.seconds])}
 
+    def cell_state(self) -> dict[str, np.ndarray]:
+        """None: every state of the model is a function of u or kept by the same partition only."""
+        return {}
+
+    def restore_cell_state(self, state: Mapping[str, np.ndarray]) -> None:
+        """Nothing to restore (``cell_state``)."""
+
     def restore_state(self, state: Mapping[str, np.ndarray] | None) -> None:
         """The list is rebuilt at the next ``prepare``; the counters and the scheme B pairs are
         those of the same partition's ``checkpoint_state``, or start again (None: another

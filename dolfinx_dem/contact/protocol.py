@@ -24,9 +24,10 @@ from petsc4py import PETSc
 class ContactModel(Protocol):
     """A contact model of a ``DEMDiscretisation`` ``dem`` (module docstring). Four groups: the
     dynamics (``prepare`` ... ``force_integral``), the outputs (``output_columns`` ...), and
-    the checkpoint (``checkpoint_state``, ``restore_state``); statics uses ``statics.StaticContact``
-    besides. ``active`` in ``force_correction`` and ``add_force`` imposes a piece of the
-    potential in the model's own form (statics); None is the natural piece."""
+    the checkpoint (``checkpoint_state``, ``restore_state``, ``cell_state``, ``restore_cell_state``);
+    statics uses ``statics.StaticContact`` besides. ``active`` in ``force_correction`` and
+    ``add_force`` imposes a piece of the potential in the model's own form (statics); None is the
+    natural piece."""
 
     dem: object  # the DEMDiscretisation it acts on
     scatter: object  # the PatchScatter of its patch dofs (a pair list round may make a new one)
@@ -83,6 +84,15 @@ class ContactModel(Protocol):
     def restore_state(self, state: Mapping[str, np.ndarray] | None) -> None:
         """Restore ``checkpoint_state`` of the same partition; None (another partition): set the
         state up again from the restored displacements at the next ``prepare``."""
+
+    def cell_state(self) -> dict[str, np.ndarray]:
+        """The model's state that a resume on any partition needs and that no function of u gives
+        (e.g. the lagged normal forces of friction): arrays (n_owned, k) of the owned cells
+        (``checkpoint.py`` stores them with the cells' keys)."""
+
+    def restore_cell_state(self, state: Mapping[str, np.ndarray]) -> None:
+        """Restore ``cell_state`` (the same names and shapes, of this process's owned cells, on any
+        partition; a checkpoint follows at least one step)."""
 
 
 @runtime_checkable

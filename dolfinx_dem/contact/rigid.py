@@ -36,7 +36,7 @@ from petsc4py import PETSc
 
 from dolfinx_dem.conditions import facet_indices
 from dolfinx_dem.contact import candidates
-from dolfinx_dem.contact.friction import CellFriction
+from dolfinx_dem.contact.friction import LAG, CellFriction
 from dolfinx_dem.contact.patch import PatchScatter
 from dolfinx_dem.contact.rigid_statics import RigidStatics
 from dolfinx_dem.errors import InputError
@@ -242,7 +242,8 @@ class RigidContact:
         self.friction = None
         if self.comm.allreduce(bool((mu > 0).any()), op=MPI.LOR):
             own = slice(0, self.num_own)
-            self.friction = CellFriction(d, self.cells[own], self.normals[own], mu[own], obstacle[own],
+            lag = LAG * geom.facet_diameters[self.facets[own]] / dem.materials.wave_speed(d, self.cells[own])
+            self.friction = CellFriction(d, self.cells[own], self.normals[own], mu[own], lag, obstacle[own],
                                          self.num_obstacles)
         self._normal_impulse = np.zeros(self.num_own)  # of the last force integral, for the friction
         self._grad_weights = (
@@ -495,9 +496,28 @@ class RigidContact:
 
     # -- checkpoint (contact.protocol.ContactModel) ----------------------------------------------------------------
     def checkpoint_state(self) -> dict[str, np.ndarray]:
-        """Only a counter: every candidate is tested at every evaluation, nothing else persists."""
+        """Only a counter: every candidate is tested at every evaluation; friction's state is a
+        ``cell_state``."""
         return {"evaluations": np.array([self.evaluations], dtype=np.int64)}
 
     def restore_state(self, state: Mapping[str, np.ndarray] | None) -> None:
         if state is not None:
             self.evaluations = int(state["evaluations"][0])
+
+    def cell_state(self) -> dict[str, np.ndarray]:
+        """With friction, the lagged normal forces Ntilde_f (contact/friction.py) of the own facets
+        as ``friction_normal_force`` (n_owned, d + 1): row c, column j for the facet j of cell c
+        (the cell's own numbering, which does not depend on the partition); 0 elsewhere."""
+        if self.friction is None:
+            return {}
+        own = slice(0, self.num_own)
+        table = np.zeros((self.dem.n_owned, self.d + 1))
+        table[self.cells[own], self._facet_j[own]] = self.friction.normal_force
+        return {"friction_normal_force": table}
+
+    def restore_cell_state(self, state: Mapping[str, np.ndarray]) -> None:
+        """Friction's lagged normal forces from ``cell_state`` (a step has set them: ``started``)."""
+        if self.friction is not None:
+            own = slice(0, self.num_own)
+            self.friction.normal_force[:] = state["friction_normal_force"][self.cells[own], self._facet_j[own]]
+            self.friction.started = True
