@@ -86,6 +86,7 @@ class CellFriction:
         self.mu, self.normals, self.group, self.lag = mu, normals, group, lag
         self.normal_force = np.zeros(len(mu))
         self.started = False
+        self.slip = np.zeros(len(mu), dtype=bool)  # the facets at their bound in the last step
         self.dofs = cells[:, None] * d + np.arange(d)
         frictional = np.flatnonzero(mu > 0)
         order = frictional[np.argsort(cells[frictional], kind="stable")]
@@ -104,7 +105,11 @@ class CellFriction:
         and the step's velocities (``state``: a memm_state.StepState after ``advance_rows``);
         returns the step's dissipation on this process, -v^{n+1/2} . T^n (non-negative, summed
         over facets)."""
-        return self.bounded(self.mu * self.lagged(normal, state.dt) * state.dt, state, impulse)
+        dissipation = self.bounded(self.mu * self.lagged(normal, state.dt) * state.dt, state, impulse)
+        # the slipping facets are those in contact over the step: a facet that left contact keeps a
+        # decaying bound, which its cell's tangential motion reaches at once
+        self.slipping = int((self.slip & (normal > 0)).sum())
+        return dissipation
 
     def lagged(self, normal: np.ndarray, dt: float) -> np.ndarray:
         """The lagged normal forces Ntilde_f after a step of normal impulses ``normal`` (module
@@ -119,7 +124,7 @@ class CellFriction:
     def bounded(self, bound: np.ndarray, state, impulse: PETSc.Vec) -> float:
         """``apply`` with the facets' bounds on |tau_f| ``bound`` (n,) (impulses; 0: no friction)."""
         self.forces[:] = 0.0
-        self.slipping = 0
+        self.slip[:] = False
         dissipation = 0.0
         values = impulse.array
         for facets in self.rounds:
@@ -138,6 +143,7 @@ class CellFriction:
             values[dofs] += tau.ravel()
             dissipation += float(np.maximum(-np.einsum("ki,ki->k", v_flight, tau), 0.0).sum())
             np.add.at(self.forces, self.group[facets], tau)
-            self.slipping += int(slip.sum())
+            self.slip[facets] = slip
+        self.slipping = int(self.slip.sum())
         self.forces /= state.dt
         return dissipation
