@@ -28,7 +28,8 @@ Files (all in the output folder):
 * ``series.csv``: one header line of column names, then one row of floats per time, written
   with ``'%.17g'`` so that they read back bit-identical (``SeriesWriter``; rank 0 writes).
 * ``summary.json`` (``write_summary``; rank 0 writes): strict JSON, a number that is not finite
-  (NaN, inf) is written as ``null``.
+  (NaN, inf) is written as ``null``; replaced atomically (``summary.json.tmp`` is a write in
+  progress).
 
 MPI: every class and function here is collective over its ``comm``; values passed to the rank-0
 writers must be the same on every rank (e.g. global reductions).
@@ -64,7 +65,7 @@ ERROR = "error.txt"
 RUN_FILES = (INCOMPLETE, ERROR, "summary.json", "series.csv", "solution.xdmf", _xdmf.FOLDER, "solution.h5",
              "final.png", "animation.gif", "contact_pressure.csv", "energies.png", "series.png",
              "force_displacement.png", "pressure.png", "checkpoint", "solution.xdmf.tmp", ".solution.xdmf",
-             ".solution.h5")
+             ".solution.h5", "summary.json.tmp")
 #: The files derived from a whole run, removed when it is resumed (the resumed run rewrites them).
 DERIVED_FILES = ("summary.json", "final.png", "animation.gif", "energies.png", "series.png", "force_displacement.png",
                  "pressure.png")
@@ -418,11 +419,15 @@ def _strict(value):
 
 def write_summary(path: str | pathlib.Path, comm: MPI.Comm, data: Mapping) -> None:
     """Write ``data`` as strict JSON (sorted keys, indent 2) on rank 0: numpy values become
-    Python ones, and numbers that are not finite (NaN, inf) are written as ``null``."""
+    Python ones, and numbers that are not finite (NaN, inf) are written as ``null``. The file is
+    replaced atomically (a temporary file, then ``os.replace``): a run killed while writing it
+    leaves the previous summary, never a truncated one (a resume reads it)."""
     path = pathlib.Path(path)
 
     def write():
         text = json.dumps(_strict(dict(data)), sort_keys=True, indent=2, allow_nan=False)
-        path.write_text(text + "\n")
+        tmp = path.with_suffix(".json.tmp")
+        tmp.write_text(text + "\n")
+        os.replace(tmp, path)
 
     call_on_root(comm, write)

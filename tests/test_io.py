@@ -113,6 +113,28 @@ def test_write_summary(tmp_path):
         io.write_summary(path, comm, {"bad": object()})
 
 
+def test_write_summary_killed_while_writing_keeps_the_previous_one(tmp_path, monkeypatch):
+    """A run killed while it writes summary.json (at its end, or when interrupted) leaves the
+    previous summary whole: a resume reads it (the kill loop met a truncated one, an empty file
+    that a resume could not parse)."""
+    path = tmp_path / "summary.json"
+    io.write_summary(path, MPI.COMM_SELF, {"status": "interrupted"})
+    write_text = pathlib.Path.write_text
+
+    def killed(self, text, *args, **kwargs):  # half the text is on disk when the process dies
+        write_text(self, text[: len(text) // 2], *args, **kwargs)
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(pathlib.Path, "write_text", killed)
+    with pytest.raises(KeyboardInterrupt):
+        io.write_summary(path, MPI.COMM_SELF, {"status": "completed", "steps": 10})
+    monkeypatch.undo()
+    assert json.loads(path.read_text()) == {"status": "interrupted"}
+    io.write_summary(path, MPI.COMM_SELF, {"status": "completed"})
+    assert json.loads(path.read_text()) == {"status": "completed"}
+    assert not path.with_suffix(".json.tmp").exists()
+
+
 def test_write_summary_is_strict_json_without_nan(tmp_path):
     """NaN and inf have no strict-JSON form (Python's json writes bare NaN / Infinity, which
     strict parsers reject): they are written as null."""
