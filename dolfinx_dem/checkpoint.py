@@ -8,7 +8,8 @@ Layout, in the run's output folder (docs/scenes.md, "Checkpoints and resume")::
                                         (index in the input mesh), ``centre`` (barycentre), the
                                         state vectors ``u``, ``v_prev``, ``v_next`` (n_owned, d)
                                         and the contact models' cell states (``contact<k>_<name>``,
-                                        (n_owned, k): friction's lagged normal forces)
+                                        (n_owned, ...): friction's lagged normal forces; their
+                                        shapes are in the header, ``cell_arrays``)
     checkpoint/step-<n>-<id>/local-<r>.npz
                                         process r's arrays that only its partition can read: the
                                         energy-row recurrence of MEMM (``y``, ``z``, ``means``)
@@ -51,11 +52,12 @@ from dolfinx_dem._xdmf import fsync
 from dolfinx_dem.errors import CheckpointError
 from dolfinx_dem.io import call_on_root
 
-FORMAT = 9  # 2: per-process local files (the recurrence, contact states); no shared file; 3: MEMM work;
+FORMAT = 10  # 2: per-process local files (the recurrence, contact states); no shared file; 3: MEMM work;
 # 4: the pair contact's exchange counter; 5: the solution as one HDF5 file per output time (io.SolutionWriter);
 # 6: the largest penetration over the local facet diameter (run_statistics.PairContactStatistics); 7: MEMM's
 # frictional dissipation; 8: the contact models' cell states (friction's lagged normal forces); 9: the counters
-# of friction between bodies (run_statistics.PairContactStatistics)
+# of friction between bodies (run_statistics.PairContactStatistics); 10: the lagged normal forces of friction
+# between bodies (contact/pair_lag.py) and the cell arrays' shapes in the header
 DIRECTORY = "checkpoint"
 HEADER = "checkpoint.json"
 VECTORS = ("u", "v_prev", "v_next")

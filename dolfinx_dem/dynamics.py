@@ -122,9 +122,9 @@ class DynamicRun:
         keys = _compat.owned_original_cells(dem.V)
         centres = dem.geometry.cell_centres[: dem.n_owned]
         tolerance = 1e-9 * float(dem.geometry.facet_diameters.min())
-        cell_arrays = self._cell_state()
+        # the shapes of the stored cell arrays: a model's may depend on its state (pair friction's slots)
         vectors = checkpoint.read_state(folder, self.comm, header, keys, centres, tolerance,
-                                        {name: a.shape[1:] for name, a in cell_arrays.items()})
+                                        {name: tuple(shape) for name, shape in header["cell_arrays"].items()})
         local = checkpoint.read_local(folder, self.comm, header, keys)  # None: another partition
         m = header["memm"]
         # the evaluation counters differ between processes (contact work is split per process):
@@ -250,6 +250,7 @@ class DynamicRun:
     def _checkpoint(self, directory: pathlib.Path):
         dem, stepper = self.dem, self.stepper
         state = stepper.state()
+        cell_arrays = self._cell_state()
         header = {
             "format": checkpoint.FORMAT,
             "version": checkpoint.package_version(),
@@ -267,6 +268,7 @@ class DynamicRun:
             "checkpoint_every": self.checkpoint_every,
             "series_bytes": self.series.position(),
             "xdmf_writes": self.solution.writes,  # on disk (sync below)
+            "cell_arrays": {name: list(a.shape[1:]) for name, a in cell_arrays.items()},
         }
         local = state["recurrence"] | {
             f"contact{k}_{name}": a
@@ -274,7 +276,7 @@ class DynamicRun:
             for name, a in c.checkpoint_state().items()
         }
         local["memm_counters"] = np.array([state["force_evaluations"], state["max_step_evaluations"]], dtype=np.int64)
-        vectors = {name: state[name].array_r.reshape(-1, dem.d) for name in checkpoint.VECTORS} | self._cell_state()
+        vectors = {name: state[name].array_r.reshape(-1, dem.d) for name in checkpoint.VECTORS} | cell_arrays
         self.solution.sync()
         checkpoint.write(
             directory,

@@ -492,11 +492,15 @@ class PairContact:
                 "seconds": np.array([self.seconds])}
 
     def cell_state(self) -> dict[str, np.ndarray]:
-        """None: every state of the model is a function of u or kept by the same partition only."""
-        return {}
+        """With friction, the pairs' lagged normal forces as ``friction_pairs`` at their facet i's
+        cell (``PairLag.table``; collective); the model's other states are functions of u or kept
+        by the same partition only."""
+        return {} if self.friction is None else {"friction_pairs": self.friction.lag.table()}
 
     def restore_cell_state(self, state: Mapping[str, np.ndarray]) -> None:
-        """Nothing to restore (``cell_state``)."""
+        """Friction's lagged normal forces from ``cell_state``."""
+        if self.friction is not None:
+            self.friction.lag.restore(state["friction_pairs"])
 
     def restore_state(self, state: Mapping[str, np.ndarray] | None) -> None:
         """The list is rebuilt at the next ``prepare``; the counters and the scheme B pairs are

@@ -3,13 +3,15 @@
 
 As on rigid obstacles (friction.py), a frictional impulse T^n over the step changes the MEMM
 pseudo-energy by v^{n+1/2} . T^n, and D^{n+1} = D^n - v^{n+1/2} . T^n keeps E + D - W constant to
-rounding whatever T^n is. Each touching pair p (facet i of cell c, facet j of cell c', the pair's
+rounding whatever T^n is. Each listed pair p (facet i of cell c, facet j of cell c', the pair's
 unit normal n from i to j) carries the normal impulse N_p = int -mu_p w_p dtau that facet i exerts
 on facet j over the step (the normal part of the pair's force term, from the step's exact force
-integral; a pair with N_p <= 0 gives no friction), and gives +tau_p to cell c and -tau_p to cell
+integral) and a lagged normal force Ntilde_p, which follows N_p^+ / dt with the time scale 2 h_i /
+c_i as the obstacles' does (pair_lag.py: the bound does not see the step's own N_p, and a pair
+that separated for a few steps keeps a decaying one). It gives +tau_p to cell c and -tau_p to cell
 c' (the total linear momentum is unchanged), tau_p in
 
-    K_p = {tau : tau . n = 0, |tau| <= mu N_p, tau . w_p <= 0},   w_p = P_n (v_c - v_c')^{n+1/2},
+    K_p = {tau : tau . n = 0, |tau| <= mu Ntilde_p dt, tau . w_p <= 0},   w_p = P_n (v_c - v_c')^{n+1/2},
 
 so that the pair's dissipation -w_p . tau_p is non-negative and sum_p -w_p . tau_p = -v^{n+1/2} . T^n.
 The impulses are those of K = prod K_p closest to sticking: they minimise the cells' kinetic
@@ -64,6 +66,7 @@ import numpy as np
 from mpi4py import MPI
 
 from dolfinx_dem.contact.friction import STICK_ROUNDING, project
+from dolfinx_dem.contact.pair_lag import PairLag
 from dolfinx_dem.contact.patch import PatchScatter
 from dolfinx_dem.errors import InputError, StateError
 
@@ -108,6 +111,7 @@ class PairFriction:
         self.unconverged = 0  # steps that reached MAX_ROUNDS
         #: this process's sums of the handled pairs' N_p > 0 and of -N_p < 0 (what the positive part drops)
         self.normal_sums = np.zeros(2)
+        self.lag = PairLag(contact)  # the pairs' lagged normal forces, whose mu-multiples bound the impulses
 
     def start(self, n_listed: int, quiet: bool) -> np.ndarray:
         """The zeroed array the step's force integral adds the listed pairs' normal impulses to;
@@ -169,15 +173,21 @@ class PairFriction:
             raise StateError("pair friction needs the normal impulses of the step's force integral (the midpoint "
                              "quadrature's exact integral, MEMM)")
         part, self._normal = self._normal, None
-        if self._quiet:  # on every process
+        L = pc.listed
+        if self._quiet:  # no pair touches during the step on any process: every N_p is 0
+            handled = np.flatnonzero(pc.facets_all.owner[L.i] == self.comm.rank)
+            normal = np.zeros(len(handled))
+        else:
+            handled, normal = self._handled_normals(part)
+            self.normal_sums += [normal[normal > 0].sum(), -normal[normal < 0].sum()]
+        lagged = self.lag.update(pc.pair_keys()[handled], L.i[handled], normal, state.dt)
+        if self._quiet and not self.lag.active():  # on every process
             self.forces[:], self.slipping = 0.0, 0
             return 0.0
         self._cells()
-        L = pc.listed
-        handled, normal = self._handled_normals(part)
-        self.normal_sums += [normal[normal > 0].sum(), -normal[normal < 0].sum()]
-        a = handled[normal > 0]
-        limit = self.mu * normal[normal > 0]
+        bounded = lagged > 0
+        a = handled[bounded]
+        limit = self.mu * lagged[bounded] * state.dt
         ci, cj, n = self._slot[L.i[a]], self._slot[L.j[a]], L.n[a]
         v_prev, v_next = (self._scatter.gather(v).reshape(-1, d) for v in (state.v_prev, state.v_next))
         self._work.set(0.0)
@@ -198,7 +208,7 @@ class PairFriction:
         self.round_counts[rounds] += 1
         self.unconverged += not converged
         self._scatter.add(self._cell_impulses(tau, ci, cj, reduce=False).ravel(), impulse)
-        self._outputs(a, tau, slip, state.dt)
+        self._outputs(a, tau, slip & (normal[bounded] > 0), state.dt)  # the pairs at the limit in contact
         return float(np.maximum(-np.einsum("ki,ki->k", w, tau), 0.0).sum())
 
     def median_rounds(self) -> float:
