@@ -203,7 +203,7 @@ class DynamicRun:
                     progress.update(diag.step, diag.t, self.stats.relative_drift, self.conservative)
                     if self.checkpoint_every and diag.step % self.checkpoint_every == 0 and diag.step < self.n_steps:
                         self._checkpoint(directory)
-                    if interrupts.requested():
+                    if interrupts.requested(now=diag.step % self.every == 0):
                         status = "interrupted"
                         break
             except InstabilityError as err:

@@ -9,18 +9,23 @@ first is being handled stops the process at once (KeyboardInterrupt).
 
 Cost. Looking at the handlers (``signal.getsignal``) and agreeing under MPI (one reduction) cost a
 sizeable part of a short step if done at every step. So the check runs every ``k`` steps, ``k``
-adapted so that checks are about ``interval`` (0.05 s) of wall time apart; under MPI, rank 0's
+adapted so that checks are about ``interval`` (0.02 s) of wall time apart; under MPI, rank 0's
 ``k`` and the flags travel in one non-blocking reduction (``MPI_Iallreduce``, completed at the
 next check), so that every process checks at the same steps and stops at the same one, with
-no synchronisation added. A run stops within about 0.1 s of the signal (two check intervals
-under MPI), or after the step in progress if one step takes longer.
+no synchronisation added. A step that wrote an output time (slow: files are created, renamed
+and synced) is followed by a check that agrees at once (``requested(now=True)``, a blocking
+reduction after a step that already synchronised): before, a check interval that held such
+writes stretched the stop to 0.3 s. A run stops within about 0.05 s of the signal, or after
+the step in progress if one step takes longer.
 
-Open MPI's ``mpirun`` does not pass SIGINT or SIGTERM on: on either it sends the processes
-SIGCONT, SIGTERM after ``odls_base_sigkill_timeout`` seconds (default 1) and SIGKILL as long after
-that; the run must reach its checkpoint within that time (raise it with
-``OMPI_MCA_odls_base_sigkill_timeout=30`` for large runs), and ``mpirun`` itself then exits with
-1 whatever the processes return. A run killed then keeps its last complete checkpoint and every
-listed output time (``checkpoint.py``, ``io.SolutionWriter``). A signal sent to the processes
+``mpirun`` does not pass SIGINT or SIGTERM on: on either it sends the processes SIGCONT, then
+SIGTERM and SIGKILL. Open MPI 4 (Debian 12) waits ``odls_base_sigkill_timeout`` seconds (default
+1) before each, which ``OMPI_MCA_odls_base_sigkill_timeout=30`` raises; Open MPI 5.0.7 (Debian 13)
+sends SIGTERM 0.25 s after SIGCONT and SIGKILL 0.25 s later, and neither that variable nor
+``PRTE_MCA_odls_base_sigkill_timeout`` changed it (measured). The run must reach its checkpoint
+within that time; ``mpirun`` itself then exits with 1 whatever the processes return. A run
+killed then keeps its last complete checkpoint and every listed output time (``checkpoint.py``,
+``io.SolutionWriter``). A signal sent to the processes
 themselves (``kill`` of their ids, a batch system such as SLURM) gives every process and
 ``mpirun`` the exit status 130.
 """
@@ -42,7 +47,7 @@ class Interrupts:
     """Context manager: SIGINT and SIGTERM request a clean stop (see the module docstring).
     ``interval``: wall time (s) between checks of the flag."""
 
-    def __init__(self, comm: MPI.Comm, interval: float = 0.05):
+    def __init__(self, comm: MPI.Comm, interval: float = 0.02):
         self.comm, self.interval = comm, interval
         self.signal = 0  # the first signal received, 0 if none
         self._previous = {}
@@ -84,28 +89,38 @@ class Interrupts:
         """Name of the signal received (e.g. "SIGINT"), "" if none."""
         return signal.Signals(self.signal).name if self.signal else ""
 
-    def requested(self) -> bool:
+    def requested(self, now: bool = False) -> bool:
         """Collective: whether to stop now (call it after every step). Every process gets the
         same answer at the same call: True at the first check after the signal in serial, at
-        the second under MPI (the reduction started at one check completes at the next)."""
+        the second under MPI (the reduction started at one check completes at the next).
+        ``now`` (the same on every process: after a step that wrote an output time, which is
+        slow) checks at this call and agrees at once (a blocking reduction): a step that took
+        much longer than the others does not stretch the time to the stop."""
         self._count += 1
-        if self._count < self._every:
+        if self._count < self._every and not now:
             return False
-        self._count = 0
+        steps, self._count = self._count, 0
         self._install()
-        now = time.perf_counter()
+        t = time.perf_counter()
         # steps to the next check, for checks `interval` apart (at most doubling each time)
-        every = int(min(2 * self._every, max(1, self._every * self.interval / max(now - self._last, 1e-9))))
-        self._last = now
+        every = int(min(2 * self._every, max(1, steps * self.interval / max(t - self._last, 1e-9))))
+        self._last = t
         if self.comm.size == 1:
             self._every = every
             return bool(self.signal)
         stop = False
         if self._request is not None:
             self._request.Wait()
+            self._request = None
             stop, self._every = bool(self._result[0]), int(self._result[1])
+        if stop:
+            return True
         self._send[:] = self.signal, every if self.comm.rank == 0 else 0
-        self._request = None if stop else self.comm.Iallreduce(self._send, self._result, op=MPI.MAX)
+        if now:
+            self.comm.Allreduce(self._send, self._result, op=MPI.MAX)
+            stop, self._every = bool(self._result[0]), int(self._result[1])
+        else:
+            self._request = self.comm.Iallreduce(self._send, self._result, op=MPI.MAX)
         return stop
 
 

@@ -312,7 +312,7 @@ class FEMP1Run:
                     if self.step % self.every == 0 or last:
                         solution.write(self.t, self.fields())
                     progress.update(self.step, self.t, self.stats.relative_drift, True)
-                    if interrupts.requested():
+                    if interrupts.requested(now=self.step % self.every == 0):
                         status = "interrupted"
                         break
                 progress.finish()
