@@ -2,6 +2,7 @@
 
 import os
 import pathlib
+import signal
 import sys
 import time
 
@@ -87,3 +88,19 @@ def children(pid: int) -> list[int]:
     for task in pathlib.Path(f"/proc/{pid}/task").iterdir():
         out += [int(c) for c in (task / "children").read_text().split()]
     return out
+
+
+def stop_after(monkeypatch, at: int, first: int = 0, crash: bool = False):
+    """Make the next run stop after step ``at`` (it starts after step ``first``): interrupted
+    as by SIGINT, or with an exception (a crash: no checkpoint then)."""
+    from dolfinx_dem import runcontrol
+    calls = [first]
+
+    def requested(self, now=False):
+        calls[0] += 1
+        if calls[0] == at and crash:
+            raise RuntimeError(f"crash after step {at}")
+        self.signal = signal.SIGINT if calls[0] >= at else 0
+        return calls[0] >= at
+
+    monkeypatch.setattr(runcontrol.Interrupts, "requested", requested)

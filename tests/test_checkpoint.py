@@ -22,10 +22,10 @@ import subprocess
 
 import numpy as np
 import pytest
-from helpers import CLI, children, mpi_env, series_rows, wait_for
+from helpers import CLI, children, mpi_env, series_rows, stop_after, wait_for
 from mpi4py import MPI
 
-from dolfinx_dem import checkpoint, cli, io, model, runcontrol, scenes, simulation
+from dolfinx_dem import checkpoint, cli, io, model, scenes, simulation
 
 #: scene -> (overrides, number of steps)
 SCENES = {
@@ -37,21 +37,6 @@ SCENES = {
 #: a resumed run's contact model exchanges facets between processes at its first step)
 TIMINGS = {"wall_time_s", "setup_time_s", "peak_rss_mb", "resumes", "contact_seconds", "contact_output_seconds",
            "contact_fraction", "contact_exchanges"}
-
-
-def stop(monkeypatch, at: int, first: int = 0, crash: bool = False):
-    """Make the next run stop after step ``at`` (it starts after step ``first``): interrupted
-    as by SIGINT, or with an exception (a crash: no checkpoint then)."""
-    calls = [first]
-
-    def requested(self):
-        calls[0] += 1
-        if calls[0] == at and crash:
-            raise RuntimeError(f"crash after step {at}")
-        self.signal = signal.SIGINT if calls[0] >= at else 0
-        return calls[0] >= at
-
-    monkeypatch.setattr(runcontrol.Interrupts, "requested", requested)
 
 
 def xdmf_times(path):
@@ -71,14 +56,14 @@ def test_a_stopped_run_resumes_bit_identical(name, tempdir, monkeypatch):
     crash, interrupt = int(0.35 * n), int(0.7 * n)  # the last checkpoint before the crash: `every`
 
     parts = tempdir / "parts"
-    stop(monkeypatch, crash, crash=True)
+    stop_after(monkeypatch, crash, crash=True)
     with pytest.raises(RuntimeError, match="crash after step"):
         simulation.run(scene, parts, comm, quiet=True, checkpoint_every=every)
     comm.barrier()  # a failing run makes no collective call on its way out: rank 0 may still be closing
     assert (parts / "INCOMPLETE").exists() and series_rows(parts / "series.csv") == crash + 1
     assert json.loads((parts / "checkpoint" / "checkpoint.json").read_text())["step"] == every
 
-    stop(monkeypatch, interrupt, first=every)
+    stop_after(monkeypatch, interrupt, first=every)
     first = simulation.resume(parts, comm, quiet=True)
     assert first["status"] == "interrupted" and first["n_steps"] == interrupt and first["resumes"] == 1
     assert (parts / "INCOMPLETE").exists() and not (parts / "error.txt").exists()
@@ -122,7 +107,7 @@ def test_a_run_stopped_on_one_process_resumes_on_two(name, tmp_path, monkeypatch
     overrides, n = SCENES[name]
     scene = scenes.load(name, overrides)
     simulation.run(scene, tmp_path / "full", MPI.COMM_SELF, quiet=True)
-    stop(monkeypatch, n // 2)
+    stop_after(monkeypatch, n // 2)
     assert simulation.run(scene, tmp_path / "parts", MPI.COMM_SELF, quiet=True)["status"] == "interrupted"
     subprocess.run(["mpirun", "-n", "2", "--oversubscribe", CLI, "resume", str(tmp_path / "parts"), "--quiet"],
                    check=True, env=mpi_env())

@@ -2,13 +2,13 @@
 non-negative dissipation at every step, a block sliding down a slope at g (sin t - mu cos t), a
 block held by friction that does not creep, and the errors."""
 
-import signal
 
 import numpy as np
 import pytest
+from helpers import stop_after
 from mpi4py import MPI
 
-from dolfinx_dem import meshes, runcontrol, scenes, simulation
+from dolfinx_dem import meshes, scenes, simulation
 from dolfinx_dem.contact import HalfSpace, RigidContact
 from dolfinx_dem.discretisation import DEMDiscretisation
 from dolfinx_dem.errors import InputError, SceneError
@@ -163,14 +163,7 @@ def test_a_friction_scene_reports_its_dissipation_and_resumes_bit_identical(tmp_
     assert np.diff(series["dissipation"]).min() >= 0.0 and full["dissipation"] == series["dissipation"][-1] > 0
     assert series["slipping_facets"].max() >= 1 and series["friction_force_obstacle0_x"][1:].max() < 0.0
 
-    calls = [0]
-
-    def requested(self):
-        calls[0] += 1
-        self.signal = signal.SIGINT if calls[0] >= 120 else 0
-        return calls[0] >= 120
-
-    monkeypatch.setattr(runcontrol.Interrupts, "requested", requested)
+    stop_after(monkeypatch, 120)
     assert simulation.run(scene, tmp_path / "parts", MPI.COMM_WORLD, quiet=True)["status"] == "interrupted"
     monkeypatch.undo()
     assert simulation.resume(tmp_path / "parts", MPI.COMM_WORLD, quiet=True)["status"] == "completed"

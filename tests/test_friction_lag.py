@@ -5,16 +5,15 @@ instantaneous bound mu N_f opened the contact (docs/validation/friction_chatter.
 a checkpoint carries it to any number of processes."""
 
 import json
-import signal
 import subprocess
 
 import numpy as np
 import pytest
-from helpers import CLI, mpi_env
+from helpers import CLI, mpi_env, stop_after
 from mpi4py import MPI
 from test_friction import BLOCK, SLIDE, G, block, slide
 
-from dolfinx_dem import checkpoint, runcontrol, scenes, simulation
+from dolfinx_dem import checkpoint, scenes, simulation
 from dolfinx_dem.contact.friction import LAG, CellFriction
 
 
@@ -84,14 +83,7 @@ def test_a_friction_run_resumes_on_another_number_of_processes(tmp_path, monkeyp
     (tmp_path / "slide.toml").write_text(SLIDE.replace("friction = 0.1", "friction = 0.3"))
     scene = scenes.load(str(tmp_path / "slide.toml"))
     simulation.run(scene, tmp_path / "full", MPI.COMM_SELF, quiet=True)
-    calls = [0]
-
-    def requested(self):
-        calls[0] += 1
-        self.signal = signal.SIGINT if calls[0] >= 120 else 0
-        return calls[0] >= 120
-
-    monkeypatch.setattr(runcontrol.Interrupts, "requested", requested)
+    stop_after(monkeypatch, 120)
     assert simulation.run(scene, tmp_path / "parts", MPI.COMM_SELF, quiet=True)["status"] == "interrupted"
     monkeypatch.undo()
     root = tmp_path / "parts" / checkpoint.DIRECTORY

@@ -5,16 +5,15 @@ cos t) where the instantaneous bound mu N_p did not, and is state: a checkpoint 
 number of processes."""
 
 import json
-import signal
 import subprocess
 
 import numpy as np
 import pytest
-from helpers import CLI, mpi_env
+from helpers import CLI, mpi_env, stop_after
 from mpi4py import MPI
 from pair_scenes import two_discs
 
-from dolfinx_dem import checkpoint, meshes, runcontrol, scenes, simulation
+from dolfinx_dem import checkpoint, meshes, scenes, simulation
 from dolfinx_dem.conditions import DirichletBC
 from dolfinx_dem.contact import PairContact
 from dolfinx_dem.contact.friction import LAG
@@ -112,14 +111,7 @@ def test_friction_between_bodies_resumes_on_another_number_of_processes(tmp_path
     scene["time"]["end"] = 0.1
     scene["output"]["every"] = 1
     full = simulation.run(scene, tmp_path / "full", MPI.COMM_SELF, quiet=True)
-    calls, stop = [0], full["n_steps"] - 5
-
-    def requested(self):
-        calls[0] += 1
-        self.signal = signal.SIGINT if calls[0] >= stop else 0
-        return calls[0] >= stop
-
-    monkeypatch.setattr(runcontrol.Interrupts, "requested", requested)
+    stop_after(monkeypatch, full["n_steps"] - 5)
     assert simulation.run(scene, tmp_path / "parts", MPI.COMM_SELF, quiet=True)["status"] == "interrupted"
     monkeypatch.undo()
     root = tmp_path / "parts" / checkpoint.DIRECTORY

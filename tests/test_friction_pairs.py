@@ -3,14 +3,14 @@ non-negative dissipation at every step, the total momentum, a block sliding on a
 mu g, a block held by friction on it without creep, the rounds (a lone pair, a chain, the cap), the
 same results on 1, 2 and 3 processes, mu = 0 as frictionless, and the errors."""
 
-import signal
 
 import numpy as np
 import pytest
+from helpers import stop_after
 from mpi4py import MPI
 from pair_scenes import SOFT, two_discs
 
-from dolfinx_dem import meshes, model, runcontrol, scenes, simulation
+from dolfinx_dem import meshes, model, scenes, simulation
 from dolfinx_dem.conditions import DirichletBC
 from dolfinx_dem.contact import PairContact, pair_friction
 from dolfinx_dem.contact.pair_friction import PairFriction
@@ -298,15 +298,9 @@ def test_a_scene_with_friction_between_bodies_reports_it_and_resumes_bit_identic
     assert full["friction_negative_normal_fraction"] == 0.0
 
     # interrupted while the disks still slide, after the steps of the most rounds
-    calls, stop = [0], full["n_steps"] - 3
+    stop = full["n_steps"] - 3
     assert series["dissipation"][stop] > series["dissipation"][stop - 1]
-
-    def requested(self):
-        calls[0] += 1
-        self.signal = signal.SIGINT if calls[0] >= stop else 0
-        return calls[0] >= stop
-
-    monkeypatch.setattr(runcontrol.Interrupts, "requested", requested)
+    stop_after(monkeypatch, stop)
     assert simulation.run(scene, tmp_path / "parts", MPI.COMM_WORLD, quiet=True)["status"] == "interrupted"
     monkeypatch.undo()
     resumed = simulation.resume(tmp_path / "parts", MPI.COMM_WORLD, quiet=True)
