@@ -313,13 +313,15 @@ def page(results: dict, chart_name: str | None = None) -> str:
               "from the first to the last step (\"-\": not recorded for that run)."]
     lines += fem_tables(results) + findings(results)
     if chart_name:
-        lines += [f"![work-precision]({chart_name})", "", work_precision_sentence(results, chart_name)]
+        lines += [""] * (lines[-1] != "") + [f"![work-precision]({chart_name})", "",
+                                              work_precision_sentence(results, chart_name)]
     return "\n".join(lines) + "\n"
 
 
 def work_precision_sentence(results: dict, chart_name: str) -> str:
     """What the chart shows, from the study's finest level common to the methods."""
     ref, runs = results["hertz"], [r for r in results["runs"] if study(r)]
+    runs = runs or [r for r in results["runs"] if "error" not in r]  # no run of the study: every run
     common = min(r["refine_h"] for r in runs if r["method"] == "fem-P1") if any(
         r["method"] == "fem-P1" for r in runs) else min(r["refine_h"] for r in runs)
     at = sorted((r for r in runs if r["refine_h"] == common), key=lambda r: r["wall_s"])
