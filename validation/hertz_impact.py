@@ -277,9 +277,9 @@ def findings(results: dict) -> list[str]:
               "the same levels) on the same bulk mesh (h = 0.03 m)" + "".join(finer(r) for r in bulk)
               + ("" if fem_bulk else "; fem-P1 with a finer bulk is not measured")
               + ". Whether the shortfall both share is Hertz's half-space and parabolic-profile assumptions (a / R "
-              f"= {ref['contact_radius'] / R:.2f}) or the discretisation, fem-P1 at another speed "
-              + ("" if fem_bulk else "or with a finer bulk ")
-              + "would tell: not measured (hertz_impact_slow.md has the DEM's at v/c = 0.01).", "",
+              f"= {ref['contact_radius'] / R:.2f}) or the discretisation is not settled by these runs"
+              + ("" if fem_bulk else " (fem-P1 with a finer bulk is not measured)")
+              + "; hertz_impact_slow.md has runs at half the speed, discussed in contact3d.md.", "",
               "**Energy.** fem-P1 is not energy-exact: its pseudo-energy changed by "
               + ", ".join(f"{fem[h]['energy_end']:+.1e} at {h:g} m" for h in levels if "energy_end" in fem[h])
               + f" from before to after the impact; the DEM's largest drift is {max(r['drift'] for r in dem):.0e}. "
