@@ -12,8 +12,9 @@ import pytest
 from helpers import CLI, mpi_env, stop_after
 from mpi4py import MPI
 from pair_scenes import two_discs
+from test_friction_pairs import oblique_scene
 
-from dolfinx_dem import checkpoint, meshes, scenes, simulation
+from dolfinx_dem import checkpoint, meshes, simulation
 from dolfinx_dem.conditions import DirichletBC
 from dolfinx_dem.contact import PairContact
 from dolfinx_dem.contact.friction import LAG
@@ -104,12 +105,7 @@ def test_friction_between_bodies_resumes_on_another_number_of_processes(tmp_path
     before its end while they slide, on one process (the checkpoint holds the pairs' Ntilde in its
     cells' file), resumed on two: the series within 1e-12 of the uninterrupted run's (energies
     against the kinetic energy, the friction force against its largest)."""
-    scene = scenes.load("two-disks")
-    scene["mesh"]["h"] = 0.03
-    scene["contact"]["friction"] = 0.3
-    scene["initial"]["velocity"] = ["where(x < 0.25, 0.3, -0.3)", "where(x < 0.25, 0.1, -0.1)"]
-    scene["time"]["end"] = 0.1
-    scene["output"]["every"] = 1
+    scene = oblique_scene()
     full = simulation.run(scene, tmp_path / "full", MPI.COMM_SELF, quiet=True)
     stop_after(monkeypatch, full["n_steps"] - 5)
     assert simulation.run(scene, tmp_path / "parts", MPI.COMM_SELF, quiet=True)["status"] == "interrupted"

@@ -31,6 +31,18 @@ def oblique(x):
     return np.stack([np.where(left, 0.3, -0.3), np.where(left, 0.1, -0.1)], axis=1)
 
 
+def oblique_scene() -> dict:
+    """The two-disks scene (h = 0.03, to 0.1 s, every step written) with the disks meeting obliquely
+    and mu = 0.3 between them."""
+    scene = scenes.load("two-disks")
+    scene["mesh"]["h"] = 0.03
+    scene["contact"]["friction"] = 0.3
+    scene["initial"]["velocity"] = ["where(x < 0.25, 0.3, -0.3)", "where(x < 0.25, 0.1, -0.1)"]
+    scene["time"]["end"] = 0.1
+    scene["output"]["every"] = 1
+    return scene
+
+
 def run_discs(mu, steps, comm=MPI.COMM_WORLD, scheme="B"):
     """The two disks of paper §5.3 (h = 0.03) meeting obliquely with friction ``mu``: the
     diagnostics of every step, and the stepper."""
@@ -281,12 +293,7 @@ def test_a_scene_with_friction_between_bodies_reports_it_and_resumes_bit_identic
     ``dissipation``, ``balance`` (to 1e-13 of the kinetic energy), the tangential force between
     the bodies and the slipping pairs; interrupted while they slide and resumed, the run writes
     the same bytes and its summary the whole run's friction counters."""
-    scene = scenes.load("two-disks")
-    scene["mesh"]["h"] = 0.03
-    scene["contact"]["friction"] = 0.3
-    scene["initial"]["velocity"] = ["where(x < 0.25, 0.3, -0.3)", "where(x < 0.25, 0.1, -0.1)"]
-    scene["time"]["end"] = 0.1
-    scene["output"]["every"] = 1
+    scene = oblique_scene()
     full = simulation.run(scene, tmp_path / "full", MPI.COMM_WORLD, quiet=True)
     series = np.genfromtxt(tmp_path / "full" / "series.csv", delimiter=",", names=True)
     assert {"dissipation", "balance", "friction_force_0_1_x", "friction_force_0_1_y",

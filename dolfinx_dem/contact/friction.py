@@ -44,7 +44,10 @@ contact model checkpoints it with the cells (rigid.RigidContact.cell_state).
 from __future__ import annotations
 
 import numpy as np
+from mpi4py import MPI
 from petsc4py import PETSc
+
+from dolfinx_dem.errors import InputError
 
 #: Slip speeds up to this fraction of the sum of a cell's velocities' sizes are rounding (a stuck
 #: cell's tangential velocity is the rounding of v + 2 M^-1 (I + tau) = 0): the cell counts as stuck.
@@ -147,3 +150,33 @@ class CellFriction:
         self.slipping = int(self.slip.sum())
         self.forces /= state.dt
         return dissipation
+
+
+def cell_friction(contact, mu: list[float], obstacle: np.ndarray) -> CellFriction | None:
+    """The friction of a rigid contact model ``contact`` (its candidates ``facets``, ``cells``,
+    ``normals``, the first ``num_own`` its own) whose obstacles have the coefficients ``mu``,
+    ``obstacle`` the obstacle of each candidate; None without friction. An InputError where the
+    law does not apply: scheme B candidates, a prescribed body's facets (collective)."""
+    dem, comm, d, n = contact.dem, contact.comm, contact.d, len(mu)
+    rec, geom = dem.reconstruction, dem.geometry
+    mu = np.asarray(mu)[obstacle]
+    # scheme B chosen for the candidates (dem-B, dem-AB); scheme A's own fallback to scheme B on
+    # cells with several Neumann facets (corners and edges, reconstruction.py) is kept
+    scheme_b = (mu > 0) & ~np.isin(contact.facets, rec.scheme_a_facets) & ~np.isin(contact.cells,
+                                                                                   rec.multi_neumann_cells)
+    k = comm.allreduce(int(obstacle[scheme_b].min(initial=n)), op=MPI.MIN)
+    if k < n:  # on every process
+        raise InputError(
+            f"obstacle {k}: friction needs scheme A candidates (method dem-A): with scheme B the facets' normal "
+            "reactions change sign from one facet to the next, and a Coulomb bound on each over-counts the normal "
+            "force (docs/theory.md, Friction on rigid obstacles)")
+    own = slice(0, contact.num_own)
+    prescribed = (mu[own] > 0) & np.isin(contact.cells[own] * d, dem.prescribed.dofs)
+    k = comm.allreduce(int(obstacle[own][prescribed].min(initial=n)), op=MPI.MIN)
+    if k < n:  # their cells have no mass for the law to stop: an error, not no friction
+        raise InputError(f"obstacle {k}: friction on a prescribed body's facets is not implemented (its motion is "
+                         "given; remove the facets from the candidates or the friction)")
+    if not comm.allreduce(bool((mu > 0).any()), op=MPI.LOR):
+        return None
+    lag = LAG * geom.facet_diameters[contact.facets[own]] / dem.materials.wave_speed(d, contact.cells[own])
+    return CellFriction(d, contact.cells[own], contact.normals[own], mu[own], lag, obstacle[own], n)

@@ -142,16 +142,16 @@ class PairFriction:
         self._scatter.add(values.ravel(), self._work)
         return self._scatter.gather(self._work).reshape(-1, self.d)
 
-    def _handled_normals(self, part: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    def _handled_normals(self, part: np.ndarray, keys: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(the listed pairs this process handles, their N_p): its own parts and those the other
-        processes that list them send (one alltoall of the nonzero parts)."""
+        processes that list them send (one alltoall of the nonzero parts; ``keys``: the listed
+        pairs' keys)."""
         pc = self.contact
         L, F = pc.listed, pc.facets_all
         owner = F.owner[L.i]
         handled = np.flatnonzero(owner == self.comm.rank)
         normal = part[handled].copy()
         if self.comm.size > 1:
-            keys = pc.pair_keys()
             send = np.flatnonzero((part != 0) & (owner != self.comm.rank))
             outgoing = [(keys[send[owner[send] == r]], part[send[owner[send] == r]]) for r in range(self.comm.size)]
             mine = keys[handled]
@@ -173,15 +173,15 @@ class PairFriction:
             raise StateError("pair friction needs the normal impulses of the step's force integral (the midpoint "
                              "quadrature's exact integral, MEMM)")
         part, self._normal = self._normal, None
-        L = pc.listed
+        L, keys = pc.listed, pc.pair_keys()
         if self._quiet:  # no pair touches during the step on any process: every N_p is 0
             handled = np.flatnonzero(pc.facets_all.owner[L.i] == self.comm.rank)
             normal = np.zeros(len(handled))
         else:
-            handled, normal = self._handled_normals(part)
+            handled, normal = self._handled_normals(part, keys)
             self.normal_sums += [normal[normal > 0].sum(), -normal[normal < 0].sum()]
-        lagged = self.lag.update(pc.pair_keys()[handled], L.i[handled], normal, state.dt)
-        if self._quiet and not self.lag.active():  # on every process
+        lagged = self.lag.update(keys[handled], L.i[handled], normal, state.dt)
+        if self._quiet and not self.lag.active:  # on every process
             self.forces[:], self.slipping = 0.0, 0
             return 0.0
         self._cells()

@@ -52,6 +52,7 @@ class PairLag:
         self.comm, self.d, self.n_owned = contact.comm, contact.d, dem.n_owned
         self.keys, self.values = np.zeros(0, dtype=np.int64), np.zeros(0)  # sorted by key
         self.started = False
+        self.active = False  # whether a pair of any process has a lagged normal force (``update``)
 
     def update(self, keys: np.ndarray, facet: np.ndarray, normal: np.ndarray, dt: float) -> np.ndarray:
         """The lagged normal forces of the handled pairs ``keys`` (their own facets i ``facet``) after
@@ -66,14 +67,11 @@ class PairLag:
             lagged, self.started = force, True
         top = self.comm.allreduce(float(lagged.max(initial=0.0)), op=MPI.MAX)
         lagged[lagged < TAIL_END * top] = 0.0
+        self.active = top > 0.0  # a pair of some process has a bound (the largest is kept)
         keep = np.flatnonzero(lagged > 0)
         order = keep[np.argsort(keys[keep])]
         self.keys, self.values = keys[order], lagged[order]
         return lagged
-
-    def active(self) -> bool:
-        """Whether a pair of any process has a lagged normal force (collective)."""
-        return self.comm.allreduce(bool(len(self.keys)), op=MPI.LOR)
 
     def table(self) -> np.ndarray:
         """The state at the own cells (collective): (n_owned, d + 1, k, 2), row c, column j for the

@@ -36,7 +36,7 @@ from petsc4py import PETSc
 
 from dolfinx_dem.conditions import facet_indices
 from dolfinx_dem.contact import candidates
-from dolfinx_dem.contact.friction import LAG, CellFriction
+from dolfinx_dem.contact.friction import cell_friction
 from dolfinx_dem.contact.patch import PatchScatter
 from dolfinx_dem.contact.rigid_statics import RigidStatics
 from dolfinx_dem.errors import InputError
@@ -222,29 +222,8 @@ class RigidContact:
             own_row=own_rows.astype(np.int8), elastic=self._is_elastic_row.astype(np.int8))
         self._arena = arena()
         self._patch_force = np.zeros(len(self.scatter))
-        mu = np.array([float(ob.friction) for ob in obstacles])[obstacle]
-        # scheme B chosen for the candidates (dem-B, dem-AB); scheme A's own fallback to scheme B on
-        # cells with several Neumann facets (corners and edges, reconstruction.py) is kept
-        scheme_b = (mu > 0) & ~np.isin(self.facets, rec.scheme_a_facets) & ~np.isin(self.cells, rec.multi_neumann_cells)
-        k = self.comm.allreduce(int(obstacle[scheme_b].min(initial=len(obstacles))), op=MPI.MIN)
-        if k < len(obstacles):  # on every process
-            raise InputError(
-                f"obstacle {k}: friction needs scheme A candidates (method dem-A): with scheme B the facets' normal "
-                "reactions change sign from one facet to the next, and a Coulomb bound on each over-counts the normal "
-                "force (docs/theory.md, Friction on rigid obstacles)")
-        own = slice(0, self.num_own)
-        prescribed = (mu[own] > 0) & np.isin(self.cells[own] * d, dem.prescribed.dofs)
-        k = self.comm.allreduce(int(obstacle[own][prescribed].min(initial=len(obstacles))), op=MPI.MIN)
-        if k < len(obstacles):  # their cells have no mass for the law to stop: an error, not no friction
-            raise InputError(f"obstacle {k}: friction on a prescribed body's facets is not implemented (its motion is "
-                             "given; remove the facets from the candidates or the friction)")
         #: Coulomb friction on the own facets' cells (None: frictionless), contact/friction.py
-        self.friction = None
-        if self.comm.allreduce(bool((mu > 0).any()), op=MPI.LOR):
-            own = slice(0, self.num_own)
-            lag = LAG * geom.facet_diameters[self.facets[own]] / dem.materials.wave_speed(d, self.cells[own])
-            self.friction = CellFriction(d, self.cells[own], self.normals[own], mu[own], lag, obstacle[own],
-                                         self.num_obstacles)
+        self.friction = cell_friction(self, [float(ob.friction) for ob in obstacles], obstacle)
         self._normal_impulse = np.zeros(self.num_own)  # of the last force integral, for the friction
         self._grad_weights = (
             geom.facet_area_normals[self.cells, geom.facet_local[self.facets, 0]] / geom.cell_volumes[self.cells, None]
