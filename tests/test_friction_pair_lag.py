@@ -19,6 +19,7 @@ from dolfinx_dem.conditions import DirichletBC
 from dolfinx_dem.contact import PairContact
 from dolfinx_dem.contact.friction import LAG
 from dolfinx_dem.discretisation import DEMDiscretisation
+from dolfinx_dem.errors import CheckpointError
 from dolfinx_dem.material import ElasticMaterial
 from dolfinx_dem.memm import MEMM
 from dolfinx_dem.problem import DEMProblem
@@ -57,6 +58,8 @@ def test_the_pairs_bound_follows_their_normal_force_through_the_rebuilds():
     fresh.restore_cell_state({"friction_pairs": table})
     assert np.array_equal(fresh.friction.lag.keys, lag.keys) and np.array_equal(fresh.friction.lag.values, lag.values)
     assert fresh.friction.lag.started
+    with pytest.raises(CheckpointError, match="stored state has the shape"):  # not this model's table
+        fresh.restore_cell_state({"friction_pairs": table[:, :2]})
 
     big = lag.update(keys, facet, np.array([1e20, 0.0, 0.0, 0.0]) * dt, dt)
     assert big[0] > 1e18 and (big[1:] == 0.0).all() and np.array_equal(lag.keys, keys[:1])
