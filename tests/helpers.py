@@ -1,8 +1,10 @@
 """Helpers shared by the test modules (tests/ is on sys.path under pytest's default import mode)."""
 
+import contextlib
 import os
 import pathlib
 import signal
+import subprocess
 import sys
 import time
 
@@ -42,6 +44,48 @@ def cell_vector(dem, field):
 
 #: The dolfinx-dem script of this Python's environment.
 CLI = str(pathlib.Path(sys.executable).parent / "dolfinx-dem")
+
+
+#: Wall time (s) a command run by a test may take: below a test's own limit (conftest.TEST_LIMIT),
+#: so that a command that hangs (an ``mpirun`` that does not return) fails its own test.
+SUBPROCESS_LIMIT = 600
+
+
+def _state(pid: int) -> str:
+    """A process's name and state from /proc (R running, S sleeping, Z exited), "gone" if none."""
+    try:
+        stat = pathlib.Path(f"/proc/{pid}/stat").read_text()
+    except FileNotFoundError:
+        return "gone"
+    name, rest = stat[stat.index("(") + 1:stat.rindex(")")], stat[stat.rindex(")") + 2:]
+    return f"{name} {rest[0]}"
+
+
+def run_command(args, timeout=SUBPROCESS_LIMIT, check=False, capture_output=False, input=None,
+                **kwargs) -> subprocess.CompletedProcess:
+    """``subprocess.run`` with a time limit: past it, the command and every process below it
+    (an mpirun's ranks) are killed and the test fails, naming them and their states (an mpirun
+    whose ranks have all exited is Open MPI's hang, a rank running is ours)."""
+    if capture_output:
+        kwargs["stdout"] = kwargs["stderr"] = subprocess.PIPE
+    if input is not None:
+        kwargs["stdin"] = subprocess.PIPE
+    with subprocess.Popen(args, **kwargs) as process:
+        try:
+            stdout, stderr = process.communicate(input, timeout=timeout)
+        except subprocess.TimeoutExpired:
+            left = [process.pid, *descendants(process.pid)]
+            states = {pid: _state(pid) for pid in left}
+            for pid in reversed(left):
+                with contextlib.suppress(ProcessLookupError):
+                    os.kill(pid, signal.SIGKILL)
+            process.communicate()
+            raise AssertionError(f"still running after {timeout:g} s, killed: {' '.join(map(str, args))}; "
+                                 f"its processes then: {states}") from None
+    result = subprocess.CompletedProcess(args, process.returncode, stdout, stderr)
+    if check:
+        result.check_returncode()
+    return result
 
 
 def mpi_env(**extra):
@@ -88,6 +132,16 @@ def children(pid: int) -> list[int]:
     for task in pathlib.Path(f"/proc/{pid}/task").iterdir():
         out += [int(c) for c in (task / "children").read_text().split()]
     return out
+
+
+def descendants(pid: int) -> list[int]:
+    """Process ids of every process below ``pid`` (children first); those that end meanwhile are
+    left out."""
+    try:
+        direct = children(pid)
+    except (FileNotFoundError, ProcessLookupError):
+        return []
+    return direct + [d for c in direct for d in descendants(c)]
 
 
 def stop_after(monkeypatch, at: int, first: int = 0, crash: bool = False):

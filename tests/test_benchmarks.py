@@ -9,10 +9,10 @@ import json
 import os
 import pathlib
 import shutil
-import subprocess
 import sys
 
 import pytest
+from helpers import run_command
 
 ROOT = pathlib.Path(__file__).resolve().parent.parent
 VALIDATION = ROOT / "docs" / "validation"
@@ -24,7 +24,7 @@ pytestmark = pytest.mark.slow
 
 def _quick(script, *args, timeout=300):
     """Run ``script`` (a path from the repository root) with ``--quick`` and ``args``."""
-    proc = subprocess.run([sys.executable, str(ROOT / script), "--quick", *args],
+    proc = run_command([sys.executable, str(ROOT / script), "--quick", *args],
                           capture_output=True, text=True, timeout=timeout, cwd=ROOT)
     assert proc.returncode == 0, proc.stderr
     return proc
@@ -300,13 +300,13 @@ def test_the_run_comparison_tools_of_contact3d_md(tmp_path):
 
     scene = scenes.load("two-balls", {"mesh.h": 0.06, "time.end": 0.05})
     assert simulation.run(scene, tmp_path / "run", MPI.COMM_SELF, quiet=True)["status"] == "completed"
-    proc = subprocess.run([sys.executable, str(ROOT / "validation" / "compare_series.py"), str(tmp_path / "run"),
+    proc = run_command([sys.executable, str(ROOT / "validation" / "compare_series.py"), str(tmp_path / "run"),
                            str(tmp_path / "run"), "--speed", "0.3"], capture_output=True, text=True, timeout=60)
     assert proc.returncode == 0, proc.stderr
     report = json.loads(proc.stdout)
     assert {"kinetic", "contact_force", "penetration", "momentum_x"} <= set(report["columns"])
     assert all(c["max_abs_diff"] == 0 for c in report["columns"].values())
-    proc = subprocess.run([sys.executable, str(ROOT / "validation" / "body_momenta.py"), str(tmp_path / "run"),
+    proc = run_command([sys.executable, str(ROOT / "validation" / "body_momenta.py"), str(tmp_path / "run"),
                            "--rho", "100"], capture_output=True, text=True, timeout=60,
                           env={**os.environ, "PYVISTA_OFF_SCREEN": "true"})
     assert proc.returncode == 0, proc.stderr

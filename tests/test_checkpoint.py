@@ -22,7 +22,7 @@ import subprocess
 
 import numpy as np
 import pytest
-from helpers import CLI, children, mpi_env, series_rows, stop_after, wait_for
+from helpers import CLI, children, mpi_env, run_command, series_rows, stop_after, wait_for
 from mpi4py import MPI
 
 from dolfinx_dem import checkpoint, cli, io, model, scenes, simulation
@@ -109,7 +109,7 @@ def test_a_run_stopped_on_one_process_resumes_on_two(name, tmp_path, monkeypatch
     simulation.run(scene, tmp_path / "full", MPI.COMM_SELF, quiet=True)
     stop_after(monkeypatch, n // 2)
     assert simulation.run(scene, tmp_path / "parts", MPI.COMM_SELF, quiet=True)["status"] == "interrupted"
-    subprocess.run(["mpirun", "-n", "2", "--oversubscribe", CLI, "resume", str(tmp_path / "parts"), "--quiet"],
+    run_command(["mpirun", "-n", "2", "--oversubscribe", CLI, "resume", str(tmp_path / "parts"), "--quiet"],
                    check=True, env=mpi_env())
     _close(_series(tmp_path / "full" / "series.csv"), _series(tmp_path / "parts" / "series.csv"))
     assert json.loads((tmp_path / "parts" / "summary.json").read_text())["processes"] == 2
@@ -128,8 +128,8 @@ def test_a_run_stopped_on_two_processes_resumes_on_one(tmp_path):
     assert process.wait(timeout=120) == 130
     stopped = json.loads((tmp_path / "parts" / "summary.json").read_text())["n_steps"]
     assert 50 <= stopped < 1200
-    subprocess.run([CLI, "resume", str(tmp_path / "parts"), "--quiet"], check=True, env=mpi_env())
-    subprocess.run([CLI, *args, "--out", str(tmp_path / "full")], check=True, env=mpi_env())
+    run_command([CLI, "resume", str(tmp_path / "parts"), "--quiet"], check=True, env=mpi_env())
+    run_command([CLI, *args, "--out", str(tmp_path / "full")], check=True, env=mpi_env())
     _close(_series(tmp_path / "full" / "series.csv"), _series(tmp_path / "parts" / "series.csv"))
 
 
@@ -158,8 +158,8 @@ def test_a_killed_run_resumes_from_its_last_checkpoint_bit_identical(tmp_path):
     rows = series_rows(out / "series.csv")
     assert step % 50 == 0 and rows >= step + 1  # (usually rows after the checkpoint, to be dropped)
     end = f"time.end={(rows + 40) * 0.0025!r}"  # past the rows the killed run wrote
-    subprocess.run([CLI, "resume", str(out), "--set", end, "--quiet"], check=True, env=mpi_env())
-    subprocess.run([CLI, "run", "bar-impact", "--set", end, *sets, "--out", str(tmp_path / "full"), "--quiet"],
+    run_command([CLI, "resume", str(out), "--set", end, "--quiet"], check=True, env=mpi_env())
+    run_command([CLI, "run", "bar-impact", "--set", end, *sets, "--out", str(tmp_path / "full"), "--quiet"],
                    check=True, env=mpi_env())
     assert (out / "series.csv").read_bytes() == (tmp_path / "full" / "series.csv").read_bytes()
     assert xdmf_times(out / "solution.xdmf") == xdmf_times(tmp_path / "full" / "solution.xdmf")

@@ -9,6 +9,7 @@ import subprocess
 import sys
 
 import pytest
+from helpers import run_command
 from mpi4py import MPI
 
 from dolfinx_dem import cli
@@ -25,24 +26,24 @@ def _snapshot(folder: pathlib.Path) -> dict:
 @pytest.mark.slow
 @pytest.mark.skip_in_parallel
 def test_cli(tmp_path):
-    listing = subprocess.run([CLI, "list"], capture_output=True, text=True, check=True).stdout
+    listing = run_command([CLI, "list"], capture_output=True, text=True, check=True).stdout
     assert {"bar-wave", "cantilever", "block", "bar-impact", "bar-bounce"} <= {
         line.split()[0] for line in listing.splitlines()}
 
     missing = tmp_path / "scene.toml"
     missing.write_text('[mesh]\ntype = "file"\npath = "nope.msh"\n[material]\nE = 1.0\nnu = 0.3\n'
                        'rho = 1.0\n[time]\nend = 1.0\ndt = 0.1\n')
-    r = subprocess.run([CLI, "run", str(missing), "--out", str(tmp_path / "m")], capture_output=True, text=True)
+    r = run_command([CLI, "run", str(missing), "--out", str(tmp_path / "m")], capture_output=True, text=True)
     assert r.returncode == 2 and "nope.msh" in r.stderr
 
-    r = subprocess.run([CLI, "run", "no-such-scene"], capture_output=True, text=True)
+    r = run_command([CLI, "run", "no-such-scene"], capture_output=True, text=True)
     assert r.returncode == 2 and "unknown scene 'no-such-scene'" in r.stderr
 
-    r = subprocess.run([CLI, "run", "bar-wave", "--set", "mesh.n=20", "--set", "time.end=0.2",
+    r = run_command([CLI, "run", "bar-wave", "--set", "mesh.n=20", "--set", "time.end=0.2",
                         "--out", str(tmp_path / "ok")], capture_output=True, text=True, check=True)
     assert "results in" in r.stdout
     assert json.loads((tmp_path / "ok" / "summary.json").read_text())["n_cells"] == 20
-    r = subprocess.run([CLI, "show", str(tmp_path / "ok")], capture_output=True, text=True, check=True)
+    r = run_command([CLI, "show", str(tmp_path / "ok")], capture_output=True, text=True, check=True)
     assert (tmp_path / "ok" / "energies.png").stat().st_size > 0
     assert (tmp_path / "ok" / "series.png").stat().st_size > 0
 
@@ -117,7 +118,7 @@ def test_a_folder_holding_a_run_needs_overwrite_and_keeps_no_stale_file(tmp_path
 def test_show_survives_a_closed_pipe_and_says_what_a_folder_holds(tmp_path):
     """``dolfinx-dem show DIR | head -3`` crashed: PETSc caught SIGPIPE and aborted MPI."""
     out = tmp_path / "out"
-    subprocess.run([CLI, "run", "bar-wave", "--set", "time.end=0.05", "--out", str(out), "--quiet"], check=True)
+    run_command([CLI, "run", "bar-wave", "--set", "time.end=0.05", "--out", str(out), "--quiet"], check=True)
     process = subprocess.Popen([CLI, "show", str(out)], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     process.stdout.close()  # the reader has gone before the first line
     stderr = process.stderr.read()
@@ -126,7 +127,7 @@ def test_show_survives_a_closed_pipe_and_says_what_a_folder_holds(tmp_path):
     assert (out / "energies.png").stat().st_size > 0 and (out / "series.png").stat().st_size > 0
     (out / "INCOMPLETE").write_text("")
     (out / "error.txt").write_text("boom")
-    shown = subprocess.run([CLI, "show", str(out)], capture_output=True, text=True, check=True).stdout
+    shown = run_command([CLI, "show", str(out)], capture_output=True, text=True, check=True).stdout
     assert shown.startswith(f"INCOMPLETE: this run did not finish (it failed, see {out / 'error.txt'})")
 
 
@@ -150,7 +151,7 @@ def test_an_error_on_one_process_only_aborts_instead_of_hanging(tmp_path):
         OMPI_ALLOW_RUN_AS_ROOT_CONFIRM="1",
         OMPI_MCA_btl_vader_single_copy_mechanism="none",
     )
-    r = subprocess.run(
+    r = run_command(
         ["mpirun", "-n", "2", "--oversubscribe", sys.executable, str(script)],
         capture_output=True,
         text=True,

@@ -34,11 +34,11 @@ import importlib.util
 import os
 import pathlib
 import shutil
-import subprocess
 import sys
 
 import numpy as np
 import pytest
+from helpers import run_command
 from mpi4py import MPI
 
 DEMO_DIR = pathlib.Path(__file__).resolve().parent.parent / "demos"
@@ -77,7 +77,7 @@ def test_demos_exist():
 @pytest.mark.parametrize("demo", DEMOS, ids=[d.stem for d in DEMOS])
 def test_demo_serial(demo, tmp_path):
     command = [sys.executable, str(demo)]
-    result = subprocess.run(command, cwd=tmp_path, env=_environment(QUICK), capture_output=True,
+    result = run_command(command, cwd=tmp_path, env=_environment(QUICK), capture_output=True,
                             text=True, timeout=TIMEOUT)
     _check(result, command)
 
@@ -89,7 +89,7 @@ def test_demo_mpi(demo, tmp_path):
     if mpirun is None:
         pytest.skip("mpirun not found (Debian package openmpi-bin)")
     command = [mpirun, "-n", "2", "--oversubscribe", sys.executable, str(demo)]
-    result = subprocess.run(command, cwd=tmp_path, env=_environment({**QUICK, **MPI_ENV}),
+    result = run_command(command, cwd=tmp_path, env=_environment({**QUICK, **MPI_ENV}),
                             capture_output=True, text=True, timeout=TIMEOUT)
     _check(result, command)
 

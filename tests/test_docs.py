@@ -10,10 +10,10 @@ import pathlib
 import re
 import shlex
 import shutil
-import subprocess
 import sys
 
 import pytest
+from helpers import run_command
 from mpi4py import MPI
 
 from dolfinx_dem import cli, scenes, simulation
@@ -162,7 +162,7 @@ def test_the_hertz3d_pages_are_their_json_rendered(script, page, tmp_path):
     for name in ("hertz3d.json", "hertz3d_diagnostics.json"):
         shutil.copy(validation / name, tmp_path / name)
     out = tmp_path / page.replace(".md", ".json")
-    proc = subprocess.run(
+    proc = run_command(
         [sys.executable, str(ROOT / "validation" / script), "--render", "--out", str(out)],
         capture_output=True,
         text=True,

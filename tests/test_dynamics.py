@@ -3,11 +3,11 @@ that stops on instability with its outputs marked, and the energy balance of a m
 
 import json
 import pathlib
-import subprocess
 import sys
 
 import numpy as np
 import pytest
+from helpers import run_command
 from mpi4py import MPI
 
 from dolfinx_dem import io, scenes, simulation
@@ -54,7 +54,7 @@ def test_stable_step_from_the_bound_or_the_eigenvalue(tmp_path):
 def test_a_moving_boundary_is_reported_as_not_conservative(tmp_path):
     """Before: "pseudo-energy drift 1.00e+00", read as a failure. The data's work W^n is counted
     (series columns work, balance): the balance E^n - W^n holds to rounding."""
-    r = subprocess.run([CLI, "run", "bar-wave", "--set", "time.end=0.1", "--set",
+    r = run_command([CLI, "run", "bar-wave", "--set", "time.end=0.1", "--set",
                         'dirichlet=[{boundary="left", value=["0.01 * t"], time_dependent=true}]', "--out",
                         str(tmp_path / "out")], capture_output=True, text=True, check=True)
     assert "not conservative (time-dependent data): energy balance error (work counted)" in r.stdout

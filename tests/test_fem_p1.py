@@ -5,11 +5,11 @@ same series on 1, 2 and 3 processes, and a clear error for what it does not run.
 import os
 import pathlib
 import re
-import subprocess
 import sys
 
 import numpy as np
 import pytest
+from helpers import run_command
 from mpi4py import MPI
 
 from dolfinx_dem import exact, meshes, model, scenes, simulation
@@ -115,7 +115,7 @@ def test_one_two_and_three_processes_give_the_same_series(name, end, tmp_path):
     data = []
     for n in (1, 2, 3):
         prefix = [] if n == 1 else ["mpirun", "-n", str(n), "--oversubscribe"]
-        subprocess.run([*prefix, CLI, "run", name, *options, "--out", str(tmp_path / str(n))], check=True, env=env)
+        run_command([*prefix, CLI, "run", name, *options, "--out", str(tmp_path / str(n))], check=True, env=env)
         data.append(_series(tmp_path / str(n) / "series.csv"))
     a = data[0]
     energy = max(np.abs(a[c]).max() for c in ("kinetic", "elastic"))

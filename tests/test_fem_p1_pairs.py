@@ -4,11 +4,11 @@ on the contact's start, end and impulse, and what it does not run is an error na
 
 import os
 import pathlib
-import subprocess
 import sys
 
 import numpy as np
 import pytest
+from helpers import run_command
 from mpi4py import MPI
 from petsc4py import PETSc
 
@@ -172,7 +172,7 @@ def test_one_two_and_three_processes_give_the_same_series(name, options, tmp_pat
     data = []
     for n in (1, 2, 3):
         prefix = [] if n == 1 else ["mpirun", "-n", str(n), "--oversubscribe"]
-        subprocess.run([*prefix, CLI, "run", name, *sets, "--quiet", "--out", str(tmp_path / str(n))], check=True,
+        run_command([*prefix, CLI, "run", name, *sets, "--quiet", "--out", str(tmp_path / str(n))], check=True,
                        env=env)
         data.append(np.genfromtxt(tmp_path / str(n) / "series.csv", delimiter=",", names=True))
     a = data[0]

@@ -5,11 +5,10 @@ instantaneous bound mu N_f opened the contact (docs/validation/friction_chatter.
 a checkpoint carries it to any number of processes."""
 
 import json
-import subprocess
 
 import numpy as np
 import pytest
-from helpers import CLI, mpi_env, stop_after
+from helpers import CLI, mpi_env, run_command, stop_after
 from mpi4py import MPI
 from test_friction import BLOCK, SLIDE, G, block, slide
 
@@ -91,7 +90,7 @@ def test_a_friction_run_resumes_on_another_number_of_processes(tmp_path, monkeyp
     with np.load(root / header["data"] / "cells-0.npz") as cells:
         assert cells["contact0_friction_normal_force"].shape == (len(cells["key"]), 3)
         assert cells["contact0_friction_normal_force"].max() > 0
-    subprocess.run(["mpirun", "-n", "2", "--oversubscribe", CLI, "resume", str(tmp_path / "parts"), "--quiet"],
+    run_command(["mpirun", "-n", "2", "--oversubscribe", CLI, "resume", str(tmp_path / "parts"), "--quiet"],
                    check=True, env=mpi_env())
     full, parts = (np.genfromtxt(tmp_path / p / "series.csv", delimiter=",", names=True) for p in ("full", "parts"))
     assert full.shape == parts.shape

@@ -5,11 +5,10 @@ cos t) where the instantaneous bound mu N_p did not, and is state: a checkpoint 
 number of processes."""
 
 import json
-import subprocess
 
 import numpy as np
 import pytest
-from helpers import CLI, mpi_env, stop_after
+from helpers import CLI, mpi_env, run_command, stop_after
 from mpi4py import MPI
 from pair_scenes import two_discs
 from test_friction_pairs import oblique_scene
@@ -119,7 +118,7 @@ def test_friction_between_bodies_resumes_on_another_number_of_processes(tmp_path
     assert slots[0] == 3 and slots[1] >= 1 and slots[2] == 2
     with np.load(root / header["data"] / "cells-0.npz") as cells:
         assert cells["contact0_friction_pairs"][..., 1].max() > 0
-    subprocess.run(["mpirun", "-n", "2", "--oversubscribe", CLI, "resume", str(tmp_path / "parts"), "--quiet"],
+    run_command(["mpirun", "-n", "2", "--oversubscribe", CLI, "resume", str(tmp_path / "parts"), "--quiet"],
                    check=True, env=mpi_env())
     full, parts = (np.genfromtxt(tmp_path / p / "series.csv", delimiter=",", names=True) for p in ("full", "parts"))
     assert full.shape == parts.shape

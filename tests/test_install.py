@@ -6,6 +6,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from helpers import run_command
 from mpi4py import MPI
 
 
@@ -41,17 +42,16 @@ def test_make_test_runs_the_mpi_tests_on_2_and_3_processes():
     """An odd process count finds what 2 hides (DESIGN.md): ``make test`` runs the tests marked
     ``mpi`` under mpirun -n 2 and -n 3 (it used to run -n 2 only)."""
     import shutil
-    import subprocess
 
     if shutil.which("make") is None:
         pytest.skip("make is not installed")
     root = Path(__file__).resolve().parents[1]
     # not the variables of a make that runs these tests (make test-fast passes MPI_NP=2 down)
     env = {k: v for k, v in os.environ.items() if k not in ("MAKEFLAGS", "MFLAGS", "MAKELEVEL", "MPI_NP")}
-    dry = subprocess.run(["make", "-n", "test"], cwd=root, capture_output=True, text=True, check=True, env=env).stdout
+    dry = run_command(["make", "-n", "test"], cwd=root, capture_output=True, text=True, check=True, env=env).stdout
     assert "for np in 2 3; do" in dry
     assert "mpirun -n $np --oversubscribe" in dry and '-m pytest -q -m "mpi" ' in dry
     assert "ruff check ." in dry  # the linter first
-    fast = subprocess.run(["make", "-n", "test-fast"], cwd=root, capture_output=True, text=True, check=True,
+    fast = run_command(["make", "-n", "test-fast"], cwd=root, capture_output=True, text=True, check=True,
                           env=env).stdout
     assert "for np in 2; do" in fast and '-m pytest -q -m "not slow"' in fast and '-m "mpi and (not slow)"' in fast

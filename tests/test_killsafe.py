@@ -9,11 +9,10 @@ The random kills: 20 on one process here, 10 on two and 10 on three in the slow 
 import json
 import pathlib
 import re
-import subprocess
 import sys
 
 import pytest
-from helpers import CLI, mpi_env
+from helpers import CLI, mpi_env, run_command
 
 from dolfinx_dem import cli
 
@@ -23,9 +22,9 @@ SCENE = ["bar-impact", "--set", "time.end=0.6", "--set", "output.every=4", "--ch
 
 def _kill_loop(tmp_path, processes, kills):
     out = tmp_path / "kills.json"
-    proc = subprocess.run([sys.executable, str(ROOT / "validation" / "kill_loop.py"), "--processes", *processes,
+    proc = run_command([sys.executable, str(ROOT / "validation" / "kill_loop.py"), "--processes", *processes,
                            "--kills", *kills, "--work", str(tmp_path), "--out", str(out)],
-                          capture_output=True, text=True, timeout=900, env=mpi_env(PYVISTA_OFF_SCREEN="true"))
+                          capture_output=True, text=True, timeout=800, env=mpi_env(PYVISTA_OFF_SCREEN="true"))
     assert proc.returncode == 0, proc.stdout + proc.stderr
     return json.loads(out.read_text())
 
@@ -75,17 +74,17 @@ def test_a_kill_during_a_checkpoint_keeps_the_previous_one(processes, function, 
     is in force, and the resumed run's series.csv is the uninterrupted run's, byte for byte."""
     out = tmp_path / "killed"
     mpirun = ["mpirun", "-n", str(processes), "--oversubscribe"] if processes > 1 else []
-    killed = subprocess.run([*mpirun, sys.executable, "-c", KILLER, function, str(at), str(rank), "run", *SCENE,
+    killed = run_command([*mpirun, sys.executable, "-c", KILLER, function, str(at), str(rank), "run", *SCENE,
                              "--out", str(out)], env=mpi_env(), capture_output=True, text=True, timeout=300)
     assert killed.returncode != 0
     header = json.loads((out / "checkpoint" / "checkpoint.json").read_text())
     assert header["step"] == kept
     assert len([p for p in (out / "checkpoint").iterdir() if p.is_dir()]) == 2  # the kill's leftover beside it
-    subprocess.run([*mpirun, CLI, "resume", str(out), "--quiet"], env=mpi_env(), check=True)
+    run_command([*mpirun, CLI, "resume", str(out), "--quiet"], env=mpi_env(), check=True)
     assert [p.name for p in (out / "checkpoint").iterdir() if p.is_dir()] == [
         json.loads((out / "checkpoint" / "checkpoint.json").read_text())["data"]]  # the leftover removed
     full = tmp_path / "full"
-    subprocess.run([*mpirun, CLI, "run", *SCENE, "--out", str(full)], env=mpi_env(), check=True)
+    run_command([*mpirun, CLI, "run", *SCENE, "--out", str(full)], env=mpi_env(), check=True)
     assert (out / "series.csv").read_bytes() == (full / "series.csv").read_bytes()
     times = [re.findall(r'<Time Value="([^"]+)"', (folder / "solution.xdmf").read_text()) for folder in (out, full)]
     assert times[0] == times[1] and len(set(times[0])) == 61

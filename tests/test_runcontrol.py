@@ -17,7 +17,7 @@ import subprocess
 import dolfinx.io
 import numpy as np
 import pytest
-from helpers import CLI, children, mpi_env, read_solution, series_rows, wait_for
+from helpers import CLI, children, mpi_env, read_solution, run_command, series_rows, wait_for
 from mpi4py import MPI
 
 from dolfinx_dem import cli, runcontrol
@@ -57,7 +57,7 @@ def test_a_signal_stops_a_serial_run_cleanly(signum, tmp_path):
     assert process.returncode == 130, stderr
     summary = _check_interrupted(out, 1, signal.Signals(signum).name)
     assert f"continue with: dolfinx-dem resume {out}" in stderr and "(interrupted)" in stdout
-    shown = subprocess.run([CLI, "show", str(out)], capture_output=True, text=True, check=True).stdout
+    shown = run_command([CLI, "show", str(out)], capture_output=True, text=True, check=True).stdout
     assert shown.startswith(f"INTERRUPTED: the run stopped at step {summary['n_steps']}")
 
 
@@ -97,7 +97,7 @@ def test_ctrl_c_on_mpirun_writes_the_checkpoint(tmp_path):
     process.send_signal(signal.SIGINT)
     process.communicate(timeout=120)
     assert process.returncode == 1  # mpirun's own status after SIGINT, whatever the processes return
-    version = subprocess.run(["mpirun", "--version"], capture_output=True, text=True, check=True).stdout
+    version = run_command(["mpirun", "--version"], capture_output=True, text=True, check=True).stdout
     if int(re.search(r"Open MPI\)? (\d+)\.", version).group(1)) < 5 or (out / "summary.json").is_file():
         _check_interrupted(out, 2, "SIGTERM")
         return
@@ -126,7 +126,7 @@ def test_a_killed_run_reads_back_up_to_its_last_output(tmp_path):
     assert len(velocity) == len(times)
     with dolfinx.io.XDMFFile(MPI.COMM_SELF, str(out / "solution.xdmf"), "r") as xdmf:
         assert xdmf.read_mesh(name="mesh").topology.index_map(2).size_global == 640
-    shown = subprocess.run([CLI, "show", str(out)], capture_output=True, text=True, check=True).stdout
+    shown = run_command([CLI, "show", str(out)], capture_output=True, text=True, check=True).stdout
     assert shown.startswith("INCOMPLETE: this run did not finish (it is still running, or was killed)")
 
 

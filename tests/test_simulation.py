@@ -3,11 +3,11 @@
 import json
 import os
 import pathlib
-import subprocess
 import sys
 
 import numpy as np
 import pytest
+from helpers import run_command
 from mpi4py import MPI
 
 from dolfinx_dem import io, model, scenes, simulation
@@ -70,8 +70,8 @@ def test_two_processes_give_the_same_series(name, tmp_path):
                OMPI_MCA_btl_vader_single_copy_mechanism="none")
     sets = [f"time.end={SHORT[name] * 4}"] + [f"{k}={v}" for k, v in COARSE.get(name, {}).items()]
     options = [x for s in sets for x in ("--set", s)]
-    subprocess.run([CLI, "run", name, *options, "--out", str(tmp_path / "1"), "--quiet"], check=True, env=env)
-    subprocess.run(["mpirun", "-n", "2", "--oversubscribe", CLI, "run", name, *options, "--out",
+    run_command([CLI, "run", name, *options, "--out", str(tmp_path / "1"), "--quiet"], check=True, env=env)
+    run_command(["mpirun", "-n", "2", "--oversubscribe", CLI, "run", name, *options, "--out",
                     str(tmp_path / "2"), "--quiet"], check=True, env=env)
     a, b = _series(tmp_path / "1" / "series.csv"), _series(tmp_path / "2" / "series.csv")
     assert a.shape == b.shape
@@ -99,7 +99,7 @@ def test_the_first_form_compilation_prints_no_compiler_output(tmp_path):
     also compiles the DEM's DG0 elements), which printed pages of ``INFO:root:running build_ext``
     and gcc command lines."""
     env = dict(os.environ, HOME=str(tmp_path / "home"))
-    r = subprocess.run([CLI, "run", "hertz", "--set", 'method="fem-P2"', "--set", "mesh.h=0.02", "--out",
+    r = run_command([CLI, "run", "hertz", "--set", 'method="fem-P2"', "--set", "mesh.h=0.02", "--out",
                         str(tmp_path / "out")], capture_output=True, text=True, env=env, check=True)
     assert list((tmp_path / "home" / ".cache" / "fenics").iterdir())  # it did compile
     assert r.stderr == "", r.stderr[:500]
