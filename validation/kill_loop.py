@@ -38,6 +38,8 @@ import numpy as np
 CLI = str(pathlib.Path(sys.executable).parent / "dolfinx-dem")
 SCENE = ["bar-impact", "--set", "time.end=0.6", "--set", "output.every=2", "--checkpoint-every", "4", "--quiet"]
 FIELDS = ("displacement", "velocity", "stress_xx")
+#: wall time (s) an attempt that is not killed may take to finish (the whole run takes a few seconds)
+ATTEMPT_LIMIT = 300
 ENV = dict(os.environ, OMPI_ALLOW_RUN_AS_ROOT="1", OMPI_ALLOW_RUN_AS_ROOT_CONFIRM="1",
            OMPI_MCA_btl_vader_single_copy_mechanism="none", OMP_NUM_THREADS="1", PYVISTA_OFF_SCREEN="true")
 
@@ -153,7 +155,7 @@ def kill_loop(folder: pathlib.Path, kills: int, processes: int, seed: int, max_d
                     header["data"]]
             counts["in_output"] += any(p.name.startswith(".") for p in (out / "solution").iterdir())
         else:
-            stderr = process.communicate()[1]
+            stderr = process.communicate(timeout=ATTEMPT_LIMIT)[1]
             check(process.returncode == 0, f"{where}: the attempt failed (exit {process.returncode}): {stderr}")
             complete(out, series, fields, where)
             counts["completed"] += 1
