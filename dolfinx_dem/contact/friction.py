@@ -36,9 +36,17 @@ with several facets with a bound takes them one after the other (rounds), each s
 impulses of the rounds before. A facet that leaves contact keeps a bound that decays as
 exp(-t / T_f): after its last contact step it can give at most mu Ntilde_f T_f more impulse.
 
-The law uses only a cell's own values and its facets' Ntilde_f (updated from their own N_f): it is
-computed where the cell is owned and does not depend on the partition. Ntilde_f is state: the
-contact model checkpoints it with the cells (rigid.RigidContact.cell_state).
+Scheme B candidates (dem-B, dem-AB): their reactions y_f . a' alternate from one facet to the
+next, and the bound of each facet's own N_f^+ over-counts the normal force. Their Ntilde_f follow
+instead the signed N'_f / dt, N'_f their neighbourhood's normal impulses spread over it
+(``Spread``, conservative), and the bound is mu max(Ntilde_f, 0): the positive part after the
+spreading and after the lag, so alternations in space and in time cancel. Any bound >= 0 keeps the
+balance and the dissipation's sign.
+
+The law uses only a cell's own values and its facets' Ntilde_f (updated from their own N_f, or for
+scheme B from their neighbours', brought by a ghost update): it is computed where the cell is owned
+and does not depend on the partition. Ntilde_f is state: the contact model checkpoints it with the
+cells (rigid.RigidContact.cell_state).
 """
 
 from __future__ import annotations
