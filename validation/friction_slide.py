@@ -42,7 +42,9 @@ suddenly applied).
 ``--scheme B`` (or ``AB``): the sliding block (mu = 0.1, 0.3 on 16 x 8 to 64 x 32 squares) and the
 held block with scheme B candidates, each sliding run with the law (the spread bound) and with the
 per-facet bound of scheme A; the sum of the facets' normal impulses' positive parts over their sum,
-and the friction impulse over mu times the normal one.
+and the friction impulse over mu times the normal one; the 3D block (mu = 0.1, 0.3 on 6 x 6 x 3 and
+12 x 12 x 6 cubes) with both bounds and with scheme A. ``--quick``: mu = 0.3 on 16 x 8 squares, held
+at tan t = 0.05, the 3D block at mu = 0.3 on 6 x 6 x 3 cubes.
 
 It writes the JSON and, next to it, the Markdown page (``--out``'s stem + .md). One process.
 """
@@ -172,13 +174,17 @@ def roll(h: float, mu: float = 0.5) -> dict:
             "rigid_dissipation": float(0.5 * m.sum() * V0**2 / 3), "wall_time_s": time.perf_counter() - start}
 
 
-def slide3d(mu: float, nx: int = 6) -> dict:
+def slide3d(mu: float, nx: int = 6, scheme: str = "A", per_facet: bool = False) -> dict:
     start = time.perf_counter()
     t, phi = np.radians(30.0), np.radians(30.0)
     along = np.array([np.cos(phi), np.sin(phi), 0.0])
     mesh, _, tags = meshes.create_box(MPI.COMM_WORLD, [0.0, 0.0, 0.0], [1.0, 1.0, 0.5], [nx, nx, nx // 2])
-    dem = DEMDiscretisation(mesh, BLOCK, "A", body_force=list(G * np.sin(t) * along + [0.0, 0.0, -G * np.cos(t)]))
-    contact = RigidContact(dem, [HalfSpace([0.0, 0.0, 0.0], [0.0, 0.0, 1.0], tags.find(meshes.ZMIN), friction=mu)])
+    base = tags.find(meshes.ZMIN)
+    dem = DEMDiscretisation(mesh, BLOCK, scheme[0], body_force=list(G * np.sin(t) * along + [0.0, 0.0, -G * np.cos(t)]),
+                            scheme_b_facets=base if scheme == "AB" else None)
+    contact = RigidContact(dem, [HalfSpace([0.0, 0.0, 0.0], [0.0, 0.0, 1.0], base, friction=mu)])
+    if per_facet:
+        contact.friction.spread = None
     stepper = MEMM(DEMProblem(dem, [contact]), 0.5 * dem.stable_time_step())
     first = stepper.initialise(dem.create_vector(), dem.create_vector())
     times, velocity, balance, dissipation, scale = [], [], [], [], first.mechanical
@@ -195,9 +201,10 @@ def slide3d(mu: float, nx: int = 6) -> dict:
     exact = G * (np.sin(t) - mu * np.cos(t)) * along
     return {"mu": mu, "cells": dem.geometry.num_cells_global, "acceleration": a.tolist(), "exact": exact.tolist(),
             "relative_error": float(np.linalg.norm(a - exact) / np.linalg.norm(exact)),
+            "along_error": float(a @ along / np.linalg.norm(exact) - 1), "nx": nx,
             "balance_error": float(np.abs(np.array(balance) - first.balance).max() / scale),
             "min_dissipation_increment": float(np.diff(np.r_[0.0, dissipation]).min()),
-            "wall_time_s": time.perf_counter() - start}
+            "scheme": scheme, "per_facet": per_facet, "wall_time_s": time.perf_counter() - start}
 
 
 def ball(h: float):
@@ -461,6 +468,10 @@ def scheme_b(args) -> dict:
     for tan in (0.05,) if args.quick else (0.05, 0.2):
         results["held"].append(run(0.5, tan, args.meshes[0], 0.3, True, args.scheme))
         print(json.dumps(results["held"][-1]), flush=True)
+    results["sliding3d"] = [slide3d(mu, nx, scheme, per_facet) for nx in ((6,) if args.quick else (6, 12))
+                            for mu in ((0.3,) if args.quick else (0.1, 0.3))
+                            for scheme, per_facet in ((args.scheme, False), (args.scheme, True), ("A", False))]
+    print(json.dumps(results["sliding3d"]), flush=True)
     return results
 
 
@@ -492,6 +503,18 @@ def page_b(results: dict) -> str:
     for r in results["held"]:
         lines.append(f"| {r['tan']:g} | {r['cells']} | {r['steps']} | {r['drift_after_first_step']:.2e} | "
                      f"{r['first_slip_step'] or 'none'} | {r['dissipation']:.2e} | {r['balance_error']:.1e} |")
+    lines += ["", "## 3D: a block sliding down a slope, 30 degrees from x (n x n x n/2 cubes of six tetrahedra)", "",
+              "The acceleration's error along the slope and its whole error's size (its components across the slope and "
+              "along the normal included), both over |g (sin t - mu cos t)|; scheme A run alongside.", "",
+              "| mu | cells | method, bound | acceleration (m/s^2) | g (sin t - mu cos t) along the slope | error along "
+              "the slope | size of the error | balance error | smallest D increment |", "|---" * 9 + "|"]
+    for r in results.get("sliding3d", []):
+        bound = "" if r["scheme"] == "A" else (", per facet" if r["per_facet"] else ", spread")
+        lines.append(f"| {r['mu']:g} | {r['cells']} | dem-{r['scheme']}{bound} | "
+                     f"({', '.join(f'{x:.4f}' for x in r['acceleration'])}) | "
+                     f"({', '.join(f'{x:.4f}' for x in r['exact'])}) | {100 * r['along_error']:+.2f} % | "
+                     f"{100 * r['relative_error']:.2f} % | {r['balance_error']:.1e} | "
+                     f"{r['min_dissipation_increment']:.1e} |")
     return "\n".join(lines) + "\n"
 
 
