@@ -152,6 +152,8 @@ validate: setup
 	$(PYTHON) validation/scheme_b.py --out docs/validation/scheme_b.json
 	$(PYTHON) validation/long_bounce.py --n 100 200 400 --out docs/validation/long_bounce.json
 	$(PYTHON) validation/friction_slide.py --out docs/validation/friction.json
+	$(PYTHON) validation/friction_slide.py --scheme B --out docs/validation/friction_scheme_b.json
+	$(PYTHON) validation/friction_slide.py --scheme AB --out docs/validation/friction_scheme_ab.json
 	$(PYTHON) validation/oblique_impact.py --out docs/validation/oblique_impact.json
 	$(PYTHON) validation/hertz_impact.py --out docs/validation/hertz_impact.json
 	$(PYTHON) validation/hertz_impact.py --levels 0.006 --methods dem-A --etas 100 --radius 0.06 --append --out docs/validation/hertz_impact.json

@@ -250,7 +250,7 @@ def _fem_problem(scene: Mapping) -> dict:
     frictional = [k for k, obstacle in enumerate(scene.get("obstacles", [])) if obstacle.get("friction", 0.0) > 0]
     if frictional:
         raise SceneError(f"scene key 'obstacles[{frictional[0]}].friction': method 'fem-P2' (the Hertz reference) "
-                         "is frictionless; statics with friction takes a DEM method (dem-A, dem-B or dem-AB)")
+                         "is frictionless; statics with friction takes method dem-A")
     mesh, loads = scene["mesh"], scene.get("loads", {})
     force = loads.get("body_force", [0.0, 0.0, 0.0])
     horizontal, f = force[:-1], -force[-1]

@@ -37,6 +37,14 @@ suddenly applied).
     .venv/bin/python validation/friction_slide.py --out docs/validation/friction.json
     .venv/bin/python validation/friction_slide.py --quick --out OUT.json   # mu = 0.1 on 16 x 8 squares,
                                                                            # the ball at h = 0.02 m
+    .venv/bin/python validation/friction_slide.py --scheme B --out docs/validation/friction_scheme_b.json
+
+``--scheme B`` (or ``AB``): the sliding block (mu = 0.1, 0.3 on 16 x 8 to 64 x 32 squares) and the
+held block with scheme B candidates, each sliding run with the law (the spread bound) and with the
+per-facet bound of scheme A; the sum of the facets' normal impulses' positive parts over their sum,
+and the friction impulse over mu times the normal one; the 3D block (mu = 0.1, 0.3 on 6 x 6 x 3 and
+12 x 12 x 6 cubes) with both bounds and with scheme A. ``--quick``: mu = 0.3 on 16 x 8 squares, held
+at tan t = 0.05, the 3D block at mu = 0.3 on 6 x 6 x 3 cubes.
 
 It writes the JSON and, next to it, the Markdown page (``--out``'s stem + .md). One process.
 """
@@ -64,19 +72,26 @@ G, MASS = 10.0, 0.5
 BLOCK = ElasticMaterial(E=1e4, nu=0.3, rho=1.0)
 
 
-def block(mu: float, gravity, nx: int) -> DEMProblem:
+def block(mu: float, gravity, nx: int, scheme: str = "A") -> DEMProblem:
     mesh, _, tags = meshes.create_rectangle(MPI.COMM_WORLD, [0.0, 0.0], [1.0, 0.5], [nx, nx // 2], "crossed")
-    dem = DEMDiscretisation(mesh, BLOCK, "A", body_force=list(BLOCK.rho * np.asarray(gravity)))
+    base = tags.find(meshes.YMIN)  # "AB": scheme A, scheme B on the candidates (method dem-AB)
+    dem = DEMDiscretisation(mesh, BLOCK, scheme[0], body_force=list(BLOCK.rho * np.asarray(gravity)),
+                            scheme_b_facets=base if scheme == "AB" else None)
     return DEMProblem(dem, [RigidContact(dem, [HalfSpace([0.0, 0.0], [0.0, 1.0], tags.find(meshes.YMIN),
                                                          friction=mu)])])
 
 
-def run(mu: float, tan: float, nx: int, t_end: float, settled: bool) -> dict:
+def run(mu: float, tan: float, nx: int, t_end: float, settled: bool, scheme: str = "A", per_facet: bool = False) -> dict:
+    """The block (``block``); with ``per_facet`` scheme B's candidates take the bound of their own
+    normal impulses, as scheme A's (the law before ``Spread``, for comparison)."""
     start = time.perf_counter()
     t = np.arctan(tan)
-    problem = block(mu, [G * np.sin(t), -G * np.cos(t)], nx)
+    problem = block(mu, [G * np.sin(t), -G * np.cos(t)], nx, scheme)
     dem, contact = problem.dem, problem.contacts[0]
-    u0 = minimise_energy(block(0.0, [0.0, -G * np.cos(t)], nx), fixed_mean=[0]).u if settled else dem.create_vector()
+    if per_facet and contact.friction is not None:
+        contact.friction.spread = None
+    u0 = (minimise_energy(block(0.0, [0.0, -G * np.cos(t)], nx, scheme), fixed_mean=[0]).u if settled
+          else dem.create_vector())
     stepper = MEMM(problem, 0.5 * dem.stable_time_step())
     first = stepper.initialise(u0, dem.create_vector())
     cells = contact.cells[: contact.num_own]
@@ -85,8 +100,16 @@ def run(mu: float, tan: float, nx: int, t_end: float, settled: bool) -> dict:
     largest = first.mechanical
     bottom, bottom_x = np.empty((n, len(cells))), np.empty((n, len(cells)))
     first_slip = None
+    normal = np.zeros(3)  # sum N_f^+, sum N_f over the facets and steps, the friction impulse along x
+    late_sums = np.zeros(3)  # sum N_f, the friction impulse and the time after 0.1 s (the fit's window)
     for k in range(n):
         diag = stepper.step()
+        impulse = contact._normal_impulse
+        normal += [np.maximum(impulse, 0.0).sum(), impulse.sum(),
+                   0.0 if contact.friction is None else -contact.friction.forces[0, 0] * stepper.dt]
+        if diag.t > 0.1:
+            late_sums += [impulse.sum(), 0.0 if contact.friction is None else -contact.friction.forces[0, 0]
+                          * stepper.dt, stepper.dt]
         times[k], mean[k], balance[k], dissipation[k] = diag.t, diag.momentum[0] / MASS, diag.balance, diag.dissipation
         largest = max(largest, diag.mechanical)
         bottom[k] = stepper.v_next.array_r.reshape(-1, 2)[cells, 0]
@@ -97,7 +120,11 @@ def run(mu: float, tan: float, nx: int, t_end: float, settled: bool) -> dict:
     out = {"mu": mu, "tan": tan, "nx": nx, "cells": dem.geometry.num_cells_global, "steps": n, "dt": stepper.dt,
            "balance_error": float(np.abs(balance - first.balance).max() / scale),
            "min_dissipation_increment": float(np.diff(np.r_[0.0, dissipation]).min()),
-           "dissipation": float(dissipation[-1]), "first_slip_step": first_slip,
+           "dissipation": float(dissipation[-1]), "first_slip_step": first_slip, "scheme": scheme,
+           "per_facet": per_facet, "normal_positive_ratio": float(normal[0] / normal[1]),
+           "friction_over_mu_n": float(normal[2] / (mu * normal[1])) if mu > 0 else 0.0,
+           "friction_over_mu_n_late": float(late_sums[1] / (mu * late_sums[0])) if mu > 0 else 0.0,
+           "normal_over_weight_late": float(late_sums[0] / (MASS * G * np.cos(t) * late_sums[2])),
            "wall_time_s": time.perf_counter() - start}
     if settled:
         out["drift_after_first_step"] = float(np.abs(bottom_x - bottom_x[0]).max())
@@ -153,13 +180,17 @@ def roll(h: float, mu: float = 0.5) -> dict:
             "rigid_dissipation": float(0.5 * m.sum() * V0**2 / 3), "wall_time_s": time.perf_counter() - start}
 
 
-def slide3d(mu: float, nx: int = 6) -> dict:
+def slide3d(mu: float, nx: int = 6, scheme: str = "A", per_facet: bool = False) -> dict:
     start = time.perf_counter()
     t, phi = np.radians(30.0), np.radians(30.0)
     along = np.array([np.cos(phi), np.sin(phi), 0.0])
     mesh, _, tags = meshes.create_box(MPI.COMM_WORLD, [0.0, 0.0, 0.0], [1.0, 1.0, 0.5], [nx, nx, nx // 2])
-    dem = DEMDiscretisation(mesh, BLOCK, "A", body_force=list(G * np.sin(t) * along + [0.0, 0.0, -G * np.cos(t)]))
-    contact = RigidContact(dem, [HalfSpace([0.0, 0.0, 0.0], [0.0, 0.0, 1.0], tags.find(meshes.ZMIN), friction=mu)])
+    base = tags.find(meshes.ZMIN)
+    dem = DEMDiscretisation(mesh, BLOCK, scheme[0], body_force=list(G * np.sin(t) * along + [0.0, 0.0, -G * np.cos(t)]),
+                            scheme_b_facets=base if scheme == "AB" else None)
+    contact = RigidContact(dem, [HalfSpace([0.0, 0.0, 0.0], [0.0, 0.0, 1.0], base, friction=mu)])
+    if per_facet:
+        contact.friction.spread = None
     stepper = MEMM(DEMProblem(dem, [contact]), 0.5 * dem.stable_time_step())
     first = stepper.initialise(dem.create_vector(), dem.create_vector())
     times, velocity, balance, dissipation, scale = [], [], [], [], first.mechanical
@@ -176,9 +207,10 @@ def slide3d(mu: float, nx: int = 6) -> dict:
     exact = G * (np.sin(t) - mu * np.cos(t)) * along
     return {"mu": mu, "cells": dem.geometry.num_cells_global, "acceleration": a.tolist(), "exact": exact.tolist(),
             "relative_error": float(np.linalg.norm(a - exact) / np.linalg.norm(exact)),
+            "along_error": float(a @ along / np.linalg.norm(exact) - 1), "nx": nx,
             "balance_error": float(np.abs(np.array(balance) - first.balance).max() / scale),
             "min_dissipation_increment": float(np.diff(np.r_[0.0, dissipation]).min()),
-            "wall_time_s": time.perf_counter() - start}
+            "scheme": scheme, "per_facet": per_facet, "wall_time_s": time.perf_counter() - start}
 
 
 def ball(h: float):
@@ -428,17 +460,98 @@ def page(results: dict) -> str:
     return "\n".join(lines) + "\n"
 
 
+def scheme_b(args) -> dict:
+    """The sliding block with the law and the per-facet bound, and the held block, on scheme B
+    candidates (``--scheme B`` or ``AB``)."""
+    results = {"command": f"validation/friction_slide.py --scheme {args.scheme} --mus "
+               + " ".join(f"{m:g}" for m in args.mus) + " --meshes " + " ".join(str(n) for n in args.meshes),
+               "scheme": args.scheme, "sliding": [], "held": []}
+    for nx in args.meshes:
+        for mu in args.mus:
+            for per_facet in (False, True):
+                results["sliding"].append(run(mu, np.tan(np.radians(30.0)), nx, 0.6, False, args.scheme, per_facet))
+                print(json.dumps(results["sliding"][-1]), flush=True)
+    for tan in (0.05,) if args.quick else (0.05, 0.2):
+        results["held"].append(run(0.5, tan, args.meshes[0], 0.3, True, args.scheme))
+        print(json.dumps(results["held"][-1]), flush=True)
+    results["sliding3d"] = [slide3d(mu, nx, scheme, per_facet) for nx in ((6,) if args.quick else (6, 12))
+                            for mu in ((0.3,) if args.quick else (0.1, 0.3))
+                            for scheme, per_facet in ((args.scheme, False), (args.scheme, True), ("A", False))]
+    print(json.dumps(results["sliding3d"]), flush=True)
+    return results
+
+
+def page_b(results: dict) -> str:
+    """The Markdown page of ``scheme_b``'s results, with scheme A's of friction.json beside them."""
+    documented = json.loads((pathlib.Path(__file__).parents[1] / "docs" / "validation" / "friction.json").read_text())
+    scheme_a = {(r["mu"], r["cells"]): r["relative_error"] for r in documented["sliding"]}
+    lines = [f"# Friction on scheme B candidates (dem-{results['scheme']}): the spread bound", "",
+             f"Written by `validation/friction_slide.py --scheme ...` (one process). Command: `{results['command']}`.", "",
+             "The block and the measures: the script's docstring; CFL 0.5 of the bound. The law (docs/theory.md, "
+             "Friction on rigid obstacles): each scheme B candidate's bound lags its normal impulse spread over its "
+             "neighbours, N'_f = |f| sum_g N_g / A_g, before the positive part (``contact.friction.Spread``). "
+             "\"per facet\": the bound of scheme A, mu times the lagged N_f^+ of the facet's own normal impulse. "
+             "sum N+ / sum N: the facets' normal impulses' positive parts over their sum, over the facets and steps; "
+             "T / (mu N): the friction impulse over mu sum N_f; after 0.1 s: the same over the fit's window, and the "
+             "mean normal force there over the weight's normal part. Scheme A: docs/validation/friction.json.", "",
+             "## Sliding from rest, dropped at zero height (tan t = 0.577, t = 30 deg)", "",
+             "| mu | cells | bound | acceleration (m/s^2) | g (sin t - mu cos t) | error | scheme A's error | "
+             "sum N+ / sum N | T / (mu N) | after 0.1 s: T / (mu N) | after 0.1 s: N / (m g cos t) | balance error | "
+             "smallest D increment | wall (s) |", "|---" * 14 + "|"]
+    for r in results["sliding"]:
+        a = scheme_a.get((r["mu"], r["cells"]))
+        lines.append(f"| {r['mu']:g} | {r['cells']} | {'per facet' if r['per_facet'] else 'spread'} | "
+                     f"{r['acceleration']:.4f} | {r['exact']:.4f} | {100 * r['relative_error']:+.2f} % | "
+                     + (f"{100 * a:+.2f} %" if a is not None else "") + f" | {r['normal_positive_ratio']:.4f} | "
+                     f"{r['friction_over_mu_n']:.4f} | {r['friction_over_mu_n_late']:.4f} | "
+                     f"{r['normal_over_weight_late']:.4f} | {r['balance_error']:.1e} | {r['min_dissipation_increment']:.1e} | "
+                     f"{r['wall_time_s']:.1f} |")
+    lines += ["", "## Held by friction (mu = 0.5), from the settled state", "",
+              "| tan t | cells | steps | contact cells' drift after the first step (m; the block is 1 m long) | "
+              "first step with a facet at the Coulomb limit | D at the end (J/m) | balance error |", "|---" * 7 + "|"]
+    for r in results["held"]:
+        lines.append(f"| {r['tan']:g} | {r['cells']} | {r['steps']} | {r['drift_after_first_step']:.2e} | "
+                     f"{r['first_slip_step'] or 'none'} | {r['dissipation']:.2e} | {r['balance_error']:.1e} |")
+    lines += ["", "## 3D: a block sliding down a slope, 30 degrees from x (n x n x n/2 cubes of six tetrahedra)", "",
+              "The acceleration's error along the slope and its whole error's size (its components across the slope and "
+              "along the normal included), both over |g (sin t - mu cos t)|; scheme A run alongside.", "",
+              "| mu | cells | method, bound | acceleration (m/s^2) | g (sin t - mu cos t) along the slope | error along "
+              "the slope | size of the error | balance error | smallest D increment |", "|---" * 9 + "|"]
+    for r in results.get("sliding3d", []):
+        bound = "" if r["scheme"] == "A" else (", per facet" if r["per_facet"] else ", spread")
+        lines.append(f"| {r['mu']:g} | {r['cells']} | dem-{r['scheme']}{bound} | "
+                     f"({', '.join(f'{x:.4f}' for x in r['acceleration'])}) | "
+                     f"({', '.join(f'{x:.4f}' for x in r['exact'])}) | {100 * r['along_error']:+.2f} % | "
+                     f"{100 * r['relative_error']:.2f} % | {r['balance_error']:.1e} | "
+                     f"{r['min_dissipation_increment']:.1e} |")
+    return "\n".join(lines) + "\n"
+
+
 def main():
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("--mus", type=float, nargs="+", default=[0.0, 0.05, 0.1, 0.2, 0.3])
-    parser.add_argument("--meshes", type=int, nargs="+", default=[16, 32], help="squares along the block")
+    parser.add_argument("--mus", type=float, nargs="+", default=None,
+                        help="default 0 0.05 0.1 0.2 0.3 (scheme A), 0.1 0.3 (scheme B)")
+    parser.add_argument("--meshes", type=int, nargs="+", default=None,
+                        help="squares along the block; default 16 32 (scheme A), 16 32 64 (scheme B)")
+    parser.add_argument("--scheme", choices=("A", "B", "AB"), default="A",
+                        help="B, AB: the sliding and held blocks only, with dem-B / dem-AB (scheme B candidates), "
+                             "the law and the per-facet bound")
     parser.add_argument("--quick", action="store_true",
                         help="mu = 0.1 on 16 x 8 squares, one disc, mu = 0.1 in 3D; the stable step for 0, 0.1; "
-                             "the ball at h = 0.02 m, stable at the bound at h = 0.03 m")
+                             "the ball at h = 0.02 m, stable at the bound at h = 0.03 m (scheme B: mu = 0.3 on "
+                             "16 x 8 squares, held at tan t = 0.05)")
     parser.add_argument("--out", type=pathlib.Path, required=True)
     args = parser.parse_args()
+    b = args.scheme != "A"
+    args.mus = args.mus or ([0.1, 0.3] if b else [0.0, 0.05, 0.1, 0.2, 0.3])
+    args.meshes = args.meshes or ([16, 32, 64] if b else [16, 32])
     if args.quick:
-        args.mus, args.meshes = [0.1], [16]
+        args.mus, args.meshes = [0.3 if b else 0.1], [16]
+    if b:
+        results = scheme_b(args)
+        args.out.write_text(json.dumps(results, indent=1) + "\n")
+        args.out.with_suffix(".md").write_text(page_b(results))
+        return
     results = {"command": "validation/friction_slide.py --mus " + " ".join(f"{m:g}" for m in args.mus)
                + " --meshes " + " ".join(str(n) for n in args.meshes), "sliding": [], "held": []}
     for nx in args.meshes:

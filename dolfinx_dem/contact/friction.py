@@ -36,9 +36,17 @@ with several facets with a bound takes them one after the other (rounds), each s
 impulses of the rounds before. A facet that leaves contact keeps a bound that decays as
 exp(-t / T_f): after its last contact step it can give at most mu Ntilde_f T_f more impulse.
 
-The law uses only a cell's own values and its facets' Ntilde_f (updated from their own N_f): it is
-computed where the cell is owned and does not depend on the partition. Ntilde_f is state: the
-contact model checkpoints it with the cells (rigid.RigidContact.cell_state).
+Scheme B candidates (dem-B, dem-AB): their reactions y_f . a' alternate from one facet to the
+next, and the bound of each facet's own N_f^+ over-counts the normal force. Their Ntilde_f follow
+instead the signed N'_f / dt, N'_f their neighbourhood's normal impulses spread over it
+(``Spread``, conservative), and the bound is mu max(Ntilde_f, 0): the positive part after the
+spreading and after the lag, so alternations in space and in time cancel. Any bound >= 0 keeps the
+balance and the dissipation's sign.
+
+The law uses only a cell's own values and its facets' Ntilde_f (updated from their own N_f, or for
+scheme B from their neighbours', brought by a ghost update): it is computed where the cell is owned
+and does not depend on the partition. Ntilde_f is state: the contact model checkpoints it with the
+cells (rigid.RigidContact.cell_state).
 """
 
 from __future__ import annotations
@@ -101,6 +109,7 @@ class CellFriction:
         self.rounds = [order[rank == r] for r in range(int(rank.max(initial=-1)) + 1)]
         self.forces = np.zeros((n_groups, d))  # the last step's tangential impulses per obstacle / dt
         self.slipping = 0  # facets at the Coulomb limit at the last step
+        self.spread = None  # scheme B candidates: their normal impulses spread over neighbours (``Spread``)
 
     def apply(self, normal: np.ndarray, state, impulse: PETSc.Vec) -> float:
         """Adds the step's tangential impulses to ``impulse`` (this process's owned entries), from
@@ -116,13 +125,21 @@ class CellFriction:
 
     def lagged(self, normal: np.ndarray, dt: float) -> np.ndarray:
         """The lagged normal forces Ntilde_f after a step of normal impulses ``normal`` (module
-        docstring; updated in place, the first step sets them)."""
+        docstring; updated in place, the first step sets them), as bounds: the facets of
+        ``spread`` (scheme B) lag their spread normal impulses N'_f / dt before the positive part
+        and give max(Ntilde_f, 0) (collective when ``spread`` is set)."""
         force = np.maximum(normal, 0.0) / dt
+        if self.spread is not None:
+            force[self.spread.rows] = self.spread(normal) / dt
         if self.started:
             self.normal_force -= np.expm1(-dt / self.lag) * (force - self.normal_force)
         else:
             self.normal_force[:], self.started = force, True
-        return self.normal_force
+        if self.spread is None:
+            return self.normal_force
+        bound = self.normal_force.copy()
+        bound[self.spread.rows] = np.maximum(bound[self.spread.rows], 0.0)
+        return bound
 
     def bounded(self, bound: np.ndarray, state, impulse: PETSc.Vec) -> float:
         """``apply`` with the facets' bounds on |tau_f| ``bound`` (n,) (impulses; 0: no friction)."""
@@ -152,24 +169,89 @@ class CellFriction:
         return dissipation
 
 
+class Spread:
+    """The normal impulses of a group of scheme B candidate facets spread over their neighbours
+    (docs/theory.md, Friction on rigid obstacles: the bound of a group of facets): with nb(g) the
+    group's facets on g's obstacle that share a vertex with g (g included) and
+    A_g = sum_{h in nb(g)} |h|, facet f of the group gets
+
+        N'_f = |f| sum_{g in nb(f)} N_g / A_g,
+
+    each N_g shared among its neighbourhood in proportion to the facets' sizes: sum_f N'_f =
+    sum_g N_g over the group (conservative), and a normal force that alternates from one facet to
+    the next, N_g = m + (-1)^g delta on equal facets, gives N' = m +- delta / 3 in 2D (not
+    delta). The others keep their own N_f. Built from the candidates ``contact`` knows (its own
+    and its first halo layer's, which hold every neighbour of an own facet) and ``group``, the
+    local candidates in the group (collective); ``__call__`` brings the neighbours' N_g from their
+    owners by a ghost update (collective) and sums them in the order of their global numbers, so
+    N'_f does not depend on the partition beyond the rounding of N_g."""
+
+    def __init__(self, contact, group: np.ndarray, obstacle: np.ndarray):
+        dem, comm, d, own = contact.dem, contact.comm, contact.d, contact.num_own
+        geom, cells, j = dem.geometry, contact.cells, contact._facet_j
+        n = len(cells)
+        first = comm.exscan(own) or 0
+
+        def exchange(values):  # own candidates' values -> every local candidate's (its owner's)
+            table = np.zeros((dem.n_owned, d + 1))
+            table[cells[:own], j[:own]] = values
+            return dem.halo_exchange(table)[cells, j]
+
+        # the group and the global numbers of the candidates, as their owners have them
+        number = exchange(np.where(group[:own], first + np.arange(own), -1)).astype(np.int64)
+        member = number >= 0
+        vertices = geom.cell_vertex_ids[cells][np.arange(d + 1) != j[:, None]].reshape(n, d)
+        # pairs (f, g) of group members of one obstacle sharing a vertex (f itself included)
+        entry = np.flatnonzero(np.repeat(member, d))
+        keys = vertices.ravel()[entry]
+        order = np.argsort(keys, kind="stable")
+        keys, owners = keys[order], entry[order] // d
+        lo, hi = np.searchsorted(keys, keys, "left"), np.searchsorted(keys, keys, "right")
+        counts = hi - lo
+        rows = np.repeat(owners, counts)
+        cols = owners[np.arange(counts.sum()) - np.repeat(np.cumsum(counts) - counts, counts) + np.repeat(lo, counts)]
+        keep = obstacle[rows] == obstacle[cols]
+        pairs = np.unique(np.stack([rows[keep], cols[keep]], axis=1), axis=0)
+        area = geom.facet_areas[contact.facets]
+        mine = pairs[pairs[:, 0] < own]  # the own facets' neighbourhoods: complete here
+        sizes = np.bincount(mine[:, 0], area[mine[:, 1]], own)
+        share = exchange(np.divide(1.0, sizes, out=np.zeros(own), where=sizes > 0))  # 1 / A_g
+        # N'_f for the own members: |f| sum_g N_g / A_g, g in the order of the global numbers
+        mine = mine[np.lexsort((number[mine[:, 1]], mine[:, 0]))]
+        self.rows = np.flatnonzero(member[:own])
+        halo = np.unique(mine[:, 1][mine[:, 1] >= own])
+        position = np.arange(n)
+        position[halo] = own + np.arange(len(halo))  # their places after the owned values
+        self._entry = np.searchsorted(self.rows, mine[:, 0])  # each term's row among ``rows``
+        self._column = position[mine[:, 1]]
+        self._weight = area[mine[:, 0]] * share[mine[:, 1]]
+        self.vec = PETSc.Vec().createGhost(np.asarray(number[halo], dtype=PETSc.IntType), size=(own, PETSc.DECIDE),
+                                           comm=comm)
+
+    def __call__(self, normal: np.ndarray) -> np.ndarray:
+        """N'_f of the own facets ``rows`` from the own facets' normal impulses ``normal``
+        (collective)."""
+        self.vec.array[:] = normal
+        self.vec.ghostUpdate(PETSc.InsertMode.INSERT, PETSc.ScatterMode.FORWARD)
+        with self.vec.localForm() as local:
+            values = local.array_r.copy()
+        return np.bincount(self._entry, self._weight * values[self._column], len(self.rows))
+
+
 def cell_friction(contact, mu: list[float], obstacle: np.ndarray) -> CellFriction | None:
     """The friction of a rigid contact model ``contact`` (its candidates ``facets``, ``cells``,
     ``normals``, the first ``num_own`` its own) whose obstacles have the coefficients ``mu``,
     ``obstacle`` the obstacle of each candidate; None without friction. An InputError where the
-    law does not apply: scheme B candidates, a prescribed body's facets (collective)."""
+    law does not apply: a prescribed body's facets. Scheme B candidates take their bounds from
+    their normal impulses spread over their neighbours (``Spread``; collective)."""
     dem, comm, d, n = contact.dem, contact.comm, contact.d, len(mu)
     rec, geom = dem.reconstruction, dem.geometry
     mu = np.asarray(mu)[obstacle]
-    # scheme B chosen for the candidates (dem-B, dem-AB); scheme A's own fallback to scheme B on
-    # cells with several Neumann facets (corners and edges, reconstruction.py) is kept
+    # scheme B chosen for the candidates (dem-B, dem-AB): their bounds from ``Spread``; scheme A's
+    # own fallback to scheme B on cells with several Neumann facets (corners and edges,
+    # reconstruction.py) keeps the facets' own N_f, as with scheme A
     scheme_b = (mu > 0) & ~np.isin(contact.facets, rec.scheme_a_facets) & ~np.isin(contact.cells,
                                                                                    rec.multi_neumann_cells)
-    k = comm.allreduce(int(obstacle[scheme_b].min(initial=n)), op=MPI.MIN)
-    if k < n:  # on every process
-        raise InputError(
-            f"obstacle {k}: friction needs scheme A candidates (method dem-A): with scheme B the facets' normal "
-            "reactions change sign from one facet to the next, and a Coulomb bound on each over-counts the normal "
-            "force (docs/theory.md, Friction on rigid obstacles)")
     own = slice(0, contact.num_own)
     prescribed = (mu[own] > 0) & np.isin(contact.cells[own] * d, dem.prescribed.dofs)
     k = comm.allreduce(int(obstacle[own][prescribed].min(initial=n)), op=MPI.MIN)
@@ -179,4 +261,7 @@ def cell_friction(contact, mu: list[float], obstacle: np.ndarray) -> CellFrictio
     if not comm.allreduce(bool((mu > 0).any()), op=MPI.LOR):
         return None
     lag = LAG * geom.facet_diameters[contact.facets[own]] / dem.materials.wave_speed(d, contact.cells[own])
-    return CellFriction(d, contact.cells[own], contact.normals[own], mu[own], lag, obstacle[own], n)
+    friction = CellFriction(d, contact.cells[own], contact.normals[own], mu[own], lag, obstacle[own], n)
+    if comm.allreduce(bool(scheme_b.any()), op=MPI.LOR):  # on every process
+        friction.spread = Spread(contact, scheme_b, obstacle)
+    return friction

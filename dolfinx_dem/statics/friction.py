@@ -248,6 +248,9 @@ def check_load_path(problem: DEMProblem, body_force, increments: int) -> tuple[R
     if contact is None or contact.friction is None or len(problem.contacts) != 1:
         raise InputError("load_tangentially takes a DEMProblem whose only contact model is a RigidContact with "
                          "friction (an obstacle with friction > 0)")
+    if contact.friction.spread is not None:  # the same on every process
+        raise InputError("statics with friction on scheme B candidates (method dem-B or dem-AB) is not implemented: "
+                         "their bound is the dynamics' spread normal impulse (contact/friction.py); use dem-A")
     d = problem.d
     if d != 2:
         raise InputError(f"statics with friction is implemented in 2D, this problem is {d}D")
