@@ -362,6 +362,17 @@ def ball_stability(h: float, factors) -> dict:
     return out
 
 
+def held_table(held: list, drift: str = "contact cells' drift after the first step (m)") -> list[str]:
+    """The page's section on the block held by friction."""
+    lines = ["", "## Held by friction (mu = 0.5), from the settled state", "",
+             f"| tan t | cells | steps | {drift} | first step with a facet at the Coulomb limit | D at the end (J/m) "
+             "| balance error |", "|---" * 7 + "|"]
+    for r in held:
+        lines.append(f"| {r['tan']:g} | {r['cells']} | {r['steps']} | {r['drift_after_first_step']:.2e} | "
+                     f"{r['first_slip_step'] or 'none'} | {r['dissipation']:.2e} | {r['balance_error']:.1e} |")
+    return lines
+
+
 def page(results: dict) -> str:
     lines = ["# Friction: a block sliding down a slope and a block held by it", "",
              f"Written by `validation/friction_slide.py` (one process). Command: `{results['command']}`.", "",
@@ -373,12 +384,7 @@ def page(results: dict) -> str:
         lines.append(f"| {r['mu']:g} | {r['cells']} | {r['acceleration']:.4f} | {r['exact']:.4f} | "
                      f"{100 * r['relative_error']:+.2f} % | {r['bottom_velocity_spread']:.3f} | {r['balance_error']:.1e} | "
                      f"{r['min_dissipation_increment']:.1e} | {r['wall_time_s']:.1f} |")
-    lines += ["", "## Held by friction (mu = 0.5), from the settled state", "",
-              "| tan t | cells | steps | contact cells' drift after the first step (m) | first step with a facet "
-              "at the Coulomb limit | D at the end (J/m) | balance error |", "|---" * 7 + "|"]
-    for r in results["held"]:
-        lines.append(f"| {r['tan']:g} | {r['cells']} | {r['steps']} | {r['drift_after_first_step']:.2e} | "
-                     f"{r['first_slip_step'] or 'none'} | {r['dissipation']:.2e} | {r['balance_error']:.1e} |")
+    lines += held_table(results["held"])
     lines += ["", "## A disc launched sliding without spin (mu = 0.5, v0 = 0.05 m/s, E = 1e6 Pa)", "",
               "| h (m) | cells | slip stops (ms) | t* (ms) | error | speed at t* (m/s) | 2/3 v0 | error | D (J/m) "
               "| rigid D | balance error |", "|---" * 11 + "|"]
@@ -506,12 +512,7 @@ def page_b(results: dict) -> str:
                      f"{r['friction_over_mu_n']:.4f} | {r['friction_over_mu_n_late']:.4f} | "
                      f"{r['normal_over_weight_late']:.4f} | {r['balance_error']:.1e} | {r['min_dissipation_increment']:.1e} | "
                      f"{r['wall_time_s']:.1f} |")
-    lines += ["", "## Held by friction (mu = 0.5), from the settled state", "",
-              "| tan t | cells | steps | contact cells' drift after the first step (m; the block is 1 m long) | "
-              "first step with a facet at the Coulomb limit | D at the end (J/m) | balance error |", "|---" * 7 + "|"]
-    for r in results["held"]:
-        lines.append(f"| {r['tan']:g} | {r['cells']} | {r['steps']} | {r['drift_after_first_step']:.2e} | "
-                     f"{r['first_slip_step'] or 'none'} | {r['dissipation']:.2e} | {r['balance_error']:.1e} |")
+    lines += held_table(results["held"], "contact cells' drift after the first step (m; the block is 1 m long)")
     lines += ["", "## 3D: a block sliding down a slope, 30 degrees from x (n x n x n/2 cubes of six tetrahedra)", "",
               "The acceleration's error along the slope and its whole error's size (its components across the slope and "
               "along the normal included), both over |g (sin t - mu cos t)|; scheme A run alongside.", "",
