@@ -43,8 +43,10 @@ suddenly applied).
 held block with scheme B candidates, each sliding run with the law (the spread bound) and with the
 per-facet bound of scheme A; the sum of the facets' normal impulses' positive parts over their sum,
 and the friction impulse over mu times the normal one; the 3D block (mu = 0.1, 0.3 on 6 x 6 x 3 and
-12 x 12 x 6 cubes) with both bounds and with scheme A. ``--quick``: mu = 0.3 on 16 x 8 squares, held
-at tan t = 0.05, the 3D block at mu = 0.3 on 6 x 6 x 3 cubes.
+12 x 12 x 6 cubes) with both bounds and with scheme A; the stable step (``stable_factor``, mu = 0,
+0.1, 0.3 on the first mesh) and the disc (``roll``, h = 0.01, 0.005 m, both bounds; also its speed
+and slip at 2 t*) with the same method. ``--quick``: mu = 0.3 on 16 x 8 squares, held at
+tan t = 0.05, the 3D block at mu = 0.3 on 6 x 6 x 3 cubes (no stable step, no disc).
 
 It writes the JSON and, next to it, the Markdown page (``--out``'s stem + .md). One process.
 """
@@ -138,21 +140,27 @@ def run(mu: float, tan: float, nx: int, t_end: float, settled: bool, scheme: str
     return out
 
 
-def roll(h: float, mu: float = 0.5) -> dict:
+def roll(h: float, mu: float = 0.5, scheme: str = "A", per_facet: bool = False) -> dict:
+    """The disc (R_DISC) settled by frictionless statics, launched at V0 without spin; ``scheme``
+    "B" or "AB": its lower half scheme B candidates (dem-B, dem-AB), ``per_facet`` as ``run``'s.
+    The slip stops: None if it stays above 1 % of V0 up to 2 t*."""
     start = time.perf_counter()
     mesh, _, tags = meshes.create_disc(MPI.COMM_WORLD, [0.0, R_DISC], R_DISC, h)
     material = ElasticMaterial(E=1e6, nu=0.3, rho=1.0)
+    boundary = tags.find(1)
+    lower = boundary[DEMDiscretisation(mesh, material, "A").geometry.facet_centres[boundary, 1] <= R_DISC]
 
     def disc(friction):
-        dem = DEMDiscretisation(mesh, material, "A", body_force=[0.0, -G])
-        boundary = tags.find(1)
-        lower = boundary[dem.geometry.facet_centres[boundary, 1] <= R_DISC]
+        dem = DEMDiscretisation(mesh, material, scheme[0], body_force=[0.0, -G],
+                                scheme_b_facets=lower if scheme == "AB" else None)
         return DEMProblem(dem, [RigidContact(dem, [HalfSpace([0.0, 0.0], [0.0, 1.0], lower, tolerance=1e-9,
                                                              friction=friction)])])
 
     u0 = minimise_energy(disc(0.0), fixed_mean=[0], fixed_rotation=True).u
     problem = disc(mu)
     dem = problem.dem
+    if per_facet and problem.contacts[0].friction is not None:
+        problem.contacts[0].friction.spread = None
     stepper = MEMM(problem, 0.5 * dem.stable_time_step())
     v = dem.create_vector()
     v.array.reshape(-1, 2)[:, 0] = V0
@@ -160,7 +168,7 @@ def roll(h: float, mu: float = 0.5) -> dict:
     m = dem.mass.array_r[::2]
     x0 = dem.geometry.cell_centres[: dem.n_owned, :2]
     t_star = V0 / (3 * mu * G)
-    times, speed, slip, balance = [], [], [], 0.0
+    times, speed, slip, balance, dissipation = [], [], [], 0.0, []
     for _ in range(round(2 * t_star / stepper.dt)):
         diag = stepper.step()
         vbar = 0.5 * (stepper.v_prev.array_r + stepper.v_next.array_r).reshape(-1, 2)
@@ -171,13 +179,17 @@ def roll(h: float, mu: float = 0.5) -> dict:
         speed.append(m @ vbar[:, 0] / m.sum())
         slip.append(speed[-1] + omega * R_DISC)
         balance = max(balance, abs(diag.balance - first.balance) / max(diag.mechanical, diag.dissipation))
+        dissipation.append(diag.dissipation)
     times, speed, slip = map(np.array, (times, speed, slip))
-    stops = float(times[np.argmax(slip < 0.01 * V0)])
+    stops = float(times[np.argmax(slip < 0.01 * V0)]) if (slip < 0.01 * V0).any() else None
     at_t_star = float(np.interp(t_star, times, speed))
     return {"h": h, "mu": mu, "cells": dem.geometry.num_cells_global, "t_star": t_star, "slip_stops": stops,
-            "slip_stops_error": stops / t_star - 1, "speed_at_t_star": at_t_star,
+            "slip_stops_error": None if stops is None else stops / t_star - 1, "speed_at_t_star": at_t_star,
             "speed_error": at_t_star / (2 / 3 * V0) - 1, "balance_error": balance, "dissipation": diag.dissipation,
-            "rigid_dissipation": float(0.5 * m.sum() * V0**2 / 3), "wall_time_s": time.perf_counter() - start}
+            "rigid_dissipation": float(0.5 * m.sum() * V0**2 / 3),
+            "min_dissipation_increment": float(np.diff(np.r_[0.0, dissipation]).min()), "steps": len(times),
+            "speed_at_end": float(speed[-1]), "slip_at_end": float(slip[-1]), "scheme": scheme,
+            "per_facet": per_facet, "wall_time_s": time.perf_counter() - start}
 
 
 def slide3d(mu: float, nx: int = 6, scheme: str = "A", per_facet: bool = False) -> dict:
@@ -330,13 +342,13 @@ def stability_runs(build, t_end: float, factors) -> list[dict]:
     return runs
 
 
-def stable_factor(mu: float, nx: int) -> float:
-    """The largest f of 1, 1.04, ..., 1.16 at which the block slides for 0.5 s down the 30 degree
-    slope with dt = f times the bound (``stability_runs``)."""
+def stable_factor(mu: float, nx: int, scheme: str = "A") -> float:
+    """The largest f of 1, 1.04, ..., 1.16 at which the block (``block``, ``scheme``) slides for
+    0.5 s down the 30 degree slope with dt = f times the bound (``stability_runs``)."""
     t = np.radians(30.0)
 
     def build():
-        problem = block(mu, [G * np.sin(t), -G * np.cos(t)], nx)
+        problem = block(mu, [G * np.sin(t), -G * np.cos(t)], nx, scheme)
         return problem, problem.dem.create_vector(), problem.dem.create_vector()
 
     return max((r["f"] for r in stability_runs(build, 0.5, (1.0, 1.04, 1.08, 1.12, 1.16)) if r["stable"]), default=0.0)
@@ -373,6 +385,27 @@ def held_table(held: list, drift: str = "contact cells' drift after the first st
     return lines
 
 
+def rolling_table(rows: list) -> list[str]:
+    """The page's section on the disc; rows with ``speed_at_end`` (scheme B's) add the bound, the
+    speed and the slip at 2 t* and the smallest D increment."""
+    more = "speed_at_end" in rows[0]
+    lines = ["", "## A disc launched sliding without spin (mu = 0.5, v0 = 0.05 m/s, E = 1e6 Pa)", "",
+             "| h (m) | cells | " + ("bound | " if more else "") + "slip stops (ms) | t* (ms) | error | speed at t* "
+             "(m/s) | 2/3 v0 | error | " + ("speed at 2 t* (m/s) | slip at 2 t* (m/s) | " if more else "")
+             + "D (J/m) | rigid D | balance error |" + (" smallest D increment | wall (s) |" if more else ""),
+             "|---" * (16 if more else 11) + "|"]
+    for r in rows:
+        stops = ("not within 2 t* | " + f"{1e3 * r['t_star']:.4f} | |" if r["slip_stops"] is None else
+                 f"{1e3 * r['slip_stops']:.4f} | {1e3 * r['t_star']:.4f} | {100 * r['slip_stops_error']:+.2f} % |")
+        lines.append(f"| {r['h']:g} | {r['cells']} | " + (f"{'per facet' if r['per_facet'] else 'spread'} | "
+                                                           if more else "")
+                     + f"{stops} {r['speed_at_t_star']:.5f} | {2 / 3 * V0:.5f} | {100 * r['speed_error']:+.2f} % | "
+                     + (f"{r['speed_at_end']:.5f} | {r['slip_at_end']:.5f} | " if more else "")
+                     + f"{r['dissipation']:.4e} | {r['rigid_dissipation']:.4e} | {r['balance_error']:.1e} |"
+                     + (f" {r['min_dissipation_increment']:.1e} | {r['wall_time_s']:.1f} |" if more else ""))
+    return lines
+
+
 def page(results: dict) -> str:
     lines = ["# Friction: a block sliding down a slope and a block held by it", "",
              f"Written by `validation/friction_slide.py` (one process). Command: `{results['command']}`.", "",
@@ -385,14 +418,7 @@ def page(results: dict) -> str:
                      f"{100 * r['relative_error']:+.2f} % | {r['bottom_velocity_spread']:.3f} | {r['balance_error']:.1e} | "
                      f"{r['min_dissipation_increment']:.1e} | {r['wall_time_s']:.1f} |")
     lines += held_table(results["held"])
-    lines += ["", "## A disc launched sliding without spin (mu = 0.5, v0 = 0.05 m/s, E = 1e6 Pa)", "",
-              "| h (m) | cells | slip stops (ms) | t* (ms) | error | speed at t* (m/s) | 2/3 v0 | error | D (J/m) "
-              "| rigid D | balance error |", "|---" * 11 + "|"]
-    for r in results["rolling"]:
-        lines.append(f"| {r['h']:g} | {r['cells']} | {1e3 * r['slip_stops']:.4f} | {1e3 * r['t_star']:.4f} | "
-                     f"{100 * r['slip_stops_error']:+.2f} % | {r['speed_at_t_star']:.5f} | {2 / 3 * V0:.5f} | "
-                     f"{100 * r['speed_error']:+.2f} % | {r['dissipation']:.4e} | {r['rigid_dissipation']:.4e} | "
-                     f"{r['balance_error']:.1e} |")
+    lines += rolling_table(results["rolling"])
     lines += ["", "## 3D: a block sliding down a slope, 30 degrees from x (6 x 6 x 3 cubes)", "",
               "| mu | cells | acceleration (m/s^2) | g (sin t - mu cos t) along the slope | error | balance error |",
               "|---" * 6 + "|"]
@@ -467,8 +493,8 @@ def page(results: dict) -> str:
 
 
 def scheme_b(args) -> dict:
-    """The sliding block with the law and the per-facet bound, and the held block, on scheme B
-    candidates (``--scheme B`` or ``AB``)."""
+    """The sliding block with the law and the per-facet bound, the held block, the 3D block, the
+    stable step and the disc, on scheme B candidates (``--scheme B`` or ``AB``)."""
     results = {"command": f"validation/friction_slide.py --scheme {args.scheme} --mus "
                + " ".join(f"{m:g}" for m in args.mus) + " --meshes " + " ".join(str(n) for n in args.meshes),
                "scheme": args.scheme, "sliding": [], "held": []}
@@ -484,6 +510,11 @@ def scheme_b(args) -> dict:
                             for mu in ((0.3,) if args.quick else (0.1, 0.3))
                             for scheme, per_facet in ((args.scheme, False), (args.scheme, True), ("A", False))]
     print(json.dumps(results["sliding3d"]), flush=True)
+    if not args.quick:
+        results["stable_factor"] = {f"{mu:g}": stable_factor(mu, args.meshes[0], args.scheme) for mu in (0.0, 0.1, 0.3)}
+        print(results["stable_factor"], flush=True)
+        results["rolling"] = [roll(h, 0.5, args.scheme, per_facet) for h in (0.01, 0.005) for per_facet in (False, True)]
+        print(json.dumps(results["rolling"]), flush=True)
     return results
 
 
@@ -525,6 +556,18 @@ def page_b(results: dict) -> str:
                      f"({', '.join(f'{x:.4f}' for x in r['exact'])}) | {100 * r['along_error']:+.2f} % | "
                      f"{100 * r['relative_error']:.2f} % | {r['balance_error']:.1e} | "
                      f"{r['min_dissipation_increment']:.1e} |")
+    if "stable_factor" in results:
+        nx = int(results["command"].split("--meshes ")[1].split()[0])
+        lines += ["", f"## The stable step with and without friction (sliding, {nx} x {nx // 2} squares)", "",
+                  "The block above from rest for 0.5 s at dt = f times the bound, f = 1, 1.04, ..., 1.16: the largest f "
+                  "the stability monitor let complete (scheme A: docs/validation/friction.json).", "",
+                  "| mu | largest stable dt / bound | scheme A's |", "|---|---|---|"]
+        lines += [f"| {mu} | {f:g} | {documented['stable_factor'].get(mu, '')} |" for mu, f in results["stable_factor"].items()]
+    if "rolling" in results:
+        lines += rolling_table(results["rolling"])
+        lines += ["", "The closed form: the slip (v + omega R, omega fitted to the cells' momenta) stops at t* = v0 / "
+                  "(3 mu g), the disc then rolls at 2/3 v0; sliding on without turning it would decelerate at mu g, "
+                  "through 2/3 v0 at t* as well, to v0 / 3 at 2 t*. Scheme A: docs/validation/friction.md."]
     return "\n".join(lines) + "\n"
 
 
@@ -535,8 +578,8 @@ def main():
     parser.add_argument("--meshes", type=int, nargs="+", default=None,
                         help="squares along the block; default 16 32 (scheme A), 16 32 64 (scheme B)")
     parser.add_argument("--scheme", choices=("A", "B", "AB"), default="A",
-                        help="B, AB: the sliding and held blocks only, with dem-B / dem-AB (scheme B candidates), "
-                             "the law and the per-facet bound")
+                        help="B, AB: the sliding and held blocks, the 3D block, the stable step and the disc with "
+                             "dem-B / dem-AB (scheme B candidates), the law and the per-facet bound")
     parser.add_argument("--quick", action="store_true",
                         help="mu = 0.1 on 16 x 8 squares, one disc, mu = 0.1 in 3D; the stable step for 0, 0.1; "
                              "the ball at h = 0.02 m, stable at the bound at h = 0.03 m (scheme B: mu = 0.3 on "
