@@ -39,6 +39,10 @@ def pytest_configure(config):
     _stderr = os.fdopen(os.dup(sys.__stderr__.fileno()), "w")
 
 
+def pytest_unconfigure(config):
+    _stderr.close()
+
+
 def _over_time(nodeid: str):
     """The test ran past TEST_LIMIT: every thread's traceback, the processes it started killed,
     its name last (CI shows the end of its log), and this process ended."""

@@ -4,6 +4,8 @@ mu g, a block held by friction on it without creep, the rounds (a lone pair, a c
 same results on 1, 2 and 3 processes, mu = 0 as frictionless, and the errors."""
 
 
+import warnings
+
 import numpy as np
 import pytest
 from helpers import stop_after
@@ -15,7 +17,7 @@ from dolfinx_dem.conditions import DirichletBC
 from dolfinx_dem.contact import PairContact, pair_friction
 from dolfinx_dem.contact.pair_friction import PairFriction
 from dolfinx_dem.discretisation import DEMDiscretisation
-from dolfinx_dem.errors import InputError, SceneError, StateError
+from dolfinx_dem.errors import AccuracyWarning, InputError, SceneError, StateError
 from dolfinx_dem.material import ElasticMaterial
 from dolfinx_dem.memm import MEMM
 from dolfinx_dem.problem import DEMProblem
@@ -270,7 +272,13 @@ def test_errors():
     with pytest.raises(InputError, match="implemented in 2D and 3D"):  # no pair contact (nor friction) in 1D
         mesh, _, _ = meshes.create_interval(MPI.COMM_WORLD, 4, 0.0, 1.0)
         PairContact(DEMDiscretisation(mesh, SOFT, "A"), np.array([0], dtype=np.int32), friction=0.3)
-    problem = DEMProblem(dem, [PairContact(dem, facets, friction=0.3)])
+    with pytest.warns(AccuracyWarning, match="contact between bodies: friction on scheme B candidates") as caught:
+        problem = DEMProblem(dem, [PairContact(dem, facets, friction=0.3)])  # two_discs: scheme B
+    assert len(caught) == (MPI.COMM_WORLD.rank == 0)
+    with warnings.catch_warnings():  # scheme A's candidates, or no friction: no warning
+        warnings.simplefilter("error", AccuracyWarning)
+        PairContact(*two_discs(scheme="A"), friction=0.3)
+        PairContact(dem, facets)
     with pytest.raises(InputError, match="friction is path dependent"):
         minimise_energy(problem)
     stepper = MEMM(problem, 0.2 * dem.stable_time_step(), quadrature="gauss-legendre-2")

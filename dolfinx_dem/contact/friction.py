@@ -51,11 +51,13 @@ cells (rigid.RigidContact.cell_state).
 
 from __future__ import annotations
 
+import warnings
+
 import numpy as np
 from mpi4py import MPI
 from petsc4py import PETSc
 
-from dolfinx_dem.errors import InputError
+from dolfinx_dem.errors import AccuracyWarning, InputError
 
 #: Slip speeds up to this fraction of the sum of a cell's velocities' sizes are rounding (a stuck
 #: cell's tangential velocity is the rounding of v + 2 M^-1 (I + tau) = 0): the cell counts as stuck.
@@ -64,6 +66,19 @@ STICK_ROUNDING = 1e-12
 #: The lag of the friction bound behind the normal force, in the times h_f / c_f a P wave takes to
 #: cross the facet (``CellFriction``; docs/theory.md, Friction on rigid obstacles)
 LAG = 2.0
+
+
+def warn_scheme_b_spin(comm: MPI.Comm, scheme_b: bool, what: str) -> None:
+    """The AccuracyWarning of friction on scheme B candidates (``scheme_b`` on some process; rank 0
+    warns; collective): scheme B does not keep a body's spin (docs/theory.md, Scheme B's accuracy),
+    so friction's torques do not turn bodies as they should."""
+    if comm.allreduce(bool(scheme_b), op=MPI.LOR) and comm.rank == 0:
+        warnings.warn(AccuracyWarning(
+            f"{what}: friction on scheme B candidates (method dem-B or dem-AB). Scheme B moves a boundary facet "
+            "with its cell, so a rigid rotation strains the body and its spin is not kept (a free disc spinning at "
+            "0.5 rad/s turns at 0.09 rad/s 0.8 ms later; dem-A keeps its spin): friction's torques do not turn "
+            "bodies as they should (a disc launched sliding on a floor keeps sliding where it should roll). Use "
+            "method dem-A where bodies roll or spin (docs/theory.md#scheme-bs-accuracy)"), stacklevel=4)
 
 
 def project(tau: np.ndarray, w: np.ndarray, n: np.ndarray, limit: np.ndarray, rounding: np.ndarray) -> np.ndarray:
@@ -264,4 +279,5 @@ def cell_friction(contact, mu: list[float], obstacle: np.ndarray) -> CellFrictio
     friction = CellFriction(d, contact.cells[own], contact.normals[own], mu[own], lag, obstacle[own], n)
     if comm.allreduce(bool(scheme_b.any()), op=MPI.LOR):  # on every process
         friction.spread = Spread(contact, scheme_b, obstacle)
+        warn_scheme_b_spin(comm, True, "rigid obstacles")
     return friction
