@@ -68,6 +68,13 @@ STICK_ROUNDING = 1e-12
 LAG = 2.0
 
 
+def scheme_b_candidates(rec, facets: np.ndarray, cells: np.ndarray) -> np.ndarray:
+    """Which candidate ``facets`` (of ``cells``) have scheme B chosen for them (dem-B, dem-AB) in the
+    reconstruction ``rec``; scheme A's own fallback to scheme B on cells with several Neumann
+    facets (corners and edges, reconstruction.py) does not count."""
+    return ~np.isin(facets, rec.scheme_a_facets) & ~np.isin(cells, rec.multi_neumann_cells)
+
+
 def warn_scheme_b_spin(comm: MPI.Comm, scheme_b: bool, what: str) -> None:
     """The AccuracyWarning of friction on scheme B candidates (``scheme_b`` on some process; rank 0
     warns; collective): scheme B does not keep a body's spin (docs/theory.md, Scheme B's accuracy),
@@ -262,11 +269,8 @@ def cell_friction(contact, mu: list[float], obstacle: np.ndarray) -> CellFrictio
     dem, comm, d, n = contact.dem, contact.comm, contact.d, len(mu)
     rec, geom = dem.reconstruction, dem.geometry
     mu = np.asarray(mu)[obstacle]
-    # scheme B chosen for the candidates (dem-B, dem-AB): their bounds from ``Spread``; scheme A's
-    # own fallback to scheme B on cells with several Neumann facets (corners and edges,
-    # reconstruction.py) keeps the facets' own N_f, as with scheme A
-    scheme_b = (mu > 0) & ~np.isin(contact.facets, rec.scheme_a_facets) & ~np.isin(contact.cells,
-                                                                                   rec.multi_neumann_cells)
+    # their bounds from ``Spread``; scheme A's fallback keeps the facets' own N_f, as with scheme A
+    scheme_b = (mu > 0) & scheme_b_candidates(rec, contact.facets, contact.cells)
     own = slice(0, contact.num_own)
     prescribed = (mu[own] > 0) & np.isin(contact.cells[own] * d, dem.prescribed.dofs)
     k = comm.allreduce(int(obstacle[own][prescribed].min(initial=n)), op=MPI.MIN)

@@ -65,7 +65,7 @@ from __future__ import annotations
 import numpy as np
 from mpi4py import MPI
 
-from dolfinx_dem.contact.friction import STICK_ROUNDING, project, warn_scheme_b_spin
+from dolfinx_dem.contact.friction import STICK_ROUNDING, project, scheme_b_candidates, warn_scheme_b_spin
 from dolfinx_dem.contact.pair_lag import PairLag
 from dolfinx_dem.contact.patch import PatchScatter
 from dolfinx_dem.errors import InputError, StateError
@@ -112,9 +112,8 @@ class PairFriction:
         #: this process's sums of the handled pairs' N_p > 0 and of -N_p < 0 (what the positive part drops)
         self.normal_sums = np.zeros(2)
         self.lag = PairLag(contact)  # the pairs' lagged normal forces, whose mu-multiples bound the impulses
-        rec, own = contact.dem.reconstruction, slice(0, contact.num_own)
-        scheme_b = ~np.isin(contact.facets[own], rec.scheme_a_facets) & ~np.isin(contact.cells[own],
-                                                                                 rec.multi_neumann_cells)
+        own = slice(0, contact.num_own)
+        scheme_b = scheme_b_candidates(contact.dem.reconstruction, contact.facets[own], contact.cells[own])
         warn_scheme_b_spin(self.comm, scheme_b.any(), "contact between bodies")
 
     def start(self, n_listed: int, quiet: bool) -> np.ndarray:
