@@ -166,7 +166,9 @@ class StaticRun:
         if self.obstacles is not None:
             axis = obstacles[0] if dem.d == 3 and len(obstacles) == 1 else None
             summary.update(_contact_summary(self.obstacles, u, result, directory / "contact_pressure.csv", axis))
-        if friction is not None:
+        if friction is not None and self.pairs is not None:
+            summary["friction"] = _pair_friction_summary(self.pairs, friction, directory / "contact_traction.csv")
+        elif friction is not None:
             summary["friction"] = _friction_summary(self.obstacles, friction, directory / "contact_traction.csv")
         if dem.d == 1:
             plotting.plot_bar(
@@ -373,6 +375,51 @@ def _friction_summary(c: RigidContact, result, path: pathlib.Path) -> dict:
         "friction_force": result.increments[-1].friction_force,
     })
     return summary
+
+
+def _pair_friction_summary(pc: PairContact, result, path: pathlib.Path) -> dict:
+    """The figures of statics with friction between bodies (statics/pair_friction.py) and the file
+    of the frictional pairs: their positions s along the load from the centre of pressure X, normal
+    forces N_p, friction forces T_p on the loaded body (along the pair's tangent, counted positive
+    along the load) and states (N/m: a pair's forces, not tractions). ``stick_half_width`` is the
+    moment measure of the deficit mu N_p - |T_p| (as on obstacles, _friction_summary, with point
+    forces at the pairs' positions), ``contact_half_width`` that of N_p, ``slip_traction_ratio`` the
+    range of |T_p| / (mu N_p) on the slip pairs, ``friction_force`` the friction on the loaded
+    bodies along the load and ``contact_tangential_force`` all their contact forces along it (the
+    frictionless pair forces' part too: -Q at equilibrium). The pairs are the same on every
+    process: rank 0 writes the file."""
+    along = (result.positions - result.centre) @ result.direction
+    tangential = result.side * np.sign(result.tangents @ result.direction) * result.tangential
+    touching = result.normal > 0
+    loaded = result.side != 0
+    stick, slip = result.stick & loaded, touching & ~result.stick & loaded
+    forces = pc.outputs.pair_forces(pc.patch_values(result.u), result.static.active) + pc.statics().kink_forces(
+        result.static.pinned, result.static.kink_forces)
+    forces = pc.comm.allreduce(forces, op=MPI.SUM)  # the force body j exerts on body i, (i, j) in body_pairs
+    frictionless = sum((float(result.loaded[i]) - float(result.loaded[j])) * forces[k] @ result.direction
+                       for k, (i, j) in enumerate(pc.body_pairs))
+    io.call_on_root(pc.comm, lambda: np.savetxt(
+        path, np.c_[along, result.normal, tangential, result.stick][np.argsort(along)], delimiter=",",
+        header="s,normal_force,tangential_force,stick", comments="", fmt="%.17g"))
+    deficit = np.where(touching & loaded, result.mu * result.normal - np.abs(tangential), 0.0)
+    ratio = np.abs(tangential[slip]) / (result.mu * result.normal[slip])
+    out = {
+        "stick_pairs": int(stick.sum()),
+        "slip_pairs": int(slip.sum()),
+        "stick_half_width_extent": float(0.5 * np.ptp(along[stick])) if stick.any() else 0.0,
+        "slip_traction_ratio": [float(ratio.min()), float(ratio.max())] if slip.any() else [],
+        "contact_force": float(result.normal[loaded].sum()),
+        "increments": len(result.increments),
+        "state_iterations": [k.state_iterations for k in result.increments],
+        "tangential_load": result.tangential_load.tolist(),
+        "friction_force": result.increments[-1].friction_force,
+        "contact_tangential_force": result.increments[-1].friction_force + frictionless,
+    }
+    for name, weights in (("stick_half_width", deficit), ("contact_half_width", np.where(loaded, result.normal, 0.0))):
+        if (weights > 0).sum() >= 3:
+            mean = weights @ along / weights.sum()
+            out[name] = float(2.0 * np.sqrt(weights @ (along - mean) ** 2 / weights.sum()))
+    return out
 
 
 def _pair_summary(pc: PairContact, u, result) -> dict:

@@ -103,20 +103,20 @@ def check_static(scene: Mapping) -> None:
         if section in scene:
             raise SceneError(f"a static scene ('statics' table) takes no '{section}' table")
     statics = scene.get("statics", {})
-    frictional = [k for k, obstacle in enumerate(scene.get("obstacles", [])) if obstacle.get("friction", 0.0) > 0]
+    frictional = [f"obstacles[{k}].friction" for k, obstacle in enumerate(scene.get("obstacles", []))
+                  if obstacle.get("friction", 0.0) > 0]
+    if scene.get("contact", {}).get("friction", 0.0) > 0:
+        frictional.append("contact.friction")
     if frictional and "tangential_body_force" not in statics:
-        raise SceneError(f"scene key 'obstacles[{frictional[0]}].friction': friction is path dependent, a static scene "
-                         "with friction takes its load path: the normal load, then 'statics.tangential_body_force' "
-                         "in 'statics.increments' steps (statics/friction.py; or a dynamic scene integrates it)")
+        raise SceneError(f"scene key '{frictional[0]}': friction is path dependent, a static scene with friction "
+                         "takes its load path: the normal load, then 'statics.tangential_body_force' in "
+                         "'statics.increments' steps (statics/friction.py; or a dynamic scene integrates it)")
     if "tangential_body_force" in statics and not frictional:
-        raise SceneError("scene key 'statics.tangential_body_force': the tangential load path is for obstacles with "
-                         "friction > 0; this scene has none")
+        raise SceneError("scene key 'statics.tangential_body_force': the tangential load path is for obstacles or "
+                         "contact between bodies with friction > 0; this scene has none")
     if "increments" in statics and "tangential_body_force" not in statics:
         raise SceneError("scene key 'statics.increments': the increments of 'statics.tangential_body_force', "
                          "which this scene does not give")
-    if scene.get("contact", {}).get("friction", 0.0) > 0:
-        raise SceneError("scene key 'contact.friction': statics with friction between bodies is not implemented "
-                         "(statics takes friction on rigid obstacles in 2D; a dynamic scene integrates it)")
     for section, keys in DYNAMIC_ONLY.items():
         for key in (k for k in keys if k in scene.get(section, {})):
             raise SceneError(f"scene key '{section}.{key}' applies to dynamic scenes: a static scene computes and "

@@ -59,12 +59,14 @@ import numpy as np
 from mpi4py import MPI
 from petsc4py import PETSc
 
+from dolfinx_dem.contact.pair import PairContact
 from dolfinx_dem.contact.rigid import RigidContact
 from dolfinx_dem.errors import InputError, StaticsError
 from dolfinx_dem.problem import DEMProblem
 from dolfinx_dem.statics import StaticResult, minimise_energy
 from dolfinx_dem.statics.active_set import ActiveSetNewton, Iterate
-from dolfinx_dem.statics.linear import Constraints, LinearSolver
+from dolfinx_dem.statics.linear import Constraints, LinearSolver, project
+from dolfinx_dem.statics.pair_friction import PairFrictionResult, Pairs
 
 __all__ = ["FrictionIncrement", "FrictionResult", "check_load_path", "load_tangentially"]
 
@@ -114,7 +116,10 @@ class FrictionResult:
 
 
 class _Cells:
-    """The own frictional candidate facets of a RigidContact grouped by their (owned) cells."""
+    """The own frictional candidate facets of a RigidContact grouped by their (owned) cells: the
+    units of friction on obstacles."""
+
+    name = "cell"
 
     def __init__(self, contact: RigidContact):
         friction, comm = contact.friction, contact.comm
@@ -136,6 +141,46 @@ class _Cells:
         self.mu = friction.mu[self.facets]
         self.cells, self.of_facet = np.unique(contact.cells[self.facets], return_inverse=True)
         self.dofs = self.cells * contact.d + self.axis  # owned, local
+        self.comm = comm
+
+    # -- the units' interface of the increments (``_increment``; pair units: pair_friction.py) -----
+    def total(self, value, op=MPI.SUM):
+        """``value`` reduced over the processes (the cells are distributed)."""
+        return self.comm.allreduce(value, op=op)
+
+    def start(self, dem, b: np.ndarray, u: PETSc.Vec, it: Iterate) -> PETSc.Vec:
+        """The tangential load of the body force b (``tangential_load``) onto the obstacle's line."""
+        return tangential_load(dem, b, self.offset * self.normal)
+
+    def hold(self, dem, stick: np.ndarray) -> Constraints:
+        """The stick cells' tangential dofs held (with the prescribed bodies')."""
+        held = np.union1d(dem.prescribed.dofs, self.dofs[stick])
+        return Constraints([], held, self.comm.allreduce(bool(len(held)), op=MPI.LOR))
+
+    def slips(self, u: PETSc.Vec, previous: PETSc.Vec) -> np.ndarray:
+        """s_c = t . (u_c - u_{k-1,c})."""
+        return u.array[self.dofs] - previous.array[self.dofs]
+
+    def add_forces(self, out: PETSc.Vec, forces: np.ndarray) -> None:
+        """out += the tangential forces T_c on the cells."""
+        out.array[self.dofs] += forces
+
+    def stick_forces(self, residual: PETSc.Vec, stick: np.ndarray) -> np.ndarray:
+        """The force T_c each hold carries: minus the Lagrangian force on its dof."""
+        return -residual.array[self.dofs]
+
+    def friction_force(self, force: np.ndarray) -> float:
+        """The tangential force the obstacles exert: the sum of the T_c (collective)."""
+        return self.comm.allreduce(float(force.sum()), op=MPI.SUM)
+
+    def result(self, u: PETSc.Vec, start: PETSc.Vec, states: _States, **common) -> FrictionResult:
+        """The solution's figures per frictional facet (``FrictionResult``)."""
+        per_cell = np.bincount(self.of_facet, states.normal, len(self.cells)).astype(float)[self.of_facet]
+        share = np.divide(states.normal, per_cell, out=np.zeros_like(per_cell), where=per_cell > 0)
+        return FrictionResult(u=u, **common, facets=self.facets, normal=states.normal,
+                              tangential=states.force[self.of_facet] * share,
+                              stick=states.stick[self.of_facet] & (states.normal > 0),
+                              slip=(u.array - start.array)[self.dofs][self.of_facet], axis=self.axis, mu=self.mu)
 
     def bounds(self, u: PETSc.Vec, it: Iterate) -> tuple[np.ndarray, np.ndarray]:
         """(N_f of the frictional facets, mu N_c of the cells) at u with the iterate's active and
@@ -149,10 +194,11 @@ class _Cells:
         return normal, np.bincount(self.of_facet, self.mu * normal, len(self.cells)).astype(float)  # float if empty
 
 
-def tangential_load(dem, b: np.ndarray, cells: _Cells) -> PETSc.Vec:
+def tangential_load(dem, b: np.ndarray, point: np.ndarray, loaded: np.ndarray | None = None) -> PETSc.Vec:
     """The cell forces of the tangential load (module docstring): vol_c (b + kappa_B (x_c - G_B)^perp)
-    for each body B, kappa_B J_B = -(G_B - x_O) x b V_B the couple that moves the resultant b V_B
-    onto the obstacle line (x_O on it), J_B = sum vol_c |x_c - G_B|^2 (collective)."""
+    for each body B (each ``loaded`` one: a bool per body, default all), kappa_B J_B = -(G_B - x_O) x
+    b V_B the couple that moves the resultant b V_B onto the line through x_O = ``point`` along b,
+    J_B = sum vol_c |x_c - G_B|^2 (collective)."""
     geom, comm, n = dem.geometry, dem.comm, dem.n_owned
     vol, x, body = geom.cell_volumes[:n], geom.cell_centres[:n, :2], geom.cell_bodies[:n]
     sums = np.zeros((geom.num_bodies, 3))
@@ -163,12 +209,14 @@ def tangential_load(dem, b: np.ndarray, cells: _Cells) -> PETSc.Vec:
     centre = sums[:, 1:] / sums[:, :1]
     r = x - centre[body]
     inertia = comm.allreduce(np.bincount(body, vol * (r**2).sum(axis=1), geom.num_bodies), op=MPI.SUM)
-    arm = centre - cells.offset * cells.normal  # G_B - x_O, x_O = offset n on the line
+    arm = centre - point  # G_B - x_O
     moment = arm[:, 0] * b[1] - arm[:, 1] * b[0]  # (G - x_O) x b, per unit volume
     kappa = -moment * sums[:, 0] / inertia
     out = dem.create_vector()
     perp = np.stack([-r[:, 1], r[:, 0]], axis=1)
     out.array.reshape(-1, 2)[:] = vol[:, None] * (b + kappa[body, None] * perp)
+    if loaded is not None:
+        out.array.reshape(-1, 2)[~loaded[body]] = 0.0
     return out
 
 
@@ -190,49 +238,51 @@ class _States:
         return np.where(self.bound > 0, np.where(self.stick, 2, self.sign), 3).astype(np.int8)
 
 
-def _increment(problem, model, cells: _Cells, previous: PETSc.Vec, u: PETSc.Vec, load: PETSc.Vec,
+def _increment(problem, model, units, previous: PETSc.Vec, u: PETSc.Vec, load: PETSc.Vec,
                states: _States, linear: LinearSolver, t: float, max_iterations: int, state_iterations: int,
-               bound_rtol: float) -> tuple[int, Iterate, PETSc.Vec]:
+               bound_rtol: float, norm0: float) -> tuple[int, Iterate, PETSc.Vec, Constraints]:
     """One increment from ``previous`` (module docstring); u and ``states`` updated in place.
-    Returns the state iterations, the last Newton iterate and the force of its Lagrangian with
-    the loads (not projected: minus the hold's reaction on the stick dofs)."""
-    dem, comm = problem.dem, problem.comm
+    ``units``: the cells of the obstacles' candidates (``_Cells``) or the pairs between bodies
+    (pair_friction.Pairs). ``norm0``: the gradient norm the Newton iteration's tolerance is
+    relative to on pieces that are not quadratic (between bodies). Returns the state iterations,
+    the last Newton iterate, the force of its Lagrangian with the loads (not projected: minus the
+    holds' reactions) and its constraints."""
+    dem = problem.dem
     history = [states.key()]
     total, residual = dem.create_vector(), dem.create_vector()
     for iteration in range(1, state_iterations + 1):
-        if comm.allreduce(int(states.stick.sum()), op=MPI.SUM) == 0:
-            raise StaticsError("no cell in contact sticks: the tangential load exceeds the friction's capacity "
-                               "(gross slip; the body has no static equilibrium)")
-        held = np.union1d(dem.prescribed.dofs, cells.dofs[states.stick])
-        constraints = Constraints([], held, comm.allreduce(bool(len(held)), op=MPI.LOR))
+        if units.total(int(states.stick.sum())) == 0:
+            raise StaticsError(f"no {units.name} in contact sticks: the tangential load exceeds the friction's "
+                               "capacity (gross slip; the body has no static equilibrium)")
+        constraints = units.hold(dem, states.stick)
         load.copy(total)
-        total.array[cells.dofs] -= states.sign * states.bound  # T_c = -sigma_c mu N_c on the slip cells
+        units.add_forces(total, -(states.sign * states.bound))  # T = -sigma mu N on the slip units
         previous.copy(u)
         model.prepare(u)
         newton = ActiveSetNewton(problem, model, t, constraints, linear, 1e-10, True, total)
-        it = newton.run(u, 1.0, max_iterations, states.piece)[0]
-        normal, bound = cells.bounds(u, it)
+        it = newton.run(u, norm0, max_iterations, states.piece)[0]
+        normal, bound = units.bounds(u, it)
         newton.lagrangian_force(u, it, residual, project_it=False)
-        force = np.where(states.stick, -residual.array[cells.dofs], -states.sign * states.bound)
-        slip = u.array[cells.dofs] - previous.array[cells.dofs]
-        rounding = SLIP_ROUNDING * comm.allreduce(float(np.abs(slip).max(initial=0.0)), op=MPI.MAX)
+        force = np.where(states.stick, units.stick_forces(residual, states.stick), -states.sign * states.bound)
+        slip = units.slips(u, previous)
+        rounding = SLIP_ROUNDING * units.total(float(np.abs(slip).max(initial=0.0)), op=MPI.MAX)
         to_slip = states.stick & (np.abs(force) > bound * (1 + BOUND_ROUNDING))
         entering = (bound > 0) & (states.bound == 0)  # free in this solve: stick if it did not move, else slip
         to_stick = (states.sign * slip < -rounding) | (entering & (np.abs(slip) <= rounding))
         to_slip |= entering & (np.abs(slip) > rounding)
-        settled = comm.allreduce(float(np.abs(bound - states.bound).max(initial=0.0)), op=MPI.MAX) <= (
-            bound_rtol * comm.allreduce(float(bound.max(initial=0.0)), op=MPI.MAX))
+        settled = units.total(float(np.abs(bound - states.bound).max(initial=0.0)), op=MPI.MAX) <= (
+            bound_rtol * units.total(float(bound.max(initial=0.0)), op=MPI.MAX))
         states.sign[to_slip] = np.where(entering, np.sign(slip), -np.sign(force))[to_slip]
         states.stick[to_slip] = False
         states.stick[to_stick], states.sign[to_stick] = True, 0.0
         states.stick[bound == 0], states.sign[bound == 0] = False, 0.0
         states.bound, states.normal, states.force = bound, normal, np.where(bound > 0, force, 0.0)
         key = states.key()
-        changed = not comm.allreduce(bool(np.array_equal(key, history[-1])), op=MPI.LAND)
+        changed = not units.total(bool(np.array_equal(key, history[-1])), op=MPI.LAND)
         if not changed and settled:
             states.piece = np.union1d(it.active, it.pinned)
-            return iteration, it, residual
-        if changed and any(comm.allreduce(bool(np.array_equal(key, old)), op=MPI.LAND) for old in history[:-1]):
+            return iteration, it, residual, constraints
+        if changed and any(units.total(bool(np.array_equal(key, old)), op=MPI.LAND) for old in history[:-1]):
             raise StaticsError(f"the friction states cycle (state iteration {iteration}): no consistent set of "
                                "stick and slip cells was found; try more increments")
         history.append(key)
@@ -240,15 +290,17 @@ def _increment(problem, model, cells: _Cells, previous: PETSc.Vec, u: PETSc.Vec,
                        f"{settled}); try more increments")
 
 
-def check_load_path(problem: DEMProblem, body_force, increments: int) -> tuple[RigidContact, np.ndarray, _Cells]:
+def check_load_path(problem: DEMProblem, body_force, increments: int):
     """An InputError unless ``problem`` and the load path (``load_tangentially``'s arguments) are
-    one this module solves; (the frictional contact, the body force, its frictional cells). Known
-    at set-up: a scene run checks it before its output folder is written."""
-    contact = problem.find(RigidContact) if isinstance(problem, DEMProblem) else None
-    if contact is None or contact.friction is None or len(problem.contacts) != 1:
+    one this module solves; (the frictional contact, the body force, its units of friction: the
+    obstacles' cells, ``_Cells``, or the pairs between bodies, pair_friction.Pairs). Known at
+    set-up: a scene run checks it before its output folder is written."""
+    contacts = problem.contacts if isinstance(problem, DEMProblem) else []
+    contact = contacts[0] if len(contacts) == 1 else None
+    if not isinstance(contact, (RigidContact, PairContact)) or contact.friction is None:
         raise InputError("load_tangentially takes a DEMProblem whose only contact model is a RigidContact with "
-                         "friction (an obstacle with friction > 0)")
-    if contact.friction.spread is not None:  # the same on every process
+                         "friction (an obstacle with friction > 0) or a PairContact with friction")
+    if isinstance(contact, RigidContact) and contact.friction.spread is not None:  # the same on every process
         raise InputError("statics with friction on scheme B candidates (method dem-B or dem-AB) is not implemented: "
                          "their bound is the dynamics' spread normal impulse (contact/friction.py); use dem-A")
     d = problem.d
@@ -259,6 +311,8 @@ def check_load_path(problem: DEMProblem, body_force, increments: int) -> tuple[R
         raise InputError(f"the tangential body force must be {d} finite numbers, got {np.asarray(body_force).tolist()}")
     if not (isinstance(increments, (int, np.integer)) and not isinstance(increments, bool) and increments >= 1):
         raise InputError(f"the number of increments must be an integer >= 1, got {increments!r}")
+    if isinstance(contact, PairContact):
+        return contact, b, Pairs(contact)
     cells = _Cells(contact)
     if b @ cells.normal != 0.0:
         raise InputError(f"the tangential body force {b.tolist()} must be parallel to the obstacle (normal "
@@ -268,24 +322,25 @@ def check_load_path(problem: DEMProblem, body_force, increments: int) -> tuple[R
 
 def load_tangentially(problem: DEMProblem, body_force, increments: int, fixed_mean=(), fixed_rotation: bool = False,
                       rtol: float = 1e-12, max_iterations: int = 50, state_iterations: int = 50,
-                      bound_rtol: float = 1e-10, t: float = 0.0) -> FrictionResult:
+                      bound_rtol: float = 1e-10, t: float = 0.0) -> FrictionResult | PairFrictionResult:
     """The load path of the module docstring: the normal load (``minimise_energy`` on frictionless
-    obstacles, with ``fixed_mean`` and ``fixed_rotation``), then the tangential load of the body
-    force ``body_force`` (N/m^3: force per unit area in 2D) moved onto the obstacle's line, in
-    ``increments`` equal increments, each the incremental Coulomb solution."""
+    contact, with ``fixed_mean`` and ``fixed_rotation``), then the tangential load of the body
+    force ``body_force`` (N/m^3: force per unit area in 2D) moved onto the obstacle's line (between
+    bodies: through the centre of pressure, pair_friction.py), in ``increments`` equal increments,
+    each the incremental Coulomb solution."""
     wall = time.perf_counter()
-    contact, b, cells = check_load_path(problem, body_force, increments)
+    contact, b, units = check_load_path(problem, body_force, increments)
     dem, d, comm = problem.dem, problem.d, problem.comm
     normal_step = minimise_energy(problem, fixed_mean, fixed_rotation, rtol, max_iterations, t=t,
                                   normal_step=True)
     u = normal_step.u
     start = u.copy()
     model = contact.statics()
-    normal, bound = cells.bounds(u, Iterate(normal_step.active, normal_step.pinned, -normal_step.kink_forces,
-                                            np.zeros(0)))
-    states = _States(bound > 0, np.zeros(len(cells.cells)), bound, normal, np.zeros(len(cells.cells)),
+    first = Iterate(normal_step.active, normal_step.pinned, -normal_step.kink_forces, np.zeros(0))
+    unit = units.start(dem, b, u, first)
+    normal, bound = units.bounds(u, first)
+    states = _States(bound > 0, np.zeros(len(bound)), bound, normal, np.zeros(len(bound)),
                      np.union1d(normal_step.active, normal_step.pinned))
-    unit = tangential_load(dem, b, cells)
     load, previous = dem.create_vector(), dem.create_vector()
     linear = LinearSolver(dem, rtol)
     done, newton_iterations = [], normal_step.iterations
@@ -294,29 +349,24 @@ def load_tangentially(problem: DEMProblem, body_force, increments: int, fixed_me
             u.copy(previous)
             load.set(0.0)
             load.axpy(k / increments, unit)
-            iterations, it, force = _increment(problem, model, cells, previous, u, load, states, linear, t,
-                                               max_iterations, state_iterations, bound_rtol)
+            iterations, it, force, constraints = _increment(problem, model, units, previous, u, load, states, linear,
+                                                            t, max_iterations, state_iterations, bound_rtol,
+                                                            normal_step.gradient_norm_initial)
             newton_iterations += it.iterations
             done.append(FrictionIncrement(
-                k / increments, iterations,
-                comm.allreduce(int((states.stick & (states.bound > 0)).sum()), op=MPI.SUM),
-                comm.allreduce(int((states.sign != 0).sum()), op=MPI.SUM),
-                comm.allreduce(float(states.force.sum()), op=MPI.SUM)))
+                k / increments, iterations, units.total(int((states.stick & (states.bound > 0)).sum())),
+                units.total(int((states.sign != 0).sum())), units.friction_force(states.force)))
     finally:
         linear.destroy()
     gradient = force.copy()
-    gradient.array[np.union1d(dem.prescribed.dofs, cells.dofs[states.stick])] = 0.0
+    project(gradient, constraints)
+    in_contact = len(it.active) + len(it.pinned)
     static = StaticResult(
         u=u, iterations=newton_iterations, linear_iterations=normal_step.linear_iterations + linear.iterations,
         gradient_norm_initial=normal_step.gradient_norm_initial, gradient_norm=gradient.norm(),
         energy=problem.energies(u, t)["potential"] - load.dot(u),
-        in_contact=comm.allreduce(len(it.active) + len(it.pinned), op=MPI.SUM),
+        in_contact=comm.allreduce(in_contact, op=MPI.SUM) if model.local_pieces else in_contact,
         wall_time_s=time.perf_counter() - wall, active=it.active, pinned=it.pinned, kink_forces=-it.multipliers,
         force=force)
-    per_cell = np.bincount(cells.of_facet, states.normal, len(cells.cells)).astype(float)[cells.of_facet]
-    share = np.divide(states.normal, per_cell, out=np.zeros_like(per_cell), where=per_cell > 0)
-    slip = (u.array - start.array)[cells.dofs][cells.of_facet]
     resultant = comm.allreduce(unit.array.reshape(-1, d).sum(axis=0), op=MPI.SUM)
-    return FrictionResult(u, static, resultant, done, cells.facets, states.normal,
-                          states.force[cells.of_facet] * share, states.stick[cells.of_facet] & (states.normal > 0),
-                          slip, cells.axis, cells.mu)
+    return units.result(u, start, states, static=static, tangential_load=resultant, increments=done)

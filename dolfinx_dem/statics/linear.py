@@ -28,11 +28,16 @@ class Constraints:
     """The subspace of the steps: w . d = 0 for the orthonormal ``normals`` w (``rigid_mode_constraints``)
     and d = 0 on the ``held`` dofs (owned, local: the prescribed bodies'), on which the normals
     vanish. ``holds``: whether any process holds dofs (the same everywhere:
-    collective calls depend on it)."""
+    collective calls depend on it). ``stiff``: the normals are not null directions of the Hessian
+    (the stick pairs of statics/pair_friction.py): each solution is projected onto the subspace,
+    since CG's residual in the I - P block, a displacement along a normal, would carry the force
+    H (I - P) d (a floor of 1e-8 of the load on the Newton iteration); the rigid modes' normals
+    carry none, and their steps are left as solved."""
 
     normals: list
     held: np.ndarray
     holds: bool
+    stiff: bool = False
 
     def __bool__(self) -> bool:
         return bool(self.normals) or self.holds
@@ -95,6 +100,16 @@ def check_held(dem, components=(), rotation: bool = False) -> None:
                                + (" / fixed_rotation" if d == 2 else ""))
 
 
+def held_bodies(dem) -> np.ndarray:
+    """Whether each body has a Dirichlet condition or a prescribed motion (collective)."""
+    geom = dem.geometry
+    held = np.zeros(geom.num_bodies, dtype=np.int64)
+    held[geom.cell_bodies[geom.facet_cells[dem.reconstruction.dirichlet_facets, 0]]] = 1
+    held[dem.prescribed.body_numbers] = 1
+    dem.comm.Allreduce(MPI.IN_PLACE, held, op=MPI.MAX)
+    return held == 1
+
+
 def rigid_mode_constraints(dem, components, rotation) -> Constraints:
     """The normals w of the linear constraints w . u = 0 (orthonormal), for each body (connected
     component) without a Dirichlet condition or a prescribed motion: its mass-weighted mean displacement in
@@ -106,13 +121,9 @@ def rigid_mode_constraints(dem, components, rotation) -> Constraints:
         raise InputError("fixed_rotation is implemented for 2D bodies")
     m = dem.mass.array_r.reshape(-1, d)
     body = geom.cell_bodies[: dem.n_owned]
-    held = np.zeros(geom.num_bodies, dtype=np.int64)
-    held[geom.cell_bodies[geom.facet_cells[dem.reconstruction.dirichlet_facets, 0]]] = 1
-    held[dem.prescribed.body_numbers] = 1
     comm = dem.comm
-    comm.Allreduce(MPI.IN_PLACE, held, op=MPI.MAX)
     normals = []
-    for b in np.flatnonzero(held == 0):
+    for b in np.flatnonzero(~held_bodies(dem)):
         mine = body == b
         for i in components:
             w = dem.create_vector()
@@ -196,7 +207,7 @@ class LinearSolver:
 
     def set_operator(self, H, constraints: Constraints) -> None:
         self.ksp.setOperators(*_constrained(H, constraints))
-        self.held = constraints.held
+        self.constraints = constraints
 
     def solve(self, b, x, iteration: int, check: bool = False) -> None:
         """x = A^-1 b; ``check``: also fail when the true residual exceeds 1e3 rtol |b| (CG
@@ -204,7 +215,10 @@ class LinearSolver:
         and be far off)."""
         x.set(0.0)
         self.ksp.solve(b, x)
-        x.array[self.held] = 0.0  # the step leaves the prescribed bodies where they are
+        if self.constraints.stiff:
+            project(x, self.constraints)
+        else:
+            x.array[self.constraints.held] = 0.0  # the step leaves the prescribed bodies where they are
         self.iterations += self.ksp.getIterationNumber()
         reason = self.ksp.getConvergedReason()
         if check and reason >= 0:
