@@ -172,8 +172,8 @@ def test_friction_errors():
         block(0.0, [0.0, -G], scheme="B")  # frictionless: no warning
     with pytest.raises(InputError, match="statics with friction on scheme B candidates"):
         load_tangentially(block(0.2, [0.0, -G], scheme="B"), [1.0, 0.0], 2)
-    with pytest.raises(InputError, match="friction is path dependent: statics with friction on rigid obstacles takes a "
-                       "load path"):
+    with pytest.raises(InputError, match="friction is path dependent: statics with friction \\(obstacles, bodies\\) "
+                       "takes a load path"):
         minimise_energy(block(0.2, [0.0, -G]), fixed_mean=[0])
     mesh, _, tags = meshes.create_interval(MPI.COMM_WORLD, 10, 0.0, 1.0)
     dem = DEMDiscretisation(mesh, BLOCK, "A")

@@ -46,7 +46,7 @@ def test_friction_between_bodies_is_the_incremental_coulomb_solution(tmp_path):
     carry |T| <= mu N; slip pairs carry mu N (to 1e-8) against their slip; the disc's contact
     forces (friction and the frictionless pair forces) balance the tangential load to 1e-10; the
     stick zone's half-width is within 10 % of Cattaneo and Mindlin's c (measured 0.927 of it with
-    Debian 12's gmsh; 0.885 and 0.948 on h = 0.02 and 0.01, docs/validation/cattaneo_mindlin_bodies.md),
+    Debian 12's mesh, 0.918 with 13's; docs/validation/cattaneo_mindlin_bodies.md for finer meshes),
     and 1, 2 and 3 processes agree to 1e-9 (measured 1e-14)."""
     comm = MPI.COMM_WORLD
     problem = model.build(_scene(), comm)

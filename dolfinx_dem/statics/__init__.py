@@ -109,7 +109,7 @@ def minimise_energy(
     if len(problem.contacts) > 1:
         raise InputError("minimise_energy takes rigid obstacles or contact between bodies, not both")
     if not normal_step and any(c.friction is not None for c in problem.contacts):
-        raise InputError("minimise_energy: friction is path dependent: statics with friction on rigid obstacles "
+        raise InputError("minimise_energy: friction is path dependent: statics with friction (obstacles, bodies) "
                          "takes a load path (statics.friction.load_tangentially), or integrate it in time with MEMM")
     models = [c.statics() for c in problem.contacts]
     if not models:
