@@ -28,16 +28,18 @@ class Constraints:
     """The subspace of the steps: w . d = 0 for the orthonormal ``normals`` w (``rigid_mode_constraints``)
     and d = 0 on the ``held`` dofs (owned, local: the prescribed bodies'), on which the normals
     vanish. ``holds``: whether any process holds dofs (the same everywhere:
-    collective calls depend on it). ``stiff``: the normals are not null directions of the Hessian
-    (the stick pairs of statics/pair_friction.py): each solution is projected onto the subspace,
-    since CG's residual in the I - P block, a displacement along a normal, would carry the force
-    H (I - P) d (a floor of 1e-8 of the load on the Newton iteration); the rigid modes' normals
-    carry none, and their steps are left as solved."""
+    collective calls depend on it). ``rows``: the normals are not null directions of the Hessian
+    (the stick pairs of statics/pair_friction.py), and these are the sparse constraints w they
+    orthonormalise, this process's, as (global dofs (m, k), values (m, k)). Then each solution is
+    projected onto the subspace, since CG's residual in the I - P block, a displacement along a
+    normal, would carry the force H (I - P) d (a floor of 1e-8 of the load on the Newton
+    iteration), and the solve is preconditioned by H + s W W^T with the I - P block scaled by s
+    (``_constrained``). The rigid modes' normals carry no force: their steps are left as solved."""
 
     normals: list
     held: np.ndarray
     holds: bool
-    stiff: bool = False
+    rows: tuple[np.ndarray, np.ndarray] | None = None
 
     def __bool__(self) -> bool:
         return bool(self.normals) or self.holds
@@ -156,12 +158,12 @@ def project(x: PETSc.Vec, constraints: Constraints) -> None:
 
 
 class _ConstrainedOperator:
-    """P H P + (I - P): symmetric positive definite when H is positive definite on range(P), and
-    equal to H on it (the identity on the held dofs and the normals), so CG on range(P) solves the
-    constrained minimisation."""
+    """P H P + s (I - P): symmetric positive definite when H is positive definite on range(P), and
+    equal to H on it (s times the identity on the held dofs and the normals), so CG on range(P)
+    solves the constrained minimisation; s = 1 but for ``Constraints.rows``."""
 
-    def __init__(self, H, constraints: Constraints):
-        self.H, self.constraints = H, constraints
+    def __init__(self, H, constraints: Constraints, s: float):
+        self.H, self.constraints, self.s = H, constraints, s
         self.work = H.createVecRight()
 
     def mult(self, mat, x, y):
@@ -169,20 +171,30 @@ class _ConstrainedOperator:
         project(self.work, self.constraints)
         self.H.mult(self.work, y)
         project(y, self.constraints)
-        y.axpy(1.0, x)
-        y.axpy(-1.0, self.work)
+        y.axpy(self.s, x)
+        y.axpy(-self.s, self.work)
 
 
 def _constrained(H, constraints: Constraints):
     """(operator, preconditioning matrix) for the constrained solve; without constraints H itself.
     The preconditioner is built from H with the held rows and columns replaced by the identity's
     (exactly P H P + (I - P) for them) and, with normals, a tiny diagonal shift, which keeps it
-    definite when the constrained directions are in (or near) the null space of H."""
+    definite when the constrained directions are in (or near) the null space of H. With
+    ``rows`` (constraints that H resists) it is H + s W W^T, s the largest diagonal entry of H,
+    and the operator's I - P block is s (I - P): both then treat the constrained directions alike
+    (with H's shifted preconditioner CG took ~1000 iterations a solve)."""
     if not constraints:
         return H, H
-    shell = PETSc.Mat().createPython(H.getSizes(), _ConstrainedOperator(H, constraints), comm=H.getComm())
-    shell.setUp()
+    s = 1.0
     P = H.copy()
+    if constraints.rows is not None:
+        s = P.getDiagonal().max()[1]
+        P.setOption(PETSc.Mat.Option.NEW_NONZERO_ALLOCATION_ERR, False)
+        for dofs, values in zip(*constraints.rows):
+            P.setValues(dofs, dofs, s * np.outer(values, values), addv=PETSc.InsertMode.ADD_VALUES)
+        P.assemble()
+    shell = PETSc.Mat().createPython(H.getSizes(), _ConstrainedOperator(H, constraints, s), comm=H.getComm())
+    shell.setUp()
     if constraints.holds:
         P.zeroRowsColumns((constraints.held + H.getOwnershipRange()[0]).astype(PETSc.IntType), diag=1.0)
     if constraints.normals:
@@ -215,7 +227,7 @@ class LinearSolver:
         and be far off)."""
         x.set(0.0)
         self.ksp.solve(b, x)
-        if self.constraints.stiff:
+        if self.constraints.rows is not None:
             project(x, self.constraints)
         else:
             x.array[self.constraints.held] = 0.0  # the step leaves the prescribed bodies where they are

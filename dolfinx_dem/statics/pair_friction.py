@@ -117,8 +117,12 @@ class Pairs:
         k, p = at[mine], np.flatnonzero(mine)
         t = L.t[p, 0]
         self.vectors = [dem.create_vector() for _ in self.keys]
-        for kk, t_p, ci, cj in zip(k, t, F.cell_dof[L.i[p]], F.cell_dof[L.j[p]]):
-            self.vectors[kk].setValues([ci, ci + 1, cj, cj + 1], [*t_p, *(-t_p)], addv=PETSc.InsertMode.ADD_VALUES)
+        ci, cj = F.cell_dof[L.i[p]], F.cell_dof[L.j[p]]
+        #: this process's pairs' w_p as (their indices, global dofs (m, 4), values (m, 4))
+        self.rows = (k, np.stack([ci, ci + 1, cj, cj + 1], axis=1).astype(PETSc.IntType),
+                     np.concatenate([t, -t], axis=1))
+        for kk, dofs, values in zip(*self.rows):
+            self.vectors[kk].setValues(dofs, values, addv=PETSc.InsertMode.ADD_VALUES)
         for w in self.vectors:
             w.assemble()
         # per pair: its normal, its position, and whether facet i's body takes the load (+1) or j's (-1)
@@ -165,7 +169,9 @@ class Pairs:
             q = dem.create_vector()
             q.maxpy(column / np.sqrt(value), W)
             normals.append(q)
-        return Constraints(normals, dem.prescribed.dofs, bool(dem.prescribed), stiff=True)
+        mine = stick[self.rows[0]]
+        return Constraints(normals, dem.prescribed.dofs, bool(dem.prescribed),
+                           rows=(self.rows[1][mine], self.rows[2][mine]))
 
     def _gram(self, W: list[PETSc.Vec]) -> np.ndarray:
         gram = np.array([[w.array_r @ v.array_r for v in W] for w in W]).reshape(len(W), len(W))
