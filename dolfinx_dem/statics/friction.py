@@ -148,9 +148,9 @@ class _Cells:
         """``value`` reduced over the processes (the cells are distributed)."""
         return self.comm.allreduce(value, op=op)
 
-    def start(self, dem, b: np.ndarray, u: PETSc.Vec, it: Iterate) -> PETSc.Vec:
-        """The tangential load of the body force b (``tangential_load``) onto the obstacle's line."""
-        return tangential_load(dem, b, self.offset * self.normal)
+    def start(self, dem, b: np.ndarray, u: PETSc.Vec, it: Iterate) -> tuple[np.ndarray, None]:
+        """The tangential load's point (on the obstacle's line) and the bodies it loads (all)."""
+        return self.offset * self.normal, None
 
     def hold(self, dem, stick: np.ndarray) -> Constraints:
         """The stick cells' tangential dofs held (with the prescribed bodies')."""
@@ -337,7 +337,7 @@ def load_tangentially(problem: DEMProblem, body_force, increments: int, fixed_me
     start = u.copy()
     model = contact.statics()
     first = Iterate(normal_step.active, normal_step.pinned, -normal_step.kink_forces, np.zeros(0))
-    unit = units.start(dem, b, u, first)
+    unit = tangential_load(dem, b, *units.start(dem, b, u, first))
     normal, bound = units.bounds(u, first)
     states = _States(bound > 0, np.zeros(len(bound)), bound, normal, np.zeros(len(bound)),
                      np.union1d(normal_step.active, normal_step.pinned))

@@ -100,11 +100,9 @@ class Pairs:
         """``value`` itself: the pairs' states are the same on every process."""
         return value
 
-    def start(self, dem, b: np.ndarray, u: PETSc.Vec, it: Iterate) -> PETSc.Vec:
-        """The units at the normal step's solution u (the facing pairs, their w_p) and the cell
-        forces of the tangential load of the body force b (collective)."""
-        from dolfinx_dem.statics.friction import tangential_load
-
+    def start(self, dem, b: np.ndarray, u: PETSc.Vec, it: Iterate) -> tuple[np.ndarray, np.ndarray]:
+        """The units at the normal step's solution u (the facing pairs, their w_p); the tangential
+        load's point X and the bodies it loads (``friction.tangential_load``; collective)."""
         pc, comm = self.contact, self.comm
         model = pc.statics()
         model.prepare(u)
@@ -153,7 +151,7 @@ class Pairs:
                              "problem's own")
         self.direction = b / np.linalg.norm(b) if b.any() else np.zeros(2)
         self.centre = N @ self.positions / N.sum()
-        return tangential_load(dem, b, self.centre, bodies)
+        return self.centre, bodies
 
     def hold(self, dem, stick: np.ndarray) -> Constraints:
         """The stick pairs' constraints w_p . d = 0, orthonormalised (with the prescribed bodies'
