@@ -40,7 +40,7 @@ import numpy as np
 from mpi4py import MPI
 from petsc4py import PETSc
 
-from dolfinx_dem.errors import InputError, StaticsError
+from dolfinx_dem.errors import InputError, StateError, StaticsError
 from dolfinx_dem.statics.active_set import Iterate
 from dolfinx_dem.statics.linear import Constraints, held_bodies
 
@@ -157,7 +157,7 @@ class Pairs:
         """The stick pairs' constraints w_p . d = 0, orthonormalised (with the prescribed bodies'
         dofs held)."""
         W = [self.vectors[k] for k in np.flatnonzero(stick)]
-        gram = self._gram(W)
+        self._held = (stick.copy(), gram := self._gram(W))  # stick_forces' Gram matrix: the same stick set
         values, vectors = np.linalg.eigh(gram)
         if len(values) and values[0] <= DEPENDENT * values[-1]:
             raise StaticsError(f"the {len(W)} stick pairs' constraints are dependent (a cycle of stick pairs between "
@@ -188,11 +188,15 @@ class Pairs:
             out.maxpy(forces, self.vectors)
 
     def stick_forces(self, residual: PETSc.Vec, stick: np.ndarray) -> np.ndarray:
-        """T = -G^-1 W^T r on the stick pairs (module docstring), 0 on the others."""
+        """T = -G^-1 W^T r on the stick pairs (module docstring), 0 on the others; ``stick`` is the
+        set of the last ``hold``, whose G it reuses."""
+        held, gram = self._held
+        if not np.array_equal(held, stick):
+            raise StateError("stick_forces takes the stick pairs of the last hold")
         out = np.zeros(len(self.keys))
         W = [self.vectors[k] for k in np.flatnonzero(stick)]
         if W:
-            out[stick] = -np.linalg.solve(self._gram(W), _dots(W, residual, self.comm))
+            out[stick] = -np.linalg.solve(gram, _dots(W, residual, self.comm))
         return out
 
     def bounds(self, u: PETSc.Vec, it: Iterate) -> tuple[np.ndarray, np.ndarray]:
