@@ -212,6 +212,17 @@ def _pairs(rng, n_facets=6, n=5, d=3):
                   normal=normal, e_i=e_i, e_j=e_j)
 
 
+def _penetration(pairs, state, centre, normals, reach, length, n_own, uf=None):
+    """dem_pair_penetration's (depth, scale, worst) of the first n_own facets (2D pairs)."""
+    n = len(centre)
+    depth, scale, worst = np.zeros(n_own), np.zeros(n_own), np.empty(2)
+    uf = np.zeros_like(centre) if uf is None else uf
+    lib.dem_pair_penetration(pairs.c, state.c, pointer(centre), pointer(uf), pointer(normals), pointer(reach),
+                             pointer(length), n_own, pointer(np.empty(3 * n + 2 * n_own)), pointer(depth),
+                             pointer(scale), pointer(worst))
+    return depth, scale, worst
+
+
 def test_penetration_of_a_facet_without_partner_over_it():
     """dem_pair_penetration for own facets that overlap no partner (no closed pair): facet 0 sits 0.1
     below the plane y = 0 of its neighbours 2 and 3 (a hole between them): 0.1 (the far facet 4
@@ -223,14 +234,53 @@ def test_penetration_of_a_facet_without_partner_over_it():
                    dw=np.zeros((0, 2)), c=np.zeros(0), mu=np.zeros(0))
     centre = np.array([[0.0, -0.1], [0.9, -0.05], [-0.5, 0.0], [0.5, 0.0], [5.0, 0.0], [0.0, 0.0], [1.0, -0.2]])
     normals = np.array([[0.0, -1.0], [0.0, -1.0], [0.0, 1.0], [0.0, 1.0], [0.0, -1.0], [0.0, 1.0], [0.8, 0.6]])
-    reach, depth, scale = np.array([0.3, 0.3, 0.3, 0.5, 0.9, 0.3, 0.3]), np.zeros(2), np.zeros(2)
-    worst = np.empty(2)
-    lib.dem_pair_penetration(pairs.c, state.c, pointer(centre), pointer(np.zeros((7, 2))), pointer(normals),
-                             pointer(reach), 2, pointer(np.zeros((2, 7))), pointer(np.empty(2)), pointer(depth),
-                             pointer(scale), pointer(worst))
+    reach = np.array([0.3, 0.3, 0.3, 0.5, 0.9, 0.3, 0.3])
+    depth, scale, worst = _penetration(pairs, state, centre, normals, reach, 2 * reach, 2)
     assert depth[0] == pytest.approx(0.1, rel=1e-14) and depth[1] == 0.0
     assert list(scale) == [0.5, 0.3]  # the largest reach of the facet and the partners around it (not 4's)
     assert list(worst) == [depth[0], depth[0] / (2 * 0.5)]  # the largest depth and depth / (2 scale)
+
+
+def test_penetration_counts_each_part_of_a_facet_by_what_lies_over_it():
+    """dem_pair_penetration for facets of unit length (facing down, y = 0 unless said) partly
+    covered by touching partners (facing up): depth = kappa m + (1 - kappa) h, kappa the covered
+    fraction, m the partners' mean depth, h the depth in the hole under the rest.
+    - Facet 0 at the rim of a contact patch: partner 4 (gap -x) covers 0.01 of it, and beyond the
+      rim the other body's surface falls away (partner 5, slope -0.75): 0.01 x, not x (the mean gap
+      as if 4 covered all of it).
+    - Facet 1 sits D = 0.2 below the plane y = 0 of partners 6 and 7, over the hole between them;
+      6 covers half of it along the common normal of tilted facets, where its gap is only -0.048:
+      0.5 (0.048 + D) (the hole's half counted), not 0.048 (the partner's mean gap alone).
+    - Facet 2, covered by 8 and 9 (gaps -0.01, -0.03) which overlap each other (0.6 of it each),
+      keeps the overlap-weighted mean gap 0.02 (fully covered: today's number).
+    - Facet 3 sits D below partners 10 and 11, 10 covering half of it with gap -D: D, as deep under
+      the partner as under the hole (the larger of the two halves alone would say D / 2)."""
+    x, D = 0.05, 0.2
+    n1 = np.array([0.3, -1.0]) / np.hypot(0.3, 1.0)  # the common normal of facet 1 and partner 6
+    i, j = np.array([0, 0, 1, 1, 2, 2, 3, 3]), np.array([4, 5, 6, 7, 8, 9, 10, 11])
+    normal = np.tile([0.0, -1.0], (8, 1))
+    normal[2] = n1
+    pairs = Struct("dem_pairs", d=2, n_facets=12, n=8, i=i, j=j, normal=normal)
+    centre = np.array([[0.0, 0.0], [10.0, -D], [20.0, 0.0], [30.0, -D], [-0.99, x], [0.01, x - 0.375], [10.5, 0.0],
+                       [8.5, 0.0], [19.75, 0.01], [20.25, 0.03], [30.5, 0.0], [28.5, 0.0]])
+    normals = np.tile([0.0, 1.0], (12, 1))
+    normals[:4] = [0.0, -1.0]
+    normals[5] = [0.6, 0.8]
+    gap = np.einsum("pi,pi->p", centre[j] - centre[i], normal)
+    assert gap[0] == -x and gap[2] == pytest.approx(-0.048, abs=1e-3) and gap[6] == -D
+    closed = np.array([0, 2, 4, 5, 6], dtype=np.int64)
+    w = np.array([0.01, 0.5 * -n1[1], 0.6, 0.6, 0.5])  # projected on the pair's plane: 6 covers half of 1
+    state = Struct("dem_pair_state", n=5, closed=closed, g=gap[closed], w=w, dw=np.zeros((5, 2)),
+                   c=w * gap[closed], mu=np.zeros(5))
+    reach = np.full(12, 0.5)
+    reach[7] = 0.7
+    depth, scale, worst = _penetration(pairs, state, centre, normals, reach, np.ones(12), 4)
+    assert depth[0] == pytest.approx(0.01 * x, rel=1e-12)
+    assert depth[1] == pytest.approx(0.5 * (-gap[2] + D), rel=1e-12) and depth[1] > 2 * -gap[2]
+    assert depth[2] == -(w[2] * gap[4] + w[3] * gap[5]) / (w[2] + w[3])  # as before: the mean
+    assert depth[3] == pytest.approx(D, rel=1e-12)
+    assert list(scale) == [0.5, 0.7, 0.5, 0.5]  # facet 1's depth reads the partners around the hole (7)
+    assert worst[0] == depth.max()
 
 
 def test_worst_motion_is_the_largest_motion_relative_to_half_the_skin():
@@ -294,32 +344,36 @@ def test_facet_forces_corrections_body_forces_and_penetration_are_their_formulas
     assert np.allclose(out, expected, rtol=1e-13, atol=1e-15)
 
     centre, uf = rng.standard_normal((n_facets, d)), rng.standard_normal((n_facets, d))
-    sums = np.full((2, n_facets), np.nan)  # overwritten by the kernel
-    weight, mean = sums
+    work = np.full(3 * n_facets + 2 * 4, np.nan)  # overwritten by the kernel
+    weight, mean, cover = work[: 3 * n_facets].reshape(3, n_facets)
     normals, reach = rng.standard_normal((n_facets, d)), 0.2 * rng.random(n_facets)
     depth, scale, worst = np.zeros(4), np.zeros(4), np.empty(2)
-    lib.dem_pair_penetration(pairs.c, state.c, pointer(centre), pointer(uf), pointer(normals), pointer(reach), 4,
-                             pointer(sums), pointer(np.empty(4)), pointer(depth), pointer(scale), pointer(worst))
+    lib.dem_pair_penetration(pairs.c, state.c, pointer(centre), pointer(uf), pointer(normals), pointer(reach),
+                             pointer(length), 4, pointer(work), pointer(depth), pointer(scale), pointer(worst))
     x = centre + uf
     gap = np.einsum("pi,pi->p", x[j[closed]] - x[i[closed]], normal[closed])
     on = w > 0
-    W, M = np.zeros(n_facets), np.zeros(n_facets)
+    W, M, C = np.zeros(n_facets), np.zeros(n_facets), np.zeros(n_facets)
     for f in (i[closed][on], j[closed][on]):
         np.add.at(W, f, w[on])
         np.add.at(M, f, (w * gap)[on])
+        np.add.at(C, f, w[on] / (length[f] * np.abs(np.einsum("pi,pi->p", normals[f], normal[closed][on]))))
     assert np.allclose(weight, W, rtol=1e-13, atol=0) and np.allclose(mean, M, rtol=1e-13, atol=0)
-    expected = np.zeros(4)
+    assert np.allclose(cover, C, rtol=1e-13, atol=0)
+    kappa = np.where(C < 1 - 1e-9, C, 1.0)
+    assert ((kappa[:4] > 0) & (kappa[:4] < 1)).any() and (kappa[:4] == 1).any()  # partly and fully covered
+    expected, expected_scale = np.zeros(4), reach[:4].copy()
     for f in range(4):
-        if W[f] > 0:
-            expected[f] = max(-M[f] / W[f], 0.0)
-            continue
+        touching = [o for k, p in enumerate(closed) if w[k] > 0 for g, o in ((i[p], j[p]), (j[p], i[p])) if g == f]
+        covered = -kappa[f] * M[f] / W[f] if W[f] > 0 else 0.0
         partners = [o for a, b in zip(i, j) for g, o in ((a, b), (b, a)) if g == f]
-        if partners:  # the least depth behind the partners around the nearest one
+        hole, around = 0.0, []
+        if partners and kappa[f] < 1:  # the least depth behind the partners around the nearest one
             r = [np.linalg.norm(x[f] - x[o]) for o in partners]
             around = [o for o, ro in zip(partners, r) if ro <= min(r) + 2 * (reach[f] + reach[o])]
-            expected[f] = max(min(-np.dot(x[f] - x[o], normals[o]) for o in around), 0.0)
-    read = [[f] + ([o for k, p in enumerate(closed) if w[k] > 0 for g, o in ((i[p], j[p]), (j[p], i[p])) if g == f]
-                   if W[f] > 0 else []) for f in range(4)]
-    assert np.array_equal(scale[W[:4] > 0], [max(reach[o] for o in read[f]) for f in range(4) if W[f] > 0])
+            hole = (1 - kappa[f]) * max(min(-np.dot(x[f] - x[o], normals[o]) for o in around), 0.0)
+        expected[f] = max(covered, 0.0) + hole
+        expected_scale[f] = max(reach[o] for o in [f] + touching + (around if hole > 0 else []))
+    assert np.array_equal(scale, expected_scale)
     assert np.allclose(depth, expected, rtol=1e-13, atol=1e-15)
     assert list(worst) == [depth.max(initial=0.0), (depth / (2 * scale)).max(initial=0.0)]

@@ -56,22 +56,26 @@ class PairOutputs:
     def penetration(self, up: np.ndarray) -> tuple[float, float]:
         """Largest interpenetration of the contact-aware facet reconstructions, as (depth in m,
         depth over the local facet diameter), each >= 0 and the largest over the own facets
-        (collective); the local diameter of a facet: the largest of its own and those of the
+        (collective). Each part of a facet's area carries the depth of what lies over it
+        (``dem_pair_penetration``): its touching partners (g < 0, w > 0) cover a fraction kappa of
+        it and carry the overlap-weighted mean over them of the reconstructed gap
+        (x_f' + u_f' - x_f - u_f) . n, negated; eq. (31) makes it zero when each facet has one
+        partner covering it exactly, and partial overlaps (facets sliding against each other)
+        leave a gap of the order of the cell gap times the uncovered fraction. The uncovered
+        fraction 1 - kappa (all of a facet that overlaps no partner, as one that slid into a hole
+        of the other body's mosaic) carries the least of its depths behind the planes of its
+        listed partners around the nearest one: in a hole it lies behind all of them, beside a
+        convex body in front of one. The facet's depth is the larger of the two parts: a sliver of
+        overlap at the rim of a contact patch counts as a sliver, a facet half over a hole as half
+        its depth there. The local diameter of a facet: the largest of its own and those of the
         partners its depth reads (a fine facet against a coarse mosaic sits as deep as the coarse
-        facets allow). A facet's depth: with touching partners (g < 0, w > 0), the overlap-weighted
-        mean over them of the reconstructed gap (x_f' + u_f' - x_f - u_f) . n, negated; eq. (31)
-        makes it zero when each facet has one partner covering it exactly, and partial overlaps
-        (facets sliding against each other) leave a gap of the order of the cell gap times the
-        uncovered fraction. Without any (a facet that slid into a hole of the other body's mosaic
-        overlaps no partner): the least of its depths behind the planes of its listed partners
-        around the nearest one (``dem_pair_penetration``): in a hole it lies behind all of them,
-        beside a convex body in front of one. The corrections of the partners come from their
-        owners (a scatter over the candidates)."""
+        facets allow). The corrections of the partners come from their owners (a scatter over the
+        candidates)."""
         pc, work = self.contact, self._work()
         at, n = pc.state(up), pc.num_own
         np.add(at.uc, pc.pair_list.candidate_values(self._corrections(up)[:n]), out=work.uf)
         lib.dem_pair_penetration(pc.pair_list.c_pairs.c, at.kernel_state.c, work.p_centre, work.p_uf, work.p_normal,
-                                 work.p_reach, n, work.p_sums, work.p_nearest, work.p_depth, work.p_scale,
+                                 work.p_reach, work.p_length, n, work.p_work, work.p_depth, work.p_scale,
                                  work.p_worst)
         worst = work.worst.copy()
         pc.comm.Allreduce(MPI.IN_PLACE, worst, op=MPI.MAX)
@@ -230,9 +234,8 @@ class _FacetWork:
         self.uf, self.worst = np.empty((n, d)), np.empty(2)  # dem_pair_penetration's
         self.reach = reach(F)
         arrays = {"length": F.length, "corrections": self.corrections, "spare": self.spare, "centre": F.centre,
-                  "uf": self.uf, "normal": F.normal, "reach": self.reach, "sums": np.empty((2, n)),
-                  "nearest": np.empty(n_own), "depth": np.empty(n_own), "scale": np.empty(n_own),
-                  "worst": self.worst}
+                  "uf": self.uf, "normal": F.normal, "reach": self.reach, "work": np.empty(3 * n + 2 * n_own),
+                  "depth": np.empty(n_own), "scale": np.empty(n_own), "worst": self.worst}
         self._arrays = arrays  # kept alive with their pointers
         for name, array in arrays.items():
             setattr(self, "p_" + name, pointer(array))

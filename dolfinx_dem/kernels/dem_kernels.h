@@ -238,7 +238,7 @@ void dem_pair_facet_corrections(const dem_pairs *pairs, const dem_pair_state *st
 int64_t dem_pair_body_forces(const dem_pairs *pairs, const dem_pair_state *state, const int64_t *body,
                              int64_t n_bodies, const int64_t *index, double *out);
 void dem_pair_penetration(const dem_pairs *pairs, const dem_pair_state *state, const double *centre,
-                          const double *uf, const double *facet_normal, const double *reach, int64_t n_own,
-                          double *sums, double *nearest, double *depth, double *scale, double *worst);
+                          const double *uf, const double *facet_normal, const double *reach, const double *length,
+                          int64_t n_own, double *work, double *depth, double *scale, double *worst);
 
 #endif
