@@ -226,7 +226,6 @@ class PairContact:
     facets_all = property(lambda self: self.pair_list.known, doc="The known facets: the local ones, then ghosts.")
     scatter = property(lambda self: self.pair_list.scatter, doc="The patch scatter (a list round may remake it).")
     skin = property(lambda self: self.pair_list.skin, doc="The smallest Verlet skin (m).")
-    facet_size = property(lambda self: self.pair_list.facet_size, doc="The candidate facets' mean diameter (m).")
     rebuilds = property(lambda self: self.pair_list.rebuilds, doc="List builds on this process.")
     exchanges = property(lambda self: self.pair_list.exchanges, doc="Exchanges of facets between processes.")
 

@@ -78,9 +78,6 @@ class PairList:
         self._uniform_skin = None if skin is None else float(skin)
         self.local_reach = reaches = reach(local)
         skins = self.skins(reaches)
-        # the mean diameter of the candidate facets (about their barycentres): the scale of the
-        # penetration the reconstructions may leave (``PairContact.penetration``)
-        self.facet_size = 2.0 * comm.allreduce(float(reaches[:num_own].sum()), op=MPI.SUM) / self.num_facets
         # the smallest skin (a length scale for tolerances) and the largest pair radius (the
         # reach of the broad phase's exchange between processes)
         self.skin = comm.allreduce(float(skins.min(initial=np.inf)), op=MPI.MIN)
