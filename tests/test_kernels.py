@@ -279,8 +279,10 @@ def test_penetration_counts_each_part_of_a_facet_by_what_lies_over_it():
     assert depth[1] == pytest.approx(0.5 * (-gap[2] + D), rel=1e-12) and depth[1] > 2 * -gap[2]
     assert depth[2] == -(w[2] * gap[4] + w[3] * gap[5]) / (w[2] + w[3])  # as before: the mean
     assert depth[3] == pytest.approx(D, rel=1e-12)
-    assert list(scale) == [0.5, 0.7, 0.5, 0.5]  # facet 1's depth reads the partners around the hole (7)
-    assert worst[0] == depth.max()
+    # each part over the size of what it reads: facet 1's hole over partner 7's
+    assert scale[[0, 2]].tolist() == [0.5, 0.5]
+    assert scale[1] == pytest.approx(depth[1] / (0.5 * -gap[2] / 0.5 + 0.5 * D / 0.7), rel=1e-12)
+    assert worst[0] == depth.max() and worst[1] == pytest.approx((depth / (2 * scale)).max(), rel=1e-14)
 
 
 def test_worst_motion_is_the_largest_motion_relative_to_half_the_skin():
@@ -362,7 +364,7 @@ def test_facet_forces_corrections_body_forces_and_penetration_are_their_formulas
     assert np.allclose(cover, C, rtol=1e-13, atol=0)
     kappa = np.where(C < 1 - 1e-9, C, 1.0)
     assert ((kappa[:4] > 0) & (kappa[:4] < 1)).any() and (kappa[:4] == 1).any()  # partly and fully covered
-    expected, expected_scale = np.zeros(4), reach[:4].copy()
+    expected, expected_scale, ratio = np.zeros(4), reach[:4].copy(), np.zeros(4)
     for f in range(4):
         touching = [o for k, p in enumerate(closed) if w[k] > 0 for g, o in ((i[p], j[p]), (j[p], i[p])) if g == f]
         covered = -kappa[f] * M[f] / W[f] if W[f] > 0 else 0.0
@@ -373,7 +375,9 @@ def test_facet_forces_corrections_body_forces_and_penetration_are_their_formulas
             around = [o for o, ro in zip(partners, r) if ro <= min(r) + 2 * (reach[f] + reach[o])]
             hole = (1 - kappa[f]) * max(min(-np.dot(x[f] - x[o], normals[o]) for o in around), 0.0)
         expected[f] = max(covered, 0.0) + hole
-        expected_scale[f] = max(reach[o] for o in [f] + touching + (around if hole > 0 else []))
-    assert np.array_equal(scale, expected_scale)
+        s_touching, s_around = (max(reach[o] for o in [f] + partners) for partners in (touching, around))
+        ratio[f] = (max(covered, 0.0) / s_touching + hole / s_around) / 2
+        expected_scale[f] = s_touching if hole == 0 else s_around if covered <= 0 else expected[f] / (2 * ratio[f])
+    assert np.allclose(scale, expected_scale, rtol=1e-13, atol=0)
     assert np.allclose(depth, expected, rtol=1e-13, atol=1e-15)
-    assert list(worst) == [depth.max(initial=0.0), (depth / (2 * scale)).max(initial=0.0)]
+    assert worst[0] == depth.max(initial=0.0) and worst[1] == pytest.approx(ratio.max(initial=0.0), rel=1e-13)

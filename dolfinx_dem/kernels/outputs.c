@@ -130,12 +130,14 @@ DEM_INLINE void behind_partners(const int32_t d, const dem_pairs *pairs, const d
  *   distance from each barycentre to its vertices, n_facets): behind all of them, f lies in a
  *   hole of the other body's mosaic; beside a convex body, in front of one. A fully covered
  *   facet's depth is max(m_f, 0), one without touching partners max(h_f, 0).
- * scale (n_own): the size its depth is compared with, the largest reach of f and of the partners
- * its depth reads: its touching partners, and those around the nearest where (1 - kappa_f) h_f
- * > 0. work: 3 n_facets + 2 n_own, overwritten: the sums sum_p w_p, the weighted gaps and the
+ * Each part is compared with the largest reach of f and of the partners it reads (its touching
+ * partners, those around the nearest): ratio_f = (kappa_f max(m_f, 0) / s_touching + (1 -
+ * kappa_f) max(h_f, 0) / s_around) / 2, so that a sliver of hole does not compare the whole depth
+ * with the coarse facets around it. scale (n_own): depth_f / (2 ratio_f), the size its depth is
+ * compared with (the reach of f where its depth is 0). work: 3 n_facets + 2 n_own, overwritten: the sums sum_p w_p, the weighted gaps and the
  * covered fractions (before the min) of each facet, then the distance to the nearest partner and
- * the largest reach around it of each own facet. worst: the largest depth and the largest depth
- * / (2 scale), each >= 0 (the run's two figures, in one pass). */
+ * the largest reach around it of each own facet. worst: the largest depth and the largest ratio,
+ * each >= 0 (the run's two figures, in one pass). */
 void dem_pair_penetration(const dem_pairs *pairs, const dem_pair_state *state, const double *restrict centre,
                           const double *restrict uf, const double *restrict facet_normal,
                           const double *restrict reach, const double *restrict length, int64_t n_own,
@@ -195,10 +197,10 @@ void dem_pair_penetration(const dem_pairs *pairs, const dem_pair_state *state, c
     const double kappa = cover[f] < DEM_COVERED ? cover[f] : 1.0;
     const double covered = weight[f] > 0 ? -kappa * mean[f] / weight[f] : 0.0;
     const double hole = kappa < DEM_COVERED && depth[f] > 0 && isfinite(depth[f]) ? (1.0 - kappa) * depth[f] : 0.0;
-    if (hole > 0 && around[f] > scale[f])
-      scale[f] = around[f];
-    depth[f] = (covered > 0 ? covered : 0.0) + hole;
-    const double ratio = depth[f] / (2 * scale[f]);
+    const double part = covered > 0 ? covered : 0.0, ratio = (part / scale[f] + hole / around[f]) / 2;
+    depth[f] = part + hole;
+    if (hole > 0) /* each part over the size of what it reads; one of them alone: that size, bit for bit */
+      scale[f] = part > 0 ? depth[f] / (2 * ratio) : around[f];
     worst[0] = depth[f] > worst[0] ? depth[f] : worst[0];
     worst[1] = ratio > worst[1] ? ratio : worst[1];
   }
