@@ -65,11 +65,12 @@ class PairOutputs:
         fraction 1 - kappa (all of a facet that overlaps no partner, as one that slid into a hole
         of the other body's mosaic) carries the least of its depths behind the planes of its
         listed partners around the nearest one: in a hole it lies behind all of them, beside a
-        convex body in front of one. The facet's depth is the larger of the two parts: a sliver of
-        overlap at the rim of a contact patch counts as a sliver, a facet half over a hole as half
-        its depth there. The local diameter of a facet: the largest of its own and those of the
-        partners its depth reads (a fine facet against a coarse mosaic sits as deep as the coarse
-        facets allow). The corrections of the partners come from their owners (a scatter over the
+        convex body in front of one. The facet's depth is the area-weighted sum of the two parts:
+        a sliver of overlap at the rim of a contact patch counts as a sliver, a facet half over a
+        hole counts the hole's half. Its ratio: each part over the local diameter of what it reads,
+        the largest of the facet's own and those of its touching partners or of the partners
+        around the nearest (a fine facet against a coarse mosaic sits as deep as the coarse facets
+        allow). The corrections of the partners come from their owners (a scatter over the
         candidates)."""
         pc, work = self.contact, self._work()
         at, n = pc.state(up), pc.num_own
