@@ -81,7 +81,7 @@ def test_free_body_is_rejected():
 R_DISC, E_DISC, LOAD = 0.2, 25e6, 2e6  # the disc of the hertz scene
 
 
-def disc_on_block(comm, h, stiffness=1.0, width=0.12, height=0.04, scheme="A"):
+def disc_on_block(comm, h, stiffness=1.0, width=0.12, height=0.04, scheme="A", surface="facet"):
     """The hertz scene's disc (radius 0.2 m, centre 1e-6 m above y = R) resting under its body
     force on an elastic block [-width, width] x [-height, 0] of Young's modulus ``stiffness`` x
     the disc's, clamped at its bottom: contact between bodies on the facets near y = 0."""
@@ -109,7 +109,7 @@ def disc_on_block(comm, h, stiffness=1.0, width=0.12, height=0.04, scheme="A"):
     dem = DEMDiscretisation(mesh, materials, scheme, [DirichletBC(bottom, [0.0, 0.0])],
                             body_force=[0.0, -LOAD], cell_tags=cells)
     facets = meshes.locate_boundary_facets(mesh, lambda x: (x[1] > -height / 2) & (x[1] < 0.05))
-    return DEMProblem(dem, [PairContact(dem, facets)])
+    return DEMProblem(dem, [PairContact(dem, facets, surface=surface)])
 
 
 def _disc_figures(problem, result):
@@ -191,11 +191,13 @@ def test_disc_on_a_stiff_block_approaches_the_rigid_plane():
     assert half_width == pytest.approx(rigid_width, rel=0.03)
 
 
-def test_pair_contact_hessian_is_the_derivative_of_the_force():
+@pytest.mark.parametrize("surface", ["facet", "vertex"])
+def test_pair_contact_hessian_is_the_derivative_of_the_force(surface):
     """On a fixed piece (pairs in contact, overlap configuration), the exact Hessian that
     the statics interface of ``PairContact`` adds (``exact``) is the derivative of the force of the
-    piece: central differences of the force along random directions."""
-    problem = disc_on_block(MPI.COMM_WORLD, 0.04, width=0.3, height=0.2)
+    piece: central differences of the force along random directions, with either surface (the
+    Hessian reads the records' rows, K for the vertex surface)."""
+    problem = disc_on_block(MPI.COMM_WORLD, 0.04, width=0.3, height=0.2, surface=surface)
     dem = problem.dem
     pc = problem.find(PairContact)
     rng = np.random.default_rng(3)
