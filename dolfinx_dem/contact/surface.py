@@ -36,7 +36,7 @@ import scipy.sparse
 from mpi4py import MPI
 
 from dolfinx_dem.contact.candidates import Candidates
-from dolfinx_dem.contact.facets import CandidateFacets
+from dolfinx_dem.contact.facets import CandidateFacets, padded_rows
 from dolfinx_dem.errors import InputError, StateError
 from dolfinx_dem.geometry import OUTSIDE
 from dolfinx_dem.halo import alltoall
@@ -74,9 +74,9 @@ def vertex_weights(star_ids: np.ndarray, star_area: np.ndarray, ids: np.ndarray)
     W = scipy.sparse.csr_matrix((np.repeat(star_area, d) / total[at.ravel()], (at.ravel(), np.repeat(np.arange(m), d))),
                                 shape=(len(vertices), m))
     mine = np.searchsorted(vertices, ids)
-    O = scipy.sparse.csr_matrix((np.full(n * d, 1.0 / d), mine.ravel(), np.arange(0, n * d + 1, d)),
-                                shape=(n, len(vertices)))
-    beta = (O @ W).tocsr()
+    mean = scipy.sparse.csr_matrix((np.full(n * d, 1.0 / d), mine.ravel(), np.arange(0, n * d + 1, d)),
+                                   shape=(n, len(vertices)))  # a facet's mean over its vertices
+    beta = (mean @ W).tocsr()
     beta.sort_indices()
     return beta
 
@@ -101,16 +101,9 @@ def vertex_surface(dem, found: Candidates, local: CandidateFacets, facets: np.nd
         raise StateError("contact.surface = 'vertex': the vertex star of a candidate facet is not held on its "
                          "process (the halo is too thin)")
     beta = vertex_weights(star_ids, np.linalg.norm(geom.facet_area_normals[cell, j], axis=1), ids)
-    K = scipy.sparse.kron(beta, scipy.sparse.identity(d), format="csr") @ R
-    K = scipy.sparse.csr_matrix((K.data, dem.columns[K.indices], K.indptr),
-                                shape=(K.shape[0], int(dem.columns.max(initial=-1)) + 1))
-    K.sum_duplicates()  # sorted global columns in each row
-    width = comm.allreduce(int(np.diff(K.indptr).max(initial=0)), op=MPI.MAX)
-    R_dofs, R_values = np.full((len(own) * d, width), -1, dtype=np.int64), np.zeros((len(own) * d, width))
-    counts = np.diff(K.indptr)
-    rows, rank = np.repeat(np.arange(len(own) * d), counts), np.arange(K.nnz) - np.repeat(K.indptr[:-1], counts)
-    R_dofs[rows, rank], R_values[rows, rank] = K.indices, K.data
-    R_dofs, R_values = R_dofs.reshape(-1, d, width), R_values.reshape(-1, d, width)
+    K = (scipy.sparse.kron(beta, scipy.sparse.identity(d), format="csr") @ R).tocsr()
+    R_dofs, R_values = padded_rows(K, dem.columns, d, comm)
+    width = R_dofs.shape[2]
     lift = beta @ dem.data.facet_lift(star)
     # the first-layer local facets: their owners' rows
     floats = np.concatenate([R_values.reshape(len(own), -1), lift], axis=1)
@@ -127,7 +120,7 @@ def _from_owners(comm, own_keys, keys, owners, floats, ints):
     ``keys`` from their ``owners``, in the order of ``keys``. Collective."""
     asked, source = alltoall(comm, np.asarray(owners, dtype=np.int64), np.asarray(keys, dtype=np.int64))
     at = np.searchsorted(own_keys, asked)
-    if not np.array_equal(np.append(own_keys, -1)[at], asked):
+    if comm.allreduce(not np.array_equal(np.append(own_keys, -1)[at], asked), op=MPI.LOR):
         raise StateError("contact.surface = 'vertex': a first-layer candidate facet is not its owner's")
     got_floats, got_ints = alltoall(comm, source, floats[at])[0], alltoall(comm, source, ints[at])[0]
     order = np.argsort(got_ints[:, 0])
