@@ -260,13 +260,16 @@ STACKED = {
 }
 
 
-def test_static_scene_with_contact_between_bodies(tempdir):
+@pytest.mark.parametrize("surface", ["facet", "vertex"])
+def test_static_scene_with_contact_between_bodies(tempdir, surface):
     """A static scene with a [contact] table: a disc resting on another one clamped at its
     bottom. The run completes; the summary's contact force (pairs in contact plus the pinned
-    pairs' multipliers) balances the upper disc's load; obstacles with contact are refused."""
-    summary = simulation.run(scenes.validate(STACKED), pathlib.Path(tempdir) / "stacked", MPI.COMM_WORLD)
+    pairs' multipliers) balances the upper disc's load, with either surface; obstacles with
+    contact are refused."""
+    scene = STACKED | {"contact": STACKED["contact"] | {"surface": surface}}
+    summary = simulation.run(scenes.validate(scene), pathlib.Path(tempdir) / f"stacked-{surface}", MPI.COMM_WORLD)
     assert summary["status"] == "completed" and summary["gradient_norm_reduction"] < 1e-10
-    dem = simulation.build(scenes.validate(STACKED)).dem
+    dem = simulation.build(scenes.validate(scene)).dem
     geom = dem.geometry
     upper = geom.cell_bodies[: dem.n_owned][geom.cell_centres[: dem.n_owned, 1] > 0]
     upper = MPI.COMM_WORLD.allreduce(int(upper.max(initial=0)), op=MPI.MAX)

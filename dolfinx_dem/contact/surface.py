@@ -106,8 +106,8 @@ def vertex_surface(dem, found: Candidates, local: CandidateFacets, facets: np.nd
     width = R_dofs.shape[2]
     lift = beta @ dem.data.facet_lift(star)
     # the first-layer local facets: their owners' rows
-    floats = np.concatenate([R_values.reshape(len(own), -1), lift], axis=1)
-    ints = np.concatenate([local.key[:num_own, None], R_dofs.reshape(len(own), -1)], axis=1)
+    floats = np.concatenate([R_values.reshape(len(own), d * width), lift], axis=1)
+    ints = np.concatenate([local.key[:num_own, None], R_dofs.reshape(len(own), d * width)], axis=1)
     floats, ints = _from_owners(comm, local.key[:num_own], local.key[num_own:], local.owner[num_own:], floats, ints)
     return dataclasses.replace(
         local, R_dofs=np.concatenate([R_dofs, ints[:, 1:].reshape(-1, d, width)]),
