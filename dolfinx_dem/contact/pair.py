@@ -54,8 +54,8 @@ clipped only at the Gauss nodes of its own pieces and interpolated at the compon
 
 Broad phase: the Verlet list of the pairs and the exchange of candidate facets between processes
 are pair_list.py's; the overlap geometry overlap.py's, the correction directions directions.py's,
-the state at a displacement and the flight pair_state.py's, the outputs pair_outputs.py's,
-Coulomb friction between the bodies (``friction``) pair_friction.py's.
+the state at a displacement and the flight pair_state.py's, the outputs pair_outputs.py's, the
+vertex surface (``surface``: K_f for R_f) surface.py's, friction between the bodies pair_friction.py's.
 ``prepare`` checks both ends of the coming step (the flight is affine); every evaluation checks
 that the list is valid for its displacements and raises otherwise (never a silently incomplete
 list); so does a step that moves a facet by more than half its skin.
@@ -299,8 +299,8 @@ class PairContact:
                     "(their facets' reaches plus their mean skin: facet centres farther apart are not listed), so a "
                     "list rebuild would drop them and the energy would jump. The bodies are too soft for their load "
                     "or speed, or, in 3D, the contact is not resolved: on fine meshes the facets of the two bodies "
-                    "slide into each other's holes (docs/validation/contact3d.md). A larger skin lists deeper pairs "
-                    "but does not stop the interpenetration")
+                    "slide into each other's holes (contact.surface = 'vertex' holds them; docs/theory.md). A larger "
+                    "skin lists deeper pairs but does not stop the interpenetration")
             if moving:  # the flight again from the new list (and reconstructions)
                 uc = self.state(up).uc
                 vc, (k, ratio), screen = self.free_flight(uc, vp, dt)
