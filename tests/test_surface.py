@@ -70,17 +70,20 @@ def _rows_by_place(c):
 
 
 @pytest.mark.mpi
-def test_the_vertex_rows_are_those_of_one_process():
+@pytest.mark.parametrize("scheme, tolerance", [("B", 0.0), ("A", 1e-14)])
+def test_the_vertex_rows_are_those_of_one_process(scheme, tolerance):
     """The rows K of the own facets on 1, 2, 3 processes (the stars of first-layer facets
-    received from their owners) equal the serial ones, cell by cell, to rounding (an entry
-    that cancels to rounding may be absent from one of them)."""
-    centres, rows = _rows_by_place(two_boxes(MPI.COMM_WORLD, "A", "vertex").find(PairContact))
-    serial_centres, serial_rows = _rows_by_place(two_boxes(MPI.COMM_SELF, "A", "vertex").find(PairContact))
+    received from their owners) equal the serial ones, cell by cell: bit-identical under scheme
+    B (the sums run in an order of barycentres and coordinates, not of DOLFINx's numbers, which
+    depend on the partition), to rounding under scheme A, whose own rows R_f differ by rounding
+    between partitions (an entry that cancels to rounding may be absent from one of them)."""
+    centres, rows = _rows_by_place(two_boxes(MPI.COMM_WORLD, scheme, "vertex").find(PairContact))
+    serial_centres, serial_rows = _rows_by_place(two_boxes(MPI.COMM_SELF, scheme, "vertex").find(PairContact))
     distance, found = scipy.spatial.cKDTree(serial_centres).query(centres)
     assert distance.max(initial=0.0) < 1e-12
     for k, j in enumerate(found):
         a, b = rows[k], serial_rows[j]
-        assert max(abs(a.get(e, 0.0) - b.get(e, 0.0)) for e in a.keys() | b.keys()) < 1e-14
+        assert max(abs(a.get(e, 0.0) - b.get(e, 0.0)) for e in a.keys() | b.keys()) <= tolerance
         assert sum(abs(x) for x in a.values()) > 0.999  # rows of weights summing to 1 per component
 
 

@@ -22,9 +22,11 @@ somewhere and amplify the rough modes instead (measured: a two-balls run at eta 
 and blows up at a larger step; docs/theory.md).
 
 Distributed: a process computes K for its own facets, whose vertex stars lie in halo layers 0
-and 1 (where the candidates and their reconstructions are held); the stars are sorted by global
-facet key, so K is the same on any partition. The first-layer local facets receive their rows
-from their owners.
+and 1 (where the candidates and their reconstructions are held). The stars are sorted by their
+facets' barycentres and each facet's vertices by their coordinates, which (unlike DOLFINx's
+global facet and vertex numbers) do not depend on the partition: the sums of K run in the same
+order on any partition, and K is bit-identical wherever the R_f' are (scheme B). The first-layer
+local facets receive their rows from their owners.
 """
 
 from __future__ import annotations
@@ -56,17 +58,21 @@ def check_surface(surface: str, friction: float) -> None:
 
 
 def facet_vertex_ids(geom, cell: np.ndarray, j: np.ndarray) -> np.ndarray:
-    """The global vertex numbers of facet j of each cell, (n, d), sorted along each row."""
-    ids = geom.cell_vertex_ids[cell]
-    keep = np.arange(ids.shape[1]) != np.asarray(j)[:, None]
-    return np.sort(ids[keep].reshape(len(cell), ids.shape[1] - 1), axis=1)
+    """The global vertex numbers of facet j of each cell, (n, d), each row in the lexicographic
+    order of the vertices' coordinates (the same on any partition, unlike the numbers)."""
+    n, d = len(cell), geom.d
+    keep = np.arange(d + 1) != np.asarray(j)[:, None]
+    ids = geom.cell_vertex_ids[cell][keep].reshape(n, d)
+    x = geom.cell_vertices[cell][keep].reshape(n * d, d)
+    order = np.lexsort((*x.T[::-1], np.repeat(np.arange(n), d)))  # by facet, then x, y, z
+    return ids.ravel()[order].reshape(n, d)
 
 
 def vertex_weights(star_ids: np.ndarray, star_area: np.ndarray, ids: np.ndarray) -> scipy.sparse.csr_matrix:
     """beta (n, m) of the facets with vertices ``ids`` (n, d) over the star facets with vertices
     ``star_ids`` (m, d) and measures ``star_area`` (m,) (module docstring); every vertex of ``ids``
-    must be one of the star's. Sums run in the order of the star facets and of the sorted vertex
-    numbers, so sorted inputs give the same beta on any partition."""
+    must be one of the star's. Sums run in the order of the star facets and of each row of
+    ``ids``: inputs in an order that does not depend on the partition give the same beta on any."""
     (n, d), m = ids.shape, len(star_area)
     vertices, at = np.unique(star_ids, return_inverse=True)
     at = at.reshape(m, d)
@@ -86,7 +92,7 @@ def vertex_surface(dem, found: Candidates, local: CandidateFacets, facets: np.nd
     lifts of the vertex surface (module docstring), from the candidates ``found`` of halo layers 0
     and 1. Collective."""
     geom, rec, d, comm = dem.geometry, dem.reconstruction, dem.d, dem.comm
-    order = np.argsort(geom.facet_global[found.facet], kind="stable")
+    order = np.lexsort(geom.facet_centres[found.facet].T[::-1])  # by barycentre: x, then y, z
     star, cell, j = found.facet[order], found.cell[order], found.j[order]
     star_ids = facet_vertex_ids(geom, cell, j)
     own = facets[:num_own]
