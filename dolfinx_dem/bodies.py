@@ -198,3 +198,16 @@ def thin_scheme_b_bodies(geom, comm: MPI.Comm, scheme_b_facets: np.ndarray) -> l
             "across: 9.6 times too stiff); use scheme A (method dem-A, or dem-AB to keep scheme B on the contact "
             "candidates only) or refine (docs/theory.md#scheme-bs-accuracy)"), stacklevel=3)
     return thin
+
+
+def body_pairs(comm: MPI.Comm, bodies: np.ndarray, num_bodies: int) -> tuple[list[tuple[int, int]], np.ndarray]:
+    """The pairs (a, b), a < b, of the bodies that appear in some process's ``bodies`` (collective),
+    and the index of each pair of body numbers among them, (num_bodies, num_bodies) (-1: none)."""
+    held = np.bincount(bodies, minlength=num_bodies).astype(np.int64)
+    comm.Allreduce(MPI.IN_PLACE, held, op=MPI.SUM)
+    present = np.flatnonzero(held)
+    pairs = [(int(a), int(b)) for k, a in enumerate(present) for b in present[k + 1:]]
+    index = np.full((num_bodies, num_bodies), -1, dtype=np.int64)
+    for k, (a, b) in enumerate(pairs):
+        index[a, b] = index[b, a] = k
+    return pairs, index

@@ -189,7 +189,8 @@ def build(scene: Mapping, comm: MPI.Comm = MPI.COMM_WORLD) -> DEMProblem:
     if pair_facets is not None:
         c = scene["contact"]
         contacts.append(PairContact(dem, pair_facets, c.get("self_contact", False), c.get("skin"),
-                                    c.get("tolerance", 0.0), friction=c.get("friction", 0.0)))
+                                    c.get("tolerance", 0.0), friction=c.get("friction", 0.0),
+                                    surface=c.get("surface", "facet")))
     return DEMProblem(dem, contacts)
 
 

@@ -17,12 +17,14 @@ from dolfinx_dem.memm import MEMM
 from dolfinx_dem.problem import DEMProblem
 
 
+@pytest.mark.parametrize("surface", ["facet", "vertex"])
 @pytest.mark.parametrize("scheme", ["A", "B"])
-def test_force_is_the_gradient_of_the_energy_in_contact(scheme):
+def test_force_is_the_gradient_of_the_energy_in_contact(scheme, surface):
     """Central differences of the potential against the force with pairs in partial overlap,
-    in and out of contact: checks eq. (31) with the overlap weights and the sliding force (34)."""
+    in and out of contact: checks eq. (31) with the overlap weights and the sliding force (34),
+    for either surface (contact/surface.py)."""
     dem, facets = two_discs(h=0.02, scheme=scheme)
-    problem = DEMProblem(dem, [PairContact(dem, facets)])
+    problem = DEMProblem(dem, [PairContact(dem, facets, surface=surface)])
     c = problem.find(PairContact)
     rng = np.random.default_rng(5)
     u = cell_vector(dem, lambda x: approach(x, 0.013) + 1e-3 * rng.standard_normal(x.shape))

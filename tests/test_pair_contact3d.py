@@ -17,9 +17,10 @@ from dolfinx_dem.memm import MEMM
 from dolfinx_dem.problem import DEMProblem
 
 
-def two_boxes(comm=MPI.COMM_WORLD, scheme="B"):
+def two_boxes(comm=MPI.COMM_WORLD, scheme="B", surface="facet"):
     """Two 0.2 m tetrahedral cubes 0.01 apart along x, the right one shifted by (0.07, 0.04) in
-    (y, z): their facing sides (the contact boundary) do not match, pairs overlap partially."""
+    (y, z): their facing sides (the contact boundary) do not match, pairs overlap partially.
+    ``surface``: the pairs' kinematics (contact/surface.py)."""
 
     def build(gmsh):
         for k, corner in enumerate([(0.0, 0.0, 0.0), (0.21, 0.07, 0.04)]):
@@ -32,7 +33,8 @@ def two_boxes(comm=MPI.COMM_WORLD, scheme="B"):
     mesh = gmsh_mesh(comm, build, gdim=3)
     dem = DEMDiscretisation(mesh, SOFT, scheme)
     problem = DEMProblem(
-        dem, [PairContact(dem, meshes.locate_boundary_facets(mesh, lambda x: (x[0] > 0.19) & (x[0] < 0.22)))]
+        dem, [PairContact(dem, meshes.locate_boundary_facets(mesh, lambda x: (x[0] > 0.19) & (x[0] < 0.22)),
+                          surface=surface)]
     )
     return problem
 
@@ -43,12 +45,14 @@ def oblique(x, speed=0.3):
     return speed * np.where(left, [1.0, 0.3, -0.2], [-1.0, -0.2, 0.4])
 
 
+@pytest.mark.parametrize("surface", ["facet", "vertex"])
 @pytest.mark.parametrize("scheme", ["A", "B"])
-def test_force_is_the_gradient_of_the_energy_in_contact_in_3d(scheme):
+def test_force_is_the_gradient_of_the_energy_in_contact_in_3d(scheme, surface):
     """Central differences of the potential against the force, tetrahedral cubes with
     triangular facets in partial overlap: the overlap areas, their gradients (the sliding
-    force) and the scheme A directions in 3D."""
-    problem = two_boxes(scheme=scheme)
+    force) and the scheme A directions in 3D, with either surface (the vertex surface's force
+    goes through K^T)."""
+    problem = two_boxes(scheme=scheme, surface=surface)
     dem = problem.dem
     c = problem.find(PairContact)
     rng = np.random.default_rng(5)
@@ -74,11 +78,11 @@ def test_force_is_the_gradient_of_the_energy_in_contact_in_3d(scheme):
     assert np.abs(F.array - free.array).max() > 1e-2 * np.abs(F.array).max()
 
 
-def _cubes_impact(comm, steps):
+def _cubes_impact(comm, steps, surface="facet"):
     """Run the oblique impact of ``two_boxes`` for ``steps`` MEMM steps: (largest relative
     pseudo-energy drift, total momentum change, the left cube's momentum, the pair force,
     the largest number of force evaluations of a step)."""
-    problem = two_boxes(comm)
+    problem = two_boxes(comm, surface=surface)
     dem = problem.dem
     c = problem.find(PairContact)
     dt = 0.3 * dem.stable_time_step()
@@ -131,13 +135,15 @@ def test_the_compiled_contact_state_is_its_definition_by_sparse_products():
     assert expected[0] > 0 and expected[1] > 0
 
 
-def test_the_force_integral_over_a_flight_with_events_is_exact():
+@pytest.mark.parametrize("surface", ["facet", "vertex"])
+def test_the_force_integral_over_a_flight_with_events_is_exact(surface):
     """``dem_pair_force_integral`` over a flight of sliding cubes whose gaps close and whose
     overlaps change topology inside it: the integral over [0, dt] is the sum of those over
     [0, t1] and [t1, dt] to rounding (a piece missed or misplaced breaks this at the size of the
     quadrature error), and agrees with a composite 3-point Gauss rule of 200 pieces of the
-    force correction (whose error comes from the kinks inside its pieces)."""
-    problem = two_boxes(MPI.COMM_SELF)
+    force correction (whose error comes from the kinks inside its pieces). The vertex surface
+    reads a fixed linear map of u: its gaps stay affine in the flight's time, the rule exact."""
+    problem = two_boxes(MPI.COMM_SELF, surface=surface)
     dem = problem.dem
     c = problem.find(PairContact)
     u, v = cell_vector(dem, lambda x: oblique(x, 0.01)), cell_vector(dem, oblique)
@@ -257,20 +263,21 @@ def test_the_step_arrays_of_a_list_are_reused_and_a_stale_use_raises():
 
 
 @pytest.mark.mpi
-def test_cubes_collide_obliquely_with_exact_energy_on_any_number_of_processes():
+@pytest.mark.parametrize("surface", ["facet", "vertex"])
+def test_cubes_collide_obliquely_with_exact_energy_on_any_number_of_processes(surface):
     """Two tetrahedral cubes meet obliquely and slide against each other (the overlaps change
     topology: events split the steps): the pseudo-energy and the momentum are conserved to
     rounding, the contact pushes the cubes apart with a sliding (tangential) force component,
-    and the run on COMM_WORLD (1, 2, 3 processes) matches the serial one."""
+    and the run on COMM_WORLD (1, 2, 3 processes) matches the serial one, with either surface."""
     steps = 12  # contact from step 5
-    drift, dp, p_left, force, evaluations = _cubes_impact(MPI.COMM_WORLD, steps)
-    assert drift < 1e-12
+    drift, dp, p_left, force, evaluations = _cubes_impact(MPI.COMM_WORLD, steps, surface)
+    assert drift < 1e-13
     assert dp < 1e-13
     assert evaluations >= 9  # some step split into 3 pieces at least
     assert force[0] < 0 and np.abs(force[1:]).max() > 1e-3 * -force[0]  # normal push, sliding force
     if MPI.COMM_WORLD.size == 1:
         return
-    serial = _cubes_impact(MPI.COMM_SELF, steps)
+    serial = _cubes_impact(MPI.COMM_SELF, steps, surface)
     assert np.abs(p_left - serial[2]).max() < 1e-12 * np.abs(serial[2]).max()
     assert np.abs(force - serial[3]).max() < 1e-10 * np.abs(serial[3]).max()
 

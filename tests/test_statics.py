@@ -81,7 +81,7 @@ def test_free_body_is_rejected():
 R_DISC, E_DISC, LOAD = 0.2, 25e6, 2e6  # the disc of the hertz scene
 
 
-def disc_on_block(comm, h, stiffness=1.0, width=0.12, height=0.04, scheme="A"):
+def disc_on_block(comm, h, stiffness=1.0, width=0.12, height=0.04, scheme="A", surface="facet"):
     """The hertz scene's disc (radius 0.2 m, centre 1e-6 m above y = R) resting under its body
     force on an elastic block [-width, width] x [-height, 0] of Young's modulus ``stiffness`` x
     the disc's, clamped at its bottom: contact between bodies on the facets near y = 0."""
@@ -109,7 +109,7 @@ def disc_on_block(comm, h, stiffness=1.0, width=0.12, height=0.04, scheme="A"):
     dem = DEMDiscretisation(mesh, materials, scheme, [DirichletBC(bottom, [0.0, 0.0])],
                             body_force=[0.0, -LOAD], cell_tags=cells)
     facets = meshes.locate_boundary_facets(mesh, lambda x: (x[1] > -height / 2) & (x[1] < 0.05))
-    return DEMProblem(dem, [PairContact(dem, facets)])
+    return DEMProblem(dem, [PairContact(dem, facets, surface=surface)])
 
 
 def _disc_figures(problem, result):
@@ -191,11 +191,13 @@ def test_disc_on_a_stiff_block_approaches_the_rigid_plane():
     assert half_width == pytest.approx(rigid_width, rel=0.03)
 
 
-def test_pair_contact_hessian_is_the_derivative_of_the_force():
+@pytest.mark.parametrize("surface", ["facet", "vertex"])
+def test_pair_contact_hessian_is_the_derivative_of_the_force(surface):
     """On a fixed piece (pairs in contact, overlap configuration), the exact Hessian that
     the statics interface of ``PairContact`` adds (``exact``) is the derivative of the force of the
-    piece: central differences of the force along random directions."""
-    problem = disc_on_block(MPI.COMM_WORLD, 0.04, width=0.3, height=0.2)
+    piece: central differences of the force along random directions, with either surface (the
+    Hessian reads the records' rows, K for the vertex surface)."""
+    problem = disc_on_block(MPI.COMM_WORLD, 0.04, width=0.3, height=0.2, surface=surface)
     dem = problem.dem
     pc = problem.find(PairContact)
     rng = np.random.default_rng(3)
@@ -258,13 +260,16 @@ STACKED = {
 }
 
 
-def test_static_scene_with_contact_between_bodies(tempdir):
+@pytest.mark.parametrize("surface", ["facet", "vertex"])
+def test_static_scene_with_contact_between_bodies(tempdir, surface):
     """A static scene with a [contact] table: a disc resting on another one clamped at its
     bottom. The run completes; the summary's contact force (pairs in contact plus the pinned
-    pairs' multipliers) balances the upper disc's load; obstacles with contact are refused."""
-    summary = simulation.run(scenes.validate(STACKED), pathlib.Path(tempdir) / "stacked", MPI.COMM_WORLD)
+    pairs' multipliers) balances the upper disc's load, with either surface; obstacles with
+    contact are refused."""
+    scene = STACKED | {"contact": STACKED["contact"] | {"surface": surface}}
+    summary = simulation.run(scenes.validate(scene), pathlib.Path(tempdir) / f"stacked-{surface}", MPI.COMM_WORLD)
     assert summary["status"] == "completed" and summary["gradient_norm_reduction"] < 1e-10
-    dem = simulation.build(scenes.validate(STACKED)).dem
+    dem = simulation.build(scenes.validate(scene)).dem
     geom = dem.geometry
     upper = geom.cell_bodies[: dem.n_owned][geom.cell_centres[: dem.n_owned, 1] > 0]
     upper = MPI.COMM_WORLD.allreduce(int(upper.max(initial=0)), op=MPI.MAX)

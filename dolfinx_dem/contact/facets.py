@@ -91,15 +91,7 @@ def candidate_records(dem, f: np.ndarray, cell: np.ndarray, numbers: np.ndarray)
     length = np.linalg.norm(an, axis=1)
     mask = np.ones((n, d + 1), dtype=bool)
     mask[np.arange(n), geom.facet_local[f, 0]] = False
-    R = rec.R[(f[:, None] * d + np.arange(d)).ravel()].tocsr()
-    width = dem.comm.allreduce(int(np.diff(R.indptr).max(initial=0)), op=MPI.MAX)
-    R_dofs = np.full((n * d, width), -1, dtype=np.int64)
-    R_values = np.zeros((n * d, width))
-    counts = np.diff(R.indptr)
-    rank = np.arange(R.nnz) - np.repeat(R.indptr[:-1], counts)
-    rows = np.repeat(np.arange(n * d), counts)
-    R_dofs[rows, rank] = dem.columns[R.indices]
-    R_values[rows, rank] = R.data
+    R_dofs, R_values = padded_rows(rec.R[(f[:, None] * d + np.arange(d)).ravel()].tocsr(), dem.columns, d, dem.comm)
     scheme_a = np.isin(f, rec.scheme_a_facets)
     C = dem.materials.elasticity_tensor(d, cell)
     # A_f x = (C_c : (x (x) a_f)) n / |c| for the pair's normal n: einsum with the cell's C and a_f.
@@ -111,9 +103,23 @@ def candidate_records(dem, f: np.ndarray, cell: np.ndarray, numbers: np.ndarray)
         ends=geom.cell_vertices[cell][mask].reshape(n, d, d),
         vertex_ids=geom.cell_vertex_ids[cell][mask].reshape(n, d), scheme_a=scheme_a,
         Ca=np.where(scheme_a[:, None, None, None], Ca, 0.0),
-        R_dofs=R_dofs.reshape(n, d, width), R_values=R_values.reshape(n, d, width),
-        lift=dem.data.facet_lift(f),
+        R_dofs=R_dofs, R_values=R_values, lift=dem.data.facet_lift(f),
     )
+
+
+def padded_rows(R: scipy.sparse.csr_matrix, columns: np.ndarray, d: int, comm: MPI.Comm) -> tuple[np.ndarray, ...]:
+    """The rows of R (n d, held dofs) as the records' (global dof, value) entries, (n, d, M),
+    padded (dof -1, value 0) to the widest row of all processes (collective)."""
+    n = R.shape[0] // d
+    width = comm.allreduce(int(np.diff(R.indptr).max(initial=0)), op=MPI.MAX)
+    R_dofs = np.full((n * d, width), -1, dtype=np.int64)
+    R_values = np.zeros((n * d, width))
+    counts = np.diff(R.indptr)
+    rank = np.arange(R.nnz) - np.repeat(R.indptr[:-1], counts)
+    rows = np.repeat(np.arange(n * d), counts)
+    R_dofs[rows, rank] = columns[R.indices]
+    R_values[rows, rank] = R.data
+    return R_dofs.reshape(n, d, width), R_values.reshape(n, d, width)
 
 
 def reach(F: CandidateFacets) -> np.ndarray:

@@ -54,8 +54,8 @@ clipped only at the Gauss nodes of its own pieces and interpolated at the compon
 
 Broad phase: the Verlet list of the pairs and the exchange of candidate facets between processes
 are pair_list.py's; the overlap geometry overlap.py's, the correction directions directions.py's,
-the state at a displacement and the flight pair_state.py's, the outputs pair_outputs.py's,
-Coulomb friction between the bodies (``friction``) pair_friction.py's.
+the state at a displacement and the flight pair_state.py's, the outputs pair_outputs.py's, the
+vertex surface (``surface``: K_f for R_f) surface.py's, friction between the bodies pair_friction.py's.
 ``prepare`` checks both ends of the coming step (the flight is affine); every evaluation checks
 that the list is valid for its displacements and raises otherwise (never a silently incomplete
 list); so does a step that moves a facet by more than half its skin.
@@ -82,6 +82,7 @@ from dolfinx_dem.contact.pair_friction import PairFriction, frictional
 from dolfinx_dem.contact.pair_list import PairList
 from dolfinx_dem.contact.pair_outputs import PairOutputs
 from dolfinx_dem.contact.pair_statics import PairStatics
+from dolfinx_dem.contact.surface import check_surface, vertex_surface
 from dolfinx_dem.errors import InputError, StateError, UnresolvedContactError
 from dolfinx_dem.kernels import Struct, arena, csr_of, lib, pointer
 
@@ -118,15 +119,17 @@ class PairContact:
         barycentre (its length in 2D).
     tolerance : how far facets may interpenetrate at t = 0 (m).
     friction : the Coulomb coefficient mu >= 0 between the bodies (pair_friction.py; 0: frictionless).
+    surface : what the pairs read: "facet" (free reconstructions) or "vertex" (their vertex average, surface.py).
     The pair list is ``pair_list`` (pair_list.py), the outputs ``outputs`` (pair_outputs.py)."""
 
     tracks_momentum = True
 
     def __init__(self, dem, facets, self_contact: bool = False, skin: float | None = None,
-                 tolerance: float = 0.0, tag: int | None = None, friction: float = 0.0):
+                 tolerance: float = 0.0, tag: int | None = None, friction: float = 0.0, surface: str = "facet"):
         geom, d = dem.geometry, dem.d
         if d not in (2, 3):
             raise InputError(f"contact between deformable bodies is implemented in 2D and 3D, not {d}D")
+        check_surface(surface, friction)
         self.dem, self.comm, self.d = dem, dem.comm, d
         if not (np.isfinite(tolerance) and tolerance >= 0):
             raise InputError(f"the penetration tolerance must be >= 0, got {tolerance}")
@@ -161,6 +164,8 @@ class PairContact:
         numbers[cell[order][: self.num_own], j[order][: self.num_own]] = first + np.arange(self.num_own)
         numbers = dem.halo_exchange(numbers[: dem.n_owned])[cell[order], j[order]]
         local = candidate_records(dem, self.facets, self.cells, numbers)
+        if surface == "vertex":
+            local = vertex_surface(dem, found, local, self.facets, self.num_own)
         dofs = (self.facets[:, None] * d + np.arange(d)).ravel()
         QF = rows.QF[: rows.num_owned][:, dofs]  # CSC
         touched = np.unique(QF.indices)  # the own rows touched
@@ -181,15 +186,10 @@ class PairContact:
         self._gauss = gauss_legendre(d)
         self._c_gauss = Struct("dem_gauss", n=len(self._gauss[0]), xi=self._gauss[0], wq=self._gauss[1])
 
-        # The body pairs (i < j) whose force is an output: both bodies hold candidate facets.
-        held = np.bincount(local.body[: self.num_own], minlength=geom.num_bodies).astype(np.int64)
-        self.comm.Allreduce(MPI.IN_PLACE, held, op=MPI.SUM)
-        bodies = np.flatnonzero(held)
-        self.body_pairs = [(int(a), int(b)) for k, a in enumerate(bodies) for b in bodies[k + 1:]]
-        #: the index in ``body_pairs`` of each pair of body numbers (-1: none)
-        self.body_pair_index = np.full((geom.num_bodies, geom.num_bodies), -1, dtype=np.int64)
-        for k, (a, b) in enumerate(self.body_pairs):
-            self.body_pair_index[a, b] = self.body_pair_index[b, a] = k
+        # The body pairs (i < j) whose force is an output (both bodies hold candidate facets), and
+        # the index in ``body_pairs`` of each pair of body numbers (-1: none)
+        self.body_pairs, self.body_pair_index = _bodies.body_pairs(self.comm, local.body[: self.num_own],
+                                                                   geom.num_bodies)
 
         self.evaluations, self._statics = 0, None  # the statics interface, made on first use (``statics``)
         self.seconds = 0.0  # processor time of the contact work of the steps (``_timed``)
@@ -298,8 +298,8 @@ class PairContact:
                     "(their facets' reaches plus their mean skin: facet centres farther apart are not listed), so a "
                     "list rebuild would drop them and the energy would jump. The bodies are too soft for their load "
                     "or speed, or, in 3D, the contact is not resolved: on fine meshes the facets of the two bodies "
-                    "slide into each other's holes (docs/validation/contact3d.md). A larger skin lists deeper pairs "
-                    "but does not stop the interpenetration")
+                    "slide into each other's holes (contact.surface = 'vertex' holds them; docs/theory.md). A larger "
+                    "skin lists deeper pairs but does not stop the interpenetration")
             if moving:  # the flight again from the new list (and reconstructions)
                 uc = self.state(up).uc
                 vc, (k, ratio), screen = self.free_flight(uc, vp, dt)

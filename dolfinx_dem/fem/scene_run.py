@@ -63,6 +63,9 @@ def check_scene(scene: Mapping) -> None:
         if key in contact:
             refuse(f"contact.{key}", "a key of the DEM's pair list (the FEM peer's search and depth limit follow "
                    "its facets, fem/pair_penalty.py)")
+    if "surface" in contact:
+        refuse("contact.surface", "the kinematics of the DEM's candidate facets (the FEM peer's facets are its "
+               "P1 element's)")
     for key in ("materials", "prescribed"):
         if key in scene:
             refuse(key, "not implemented for the FEM peer (one material, no prescribed bodies)")

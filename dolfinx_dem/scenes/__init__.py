@@ -159,6 +159,7 @@ SCHEMA = {
         "skin": lambda k, v, d: _number(k, v, positive=True),
         "max_penetration": lambda k, v, d: _number(k, v, positive=True),
         "friction": lambda k, v, d: _number(k, v, nonnegative=True),
+        "surface": lambda k, v, d: _string(k, v, ("facet", "vertex")),  # contact/surface.py SURFACES
     },
     "prescribed": [{
         "tag": lambda k, v, d: _integer(k, v, minimum=0),
