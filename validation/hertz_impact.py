@@ -16,7 +16,13 @@ a nonzero pair force ``contact_force_0_1_x``; the largest force; the approach of
 gap; the restitution, from the impulse J = int |F| dt (trapezoids) on the left ball, e = J / (m* v) - 1
 (its velocity after the impact is v/2 - J/m); the pseudo-energy drift. The contact zone is meshed
 at ``refine_h`` within 0.03 m of the contact point (the Hertz contact radius is a = sqrt(R* delta)),
-h = 0.03 m elsewhere; each level is run with schemes A and B and eta = E and 10 E (``--etas``).
+h = 0.03 m elsewhere; each level is run with schemes A and B and eta = E and 10 E (``--etas``), and with
+the DEM's contact surface ``--surfaces`` (scene key ``contact.surface``, default "facet"; "vertex":
+contact/surface.py, docs/theory.md). Each row records its ``surface`` (None for fem-P1, which has its
+own); the rows made before it was recorded have none and are facet-surface runs. The comparisons
+between runs (scheme A and B, eta = E and 10 E, the levels of a variant) pair runs of the same
+surface, and the page compares, at each level, each vertex-surface run with the facet-surface runs
+of its method at eta = E and 10 E.
 The energy error ``energy_end`` is the pseudo-energy's relative change from the first to the last
 row (the DEM rows made before it was measured show "-"; their drift, the largest change over the
 run relative to the largest mechanical energy, bounds it).
@@ -44,12 +50,15 @@ different processes at different times.
     .venv/bin/python validation/hertz_impact.py --page-only --out docs/validation/hertz_impact.json
     .venv/bin/python validation/hertz_impact.py --levels 0.006 --methods dem-A --etas 100 --radius 0.06 \\
         --append --out docs/validation/hertz_impact.json          # more runs in the same tables
+    .venv/bin/python validation/hertz_impact.py --levels 0.006 0.004 --methods dem-B dem-A --etas 100 \\
+        --surfaces vertex --append --out docs/validation/hertz_impact.json   # the vertex surface
 
 It writes the JSON and, next to it, the Markdown page (``--out``'s stem + .md) and the chart;
 ``--page-only`` rewrites the page and the chart from the JSON without running. One process per run.
 """
 
 import argparse
+import itertools
 import json
 import math
 import pathlib
@@ -75,12 +84,12 @@ def hertz(v: float) -> dict:
 
 
 def run(refine_h: float, method: str, eta: float, v: float, cfl: float, work: pathlib.Path, h: float = 0.03,
-        radius: float = 0.03) -> dict:
+        radius: float = 0.03, surface: str = "facet") -> dict:
     reference = hertz(v)
     end = GAP / v + 1.5 * reference["duration"]
     fem = method.startswith("fem")  # fem-P1 has no stabilisation: the scene's material.eta dropped, eta None
-    eta = None if fem else eta
-    scene = scenes.load("two-balls", ({} if fem else {"material.eta": eta}) | {
+    eta, surface = (None, None) if fem else (eta, surface)  # fem-P1 has its own facets: no contact.surface
+    scene = scenes.load("two-balls", ({} if fem else {"material.eta": eta, "contact.surface": surface}) | {
         "method": method, "mesh.balls": [[LEFT, 0.0, 0.0, R], [RIGHT, 0.0, 0.0, R]],
         "mesh.h": h, "mesh.refine_h": refine_h, "mesh.refine_radius": radius, "initial.velocity": [
             f"where(x < 0.25, {v / 2!r}, {-v / 2!r})", "0", "0"], "time.cfl": cfl, "time.end": end,
@@ -88,9 +97,9 @@ def run(refine_h: float, method: str, eta: float, v: float, cfl: float, work: pa
                                            {"name": "right", "point": [RIGHT, 0.0, 0.0], "component": 0}]})
     if fem:
         scene["material"].pop("eta", None)
-    out = work / f"{method}-{eta}-{refine_h:g}-{h:g}-{radius:g}"
+    out = work / f"{method}-{eta}-{surface}-{refine_h:g}-{h:g}-{radius:g}"
     start = time.perf_counter()
-    row = {"h": h, "refine_h": refine_h, "refine_radius": radius, "method": method, "eta": eta}
+    row = {"h": h, "refine_h": refine_h, "refine_radius": radius, "method": method, "eta": eta, "surface": surface}
     try:
         summary = simulation.run(scene, out, quiet=True, overwrite=True)
     except UnresolvedContactError as err:
@@ -109,9 +118,16 @@ def run(refine_h: float, method: str, eta: float, v: float, cfl: float, work: pa
         "energy_end": float(series["pseudo_energy"][-1] / series["pseudo_energy"][0] - 1), "wall_s": time.perf_counter() - start}
 
 
+def surface(r: dict) -> str | None:
+    """A DEM run's contact.surface ("facet" for the rows made before it was recorded); None for fem-P1."""
+    return None if r["method"].startswith("fem") else r.get("surface") or "facet"
+
+
 def series_label(r: dict) -> str:
-    """The chart's series of a run: its method and eta, and h or radius where not the study's 0.03 m."""
-    label = r["method"] + ("" if r["eta"] is None else f", eta = {r['eta'] / E:g} E")
+    """The chart's series of a run: its method and eta, its surface where not the default facet one, and h or
+    radius where not the study's 0.03 m."""
+    label = r["method"] + ("" if r["eta"] is None else f", eta = {r['eta'] / E:g} E") + (
+        "" if surface(r) in (None, "facet") else f", {surface(r)} surface")
     extra = [f"{k} {r[k]:g}" for k in ("h", "refine_radius") if r.get(k, 0.03) != 0.03]
     return label + (f" ({', '.join(extra)})" if extra else "")
 
@@ -147,7 +163,8 @@ def chart(results: dict, path: pathlib.Path) -> None:
         ax.grid(True, which="both", alpha=0.3)
     handles, labels = axes[0].get_legend_handles_labels()
     fig.legend(handles, labels, loc="lower center", ncol=4, fontsize=8)
-    fig.suptitle(f"Hertz impact, v/c = {results['speed']:g}: error against wall time (labels: refine_h, m)")
+    fig.suptitle(f"Hertz impact, v/c = {results['speed']:g}: error against wall time (labels: refine_h, m; "
+                 "DEM contact surface facet unless named)")
     fig.tight_layout(rect=(0, 0.1, 1, 1))
     fig.savefig(path, dpi=100)
     plt.close(fig)
@@ -165,7 +182,7 @@ def study(r: dict) -> bool:
 def head(r: dict, ref: dict) -> str:
     eta = "-" if r["eta"] is None else f"{r['eta'] / E:g}"
     return (f"| {r.get('h', 0.03):g}, {r['refine_h']:g}, {r.get('refine_radius', 0.03):g} | "
-            f"{ref['contact_radius'] / r['refine_h']:.2g} | {r['method']} | {eta} |")
+            f"{ref['contact_radius'] / r['refine_h']:.2g} | {r['method']} | {eta} | {surface(r) or '-'} |")
 
 
 def fem_tables(results: dict) -> list[str]:
@@ -182,8 +199,8 @@ def fem_tables(results: dict) -> list[str]:
                   f"{best['approach'] / fem[1]['approach'] - 1:+.2%} and its force by "
                   f"{best['force'] / fem[1]['force'] - 1:+.2%}: the reference is not converged to better than "
                   "that.", ""]
-    lines += ["| h, refine_h, radius (m) | a / refine_h | method | eta / E | duration | approach | force | "
-              "restitution - fem's |", "|---|---|---|---|---|---|---|---|"]
+    lines += ["| h, refine_h, radius (m) | a / refine_h | method | eta / E | surface | duration | approach | force | "
+              "restitution - fem's |", "|---|---|---|---|---|---|---|---|---|"]
     lines += [f"{head(r, ref)} {rel(r, best, 'duration'):+.2%} | {rel(r, best, 'approach'):+.2%} | "
               f"{rel(r, best, 'force'):+.2%} | {r['restitution'] - best['restitution']:+.4f} |"
               for r in runs if "error" not in r]
@@ -207,6 +224,12 @@ def fem_tables(results: dict) -> list[str]:
     return lines
 
 
+def variant(r: dict) -> str:
+    """A run's method and eta, and its surface where not the default facet one."""
+    eta = "" if r["eta"] is None else f" eta = {r['eta'] / E:g} E"
+    return r["method"] + eta + ("" if surface(r) in (None, "facet") else f" ({surface(r)} surface)")
+
+
 def spread(pairs: list[tuple[dict, dict]], ref: dict, key: str) -> str:
     """The range of |error(a)| - |error(b)| in percentage points over the pairs (a, b)."""
     d = sorted(100 * (abs(rel(a, ref, key)) - abs(rel(b, ref, key))) for a, b in pairs)
@@ -225,12 +248,12 @@ def findings(results: dict) -> list[str]:
     farther = [r for r in dem if any(abs(rel(r, ref, k)) > abs(rel(fem[r["refine_h"]], ref, k))
                                      for k in ("duration", "approach"))]
     nearer = [r for r in dem if r not in farther]
-    key = {(r["method"], r["eta"], r["refine_h"]): r for r in dem}
-    scheme = [(b, key[("dem-A", b["eta"], b["refine_h"])]) for b in dem
-              if b["method"] == "dem-B" and ("dem-A", b["eta"], b["refine_h"]) in key]
-    eta = [(r, key[(r["method"], E, r["refine_h"])]) for r in dem
-           if r["eta"] == 10 * E and (r["method"], E, r["refine_h"]) in key]
-    name = lambda r: f"{r['method']} eta = {r['eta'] / E:g} E at {r['refine_h']:g} m"  # noqa: E731
+    key = {(r["method"], r["eta"], r["refine_h"], surface(r)): r for r in dem}
+    scheme = [(b, key[("dem-A", b["eta"], b["refine_h"], surface(b))]) for b in dem
+              if b["method"] == "dem-B" and ("dem-A", b["eta"], b["refine_h"], surface(b)) in key]
+    eta = [(r, key[(r["method"], E, r["refine_h"], surface(r))]) for r in dem
+           if r["eta"] == 10 * E and (r["method"], E, r["refine_h"], surface(r)) in key]
+    name = lambda r: f"{variant(r)} at {r['refine_h']:g} m"  # noqa: E731
     lines = ["**Where the DEM is farther from Hertz than fem-P1.** " + (
         f"In the duration or the approach: {', '.join(name(r) for r in farther)}; nearer in both: "
         f"{', '.join(name(r) for r in nearer) or 'none'}. " if farther else
@@ -249,17 +272,16 @@ def findings(results: dict) -> list[str]:
     levels = sorted(fem, reverse=True)
     variants: dict[tuple, list[dict]] = {}
     for r in runs:
-        variants.setdefault((r["method"], r["eta"]), []).append(r)
+        variants.setdefault((r["method"], r["eta"], surface(r)), []).append(r)
     change = max(100 * abs(rel(a, ref, k) - rel(b, ref, k)) for rows in variants.values() for a in rows
                  for b in rows for k in ("duration", "approach"))
     bulk = [r for r in results["runs"] if "error" not in r and r.get("h", 0.03) != 0.03
             and r.get("refine_radius", 0.03) == 0.03]
-    coarse = {(r["method"], r["eta"], r["refine_h"]): r for r in runs}
+    coarse = {(r["method"], r["eta"], r["refine_h"], surface(r)): r for r in runs}
 
     def finer(r: dict) -> str:
-        c = coarse.get((r["method"], r["eta"], r["refine_h"]))
-        eta = "" if r["eta"] is None else f" eta = {r['eta'] / E:g} E"
-        text = (f"; with h = {r['h']:g} m (refine_h {r['refine_h']:g} m) {r['method']}{eta}'s restitution is "
+        c = coarse.get((r["method"], r["eta"], r["refine_h"], surface(r)))
+        text = (f"; with h = {r['h']:g} m (refine_h {r['refine_h']:g} m) {variant(r)}'s restitution is "
                 f"{r['restitution']:.4f}, its duration and approach errors {rel(r, ref, 'duration'):+.2%} and "
                 f"{rel(r, ref, 'approach'):+.2%}")
         return text + (f" (with h = 0.03 m {c['restitution']:.4f}, {rel(c, ref, 'duration'):+.2%} and "
@@ -288,6 +310,35 @@ def findings(results: dict) -> list[str]:
     return lines
 
 
+def vertex_sentences(results: dict) -> list[str]:
+    """At each level of the study with vertex-surface runs, each such run against the facet-surface runs of
+    its method at eta = E and 10 E: duration, approach and force against Hertz and the finest fem-P1 level."""
+    ref, runs = results["hertz"], [r for r in results["runs"] if study(r)]
+    vertex = [r for r in runs if surface(r) == "vertex"]
+    if not vertex:
+        return []
+    fem = sorted((r for r in runs if r["method"] == "fem-P1"), key=lambda r: r["refine_h"])
+    keys = ("duration", "approach", "force")
+
+    def errors(r: dict) -> str:
+        text = f"{' / '.join(f'{rel(r, ref, k):+.2%}' for k in keys)} against Hertz"
+        return text + (f", {' / '.join(f'{rel(r, fem[0], k):+.2%}' for k in keys)} against fem-P1" if fem else "")
+
+    lines = ["**The vertex surface.** Duration / approach / force against Hertz" + (
+        f" and against the finest fem-P1 level (refine_h = {fem[0]['refine_h']:g} m)" if fem else "")
+        + ", each vertex-surface run against the facet-surface runs of its method at eta = E and 10 E."]
+    for level in sorted({r["refine_h"] for r in vertex}, reverse=True):
+        text = []
+        for v in (r for r in vertex if r["refine_h"] == level):
+            facet = [r for r in runs if r["refine_h"] == level and r["method"] == v["method"]
+                     and surface(r) == "facet" and r["eta"] in (E, 10 * E)]
+            text.append(f"{variant(v)}: {errors(v)}; "
+                        + ("; ".join(f"facet eta = {r['eta'] / E:g} E: {errors(r)}"
+                                     for r in sorted(facet, key=lambda r: r["eta"])) or "no facet run"))
+        lines.append(f"At refine_h = {level:g} m, " + "; ".join(text) + ".")
+    return [" ".join(lines), ""]
+
+
 def page(results: dict, chart_name: str | None = None) -> str:
     ref = results["hertz"]
     made = ", then ".join(f"`{c}`" for c in results["commands"])
@@ -297,9 +348,9 @@ def page(results: dict, chart_name: str | None = None) -> str:
              f"Approach speed v = {results['speed']:g} m/s (v/c = {results['speed']:g}), CFL {results['cfl']:g}. "
              f"Hertz: duration {ref['duration']:.4g} s, largest approach {ref['approach']:.4g} m, largest force "
              f"{ref['force']:.4g} N, contact radius a = {ref['contact_radius']:.4g} m, restitution 1.", "",
-             "| h, refine_h, radius (m) | a / refine_h | method | eta / E | cells | steps | duration | approach | "
-             "force | restitution | drift | energy | wall (s) |",
-             "|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
+             "| h, refine_h, radius (m) | a / refine_h | method | eta / E | surface | cells | steps | duration | "
+             "approach | force | restitution | drift | energy | wall (s) |",
+             "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
     for r in results["runs"]:
         if "error" in r:
             lines.append(f"{head(r, ref)} stopped: {r['error']} |||||||||")
@@ -311,7 +362,7 @@ def page(results: dict, chart_name: str | None = None) -> str:
     lines += ["", "Duration, approach and force: relative differences from Hertz. Drift: the largest change of the "
               "pseudo-energy over the run relative to the largest mechanical energy; energy: its relative change "
               "from the first to the last step (\"-\": not recorded for that run)."]
-    lines += fem_tables(results) + findings(results)
+    lines += fem_tables(results) + findings(results) + vertex_sentences(results)
     if chart_name:
         lines += [""] * (lines[-1] != "") + [f"![work-precision]({chart_name})", "",
                                               work_precision_sentence(results, chart_name)]
@@ -346,6 +397,8 @@ def main():
     parser.add_argument("--levels", type=float, nargs="+", default=[0.006, 0.004, 0.0027], help="refine_h (m)")
     parser.add_argument("--methods", nargs="+", default=["dem-B", "dem-A"])
     parser.add_argument("--etas", type=float, nargs="+", default=[E, 10 * E], help="material.eta (Pa)")
+    parser.add_argument("--surfaces", nargs="+", default=["facet"], choices=["facet", "vertex"],
+                        help="contact.surface of the DEM runs (fem-P1 has none)")
     parser.add_argument("--h", type=float, default=0.03, help="mesh.h away from the contact zone (m)")
     parser.add_argument("--radius", type=float, default=0.03, help="mesh.refine_radius (m)")
     parser.add_argument("--speed", type=float, default=0.02, help="approach speed (m/s)")
@@ -369,14 +422,16 @@ def main():
     with tempfile.TemporaryDirectory() as work:
         for h in args.levels:
             for method in args.methods:
-                for eta in ([None] if method.startswith("fem") else args.etas):
+                fem = method.startswith("fem")
+                for eta, surface in itertools.product(*([[None]] * 2 if fem else [args.etas, args.surfaces])):
                     results["runs"].append(run(h, method, eta, args.speed, args.cfl, pathlib.Path(work), args.h,
-                                               args.radius))
+                                               args.radius, surface))
                     print(json.dumps(results["runs"][-1]), flush=True)
     results["commands"].append("validation/hertz_impact.py " + ("--quick" if args.quick else " ".join(
         [f"--levels {' '.join(f'{h:g}' for h in args.levels)}", f"--methods {' '.join(args.methods)}",
          *([f"--etas {' '.join(f'{e:g}' for e in args.etas)}"] if any(m.startswith("dem") for m in args.methods)
-           else []), f"--h {args.h:g}", f"--radius {args.radius:g}",
+           else []), *([f"--surfaces {' '.join(args.surfaces)}"] if any(m.startswith("dem") for m in args.methods)
+                       and args.surfaces != ["facet"] else []), f"--h {args.h:g}", f"--radius {args.radius:g}",
          f"--speed {args.speed:g}", f"--cfl {args.cfl:g}"])) + (" --append" if args.append else ""))
     args.out.write_text(json.dumps(results, indent=1) + "\n")
     write(results, args.out)
