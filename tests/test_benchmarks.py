@@ -331,6 +331,7 @@ def test_hertz_impact_quick_is_near_hertz(tmp_path):
         assert abs(r["duration"] / ref["duration"] - 1) < 0.15 and abs(r["approach"] / ref["approach"] - 1) < 0.15
         assert abs(r["force"] / ref["force"] - 1) < 0.2 and 0.85 < r["restitution"] <= 1.0
     assert fem["method"] == "fem-P1" and fem["eta"] is None and fem["drift"] < 2e-3
+    assert run["surface"] == "facet" and fem["surface"] is None  # the DEM's default contact.surface; fem-P1 has none
     assert fem["duration"] == pytest.approx(run["duration"], rel=0.03)
     assert fem["approach"] == pytest.approx(run["approach"], rel=0.03)
     assert (tmp_path / "h.md").read_text().startswith("# Hertz impact of two balls")
