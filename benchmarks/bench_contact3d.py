@@ -4,7 +4,7 @@
    summary's `contact_fraction` (processor time of the contact work, in `PairContact` and in the
    contact outputs computed at every step, over the MEMM stepping time plus those outputs;
    target below 40 %).
-2. `two-balls` (h = 0.04 m uniform, eta = E, contact boundary "all") with N idle balls of the same size, 0.2 m
+2. `two-balls` (h = 0.04 m uniform, eta = E, the facet surface, contact boundary "all") with N idle balls of the same size, 0.2 m
    from each other and 0.4 m from the pair (farther than the pair list radius), all of whose
    facets are contact candidates: the contact work per step during the impact
    (0.04 to 0.16 s; processor time in `PairContact.force_integral` and `energy_correction`,
@@ -40,9 +40,10 @@ def cradle(t_end: float) -> dict:
 
 def idle_balls(n_idle: int, h: float, t0: float, t1: float) -> dict:
     balls = [[0.14, 0.0, 0.0, 0.1], [0.36, 0.0, 0.0, 0.1]] + [[0.4 * k, 0.6, 0.0, 0.1] for k in range(n_idle)]
-    # a uniform mesh and eta = E (the scene refines its contact point and takes eta = 10 E): the
-    # same configuration as the figures of CHANGELOG.md, so that they compare
+    # a uniform mesh, eta = E and the facet surface (the scene refines its contact point and takes the
+    # vertex surface): the same configuration as the figures of CHANGELOG.md, so that they compare
     scene = scenes.load("two-balls", {"mesh.h": h, "mesh.refine_h": h, "material.eta": 100.0, "mesh.balls": balls,
+                                      "contact.surface": "facet",
                                       "contact.boundary": ["all"], "time.end": t1})
     run = DynamicRun(scene, MPI.COMM_SELF, quiet=True)
     stepper, contact = run.stepper, run.pairs

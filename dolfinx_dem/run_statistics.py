@@ -93,8 +93,8 @@ class PairContactStatistics:
                 f"contact.max_penetration = {self.max_penetration:g}. Eq. (31) corrects a gap only where "
                 "the facets of the two bodies overlap: the bodies are too soft for their load or speed, or, in 3D, "
                 "the facets slide into holes of each other's mosaic on a mesh too fine for the stabilisation: "
-                "contact.surface = 'vertex' or a larger material.eta (two-balls: 10 E) keeps the mosaic tiled "
-                "(docs/theory.md, docs/validation/contact3d.md). The "
+                "contact.surface = 'vertex' or, with the facet surface, a larger material.eta (10 E) keeps the "
+                "mosaic tiled (docs/theory.md, docs/validation/contact3d.md). The "
                 "results from here on would be wrong; raise "
                 "contact.max_penetration only to look at them")
         if self.free:

@@ -24,6 +24,7 @@ def _overlapping(name, h, push, tolerance=0.01):
     2 push along x at t = 0 (the contact tolerates it)."""
     scene = scenes.load(name, {"method": "fem-P1", "mesh.h": h, "contact.tolerance": tolerance})
     scene["material"].pop("eta", None)
+    scene["contact"].pop("surface", None)  # the DEM's contact surface (two-balls: vertex); fem-P1 has its own
     d = 3 if name == "two-balls" else 2
     scene["initial"]["displacement"] = [f"where(x < 0.25, {push}, {-push})"] + ["0"] * (d - 1)
     return scene

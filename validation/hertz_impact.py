@@ -17,8 +17,8 @@ gap; the restitution, from the impulse J = int |F| dt (trapezoids) on the left b
 (its velocity after the impact is v/2 - J/m); the pseudo-energy drift. The contact zone is meshed
 at ``refine_h`` within 0.03 m of the contact point (the Hertz contact radius is a = sqrt(R* delta)),
 h = 0.03 m elsewhere; each level is run with schemes A and B and eta = E and 10 E (``--etas``), and with
-the DEM's contact surface ``--surfaces`` (scene key ``contact.surface``, default "facet"; "vertex":
-contact/surface.py, docs/theory.md). Each row records its ``surface`` (None for fem-P1, which has its
+the DEM's contact surface ``--surfaces`` (scene key ``contact.surface``, default "facet", set on every
+DEM run: the scene's own is "vertex"; "vertex": contact/surface.py, docs/theory.md). Each row records its ``surface`` (None for fem-P1, which has its
 own); the rows made before it was recorded have none and are facet-surface runs. The comparisons
 between runs (scheme A and B, eta = E and 10 E, the levels of a variant) pair runs of the same
 surface, and the page compares, at each level, each vertex-surface run with the facet-surface runs
@@ -27,8 +27,8 @@ The energy error ``energy_end`` is the pseudo-energy's relative change from the 
 row (the DEM rows made before it was measured show "-"; their drift, the largest change over the
 run relative to the largest mechanical energy, bounds it).
 
-The FEM peer (``--methods fem-P1``, one row per level, no eta: the scene's ``material.eta`` is
-dropped) runs the same scene on the same mesh (P1 tetrahedra, lumped mass, central differences,
+The FEM peer (``--methods fem-P1``, one row per level, no eta: the scene's ``material.eta`` and
+``contact.surface`` are dropped) runs the same scene on the same mesh (P1 tetrahedra, lumped mass, central differences,
 symmetric node-to-facet penalty between the balls, dolfinx_dem/fem/) and writes the same
 columns, measured the same way, with two differences of meaning: the pair force is the sum of
 the penalty forces of ball 1 on ball 0 (nonzero while a node of either ball is behind a facet of
@@ -88,7 +88,7 @@ def run(refine_h: float, method: str, eta: float, v: float, cfl: float, work: pa
     reference = hertz(v)
     end = GAP / v + 1.5 * reference["duration"]
     fem = method.startswith("fem")  # fem-P1 has no stabilisation: the scene's material.eta dropped, eta None
-    eta, surface = (None, None) if fem else (eta, surface)  # fem-P1 has its own facets: no contact.surface
+    eta, surface = (None, None) if fem else (eta, surface)  # fem-P1 has its own facets: the scene's surface dropped
     scene = scenes.load("two-balls", ({} if fem else {"material.eta": eta, "contact.surface": surface}) | {
         "method": method, "mesh.balls": [[LEFT, 0.0, 0.0, R], [RIGHT, 0.0, 0.0, R]],
         "mesh.h": h, "mesh.refine_h": refine_h, "mesh.refine_radius": radius, "initial.velocity": [
@@ -97,6 +97,7 @@ def run(refine_h: float, method: str, eta: float, v: float, cfl: float, work: pa
                                            {"name": "right", "point": [RIGHT, 0.0, 0.0], "component": 0}]})
     if fem:
         scene["material"].pop("eta", None)
+        scene["contact"].pop("surface", None)
     out = work / f"{method}-{eta}-{surface}-{refine_h:g}-{h:g}-{radius:g}"
     start = time.perf_counter()
     row = {"h": h, "refine_h": refine_h, "refine_radius": radius, "method": method, "eta": eta, "surface": surface}
