@@ -54,7 +54,7 @@ clipped only at the Gauss nodes of its own pieces and interpolated at the compon
 
 Broad phase: the Verlet list of the pairs and the exchange of candidate facets between processes
 are pair_list.py's; the overlap geometry overlap.py's, the correction directions directions.py's,
-the state at a displacement and the flight pair_state.py's, the outputs pair_outputs.py's, the
+the state at a displacement and the flight events.py's, the outputs pair_outputs.py's, the
 vertex surface (``surface``: K_f for R_f) surface.py's, friction between the bodies pair_friction.py's.
 ``prepare`` checks both ends of the coming step (the flight is affine); every evaluation checks
 that the list is valid for its displacements and raises otherwise (never a silently incomplete
