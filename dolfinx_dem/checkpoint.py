@@ -52,12 +52,13 @@ from dolfinx_dem._xdmf import fsync
 from dolfinx_dem.errors import CheckpointError
 from dolfinx_dem.io import call_on_root
 
-FORMAT = 10  # 2: per-process local files (the recurrence, contact states); no shared file; 3: MEMM work;
+FORMAT = 11  # 2: per-process local files (the recurrence, contact states); no shared file; 3: MEMM work;
 # 4: the pair contact's exchange counter; 5: the solution as one HDF5 file per output time (io.SolutionWriter);
 # 6: the largest penetration over the local facet diameter (run_statistics.PairContactStatistics); 7: MEMM's
 # frictional dissipation; 8: the contact models' cell states (friction's lagged normal forces); 9: the counters
 # of friction between bodies (run_statistics.PairContactStatistics); 10: the lagged normal forces of friction
-# between bodies (contact/pair_lag.py) and the cell arrays' shapes in the header
+# between bodies (contact/pair_lag.py) and the cell arrays' shapes in the header; 11: the touching pairs'
+# largest crossing angle (run_statistics.PairContactStatistics)
 DIRECTORY = "checkpoint"
 HEADER = "checkpoint.json"
 VECTORS = ("u", "v_prev", "v_next")

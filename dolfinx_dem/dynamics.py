@@ -221,7 +221,8 @@ class DynamicRun:
         contact = model.contact_values(self.problem, stepper.u, stepper.contact_patch_values())
         if self.pairs is not None:
             contact += list(diag.momentum)
-            penetration = (contact[self._penetration_column], self.pairs.outputs.penetration_ratio)
+            outputs = self.pairs.outputs
+            penetration = (contact[self._penetration_column], outputs.penetration_ratio, outputs.crossing_angle)
             self.pair_stats.record(diag.t, stepper, penetration, diag.momentum)
             # contact work done at every step for its outputs: part of the contact share
             self.pair_stats.output_seconds += time.process_time() - tic

@@ -7,13 +7,14 @@ from __future__ import annotations
 import dataclasses
 import math
 import resource
+import warnings
 from collections.abc import Mapping
 
 import numpy as np
 from mpi4py import MPI
 
 from dolfinx_dem.contact import PairContact
-from dolfinx_dem.errors import UnresolvedContactError
+from dolfinx_dem.errors import AccuracyWarning, UnresolvedContactError
 from dolfinx_dem.memm import MEMM
 from dolfinx_dem.problem import DEMProblem
 
@@ -41,6 +42,13 @@ class Statistics:
 #: in docs/validation/contact3d.md).
 MAX_PENETRATION = 0.5
 
+#: The crossing angle of touching facets (degrees) above which a run warns: each facet keeps its
+#: reference normal and moves by one translation (eq. (31)), so the gap of a pair whose planes cross
+#: at theta varies across the facet by about |f| tan theta, which no translation closes; at 45
+#: degrees by the facet's own size, and the penetration over the facet size then no longer falls
+#: under refinement (docs/validation/contact3d.md, "The vertex surface under refinement").
+MAX_CROSSING_ANGLE = 45.0
+
 
 class PairContactStatistics:
     """Running figures of contact between bodies for ``summary.json``: first contact time (when
@@ -56,6 +64,7 @@ class PairContactStatistics:
         dem = problem.dem
         self.contact = problem.find(PairContact)
         self.first_contact, self.penetration, self.penetration_ratio = None, 0.0, 0.0
+        self.crossing_angle = 0.0  # the largest crossing angle of touching pairs (degrees)
         self.max_penetration = max_penetration
         # floats: on a 3-vector, numpy's operations cost more than a loop, at every step
         self.p0 = momentum.tolist() if self.contact is not None else None
@@ -68,9 +77,11 @@ class PairContactStatistics:
         self.previous = None  # the displacement of the previous step, until the first contact (one vector)
         self.output_seconds = 0.0  # processor time of the per-step contact outputs (this process)
 
-    def record(self, t: float, stepper: MEMM, penetration: tuple[float, float], momentum: np.ndarray):
-        """Update with the state at ``t``: its ``penetration`` (depth in m, the series column, and
-        depth over the local facet diameter: ``PairOutputs.penetration``) and ``momentum``."""
+    def record(self, t: float, stepper: MEMM, penetration: tuple[float, float, float], momentum: np.ndarray):
+        """Update with the state at ``t``: its ``penetration`` (depth in m, the series column, depth
+        over the local facet diameter and the touching pairs' largest crossing angle in degrees:
+        ``PairOutputs.penetration``) and ``momentum``. Warns (``AccuracyWarning``, once) when the
+        crossing angle first exceeds ``MAX_CROSSING_ANGLE``."""
         contact = self.contact
         if self.first_contact is None:
             if self.previous is None:
@@ -83,9 +94,19 @@ class PairContactStatistics:
                 # PETSc.garbage_cleanup, so a new copy per step would keep every one (a vector
                 # of the mesh's size per step until the first contact)
                 stepper.u.copy(self.previous)
-        penetration, ratio = penetration
+        penetration, ratio, crossing = penetration
         self.penetration = max(self.penetration, penetration)
         self.penetration_ratio = max(self.penetration_ratio, ratio)
+        if crossing > MAX_CROSSING_ANGLE >= self.crossing_angle and self.contact.comm.rank == 0:  # reduced values
+            warnings.warn(AccuracyWarning(
+                f"at t = {t:.6g} touching facets of two bodies cross at {crossing:.3g} degrees (more than "
+                f"{MAX_CROSSING_ANGLE:g}): the bodies have turned their surfaces against each other, by a "
+                "deformation beyond small displacements or at a corner. Each facet keeps its reference normal "
+                "and moves by one translation (eq. (31)), so the gap of such a pair varies across a facet by "
+                "more than its size: the penetration over the facet size no longer falls under refinement "
+                "there (docs/validation/contact3d.md). A slower approach or stiffer bodies keep the "
+                "contact of smooth bodies in the method's range"), stacklevel=2)
+        self.crossing_angle = max(self.crossing_angle, crossing)
         if ratio > self.max_penetration:  # the same on every process (a reduced value)
             raise UnresolvedContactError(
                 f"contact between bodies is not resolved at t = {t:.6g}: the contact surfaces interpenetrate by "
@@ -108,6 +129,7 @@ class PairContactStatistics:
             "first_contact": self.first_contact,
             "penetration": self.penetration,
             "penetration_ratio": self.penetration_ratio,
+            "crossing_angle": self.crossing_angle,
             "momentum_change": self.momentum_change,
             "p_scale": self.p_scale,
             "output_seconds": self.output_seconds,
@@ -128,7 +150,7 @@ class PairContactStatistics:
 
     def restore(self, state: Mapping, stepper: MEMM):
         self.first_contact, self.penetration = state["first_contact"], state["penetration"]
-        self.penetration_ratio = state["penetration_ratio"]
+        self.penetration_ratio, self.crossing_angle = state["penetration_ratio"], state["crossing_angle"]
         self.momentum_change, self.p_scale = state["momentum_change"], state["p_scale"]
         self.output_seconds = state["output_seconds"]
         self.p0 = state["p0"]
@@ -154,6 +176,7 @@ class PairContactStatistics:
             "first_contact_time": self.first_contact,
             "max_penetration": self.penetration,
             "max_penetration_over_facet_size": self.penetration_ratio,
+            "max_contact_crossing_angle": self.crossing_angle,
             # all contact work of the steps, outputs included, over the steps and those outputs
             "contact_seconds": comm.allreduce(c.seconds + self.output_seconds, op=MPI.MAX),
             "contact_output_seconds": comm.allreduce(self.output_seconds, op=MPI.MAX),

@@ -23,7 +23,9 @@ class PairOutputs:
         self.contact = contact
         self._grad_weights = grad_weights  # a_f / |c| of the local facets' cells (eq. (8))
         self.penetration_ratio = 0.0  # of the last output_values
+        self.crossing_angle = 0.0  # of the last output_values (degrees)
         self._facets = (None, None)  # (the known facets, their ``_FacetWork``): remade with each list build
+        self._crossing = (None, None)  # (the listed pairs, cos of their crossing): remade with each list build
 
     def _work(self) -> _FacetWork:
         """The outputs' arrays of the known facets (their C pointers made once per list build)."""
@@ -53,10 +55,11 @@ class PairOutputs:
         own = slice(0, pc.num_own)
         return pc.cells[own], np.einsum("ni,nj->nij", self._corrections(up)[own], self._grad_weights[own])
 
-    def penetration(self, up: np.ndarray) -> tuple[float, float]:
+    def penetration(self, up: np.ndarray) -> tuple[float, float, float]:
         """Largest interpenetration of the contact-aware facet reconstructions, as (depth in m,
-        depth over the local facet diameter), each >= 0 and the largest over the own facets
-        (collective). Each part of a facet's area carries the depth of what lies over it
+        depth over the local facet diameter), each >= 0 and the largest over the own facets, and
+        the largest crossing angle of the touching pairs (degrees, ``_crossing_cosines``;
+        collective). Each part of a facet's area carries the depth of what lies over it
         (``dem_pair_penetration``): its touching partners (g < 0, w > 0) cover a fraction kappa of
         it and carry the overlap-weighted mean over them of the reconstructed gap
         (x_f' + u_f' - x_f - u_f) . n, negated; eq. (31) makes it zero when each facet has one
@@ -78,9 +81,24 @@ class PairOutputs:
         lib.dem_pair_penetration(pc.pair_list.c_pairs.c, at.kernel_state.c, work.p_centre, work.p_uf, work.p_normal,
                                  work.p_reach, work.p_length, n, work.p_work, work.p_depth, work.p_scale,
                                  work.p_worst)
-        worst = work.worst.copy()
+        closed = at.pairs
+        cos = self._crossing_cosines()[closed.closed[(closed.g < 0) & (closed.w > 0)]]
+        worst = np.append(work.worst, -cos.min(initial=1.0))
         pc.comm.Allreduce(MPI.IN_PLACE, worst, op=MPI.MAX)
-        return float(worst[0]), float(worst[1])
+        return float(worst[0]), float(worst[1]), float(np.degrees(np.arccos(min(-worst[2], 1.0))))
+
+    def _crossing_cosines(self) -> np.ndarray:
+        """cos theta_p = -n_i . n_j of the listed pairs: theta_p, the angle at which the planes of
+        the two facets cross (0 for facets face to face; below 90 degrees for every listed pair,
+        which face each other). Each facet keeps its reference normal and moves by one
+        translation, eq. (31), so a touching pair's gap varies across the facet by about
+        |f| tan theta_p, which no translation closes: the penetration over the facet size
+        then stays of the order of tan theta_p under refinement."""
+        L = self.contact.listed
+        if self._crossing[0] is not L:  # the listed pairs change with each list build
+            n = self.contact.facets_all.normal
+            self._crossing = (L, -np.einsum("pi,pi->p", n[L.i], n[L.j]))
+        return self._crossing[1]
 
     def pair_states(self, up: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Gap g and overlap w of the pairs listed on this process (``listed``; indices into
@@ -213,8 +231,9 @@ class PairOutputs:
     def output_values(self, up: np.ndarray, sums: np.ndarray) -> list[float]:
         """The values of ``output_columns`` from the reduced ``output_sums``: the penetration's
         scatter and reduction only where some process has a closed pair (collective). Its depth
-        over the local facet diameter is kept as ``penetration_ratio`` (the run's check)."""
-        depth, self.penetration_ratio = self.penetration(up) if sums[-1] > 0 else (0.0, 0.0)
+        over the local facet diameter is kept as ``penetration_ratio`` (the run's check), the touching
+        pairs' largest crossing angle as ``crossing_angle``."""
+        depth, self.penetration_ratio, self.crossing_angle = self.penetration(up) if sums[-1] > 0 else (0.0, 0.0, 0.0)
         return [sums[-2], depth, *sums[:-2]]
 
     def smallest_gap(self, up: np.ndarray) -> float:
