@@ -25,7 +25,6 @@ class PairOutputs:
         self.penetration_ratio = 0.0  # of the last output_values
         self.crossing_angle = 0.0  # of the last output_values (degrees)
         self._facets = (None, None)  # (the known facets, their ``_FacetWork``): remade with each list build
-        self._crossing = (None, None)  # (the listed pairs, cos of their crossing): remade with each list build
 
     def _work(self) -> _FacetWork:
         """The outputs' arrays of the known facets (their C pointers made once per list build)."""
@@ -56,24 +55,25 @@ class PairOutputs:
         return pc.cells[own], np.einsum("ni,nj->nij", self._corrections(up)[own], self._grad_weights[own])
 
     def penetration(self, up: np.ndarray) -> tuple[float, float, float]:
-        """Largest interpenetration of the contact-aware facet reconstructions, as (depth in m,
-        depth over the local facet diameter), each >= 0 and the largest over the own facets, and
-        the largest crossing angle of the touching pairs (degrees, ``_crossing_cosines``;
-        collective). Each part of a facet's area carries the depth of what lies over it
-        (``dem_pair_penetration``): its touching partners (g < 0, w > 0) cover a fraction kappa of
-        it and carry the overlap-weighted mean over them of the reconstructed gap
-        (x_f' + u_f' - x_f - u_f) . n, negated; eq. (31) makes it zero when each facet has one
-        partner covering it exactly, and partial overlaps (facets sliding against each other)
-        leave a gap of the order of the cell gap times the uncovered fraction. The uncovered
-        fraction 1 - kappa (all of a facet that overlaps no partner, as one that slid into a hole
-        of the other body's mosaic) carries the least of its depths behind the planes of its
-        listed partners around the nearest one: in a hole it lies behind all of them, beside a
-        convex body in front of one. The facet's depth is the area-weighted sum of the two parts:
-        a sliver of overlap at the rim of a contact patch counts as a sliver, a facet half over a
-        hole counts the hole's half. Its ratio: each part over the local diameter of what it reads,
-        the largest of the facet's own and those of its touching partners or of the partners
-        around the nearest (a fine facet against a coarse mosaic sits as deep as the coarse facets
-        allow). The corrections of the partners come from their owners (a scatter over the
+        """Largest interpenetration of the contact-aware facet reconstructions, as (depth in m, depth over the local
+        facet diameter), each >= 0 and the largest over the own facets, and the largest angle theta_p at
+        which the planes of two touching facets cross (degrees; 0 face to face, cos theta_p = -n_i . n_j;
+        collective). Each facet keeps its reference normal and moves by one translation (eq. (31)), so a
+        touching pair's gap varies across the facet by about |f| tan theta_p, which no translation closes:
+        the penetration over the facet size then stays of the order of tan theta_p under refinement. Each
+        part of a facet's area carries the depth of what lies over it (``dem_pair_penetration``): its
+        touching partners (g < 0, w > 0) cover a fraction kappa of it and carry the overlap-weighted mean
+        over them of the reconstructed gap (x_f' + u_f' - x_f - u_f) . n, negated; eq. (31) makes it zero
+        when each facet has one partner covering it exactly, and partial overlaps (facets sliding against
+        each other) leave a gap of the order of the cell gap times the uncovered fraction. The uncovered
+        fraction 1 - kappa (all of a facet that overlaps no partner, as one that slid into a hole of the
+        other body's mosaic) carries the least of its depths behind the planes of its listed partners around
+        the nearest one: in a hole it lies behind all of them, beside a convex body in front of one. The
+        facet's depth is the area-weighted sum of the two parts: a sliver of overlap at the rim of a contact
+        patch counts as a sliver, a facet half over a hole counts the hole's half. Its ratio: each part over
+        the local diameter of what it reads, the largest of the facet's own and those of its touching
+        partners or of the partners around the nearest (a fine facet against a coarse mosaic sits as deep as
+        the coarse facets allow). The corrections of the partners come from their owners (a scatter over the
         candidates)."""
         pc, work = self.contact, self._work()
         at, n = pc.state(up), pc.num_own
@@ -81,24 +81,9 @@ class PairOutputs:
         lib.dem_pair_penetration(pc.pair_list.c_pairs.c, at.kernel_state.c, work.p_centre, work.p_uf, work.p_normal,
                                  work.p_reach, work.p_length, n, work.p_work, work.p_depth, work.p_scale,
                                  work.p_worst)
-        closed = at.pairs
-        cos = self._crossing_cosines()[closed.closed[(closed.g < 0) & (closed.w > 0)]]
-        worst = np.append(work.worst, -cos.min(initial=1.0))
+        worst = work.worst.copy()
         pc.comm.Allreduce(MPI.IN_PLACE, worst, op=MPI.MAX)
         return float(worst[0]), float(worst[1]), float(np.degrees(np.arccos(min(-worst[2], 1.0))))
-
-    def _crossing_cosines(self) -> np.ndarray:
-        """cos theta_p = -n_i . n_j of the listed pairs: theta_p, the angle at which the planes of
-        the two facets cross (0 for facets face to face; below 90 degrees for every listed pair,
-        which face each other). Each facet keeps its reference normal and moves by one
-        translation, eq. (31), so a touching pair's gap varies across the facet by about
-        |f| tan theta_p, which no translation closes: the penetration over the facet size
-        then stays of the order of tan theta_p under refinement."""
-        L = self.contact.listed
-        if self._crossing[0] is not L:  # the listed pairs change with each list build
-            n = self.contact.facets_all.normal
-            self._crossing = (L, -np.einsum("pi,pi->p", n[L.i], n[L.j]))
-        return self._crossing[1]
 
     def pair_states(self, up: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Gap g and overlap w of the pairs listed on this process (``listed``; indices into
@@ -251,7 +236,7 @@ class _FacetWork:
     def __init__(self, F, n_own: int, d: int):
         n = len(F)
         self.corrections, self.spare = np.empty((n, d)), np.empty((n, d))  # dem_pair_facet_corrections
-        self.uf, self.worst = np.empty((n, d)), np.empty(2)  # dem_pair_penetration's
+        self.uf, self.worst = np.empty((n, d)), np.empty(3)  # dem_pair_penetration's
         self.reach = reach(F)
         arrays = {"length": F.length, "corrections": self.corrections, "spare": self.spare, "centre": F.centre,
                   "uf": self.uf, "normal": F.normal, "reach": self.reach, "work": np.empty(3 * n + 2 * n_own),

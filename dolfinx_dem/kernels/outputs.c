@@ -137,7 +137,9 @@ DEM_INLINE void behind_partners(const int32_t d, const dem_pairs *pairs, const d
  * compared with (the reach of f where its depth is 0). work: 3 n_facets + 2 n_own, overwritten: the sums sum_p w_p, the weighted gaps and the
  * covered fractions (before the min) of each facet, then the distance to the nearest partner and
  * the largest reach around it of each own facet. worst: the largest depth and the largest ratio,
- * each >= 0 (the run's two figures, in one pass). */
+ * each >= 0 (the run's two figures, in one pass), and the largest n_i . n_j of the touching pairs, -1
+ * without one: minus the cosine of the largest angle at which the planes of two touching facets
+ * cross (pair_outputs.PairOutputs.penetration). */
 void dem_pair_penetration(const dem_pairs *pairs, const dem_pair_state *state, const double *restrict centre,
                           const double *restrict uf, const double *restrict facet_normal,
                           const double *restrict reach, const double *restrict length, int64_t n_own,
@@ -151,19 +153,22 @@ void dem_pair_penetration(const dem_pairs *pairs, const dem_pair_state *state, c
   const int64_t *restrict i = pairs->i, *restrict j = pairs->j, *restrict p = state->closed;
   const double *restrict normal = pairs->normal, *restrict w = state->w;
   memset(work, 0, (size_t)(3 * n) * sizeof *work);
+  worst[2] = -1.0;
   for (int64_t k = 0; k < state->n; ++k)
   {
     if (!(w[k] > 0))
       continue;
     const int64_t q = p[k];
-    double gap = 0.0, cos_i = 0.0, cos_j = 0.0;
+    double gap = 0.0, cos_i = 0.0, cos_j = 0.0, facing = 0.0;
     for (int32_t x = 0; x < d; ++x)
     {
       gap += ((centre[j[q] * d + x] + uf[j[q] * d + x]) - centre[i[q] * d + x] - uf[i[q] * d + x]) *
              normal[q * d + x];
       cos_i += facet_normal[i[q] * d + x] * normal[q * d + x];
       cos_j += facet_normal[j[q] * d + x] * normal[q * d + x];
+      facing += facet_normal[i[q] * d + x] * facet_normal[j[q] * d + x];
     }
+    worst[2] = facing > worst[2] ? facing : worst[2];
     weight[i[q]] += w[k];
     weight[j[q]] += w[k];
     mean[i[q]] += w[k] * gap;
