@@ -46,7 +46,7 @@ MAX_PENETRATION = 0.5
 #: reference normal and moves by one translation (eq. (31)), so the gap of a pair whose planes cross
 #: at theta varies across the facet by about |f| tan theta, which no translation closes; at 45
 #: degrees by the facet's own size, and the penetration over the facet size then no longer falls
-#: under refinement (docs/validation/contact3d.md, "The vertex surface under refinement").
+#: under refinement (docs/validation/contact3d.md, "The crossing angle").
 MAX_CROSSING_ANGLE = 45.0
 
 
