@@ -26,12 +26,16 @@ Per run, on a common time grid (``interval``: 0.5 s billiard, 0.025 s cradle):
   centres' positions and velocities. Each run is also compared with the other method's finest run,
   and the distance between the two finest runs is given: where the errors fall below it, the
   references do not resolve them.
+- ``cradle`` only: the lateral drift, the largest distance of a ball's centre of mass from the x axis,
+  against the exact value 0 (the balls start on the axis and only the first moves, along it), and
+  the axial error, the x part of the trajectory error.
+- the balls' centre displacements at the tables' times (``displacements_shown``, for the tests).
 - contact episodes: per pair of bodies, the stretches with a nonzero pair force
   (``contact_force_<i>_<j>_*``), gaps shorter than ``interval`` merged, summed over the pairs.
 - the wall time of the run (set-up, steps and the output of the frames, one process).
 
     .venv/bin/python validation/long_runs.py --out docs/validation/long_runs.json
-    .venv/bin/python validation/long_runs.py --quick --out OUT.json   # billiard h 0.2, 0.1 to 20 s; cradle h 0.05, 0.04 to 1 s
+    .venv/bin/python validation/long_runs.py --quick --out OUT.json   # billiard h 0.2, 0.1 to 20 s; cradle h 0.04, 0.028 to 1 s
 
 It writes the JSON and, next to it, the Markdown page and the chart (``--out``'s stem + .md, .png);
 ``--render`` rewrites the page and the chart from the JSON.
@@ -40,6 +44,7 @@ It writes the JSON and, next to it, the Markdown page and the chart (``--out``'s
 import argparse
 import datetime
 import json
+import math
 import pathlib
 import subprocess
 import tempfile
@@ -54,13 +59,13 @@ SCENES = {
     # output's step count only: the frames' times are read back)
     "billiard": {"centres": [[4.0, 5.0], [5.0, 4.0], [8.0, 4.0], [7.0, 6.0], [5.0, 7.0], [4.0, 8.0], [7.0, 8.0]],
                  "radius": 0.5, "end": 50.0, "interval": 0.5, "tolerance": 0.05, "shown": (10.0, 25.0, 50.0),
-                 "dt_over_h": {"dem-B": 0.19, "fem-P1": 0.30}, "h": (0.2, 0.1, 0.05, 0.025)},
+                 "dt_over_h": {"dem-B": 0.19, "fem-P1": 0.30}, "h": (0.2, 0.1, 0.05, 0.025), "axis": None},
     "cradle": {"centres": [[0.1, 0.0, 0.0], [0.31, 0.0, 0.0], [0.52, 0.0, 0.0], [0.73, 0.0, 0.0], [0.94, 0.0, 0.0]],
                "radius": 0.1, "end": 3.0, "interval": 0.025, "tolerance": 0.01, "shown": (1.0, 2.0, 3.0),
-               "dt_over_h": {"dem-B": 0.037, "fem-P1": 0.079}, "h": (0.04, 0.028, 0.02, 0.014)},
+               "dt_over_h": {"dem-B": 0.037, "fem-P1": 0.079}, "h": (0.04, 0.028, 0.02, 0.014), "axis": 0},
 }
 QUICK = {"billiard": {"h": (0.2, 0.1), "end": 20.0, "shown": (10.0, 20.0)},
-         "cradle": {"h": (0.05, 0.04), "end": 1.0, "shown": (0.5, 1.0)}}
+         "cradle": {"h": (0.04, 0.028), "end": 1.0, "shown": (0.5, 1.0)}}
 COLOURS = {"dem-B": "tab:blue", "fem-P1": "tab:red"}
 STYLES = ("-", "--", ":", "-.")
 
@@ -164,8 +169,15 @@ def study(name: str, levels: tuple, end: float, shown: tuple, work: pathlib.Path
         other = METHODS[1 - METHODS.index(r["method"])]
         r["trajectory_error"] = distance(r, finest[r["method"]]).tolist()
         r["trajectory_error_other"] = distance(r, finest[other]).tolist()
-    for r in runs:  # the displacements themselves are not kept: the errors are
+    grid, axis = grid_times(spec["interval"], end), spec["axis"]
+    u = [np.array(r["displacement"]) for r in runs]
+    u_ref = {m: np.array(finest[m]["displacement"]) for m in METHODS}
+    for r, u_r in zip(runs, u):  # the displacements are kept at the times shown only
         del r["displacement"]
+        r["displacements_shown"] = {f"{t:g}": u_r[int(np.argmin(np.abs(grid - t)))].tolist() for t in shown}
+        if axis is not None:  # in the exact solution the balls move along the axis only (symmetry)
+            r["axial_error"] = np.abs(u_r[:, :, axis] - u_ref[r["method"]][:, :, axis]).max(axis=1).tolist()
+            r["lateral"] = np.linalg.norm(np.delete(u_r, axis, axis=2), axis=2).max(axis=1).tolist()
     return {"end": end, "interval": spec["interval"], "tolerance": spec["tolerance"], "shown": list(shown),
             "levels": list(levels), "reference_h": levels[-1], "grid": grid_times(spec["interval"], end).tolist(),
             "reference_distance": finest["dem-B"]["trajectory_error_other"], "runs": runs}
@@ -266,6 +278,10 @@ def page(results: dict, png: str) -> str:
         "their own forces. No exact solution exists for these scenes; the column *against the other method's finest* "
         "and the distance between the two finest runs (the black line of the chart) show how far the two "
         "references agree: an error below that distance is not resolved by either reference.",
+        "- **Lateral drift** (`cradle`): the balls start on the x axis and only the first moves, along x, so in the "
+        "exact solution they move along x only; the largest distance of a ball's centre of mass from the x axis "
+        "(its y, z displacement) is an error against an exact reference, made by the faceted contact surfaces of "
+        "the meshed balls. The *axial error* is the x part of the trajectory error.",
         "- **Contact episodes**: per pair of bodies, the stretches of nonzero pair force (gaps shorter than the grid's "
         "interval merged), summed over the pairs (the billiard's frame is a body).",
         "- **Wall time**: the whole run (set-up, steps, the series every step and the fields about every interval), "
@@ -274,14 +290,16 @@ def page(results: dict, png: str) -> str:
         f"![energy and trajectory errors]({png})",
     ]
     for name, data in results["scenes"].items():
-        shown = data["shown"]
+        shown, axial = data["shown"], "lateral" in data["runs"][0]
         lines += ["", f"## `{name}`, to {data['end']:g} s", "",
                   "| method | h (m) | cells | steps | dt (s) | contact episodes | "
                   + " | ".join(f"energy error, t = {t:g} s" for t in shown) + " | "
                   + " | ".join(f"trajectory error (m), t = {t:g} s" for t in shown)
                   + f" | first t with a trajectory error over {data['tolerance']:g} m | trajectory error against the "
-                  "other method's finest (m), end | wall (s) |",
-                  "|---" * (9 + 2 * len(shown)) + "|"]
+                  "other method's finest (m), end | "
+                  + ("axial (x) error against the method's finest (m), end | lateral drift (m), end (exact: 0) | "
+                     if axial else "") + "wall (s) |",
+                  "|---" * (9 + 2 * len(shown) + 2 * axial) + "|"]
         for r in sorted(data["runs"], key=lambda r: (r["method"], -r["h"])):
             ref = r["h"] == data["reference_h"]
             first = first_above(data, r["trajectory_error"], data["tolerance"])
@@ -290,7 +308,9 @@ def page(results: dict, png: str) -> str:
                 + " | ".join(f"{at(data, r['energy_error'], t):.1e}" for t in shown) + " | "
                 + " | ".join("reference" if ref else f"{at(data, r['trajectory_error'], t):.2e}" for t in shown)
                 + f" | {'-' if ref else ('none' if first is None else f'{first:g}')} | "
-                + f"{at(data, r['trajectory_error_other'], data['end']):.2e} | {r['wall_s']:.1f} |")
+                + f"{at(data, r['trajectory_error_other'], data['end']):.2e} | "
+                + (f"{'reference' if ref else format(at(data, r['axial_error'], data['end']), '.2e')} | "
+                   f"{at(data, r['lateral'], data['end']):.2e} | " if axial else "") + f"{r['wall_s']:.1f} |")
         d = data["reference_distance"]
         first = first_above(data, d, data["tolerance"])
         over = f"over {data['tolerance']:g} m from t = {first:g} s" if first is not None else "never over the tolerance"
@@ -306,7 +326,48 @@ def page(results: dict, png: str) -> str:
     for name, data in results["scenes"].items():
         for h in data["levels"]:
             lines.append(f"| `{name}` " + verdict(data, h))
+    for name, data in results["scenes"].items():
+        lines += ["", *summary(name, data)]
     return "\n".join(lines) + "\n"
+
+
+def summary(name: str, data: dict) -> list[str]:
+    """The measured answer per scene: energy, trajectory (same mesh, equal wall time), cost, what the references resolve."""
+    runs = {m: sorted((r for r in data["runs"] if r["method"] == m), key=lambda r: -r["h"]) for m in METHODS}
+    coarse = {m: [r for r in rows if r["h"] != data["reference_h"]] for m, rows in runs.items()}
+    end, d_end = data["end"], at(data, data["reference_distance"], data["end"])
+
+    def listed(rows, key):
+        return ", ".join(f"{at(data, r[key], end):.2g}" for r in rows)
+
+    hs = ", ".join(f"{h:g}" for h in data["levels"])
+    wins = {m: sum(1 for a, b in zip(coarse["dem-B"], coarse["fem-P1"])
+                   if (at(data, a["trajectory_error"], end) < at(data, b["trajectory_error"], end)) == (m == "dem-B"))
+            for m in METHODS}
+    pairs = []
+    for f in coarse["fem-P1"]:
+        d = min(coarse["dem-B"], key=lambda r: abs(math.log(r["wall_s"] / f["wall_s"])))
+        pairs.append(f"fem-P1 h = {f['h']:g} ({f['wall_s']:.1f} s) {at(data, f['trajectory_error'], end):.2g} m against "
+                     f"dem-B h = {d['h']:g} ({d['wall_s']:.1f} s) {at(data, d['trajectory_error'], end):.2g} m")
+    episodes = sorted({r["contact_episodes"] for r in data["runs"]})
+    fem_energy = ", ".join(f"{r['energy_error_end']:.1e}" for r in runs["fem-P1"])
+    coarse_h = ", ".join(f"{r['h']:g}" for r in coarse["dem-B"])
+    steps = ", ".join(f"{a['steps'] / b['steps']:.2f}" for a, b in zip(runs["dem-B"], runs["fem-P1"]))
+    walls = ", ".join(f"{a['wall_s'] / b['wall_s']:.2f}" for a, b in zip(runs["dem-B"], runs["fem-P1"]))
+    return [
+        f"**`{name}`** ({episodes[0]}-{episodes[-1]} contact episodes per run). *Energy*: dem-B's error stays below "
+        f"{max(r['energy_error_end'] for r in runs['dem-B']):.1e} on every mesh (h = {hs}); fem-P1's ends at "
+        f"{fem_energy}. *Trajectory at t = {end:g} s*, against each method's finest run: dem-B "
+        f"{listed(coarse['dem-B'], 'trajectory_error')} m, fem-P1 {listed(coarse['fem-P1'], 'trajectory_error')} m on "
+        f"h = {coarse_h}: smaller for dem-B on {wins['dem-B']} of the {len(coarse['dem-B'])} meshes, for fem-P1 on "
+        f"{wins['fem-P1']}; against the other method's finest run: dem-B {listed(coarse['dem-B'], 'trajectory_error_other')}"
+        f" m, fem-P1 {listed(coarse['fem-P1'], 'trajectory_error_other')} m. The two finest runs are {d_end:.2g} m apart at "
+        f"the end: smaller errors are not resolved. *Cost*: on each mesh dem-B takes {steps} times fem-P1's steps and "
+        f"{walls} times its wall time. *At about equal wall time*: {'; '.join(pairs)}."
+        + ("" if "lateral" not in runs["dem-B"][0] else
+           f" *Lateral drift at the end* (exact: 0, by symmetry; h = {hs}): dem-B {listed(runs['dem-B'], 'lateral')} m, "
+           f"fem-P1 {listed(runs['fem-P1'], 'lateral')} m; *axial error* against the method's finest: dem-B "
+           f"{listed(coarse['dem-B'], 'axial_error')} m, fem-P1 {listed(coarse['fem-P1'], 'axial_error')} m.")]
 
 
 def main():
@@ -316,7 +377,7 @@ def main():
                         help="mesh sizes, coarse to fine; the last is the reference")
     parser.add_argument("--cradle-h", type=float, nargs="+", default=list(SCENES["cradle"]["h"]),
                         help="mesh sizes, coarse to fine; the last is the reference")
-    parser.add_argument("--quick", action="store_true", help="billiard h 0.2, 0.1 to 20 s; cradle h 0.05, 0.04 to 1 s")
+    parser.add_argument("--quick", action="store_true", help="billiard h 0.2, 0.1 to 20 s; cradle h 0.04, 0.028 to 1 s")
     parser.add_argument("--work", type=pathlib.Path, help="folder of the runs (default: a temporary one)")
     parser.add_argument("--keep", action="store_true", help="keep the runs' folders (with --work)")
     parser.add_argument("--render", action="store_true", help="rewrite the page and chart from --out's JSON")
