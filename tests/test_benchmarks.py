@@ -363,9 +363,12 @@ def test_long_runs_quick_keeps_the_dem_energy_and_reproduces_the_study(tmp_path)
     (cradle; the quick run's last frame against the study's interpolated one: measured 0, 1.6e-7 and
     5.8e-8 m); the other runs' step, rounded to the shorter end, differs by 0.06-0.1 %: within 2e-3 m
     (measured 1.8e-5 to 7.6e-4 m, the largest fem-P1's cradle at h = 0.028)."""
+    import gmsh
+
     _quick("validation/long_runs.py", "--out", str(tmp_path / "r.json"))
     data = json.loads((tmp_path / "r.json").read_text())["scenes"]
     documented = _documented("long_runs.json")["scenes"]
+    pages_mesh = gmsh.__version__ == PAGES_GMSH  # another gmsh meshes the discs and balls otherwise
     shared = 0
     for name, bound, t in (("billiard", 0.1, "10"), ("cradle", 0.03, "1")):
         for r in data[name]["runs"]:
@@ -377,15 +380,18 @@ def test_long_runs_quick_keeps_the_dem_energy_and_reproduces_the_study(tmp_path)
                 assert r["trajectory_error"][-1] < bound
             if name == "cradle":
                 assert max(r["lateral"]) < 0.02
+            if not pages_mesh:
+                continue
             study = next(d for d in documented[name]["runs"] if d["method"] == r["method"] and d["h"] == r["h"])
             assert r["cells"] == study["cells"]
             same_step = abs(r["dt"] / study["dt"] - 1) < 1e-12
             shared += same_step
             moved = np.array(r["displacements_shown"][t]) - np.array(study["displacements_shown"][t])
             assert np.abs(moved).max() < (1e-6 if same_step else 2e-3), (name, r["method"], r["h"])
-    assert shared == 3  # dem-B: billiard h = 0.2, cradle h = 0.04 and 0.028
+    assert shared == (3 if pages_mesh else 0)  # dem-B: billiard h = 0.2, cradle h = 0.04 and 0.028
     assert (tmp_path / "r.md").read_text().startswith("# Many impacts between bodies")
     assert (tmp_path / "r.png").stat().st_size > 0
+
 
 def test_friction_slide_scheme_b_quick_spreads_the_bound(tmp_path):
     """dem-B, mu = 0.3, 16 x 8 squares: the spread bound within 0.6 % of g (sin t - mu cos t)
