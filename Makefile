@@ -151,6 +151,7 @@ validate: setup
 	$(PYTHON) validation/two_materials.py --meshes 350 700 1400 2800 --out docs/validation/two_materials.json
 	$(PYTHON) validation/scheme_b.py --out docs/validation/scheme_b.json
 	$(PYTHON) validation/long_bounce.py --n 100 200 400 --out docs/validation/long_bounce.json
+	$(PYTHON) validation/long_runs.py --out docs/validation/long_runs.json
 	$(PYTHON) validation/friction_slide.py --out docs/validation/friction.json
 	$(PYTHON) validation/friction_slide.py --scheme B --out docs/validation/friction_scheme_b.json
 	$(PYTHON) validation/friction_slide.py --scheme AB --out docs/validation/friction_scheme_ab.json

@@ -11,6 +11,7 @@ import pathlib
 import shutil
 import sys
 
+import numpy as np
 import pytest
 from helpers import run_command
 
@@ -349,6 +350,47 @@ def test_long_bounce_quick_keeps_the_dem_energy_and_ranks_the_fem(tmp_path):
     assert rows["projection"]["energy_error"][-1] > 1e-3 and rows["newmark-penalty"]["energy_error"][-1] > 1.0
     assert max(r["tip_rms"][0] for r in rows.values()) < 0.15
     assert (tmp_path / "b.md").read_text().startswith("# Many impacts")
+
+
+def test_long_runs_quick_keeps_the_dem_energy_and_reproduces_the_study(tmp_path):
+    """billiard (h = 0.2, 0.1, to 20 s) and cradle (h = 0.04, 0.028, to 1 s), dem-B and fem-P1: the
+    DEM's energy error stays at rounding (measured <= 1.1e-14), fem-P1's does not (1.6e-4 to 9.0e-3);
+    each coarse run follows its method's h = 0.1 (billiard) or 0.028 (cradle) run within 0.1 m
+    (measured 0.055 dem-B, 0.040 fem-P1) and 0.03 m (0.014, 0.0073); the cradle's balls leave the x axis
+    by at most 0.02 m (0.012). The runs are those of docs/validation/long_runs.md on the meshes they
+    share: the same cells, and the dem-B runs with the study's time step (billiard h = 0.2, cradle
+    h = 0.04 and 0.028) move the balls' centres as the study's did at t = 10 s (billiard) and 1 s
+    (cradle; the quick run's last frame against the study's interpolated one: measured 0, 1.6e-7 and
+    5.8e-8 m); the other runs' step, rounded to the shorter end, differs by 0.06-0.1 %: within 2e-3 m
+    (measured 1.8e-5 to 7.6e-4 m, the largest fem-P1's cradle at h = 0.028)."""
+    import gmsh
+
+    _quick("validation/long_runs.py", "--out", str(tmp_path / "r.json"))
+    data = json.loads((tmp_path / "r.json").read_text())["scenes"]
+    documented = _documented("long_runs.json")["scenes"]
+    pages_mesh = gmsh.__version__ == PAGES_GMSH  # another gmsh meshes the discs and balls otherwise
+    shared = 0
+    for name, bound, t in (("billiard", 0.1, "10"), ("cradle", 0.03, "1")):
+        for r in data[name]["runs"]:
+            if r["method"] == "dem-B":
+                assert r["energy_error_end"] < 1e-13
+            else:
+                assert 5e-5 < r["energy_error_end"] < 0.05
+            if r["h"] != data[name]["reference_h"]:
+                assert r["trajectory_error"][-1] < bound
+            if name == "cradle":
+                assert max(r["lateral"]) < 0.02
+            if not pages_mesh:
+                continue
+            study = next(d for d in documented[name]["runs"] if d["method"] == r["method"] and d["h"] == r["h"])
+            assert r["cells"] == study["cells"]
+            same_step = abs(r["dt"] / study["dt"] - 1) < 1e-12
+            shared += same_step
+            moved = np.array(r["displacements_shown"][t]) - np.array(study["displacements_shown"][t])
+            assert np.abs(moved).max() < (1e-6 if same_step else 2e-3), (name, r["method"], r["h"])
+    assert shared == (3 if pages_mesh else 0)  # dem-B: billiard h = 0.2, cradle h = 0.04 and 0.028
+    assert (tmp_path / "r.md").read_text().startswith("# Many impacts between bodies")
+    assert (tmp_path / "r.png").stat().st_size > 0
 
 
 def test_friction_slide_scheme_b_quick_spreads_the_bound(tmp_path):
