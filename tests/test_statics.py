@@ -260,6 +260,7 @@ STACKED = {
 }
 
 
+@pytest.mark.mpi
 @pytest.mark.parametrize("surface", ["facet", "vertex"])
 def test_static_scene_with_contact_between_bodies(tempdir, surface):
     """A static scene with a [contact] table: a disc resting on another one clamped at its
