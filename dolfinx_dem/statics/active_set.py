@@ -23,7 +23,10 @@ cycle (or the step is cut ever shorter against the switch). The candidates that 
 (or whose switch a stalled step crosses) are pinned on it, g = 0, by Lagrange multipliers mu
 (one extra solve each, and a small Schur complement):
 
-    H_A z_0 = F_A,   H_A z_c = P grad g_c,   (grad g_C . Z) mu = g_C(u) + grad g_C . z_0,   d = z_0 - Z mu.
+    H_A z_0 = F_A,   H_A z_c = P grad g_c,   (grad g_C . Z) mu = g_C(u) + grad g_C . z_0,   d = z_0 - Z mu,
+
+solved as an update of the last step's multipliers where the pinned candidates are the same
+(``_solve``: the error of CG then shrinks with the gradient of the Lagrangian).
 
 At the solution the directional derivatives of V must be >= 0 on both sides of each pinned
 switch: towards lifting off (g > 0) it is -mu_c, towards pressing in mu_c + r_c (r_c the force the
@@ -49,7 +52,8 @@ from dolfinx_dem.statics.linear import Constraints, LinearSolver, project
 class Iterate:
     """The state of the iteration: the piece ``active``, the ``pinned`` candidates, their
     ``multipliers`` and ``gaps`` (global order) of the last Newton step, the iterations done and
-    the Newton steps taken with the Gauss-Newton Hessian."""
+    the Newton steps taken with the Gauss-Newton Hessian; ``solved``: the pinned candidates the
+    multipliers belong to (None before the first Newton step)."""
 
     active: np.ndarray
     pinned: np.ndarray
@@ -57,6 +61,7 @@ class Iterate:
     gaps: np.ndarray
     iterations: int = 0
     gauss_newton_steps: int = 0
+    solved: np.ndarray | None = None
 
 
 class ActiveSetNewton:
@@ -169,7 +174,11 @@ class ActiveSetNewton:
     def newton_step(self, u: PETSc.Vec, it: Iterate, rhs: PETSc.Vec, step: PETSc.Vec, iteration: int) -> bool:
         """The (constrained) Newton step of the piece into ``step``, ``rhs`` the force of the
         Lagrangian; sets the multipliers and gaps of the pinned candidates. Returns whether the
-        exact Hessian made it (else its Gauss-Newton part)."""
+        exact Hessian made it (else its Gauss-Newton part). The multipliers are updated from
+        those of the last step where the pinned candidates are the same (``_solve``)."""
+        same = it.solved is not None and self.same(it.pinned, it.solved)
+        previous = it.multipliers if same else np.zeros(self.count(it.pinned))
+        it.solved = it.pinned
         for exact in self.tries:
             it.multipliers = np.zeros(0)
             self.dem.force(u, self.t, rhs)
@@ -178,7 +187,7 @@ class ActiveSetNewton:
                 rhs.axpy(1.0, self.load)
             project(rhs, self.constraints)
             try:
-                self._solve(u, it, exact, rhs, step, iteration)
+                self._solve(u, it, exact, rhs, step, iteration, previous)
             except StaticsError:
                 if exact:
                     continue  # CG broke down on the indefinite exact Hessian: Gauss-Newton
@@ -187,10 +196,14 @@ class ActiveSetNewton:
                 return exact  # a descent direction (always, with the Gauss-Newton Hessian)
         return False
 
-    def _solve(self, u, it: Iterate, exact: bool, rhs, step, iteration: int) -> None:
+    def _solve(self, u, it: Iterate, exact: bool, rhs, step, iteration: int, previous: np.ndarray) -> None:
         """H d = F_A with the pinned candidates held on their switch, g_C(u + d) = 0 (g is affine
-        along a step): d = z_0 - Z mu, H z_0 = F_A, H Z = P grad g_C,
-        (grad g_C . Z) mu = g_C(u) + grad g_C . z_0."""
+        along a step), as an update of the multipliers ``previous`` (mu_0, global order):
+        d = z_0 - Z delta, H z_0 = F_A - grad g_C^T mu_0 (the force of the Lagrangian at mu_0),
+        H Z = P grad g_C, (grad g_C . Z) delta = g_C(u) + grad g_C . z_0, mu = mu_0 + delta.
+        The same step as from mu_0 = 0, but each solve's error is relative to its right-hand
+        side: near the solution F_A is the pinned candidates' force (O(1)), the Lagrangian's force
+        and delta are small, and so is the error they carry into the gradient."""
         dem, model, linear = self.dem, self.model, self.linear
         H = dem.K.copy()
         H.setOption(PETSc.Mat.Option.NEW_NONZERO_ALLOCATION_ERR, False)
@@ -198,13 +211,16 @@ class ActiveSetNewton:
         H.assemble()
         linear.set_operator(H, self.constraints)
         try:
-            linear.solve(rhs, step, iteration, check=exact)
             if self.count(it.pinned) == 0:
+                linear.solve(rhs, step, iteration, check=exact)
                 it.gaps = np.zeros(0)
                 return
             gradients = model.constraint_gradients(u, it.pinned)
             for g in gradients:
                 project(g, self.constraints)
+            for m, b in zip(previous, gradients):
+                rhs.axpy(-m, b)
+            linear.solve(rhs, step, iteration, check=exact)
             Z = [dem.create_vector() for _ in gradients]
             for b, z in zip(gradients, Z):
                 linear.solve(b, z, iteration, check=exact)
@@ -212,10 +228,11 @@ class ActiveSetNewton:
             H.destroy()
         products = model.constraint_products(u, it.pinned, gradients, Z + [step])
         it.gaps = model.constraint_gaps(u, it.pinned)
-        it.multipliers = np.linalg.solve(products[:, :-1], it.gaps + products[:, -1])
-        for m, z in zip(it.multipliers, Z):
+        delta = np.linalg.solve(products[:, :-1], it.gaps + products[:, -1])
+        it.multipliers = previous + delta
+        for m, z in zip(delta, Z):
             step.axpy(-m, z)
-        for m, b in zip(it.multipliers, gradients):
+        for m, b in zip(delta, gradients):
             rhs.axpy(-m, b)  # the force of the Lagrangian: d is a descent direction on g_C = 0
 
     def line_search(self, u, it: Iterate, rhs, step, trial, iteration: int) -> float:
