@@ -6,10 +6,14 @@ The random kills: 20 on one process here, 10 on two and 10 on three in the slow 
 (docs/validation/kill_loop.json).
 """
 
+import importlib.util
 import json
 import pathlib
 import re
+import signal
+import subprocess
 import sys
+import time
 
 import pytest
 from helpers import CLI, mpi_env, run_command
@@ -39,6 +43,32 @@ def test_random_kills_keep_every_listed_output_time_and_resume_bit_identical(tmp
 def test_random_kills_on_two_and_three_processes(tmp_path):
     counts = _kill_loop(tmp_path, ["2", "3"], ["10", "10"])
     assert counts["processes"]["2"]["kills"] == 10 and counts["processes"]["3"]["kills"] == 10
+
+
+#: a stand-in for mpirun: starts three "ranks" (sleeping processes), then never exits by itself
+HANGING_MPIRUN = """
+import subprocess, sys, time
+ranks = [subprocess.Popen([sys.executable, "-c", "import time; time.sleep(600)"]) for _ in range(3)]
+print("started", flush=True)
+time.sleep(600)
+"""
+
+
+def test_the_kill_loop_kills_an_mpirun_that_hangs_after_its_ranks(monkeypatch):
+    """kill_loop.kill SIGKILLs every rank, and an mpirun still there MPIRUN_EXIT_LIMIT after them
+    (Open MPI 4.1.4 did not return once in CI) is killed and reported, not waited on forever."""
+    spec = importlib.util.spec_from_file_location("kill_loop", ROOT / "validation" / "kill_loop.py")
+    kill_loop = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(kill_loop)
+    monkeypatch.setattr(kill_loop, "MPIRUN_EXIT_LIMIT", 1)
+    process = subprocess.Popen([sys.executable, "-c", HANGING_MPIRUN], stdout=subprocess.PIPE, text=True)
+    assert process.stdout.readline() == "started\n"
+    ranks = kill_loop.children(process.pid)
+    assert len(ranks) == 3 and all(map(kill_loop.alive, ranks))
+    start = time.monotonic()
+    assert kill_loop.kill(process, 3)
+    assert process.returncode == -signal.SIGKILL and time.monotonic() - start < 30
+    assert not any(map(kill_loop.alive, ranks))
 
 
 #: a run that SIGKILLs one of its processes at the ``at``-th call of ``checkpoint.<function>``
