@@ -4,18 +4,15 @@ reproduce the figures of their pages' JSON (docs/validation/) on the meshes they
 script imports, and the branches that no quick mode reaches (the DEM in bench_signorini's
 stability sweep, the kink facets of hertz3d_diagnostics) run on their smallest case."""
 
-import importlib.util
 import json
 import os
-import pathlib
 import shutil
 import sys
 
 import numpy as np
 import pytest
-from helpers import run_command
+from helpers import ROOT, import_script, run_command, run_quick
 
-ROOT = pathlib.Path(__file__).resolve().parent.parent
 VALIDATION = ROOT / "docs" / "validation"
 SCRIPTS = sorted((ROOT / "benchmarks").glob("*.py")) + sorted((ROOT / "validation").glob("*.py"))
 #: the modules among them that scripts import, without a main of their own
@@ -25,41 +22,22 @@ LIBRARIES = ("work_precision", "friction_slide_pages")
 pytestmark = pytest.mark.slow
 
 
-def _quick(script, *args, timeout=300):
-    """Run ``script`` (a path from the repository root) with ``--quick`` and ``args``."""
-    proc = run_command([sys.executable, str(ROOT / script), "--quick", *args],
-                          capture_output=True, text=True, timeout=timeout, cwd=ROOT)
-    assert proc.returncode == 0, proc.stderr
-    return proc
-
-
 def _documented(path):
     return json.loads((VALIDATION / path).read_text())
-
-
-def _script(path, monkeypatch):
-    """The script at ``path`` imported as a module (its folder on sys.path, as when it runs)."""
-    monkeypatch.syspath_prepend(str(path.parent))
-    name = f"_script_{path.parent.name}_{path.stem}"
-    spec = importlib.util.spec_from_file_location(name, path)
-    module = importlib.util.module_from_spec(spec)
-    monkeypatch.setitem(sys.modules, name, module)
-    spec.loader.exec_module(module)
-    return module
 
 
 @pytest.mark.parametrize("path", SCRIPTS, ids=[f"{p.parent.name}/{p.name}" for p in SCRIPTS])
 def test_script_imports(path, monkeypatch):
     """Every script's module-level imports resolve against the package (its main is not run)."""
     assert len(SCRIPTS) >= 14
-    module = _script(path, monkeypatch)
+    module = import_script(path, monkeypatch)
     assert path.stem in LIBRARIES or callable(module.main)
 
 
 def test_bench_signorini_dem_stability_sweep(tmp_path, monkeypatch):
     """The DEM part of the stability sweep (left out of --quick): its SLEPc limit and bound in
     CFL units, and a stable run at CFL 0.5 with the energy conserved."""
-    signorini = _script(ROOT / "benchmarks" / "bench_signorini.py", monkeypatch)
+    signorini = import_script(ROOT / "benchmarks" / "bench_signorini.py", monkeypatch)
     sweep = signorini.stability_sweep([0.5], tmp_path, lambda message: None, n=50, t_end=0.2, dem=True)
     assert 1.0 < sweep["cfl_limit"]["dem-A"] < 1.01 and 0.99 < sweep["cfl_bound_dem-A"] <= 1.0
     (run,) = sweep["runs"]["dem-A"]
@@ -67,7 +45,7 @@ def test_bench_signorini_dem_stability_sweep(tmp_path, monkeypatch):
 
 
 def test_bench_femp1_quick(tmp_path):
-    _quick("benchmarks/bench_femp1.py", "--out", str(tmp_path / "femp1.json"))
+    run_quick("benchmarks/bench_femp1.py", "--out", str(tmp_path / "femp1.json"))
     data = json.loads((tmp_path / "femp1.json").read_text())
     for method in ("dem-A", "fem-P1"):
         assert data["results"][method]["steps"] == 800  # 2 rounds of 400 steps
@@ -76,7 +54,7 @@ def test_bench_femp1_quick(tmp_path):
 
 
 def test_bench_study_quick(tmp_path):
-    _quick("benchmarks/bench_study.py", "--out", str(tmp_path), timeout=600)
+    run_quick("benchmarks/bench_study.py", "--out", str(tmp_path), timeout=600)
     data = json.loads((tmp_path / "results.json").read_text())
     for key in ("force_vs_matmult_ratio", "contact_fraction_billiard", "mpi_speedup_2",
                 "setup_seconds_per_million_cells"):
@@ -103,32 +81,32 @@ def test_bench_study_quick(tmp_path):
 
 
 def test_bench_signorini_quick(tmp_path):
-    _quick("benchmarks/bench_signorini.py", "--out-dir", str(tmp_path))
+    run_quick("benchmarks/bench_signorini.py", "--out-dir", str(tmp_path))
     data = json.loads((tmp_path / "signorini.json").read_text())
     assert data["quick"]
 
 
 def test_bench_wave2d_quick(tmp_path):
-    _quick("benchmarks/bench_wave2d.py", "--out-dir", str(tmp_path))
+    run_quick("benchmarks/bench_wave2d.py", "--out-dir", str(tmp_path))
     assert json.loads((tmp_path / "wave2d.json").read_text())
 
 
 def test_bench_contact_scaling_quick(tmp_path):
-    _quick("benchmarks/bench_contact_scaling.py", "--out", str(tmp_path / "scaling.json"))
+    run_quick("benchmarks/bench_contact_scaling.py", "--out", str(tmp_path / "scaling.json"))
     data = json.loads((tmp_path / "scaling.json").read_text())
     # the contact work per step does not grow like the contact facets (5 x more here)
     assert data["contact_facets_ratio"] == 5.0 and data["contact_work_ratio"] < 3.0
 
 
 def test_bench_contact3d_quick(tmp_path):
-    _quick("benchmarks/bench_contact3d.py", "--out", str(tmp_path / "contact3d.json"))
+    run_quick("benchmarks/bench_contact3d.py", "--out", str(tmp_path / "contact3d.json"))
     data = json.loads((tmp_path / "contact3d.json").read_text())
     assert 0 < data["cradle"]["contact_fraction"] < 1
     assert [r["idle_balls"] for r in data["idle_balls"]] == [0, 2]
 
 
 def test_bench_parallel_quick(tmp_path):
-    _quick("benchmarks/bench_parallel.py", "--repeat", "1", "--out", str(tmp_path / "parallel.json"))
+    run_quick("benchmarks/bench_parallel.py", "--repeat", "1", "--out", str(tmp_path / "parallel.json"))
     data = json.loads((tmp_path / "parallel.json").read_text())
     runs = data["scaling"]
     assert [r["processes"] for r in runs] == [1, 2, 4] and len({r["cells"] for r in runs}) == 1
@@ -142,7 +120,7 @@ def test_bench_parallel_quick(tmp_path):
 def test_bar_traction_quick_reproduces_its_page(tmp_path):
     """50 and 100 cells, both schemes: the tip errors of bar_traction.json, first order, the
     energy conserved."""
-    _quick("validation/bar_traction.py", "--out", str(tmp_path / "bar.json"))
+    run_quick("validation/bar_traction.py", "--out", str(tmp_path / "bar.json"))
     rows = json.loads((tmp_path / "bar.json").read_text())["results"]
     documented = {(r["n"], r["scheme"]): r for r in _documented("bar_traction.json")["results"]}
     assert [(r["n"], r["scheme"]) for r in rows] == [(50, "A"), (100, "A"), (50, "B"), (100, "B")]
@@ -157,7 +135,7 @@ def test_bar_traction_quick_reproduces_its_page(tmp_path):
 def test_two_materials_quick_reproduces_its_page(tmp_path):
     """350 and 700 cells: T converges at second order, the energy is conserved, the reaction
     balances the load, and R, T and the stress error are those of two_materials.json."""
-    _quick("validation/two_materials.py", "--out", str(tmp_path / "two.json"))
+    run_quick("validation/two_materials.py", "--out", str(tmp_path / "two.json"))
     data = json.loads((tmp_path / "two.json").read_text())
     documented = _documented("two_materials.json")["weights"]
     for name, study in data["weights"].items():
@@ -178,7 +156,7 @@ def test_scheme_b_quick_reproduces_its_page(tmp_path):
     meshed them), the energy exact; the thin-body check flags the scheme B cantilever."""
     import gmsh
 
-    _quick("validation/scheme_b.py", "--out", str(tmp_path / "b.json"))
+    run_quick("validation/scheme_b.py", "--out", str(tmp_path / "b.json"))
     data, documented = json.loads((tmp_path / "b.json").read_text()), _documented("scheme_b.json")
     for m in ("dem-A", "dem-B"):
         for r, d in zip(data["cantilever"][m], documented["cantilever"][m]):
@@ -199,7 +177,7 @@ def test_scheme_b_quick_reproduces_its_page(tmp_path):
 
 def test_indentation_fem_quick_reproduces_its_page(tmp_path):
     """The coarsest mesh (h = 0.004 m) of indentation_fem.json: P, a and p_max, and the balance."""
-    _quick("validation/indentation_fem.py", "--out", str(tmp_path / "fem.json"))
+    run_quick("validation/indentation_fem.py", "--out", str(tmp_path / "fem.json"))
     data = json.loads((tmp_path / "fem.json").read_text())
     documented = _documented("indentation_fem.json")["deltas"]
     for delta, entry in data["deltas"].items():
@@ -213,7 +191,7 @@ def test_indentation_fem_quick_reproduces_its_page(tmp_path):
 def test_indentation_quick_reproduces_its_page(tmp_path):
     """h = 0.04 m: the dynamic force at 0.5 m/s and the static force at each indentation are
     those of indentation.json; the energy balances the disc's work, the statics the reactions."""
-    _quick("validation/indentation.py", "--out", str(tmp_path / "ind.json"))
+    run_quick("validation/indentation.py", "--out", str(tmp_path / "ind.json"))
     data = json.loads((tmp_path / "ind.json").read_text())
     documented = _documented("indentation.json")
     (dynamic,) = data["dynamic"]
@@ -245,7 +223,7 @@ def test_hertz3d_quick_reproduces_its_pages(tmp_path):
     """The coarsest levels: the DEM's a at s = 0.5 and the FEM at s = 0.5, 0.71, 1 are those of
     hertz3d_diagnostics.json (and hertz3d.json at s = 1); the page is written."""
     _skip_unless_the_pages_gmsh()
-    _quick("validation/hertz3d.py", "--out", str(tmp_path / "hertz3d.json"), "--work", str(tmp_path / "runs"))
+    run_quick("validation/hertz3d.py", "--out", str(tmp_path / "hertz3d.json"), "--work", str(tmp_path / "runs"))
     data = json.loads((tmp_path / "hertz3d.json").read_text())
     rows = {(r["method"], r["scale"]): r for r in _documented("hertz3d_diagnostics.json")["rows"]
             if r.get("load_factor", 1.0) == 1.0}
@@ -265,7 +243,7 @@ def test_hertz3d_diagnostics_kink_facet(monkeypatch):
     """Level s = 0.71 (one kink facet, not in --quick): the contact force, a and the kink facet's
     force and interval are those of hertz3d_diagnostics.json."""
     _skip_unless_the_pages_gmsh()
-    diagnostics = _script(ROOT / "validation" / "hertz3d_diagnostics.py", monkeypatch)
+    diagnostics = import_script(ROOT / "validation" / "hertz3d_diagnostics.py", monkeypatch)
     row = diagnostics.dem_level(0.71)
     rows = _documented("hertz3d_diagnostics.json")["rows"]
     (same,) = [r for r in rows if r["method"] == "dem-A" and r["scale"] == 0.71]
@@ -282,7 +260,7 @@ def test_hertz3d_diagnostics_quick_reproduces_its_page(tmp_path):
     _skip_unless_the_pages_gmsh()
     for name in ("hertz3d.json", "hertz3d_diagnostics.json"):
         shutil.copy(VALIDATION / name, tmp_path / name)
-    _quick("validation/hertz3d_diagnostics.py", "--out", str(tmp_path / "hertz3d_diagnostics.json"))
+    run_quick("validation/hertz3d_diagnostics.py", "--out", str(tmp_path / "hertz3d_diagnostics.json"))
     key = lambda r: (r["method"], r["scale"], r.get("load_factor", 1.0))  # noqa: E731
     new = {key(r): r for r in json.loads((tmp_path / "hertz3d_diagnostics.json").read_text())["rows"]}
     old = {key(r): r for r in _documented("hertz3d_diagnostics.json")["rows"]}
@@ -323,7 +301,7 @@ def test_hertz_impact_quick_is_near_hertz(tmp_path):
     exact; the FEM peer fem-P1 on the same mesh (measured: duration -11.4 %, approach -10.3 %, force
     +11.5 %, restitution 0.938, pseudo-energy drift 7.7e-5), its duration and approach within 3 % of
     the DEM's (measured 0.2 % and 1.1 %); the study under refinement: docs/validation/hertz_impact.md."""
-    _quick("validation/hertz_impact.py", "--out", str(tmp_path / "h.json"))
+    run_quick("validation/hertz_impact.py", "--out", str(tmp_path / "h.json"))
     data = json.loads((tmp_path / "h.json").read_text())
     ref, (run, fem) = data["hertz"], data["runs"]
     assert ref["duration"] == pytest.approx(1.2578, rel=1e-3) and ref["approach"] == pytest.approx(8.542e-3, rel=1e-3)
@@ -344,7 +322,7 @@ def test_long_bounce_quick_keeps_the_dem_energy_and_ranks_the_fem(tmp_path):
     (measured 2.9e-15), the explicit FEM's does not (projection 1.1e-2, modified mass 1.1e-3,
     Newmark + penalty 3.2), and every method follows the exact tip through the first period
     (RMS 0.004-0.11 m); the 50-period study: docs/validation/long_bounce.md."""
-    _quick("validation/long_bounce.py", "--out", str(tmp_path / "b.json"))
+    run_quick("validation/long_bounce.py", "--out", str(tmp_path / "b.json"))
     rows = json.loads((tmp_path / "b.json").read_text())["levels"]["50"]
     assert max(rows[m]["energy_error"][-1] for m in ("dem-A", "dem-B")) < 1e-13
     assert rows["projection"]["energy_error"][-1] > 1e-3 and rows["newmark-penalty"]["energy_error"][-1] > 1.0
@@ -365,7 +343,7 @@ def test_long_runs_quick_keeps_the_dem_energy_and_reproduces_the_study(tmp_path)
     (measured 1.8e-5 to 7.6e-4 m, the largest fem-P1's cradle at h = 0.028)."""
     import gmsh
 
-    _quick("validation/long_runs.py", "--out", str(tmp_path / "r.json"))
+    run_quick("validation/long_runs.py", "--out", str(tmp_path / "r.json"))
     data = json.loads((tmp_path / "r.json").read_text())["scenes"]
     documented = _documented("long_runs.json")["scenes"]
     pages_mesh = gmsh.__version__ == PAGES_GMSH  # another gmsh meshes the discs and balls otherwise
@@ -397,7 +375,7 @@ def test_friction_slide_scheme_b_quick_spreads_the_bound(tmp_path):
     """dem-B, mu = 0.3, 16 x 8 squares: the spread bound within 0.6 % of g (sin t - mu cos t)
     (measured -0.39 %), the per-facet bound 2.17 % too slow; held at tan t = 0.05 the block does not
     move; the 3D block within 0.5 % (measured 0.34 %); docs/validation/friction_scheme_b.md."""
-    _quick("validation/friction_slide.py", "--scheme", "B", "--out", str(tmp_path / "b.json"))
+    run_quick("validation/friction_slide.py", "--scheme", "B", "--out", str(tmp_path / "b.json"))
     data = json.loads((tmp_path / "b.json").read_text())
     (law, per_facet), (held,) = data["sliding"], data["held"]
     assert not law["per_facet"] and per_facet["per_facet"]
@@ -417,7 +395,7 @@ def test_friction_slide_quick_follows_coulomb_and_keeps_the_stable_step(tmp_path
     law; friction leaves the stable step where it was (1.08 times the bound, measured); a ball
     launched sliding rolls from t* = 2 v0 / (7 mu g) at 5/7 v0, and runs at the stable-step bound
     with friction as without; docs/validation/friction.md."""
-    _quick("validation/friction_slide.py", "--out", str(tmp_path / "f.json"))
+    run_quick("validation/friction_slide.py", "--out", str(tmp_path / "f.json"))
     data = json.loads((tmp_path / "f.json").read_text())
     (sliding,), (held, _) = data["sliding"], data["held"]
     assert abs(sliding["relative_error"]) < 0.002 and sliding["balance_error"] < 1e-13
@@ -451,7 +429,7 @@ def test_friction_bodies_quick_balances_the_energy_through_friction(tmp_path):
     creep: its touching cells' slip below 1e-10 of its size (measured 3.1e-12 m), no pair slipping, the
     rounds converged (measured at most 131); the block on a 30 degree slope (h = 0.05, to 0.3 s)
     within 1 % of g (sin t - mu cos t) (measured +0.08 %); docs/validation/friction_bodies.md."""
-    _quick("validation/friction_bodies.py", "--out", str(tmp_path / "f.json"))
+    run_quick("validation/friction_bodies.py", "--out", str(tmp_path / "f.json"))
     disks, billiard, held, slope = json.loads((tmp_path / "f.json").read_text())["runs"]
     assert abs(slope["acceleration_error"]) < 0.01 and slope["balance_error"] < 1e-13
     assert slope["min_dissipation_increment"] >= 0.0
@@ -473,7 +451,7 @@ def test_friction_chatter_quick_measures_the_lagged_bound_against_the_instantane
     (0.982 mu N, +1.7 %). Without friction (mu = 1e-9) every facet is in contact at every step. The
     continuum's steady sliding has no growing surface wave at mu = 0.3 and one at 1.2 (Im xi =
     0.081, measured); docs/validation/friction_chatter.md."""
-    _quick("validation/friction_chatter.py", "--out", str(tmp_path / "c.json"))
+    run_quick("validation/friction_chatter.py", "--out", str(tmp_path / "c.json"))
     data = json.loads((tmp_path / "c.json").read_text())
     law, instantaneous, smooth = data["block"]
     assert (law["law"], instantaneous["law"]) == ("law", "instantaneous")
@@ -493,7 +471,7 @@ def test_oblique_impact_quick_slides_by_the_coulomb_impulse(tmp_path):
     the spin the rigid disc's for that impulse (measured -1.4 %),
     the balance E + D - W to rounding at every step, D never decreasing;
     docs/validation/oblique_impact.md."""
-    _quick("validation/oblique_impact.py", "--out", str(tmp_path / "o.json"))
+    run_quick("validation/oblique_impact.py", "--out", str(tmp_path / "o.json"))
     (run,) = json.loads((tmp_path / "o.json").read_text())["gross2d"]
     assert 1000 < run["cells"] < 1200 and abs(run["tangential_ratio"] - 1) < 1e-5
     assert abs(run["spin_ratio"] - 1) < 0.02 and 0.97 < run["restitution"] < 1.0
@@ -507,7 +485,7 @@ def test_cattaneo_mindlin_quick_reproduces_its_page(tmp_path):
     obstacle's tangential force equal to Q and the slip facets' traction mu p (to the
     iteration's tolerance), the figures of the page's first row (to 1e-3: Debian 13's gmsh meshes
     the disc differently, 1.03650 against 1.03641); docs/validation/cattaneo_mindlin.md."""
-    _quick("validation/cattaneo_mindlin.py", "--out", str(tmp_path / "c.json"))
+    run_quick("validation/cattaneo_mindlin.py", "--out", str(tmp_path / "c.json"))
     (run,) = json.loads((tmp_path / "c.json").read_text())["runs"]
     documented = _documented("cattaneo_mindlin.json")["runs"][0]
     assert (run["h"], run["refine_h"], run["increments"]) == (documented["h"], documented["refine_h"], 10)
@@ -524,7 +502,7 @@ def test_cattaneo_mindlin_bodies_quick_reproduces_its_page(tmp_path):
     iteration's tolerance), and the stick zone's half-width is the page's first row's (to 2 %:
     Debian 13's gmsh meshes the bodies differently, 0.9176 against 0.9271);
     docs/validation/cattaneo_mindlin_bodies.md."""
-    _quick("validation/cattaneo_mindlin_bodies.py", "--out", str(tmp_path / "c.json"))
+    run_quick("validation/cattaneo_mindlin_bodies.py", "--out", str(tmp_path / "c.json"))
     (run,) = json.loads((tmp_path / "c.json").read_text())["runs"]
     documented = _documented("cattaneo_mindlin_bodies.json")["runs"][0]
     assert (run["h"], run["refine_h"], run["increments"]) == (documented["h"], documented["refine_h"], 5)
