@@ -141,9 +141,9 @@ bench: setup
 	$(PYTHON) benchmarks/bench_femp1.py --out docs/bench/femp1.json
 	$(PYTHON) benchmarks/bench_parallel.py --out docs/bench/parallel.json
 
-# The validation studies of docs/validation/README.md (~1.5 h alone): each writes its JSON and
-# page there. The pages written by the demos and the 3D contact runs give their own commands.
-# hertz3d_diagnostics adds its levels to its JSON, so that starts empty.
+# The validation studies of docs/validation/README.md (about 3.5 h by their JSON's wall times):
+# each writes its JSON and page there. The pages written by the demos and the 3D contact runs give
+# their own commands. hertz3d_diagnostics adds its levels to its JSON, so that starts empty.
 VALIDATE_WORK := results/validate
 validate: export OMP_NUM_THREADS = 1
 validate: setup

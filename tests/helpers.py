@@ -1,6 +1,7 @@
 """Helpers shared by the test modules (tests/ is on sys.path under pytest's default import mode)."""
 
 import contextlib
+import importlib.util
 import os
 import pathlib
 import signal
@@ -158,3 +159,28 @@ def stop_after(monkeypatch, at: int, first: int = 0, crash: bool = False):
         return calls[0] >= at
 
     monkeypatch.setattr(runcontrol.Interrupts, "requested", requested)
+
+
+# --- the studies' scripts (benchmarks/, validation/) ------------------------------------------
+
+#: The repository's root: the scripts' paths are relative to it, and they run in it.
+ROOT = pathlib.Path(__file__).resolve().parent.parent
+
+
+def run_quick(script, *args, timeout=300):
+    """Run ``script`` (a path from the repository root) with ``--quick`` and ``args``."""
+    proc = run_command([sys.executable, str(ROOT / script), "--quick", *args],
+                       capture_output=True, text=True, timeout=timeout, cwd=ROOT)
+    assert proc.returncode == 0, proc.stderr
+    return proc
+
+
+def import_script(path, monkeypatch):
+    """The script at ``path`` imported as a module (its folder on sys.path, as when it runs)."""
+    monkeypatch.syspath_prepend(str(path.parent))
+    name = f"_script_{path.parent.name}_{path.stem}"
+    spec = importlib.util.spec_from_file_location(name, path)
+    module = importlib.util.module_from_spec(spec)
+    monkeypatch.setitem(sys.modules, name, module)
+    spec.loader.exec_module(module)
+    return module

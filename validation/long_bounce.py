@@ -24,9 +24,9 @@ It writes the JSON and, next to it, the Markdown page and the chart (``--out``'s
 """
 
 import argparse
-import json
 import math
 import pathlib
+import sys
 import time
 
 import numpy as np
@@ -35,6 +35,9 @@ from mpi4py import MPI
 from dolfinx_dem import exact, memm, model, scenes
 from dolfinx_dem.contact import RigidContact
 from dolfinx_dem.fem import signorini
+
+sys.path.insert(0, str(pathlib.Path(__file__).parent))
+import long_runs  # noqa: E402  (its command line: --render and --out)
 
 L, C, CFL = 10.0, 30.0, 0.75
 PERIOD = 8.0 / 3.0  # 1 s falling, 2/3 s in contact, 1 s rising: the exact first flight's period
@@ -138,21 +141,8 @@ def page(results: dict, png: str) -> str:
     return "\n".join(lines) + "\n"
 
 
-def main():
-    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("--n", type=int, nargs="+", default=[100], help="cells (one level each)")
-    parser.add_argument("--periods", type=int, default=50)
-    parser.add_argument("--methods", nargs="+", default=list(FEM + DEM), choices=FEM + DEM)
-    parser.add_argument("--quick", action="store_true", help="N = 50, 3 periods")
-    parser.add_argument("--render", action="store_true", help="rewrite the page and chart from --out's JSON")
-    parser.add_argument("--out", type=pathlib.Path, required=True)
-    args = parser.parse_args()
-    png = args.out.with_suffix(".png")
-    if args.render:
-        results = json.loads(args.out.read_text())
-        chart(results, png)
-        args.out.with_suffix(".md").write_text(page(results, png.name))
-        return
+def measure(args: argparse.Namespace) -> dict:
+    """The study of the command line ``args``."""
     if args.quick:
         args.n, args.periods = [50], 3
     t_end = args.periods * PERIOD
@@ -167,9 +157,16 @@ def main():
             row = results["levels"][n][method] = metrics(run, args.periods)
             print(f"N {n} {method:16s} tip rms first {row['tip_rms'][0]:.3f} last {row['tip_rms'][-1]:.3f}  energy "
                   f"{row['energy_error'][-1]:.1e}  wall {row['wall_time_s']:.2f} s", flush=True)
-    args.out.write_text(json.dumps(results, indent=1) + "\n")
-    chart(results, png)
-    args.out.with_suffix(".md").write_text(page(results, png.name))
+    return results
+
+
+def main():
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--n", type=int, nargs="+", default=[100], help="cells (one level each)")
+    parser.add_argument("--periods", type=int, default=50)
+    parser.add_argument("--methods", nargs="+", default=list(FEM + DEM), choices=FEM + DEM)
+    parser.add_argument("--quick", action="store_true", help="N = 50, 3 periods")
+    long_runs.run_or_render(parser, measure, chart, page)
 
 
 if __name__ == "__main__":

@@ -370,25 +370,27 @@ def summary(name: str, data: dict) -> list[str]:
            f"{listed(coarse['dem-B'], 'axial_error')} m, fem-P1 {listed(coarse['fem-P1'], 'axial_error')} m.")]
 
 
-def main():
-    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("--scenes", nargs="+", default=list(SCENES), choices=list(SCENES))
-    parser.add_argument("--billiard-h", type=float, nargs="+", default=list(SCENES["billiard"]["h"]),
-                        help="mesh sizes, coarse to fine; the last is the reference")
-    parser.add_argument("--cradle-h", type=float, nargs="+", default=list(SCENES["cradle"]["h"]),
-                        help="mesh sizes, coarse to fine; the last is the reference")
-    parser.add_argument("--quick", action="store_true", help="billiard h 0.2, 0.1 to 20 s; cradle h 0.04, 0.028 to 1 s")
-    parser.add_argument("--work", type=pathlib.Path, help="folder of the runs (default: a temporary one)")
-    parser.add_argument("--keep", action="store_true", help="keep the runs' folders (with --work)")
+def run_or_render(parser: argparse.ArgumentParser, measure, chart, page) -> None:
+    """The command line of a many-impacts study (this one and long_bounce.py): ``parser``, with the
+    study's own arguments, gets ``--render`` and ``--out``; ``measure(args)`` runs the study and returns
+    its results, written as JSON to ``--out`` and next to it as the page ``page(results, png name)``
+    and the chart ``chart(results, png)`` (``--out``'s stem + .md, .png). With ``--render`` nothing
+    runs: the page and the chart are rewritten from ``--out``'s JSON."""
     parser.add_argument("--render", action="store_true", help="rewrite the page and chart from --out's JSON")
     parser.add_argument("--out", type=pathlib.Path, required=True)
     args = parser.parse_args()
-    png = args.out.with_suffix(".png")
     if args.render:
         results = json.loads(args.out.read_text())
-        chart(results, png)
-        args.out.with_suffix(".md").write_text(page(results, png.name))
-        return
+    else:
+        results = measure(args)
+        args.out.write_text(json.dumps(results, indent=1) + "\n")
+    png = args.out.with_suffix(".png")
+    chart(results, png)
+    args.out.with_suffix(".md").write_text(page(results, png.name))
+
+
+def measure(args: argparse.Namespace) -> dict:
+    """The study of the command line ``args``."""
     levels = {"billiard": tuple(args.billiard_h), "cradle": tuple(args.cradle_h)}
     command = "validation/long_runs.py " + ("--quick" if args.quick else " ".join(
         [f"--scenes {' '.join(args.scenes)}"] + [f"--{n}-h {' '.join(f'{h:g}' for h in levels[n])}" for n in args.scenes]))
@@ -403,9 +405,20 @@ def main():
                                                    "shown": SCENES[name]["shown"]}
             results["scenes"][name] = study(name, tuple(spec["h"]), spec["end"], tuple(spec["shown"]), work,
                                             args.keep and args.work is not None)
-    args.out.write_text(json.dumps(results, indent=1) + "\n")
-    chart(results, png)
-    args.out.with_suffix(".md").write_text(page(results, png.name))
+    return results
+
+
+def main():
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--scenes", nargs="+", default=list(SCENES), choices=list(SCENES))
+    parser.add_argument("--billiard-h", type=float, nargs="+", default=list(SCENES["billiard"]["h"]),
+                        help="mesh sizes, coarse to fine; the last is the reference")
+    parser.add_argument("--cradle-h", type=float, nargs="+", default=list(SCENES["cradle"]["h"]),
+                        help="mesh sizes, coarse to fine; the last is the reference")
+    parser.add_argument("--quick", action="store_true", help="billiard h 0.2, 0.1 to 20 s; cradle h 0.04, 0.028 to 1 s")
+    parser.add_argument("--work", type=pathlib.Path, help="folder of the runs (default: a temporary one)")
+    parser.add_argument("--keep", action="store_true", help="keep the runs' folders (with --work)")
+    run_or_render(parser, measure, chart, page)
 
 
 if __name__ == "__main__":
