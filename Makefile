@@ -141,7 +141,7 @@ bench: setup
 	$(PYTHON) benchmarks/bench_femp1.py --out docs/bench/femp1.json
 	$(PYTHON) benchmarks/bench_parallel.py --out docs/bench/parallel.json
 
-# The validation studies of docs/validation/README.md (about 3.5 h by their JSON's wall times):
+# The validation studies of docs/validation/README.md (about 4.7 h by their JSON's wall times):
 # each writes its JSON and page there. The pages written by the demos and the 3D contact runs give
 # their own commands. hertz3d_diagnostics adds its levels to its JSON, so that starts empty.
 VALIDATE_WORK := results/validate
@@ -156,10 +156,19 @@ validate: setup
 	$(PYTHON) validation/friction_slide.py --scheme B --out docs/validation/friction_scheme_b.json
 	$(PYTHON) validation/friction_slide.py --scheme AB --out docs/validation/friction_scheme_ab.json
 	$(PYTHON) validation/oblique_impact.py --out docs/validation/oblique_impact.json
-	$(PYTHON) validation/hertz_impact.py --out docs/validation/hertz_impact.json
-	$(PYTHON) validation/hertz_impact.py --levels 0.006 --methods dem-A --etas 100 --radius 0.06 --append --out docs/validation/hertz_impact.json
-	$(PYTHON) validation/hertz_impact.py --levels 0.006 --methods dem-A --etas 100 --h 0.015 --append --out docs/validation/hertz_impact.json
-	$(PYTHON) validation/hertz_impact.py --levels 0.006 0.004 --methods dem-A --etas 100 --h 0.015 --speed 0.01 --out docs/validation/hertz_impact_slow.json
+	$(PYTHON) validation/friction_bodies.py --out docs/validation/friction_bodies.json
+	$(PYTHON) validation/friction_chatter.py --out docs/validation/friction_chatter.json
+	$(PYTHON) validation/cattaneo_mindlin.py --out docs/validation/cattaneo_mindlin.json
+	$(PYTHON) validation/cattaneo_mindlin_bodies.py --out docs/validation/cattaneo_mindlin_bodies.json
+	$(PYTHON) validation/hertz_impact.py --levels 0.006 0.004 0.0027 --methods dem-B dem-A --etas 100 1000 --h 0.03 --radius 0.03 --speed 0.02 --cfl 0.5 --out docs/validation/hertz_impact.json
+	$(PYTHON) validation/hertz_impact.py --levels 0.006 --methods dem-A --etas 100 --h 0.03 --radius 0.06 --speed 0.02 --cfl 0.5 --append --out docs/validation/hertz_impact.json
+	$(PYTHON) validation/hertz_impact.py --levels 0.006 --methods dem-A --etas 100 --h 0.015 --radius 0.03 --speed 0.02 --cfl 0.5 --append --out docs/validation/hertz_impact.json
+	$(PYTHON) validation/hertz_impact.py --levels 0.006 0.004 --methods fem-P1 --h 0.03 --radius 0.03 --speed 0.02 --cfl 0.5 --append --out docs/validation/hertz_impact.json
+	$(PYTHON) validation/hertz_impact.py --levels 0.0027 --methods fem-P1 --h 0.03 --radius 0.03 --speed 0.02 --cfl 0.5 --append --out docs/validation/hertz_impact.json
+	$(PYTHON) validation/hertz_impact.py --levels 0.006 --methods fem-P1 --h 0.015 --radius 0.03 --speed 0.02 --cfl 0.5 --append --out docs/validation/hertz_impact.json
+	$(PYTHON) validation/hertz_impact.py --levels 0.006 0.004 --methods dem-B dem-A --etas 100 --surfaces vertex --h 0.03 --radius 0.03 --speed 0.02 --cfl 0.5 --append --out docs/validation/hertz_impact.json
+	$(PYTHON) validation/hertz_impact.py --levels 0.006 0.004 --methods dem-A --etas 100 --h 0.015 --radius 0.03 --speed 0.01 --cfl 0.5 --out docs/validation/hertz_impact_slow.json
+	$(PYTHON) validation/hertz_impact.py --levels 0.006 --methods fem-P1 --h 0.015 --radius 0.03 --speed 0.01 --cfl 0.5 --append --out docs/validation/hertz_impact_slow.json
 	$(PYTHON) validation/kill_loop.py --processes 1 2 3 --kills 140 30 30 --out docs/validation/kill_loop.json
 	$(PYTHON) validation/indentation_fem.py --out docs/validation/indentation_fem.json
 	$(PYTHON) validation/indentation_fem.py --meshes 0.0005 --out docs/validation/indentation_fem_fine.json
