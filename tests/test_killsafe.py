@@ -6,7 +6,6 @@ The random kills: 20 on one process here, 10 on two and 10 on three in the slow 
 (docs/validation/kill_loop.json).
 """
 
-import importlib.util
 import json
 import pathlib
 import re
@@ -16,7 +15,7 @@ import sys
 import time
 
 import pytest
-from helpers import CLI, mpi_env, run_command
+from helpers import CLI, import_script, mpi_env, run_command
 
 from dolfinx_dem import cli
 
@@ -57,9 +56,7 @@ time.sleep(600)
 def test_the_kill_loop_kills_an_mpirun_that_hangs_after_its_ranks(monkeypatch):
     """kill_loop.kill SIGKILLs every rank, and an mpirun still there MPIRUN_EXIT_LIMIT after them
     (Open MPI 4.1.4 did not return once in CI) is killed and reported, not waited on forever."""
-    spec = importlib.util.spec_from_file_location("kill_loop", ROOT / "validation" / "kill_loop.py")
-    kill_loop = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(kill_loop)
+    kill_loop = import_script(ROOT / "validation" / "kill_loop.py", monkeypatch)
     monkeypatch.setattr(kill_loop, "MPIRUN_EXIT_LIMIT", 1)
     process = subprocess.Popen([sys.executable, "-c", HANGING_MPIRUN], stdout=subprocess.PIPE, text=True)
     assert process.stdout.readline() == "started\n"
