@@ -18,7 +18,7 @@ Three parts, all on benchmark 1 of Doyen, Ern & Piperno (2011) (see bench_signor
    FEM schemes (a), (b) run in the same process at CFL 0.75 (the benchmark's) and at 0.99.
 
 Writes ``signorini_tte.json`` and replaces (or appends) the section "Why the DEM takes ..." of
-``signorini.md`` in the output folder. Serial. Usage::
+``signorini.md`` in the output folder (the text: signorini_tte_report.py). Serial. Usage::
 
     python benchmarks/bench_signorini_tte.py                  # -> docs/bench/ (~3 min)
     python benchmarks/bench_signorini_tte.py --quick --out-dir /tmp/tte   # ~15 s
@@ -35,13 +35,13 @@ import time
 
 import bench_signorini as bs
 import numpy as np
+from signorini_tte_report import _f, section, write_section
 from work_precision import time_to_error  # benchmarks/ is on sys.path when a script runs
 
 ROOT = pathlib.Path(__file__).resolve().parent.parent
 L, E, C = bs.L, bs.E, bs.C
 TARGETS = (0.05, 0.03, 0.025)
-HEADING = "## Why the DEM takes 6.5 times longer to reach an error"
-REPEATS = 5  # best of 5 wall times, DEM and FEM alike (the machine is shared)
+REPEATS = 5  # best of 5 wall times, DEM and FEM alike, interleaved (the machine is shared)
 #: (label, method, eta / E, CFL): the benchmark's case first; CFLs below each eta's linear limit
 #: (1.0002 for eta = E, 1.732 for E/3, 1.90 for E/6, 0.707 for 2 E; part 1 measures them)
 VARIANTS = (
@@ -166,7 +166,12 @@ def error_ratio_at_equal_n(methods, dem="dem-A", fems=("projection", "modified-m
     out = {"n": n.astype(int).tolist(), "dem_order": order}
     for m in fems:
         ratio = e_d / np.array([r["tip_l2"] for r in methods[m]])
-        out[m] = {"error_ratio": ratio.tolist(), "n_ratio_at_dem_order": (ratio ** (1.0 / order)).tolist()}
+        out[m] = {"error_ratio": ratio.tolist(), "n_ratio_at_dem_order": (ratio ** (1.0 / order)).tolist(),
+                  "stepping_per_step_ratio": [(d["solve_time_s"] / d["steps"]) / (f["solve_time_s"] / f["steps"])
+                                              for d, f in zip(methods[dem], methods[m])],
+                  "setup_ratio": [d["setup_time_s"] / f["setup_time_s"] for d, f in zip(methods[dem], methods[m])],
+                  "stepping_per_step_ms": [1e3 * f["solve_time_s"] / f["steps"] for f in methods[m]]}
+    out["dem_stepping_per_step_ms"] = [1e3 * d["solve_time_s"] / d["steps"] for d in methods[dem]]
     return out
 
 
@@ -179,27 +184,28 @@ def _steps_dt(n, cfl, t_end=2.0):
 
 
 def run_dem(method, n, eta_over_e, cfl):
-    """One DEM variant on one mesh: tip L2 error, wall (best set-up + stepping), or the failure."""
+    """One DEM run of a variant on one mesh: tip L2 error and wall time, or the failure."""
     from dolfinx_dem import exact, memm
 
     steps, dt = _steps_dt(n, cfl)
-    best = None
-    for _ in range(REPEATS):
-        try:
-            setup, solve, t, tip = bs.run_dem_loop(method, n, dt, 2.0, overrides={"material.eta": eta_over_e * E})
-        except memm.InstabilityError as err:
-            return {"n": n, "steps": steps, "failed": str(err).split(":")[0]}
-        if best is None or setup + solve < best[0] + best[1]:
-            best = (setup, solve)
+    try:
+        setup, solve, t, tip = bs.run_dem_loop(method, n, dt, 2.0, overrides={"material.eta": eta_over_e * E})
+    except memm.InstabilityError as err:
+        return {"n": n, "steps": steps, "failed": str(err).split(":")[0]}
     return {"n": n, "steps": steps, "tip_l2": bs.l2_in_time(t, tip - exact.impact_tip_position(t)),
-            "wall_time_s": best[0] + best[1], "setup_time_s": best[0], "solve_time_s": best[1]}
+            "wall_time_s": setup + solve, "setup_time_s": setup, "solve_time_s": solve}
 
 
 def run_fem(method, n, cfl):
-    r = bs.run_fem(method, n, cfl=cfl, repeats=REPEATS)
+    r = bs.run_fem(method, n, cfl=cfl, repeats=1)
     m = bs.impact_metrics(r.t, r.tip_position, r.contact_pressure, r.energy)
     return {"n": n, "steps": r.n_steps, "tip_l2": m["tip_l2"], "wall_time_s": r.wall_time_s,
             "setup_time_s": r.setup_time_s, "solve_time_s": r.solve_time_s}
+
+
+def _best_of(runs):
+    """Rows of the fastest of repeated runs (``runs``: one list of rows per repeat)."""
+    return [min(rows, key=lambda r: r.get("wall_time_s", math.inf)) for rows in zip(*runs)]
 
 
 def contact_quality(method, n, eta_over_e, cfl, workdir):
@@ -214,14 +220,22 @@ def contact_quality(method, n, eta_over_e, cfl, workdir):
 def variant_study(ns, targets, log, variants=VARIANTS):
     import tempfile
 
-    fem = {}
-    for cfl in FEM_CFLS:
-        for m in ("projection", "modified-mass"):
-            fem[f"{m} CFL {cfl:g}"] = [run_fem(m, n, cfl) for n in ((*FEM_COARSE, *ns) if cfl != 0.75 else ns)]
-            log(f"{m} CFL {cfl}: " + ", ".join(f"{r['tip_l2']:.4f} / {r['wall_time_s']:.3f} s" for r in fem[f"{m} CFL {cfl:g}"]))
-    out = {"n": list(ns), "fem": fem, "variants": []}
+    # the repeats interleaved (every FEM and DEM run once, REPEATS times; the fastest of each kept), so
+    # that a burst of load on the shared machine slows one repeat of all, not all repeats of one
+    fem_cases = {f"{m} CFL {cfl:g}": (m, cfl, (*FEM_COARSE, *ns) if cfl != 0.75 else ns)
+                 for cfl in FEM_CFLS for m in ("projection", "modified-mass")}
+    fem_runs, dem_runs = {k: [] for k in fem_cases}, {v[0]: [] for v in variants}
+    for _ in range(REPEATS):
+        for key, (m, cfl, fem_ns) in fem_cases.items():
+            fem_runs[key].append([run_fem(m, n, cfl) for n in fem_ns])
+        for label, method, eta, cfl in variants:
+            dem_runs[label].append([run_dem(method, n, eta, cfl) for n in ns])
+    fem = {key: _best_of(runs) for key, runs in fem_runs.items()}
+    for key, rows in fem.items():
+        log(f"{key}: " + ", ".join(f"{r['tip_l2']:.4f} / {r['wall_time_s']:.3f} s" for r in rows))
+    out = {"n": list(ns), "fem_cfls": list(FEM_CFLS), "fem": fem, "variants": []}
     for label, method, eta, cfl in variants:
-        rows = [run_dem(method, n, eta, cfl) for n in ns]
+        rows = _best_of(dem_runs[label])
         v = {"label": label, "method": method, "eta_over_E": eta, "cfl": cfl, "rows": rows, "time_to_error": {}}
         with tempfile.TemporaryDirectory(prefix="tte_") as workdir:
             v["contact_n100"] = contact_quality(method, 100, eta, cfl, workdir)
@@ -231,9 +245,11 @@ def variant_study(ns, targets, log, variants=VARIANTS):
             steps = _at_error(ok, "steps", target) if len(ok) > 1 else None
             entry = {"dem": t, "n_dem": _at_error(ok, "n", target) if len(ok) > 1 else None, "steps_dem": steps}
             for cfl_f in FEM_CFLS:
-                fem_s = [_at_error(fem[f"{m} CFL {cfl_f:g}"], "steps", target) for m in ("projection", "modified-mass")]
-                fem_s = [x for x in fem_s if x is not None]
-                entry[f"step_ratio_cfl_{cfl_f:g}"] = steps / min(fem_s) if (steps and fem_s) else None
+                fem_s = [(_at_error(fem[f"{m} CFL {cfl_f:g}"], "steps", target),
+                          _at_error(fem[f"{m} CFL {cfl_f:g}"], "n", target)) for m in ("projection", "modified-mass")]
+                fem_s = [x for x in fem_s if x[0] is not None]
+                entry[f"step_ratio_cfl_{cfl_f:g}"] = steps / min(fem_s)[0] if (steps and fem_s) else None
+                entry[f"n_fem_cfl_{cfl_f:g}"] = min(fem_s)[1] if fem_s else None
                 fem_t = {m: time_to_error([r["tip_l2"] for r in fem[f"{m} CFL {cfl_f:g}"]],
                                           [r["wall_time_s"] for r in fem[f"{m} CFL {cfl_f:g}"]], target)
                          for m in ("projection", "modified-mass")}
@@ -264,131 +280,6 @@ def estimate_with_benchmark_timings(var, conv, targets):
             fem = [x for x in fem if x is not None]
             t = time_to_error([r["tip_l2"] for r in ok], walls, target) if len(ok) > 1 else None
             v["time_to_error"][f"{target:g}"]["estimate_cfl_0.75"] = t / min(fem) if (t and fem) else None
-
-
-# --- report ----------------------------------------------------------------------------------------------
-
-
-def _f(x, fmt="{:.2f}"):
-    return "-" if x is None else fmt.format(x)
-
-
-def section(res, command) -> str:
-    disp, dec, eq, var = res["dispersion"], res["decomposition"], res["equal_n"], res["variants"]
-    p1 = disp["p1_lumped"]
-    base = next(d for d in disp["dem"] if d["method"] == "dem-A" and d["eta_over_E"] == 1.0)
-    lines = [HEADING, "",
-             f"Written by `benchmarks/bench_signorini_tte.py` (run {res['date']}, commit {res['commit']}, "
-             f"{res['wall_time_s']:.0f} s{', quick mode' if res['quick'] else ''}; numbers in `signorini_tte.json`); "
-             "its decomposition reads `signorini.json`, the run above. Command:", "", "```", command, "```", "",
-             "### The ratio is the product of three factors", "",
-             "At each target error, N is the mesh each method needs and steps its time steps (both log-log interpolated "
-             "between meshes like the wall time), wall the wall time (set-up + stepping) at the target; best FEM = the "
-             "faster of (a), (b) (both at CFL 0.75, as in the table above). wall_D / wall_F = (N_D / N_F) x "
-             "[(steps_D / N_D) / (steps_F / N_F)] x [(wall_D / steps_D) / (wall_F / steps_F)] exactly.", "",
-             "| target / DEM | best FEM | N_F | N_D | (a) N_D / N_F | (b) steps per cell D / F | (c) wall per step D / F "
-             "| product | measured ratio | set-up share F / D |", "|---|---|---|---|---|---|---|---|---|---|"]
-    for key, r in dec.items():
-        lines.append(f"| {key} | {r['best_fem']} | {r['n_fem']:.0f} | {r['n_dem']:.0f} | {r['n_ratio']:.2f} "
-                     f"| {r['steps_per_cell_ratio']:.2f} | {r['cost_per_step_ratio']:.2f} | {r['product']:.2f} "
-                     f"| {r['ratio']:.2f} | {100 * r['setup_share_fem']:.0f} % / {100 * r['setup_share_dem']:.0f} % |")
-    lines += ["", "- (b) is 1: at equal N and CFL the DEM's step is the FEM's (dt = 0.75 h / c for both); its "
-              f"linear limit with eta = E is CFL {base['cfl_limit']:.4f}, the lumped P1's {p1['cfl_limit']:.4f} "
-              "(the jump term does not shorten the step in 1D, see below).",
-              "- (c) wall time per step including the set-up: the DEM's set-up (building the discretisation) is "
-              "larger, and at these small N the set-up is a large share of the FEM's wall time.",
-              "- (a) dominates. The DEM's tip error on equal meshes, DEM-A / FEM, and the N ratio it implies at the "
-              f"DEM's fitted order {eq['dem_order']:.2f}:", "",
-              "| N | " + " | ".join(str(n) for n in eq["n"]) + " |", "|---|" + "---|" * len(eq["n"])]
-    for m in ("projection", "modified-mass"):
-        lines.append(f"| error DEM-A / {m} | " + " | ".join(f"{x:.2f}" for x in eq[m]["error_ratio"]) + " |")
-        lines.append(f"| implied N ratio vs {m} | " + " | ".join(f"{x:.2f}" for x in eq[m]["n_ratio_at_dem_order"]) + " |")
-    lines += ["", "(b)'s lower order (0.57) makes its error ratio and so N_D / N_F grow towards coarse meshes, "
-              "where it wins the small targets.", "",
-              f"### Why the DEM's error is twice the FEM's: dispersion (N = {disp['n']}, free bar)", "",
-              "Eigenfrequencies of M^-1 K from the assembled operators; omega_h / omega = 1 - beta theta^2 for small "
-              "theta = k h (fitted on modes 1-8), fully discrete with central differences at CFL nu (MEMM is central "
-              "differences on a linear problem): (2/dt) arcsin(omega_h dt / 2) / omega = 1 - beta_nu theta^2.", "",
-              "| operator | beta | beta_0.75 | beta_0.99 | CFL limit | omega_h/omega at theta = pi/4, pi/2 |",
-              "|---|---|---|---|---|---|",
-              f"| P1 lumped | {p1['beta']:.4f} | {p1['beta_full']['0.75']:.4f} | {p1['beta_full']['0.99']:.4f} "
-              f"| {p1['cfl_limit']:.4f} | {_f(None)} |"]
-    for d in disp["dem"]:
-        bf = d["beta_full"]
-        lines.append(f"| DEM {d['method'][-1]}, eta = {d['eta_over_E']:.3g} E | {d['beta']:.4f} | {_f(bf.get('0.75'), '{:.4f}')} "
-                     f"| {_f(bf.get('0.99'), '{:.4f}')} | {d['cfl_limit']:.4f} "
-                     f"| {d['ratio_quarter_half'][0]:.3f}, {d['ratio_quarter_half'][1]:.3f} |")
-    ratio_beta = base["beta_full"]["0.75"] / p1["beta_full"]["0.75"]
-    lines += ["", f"- The DEM's beta is {base['beta'] / p1['beta']:.2f} times the P1's (1/6 against 1/24): in 1D the cell "
-              "gradient is (u_{c+1} - u_{c-1}) / 2h, a centred difference over 2h, so the long waves travel like "
-              "those of a P1 mesh of spacing 2h, i.e. N/2 nodes. Its omega^2 = (4 c^2 / h^2) s^2 (1 - s^2 + (eta/E) s^4), "
-              "s = sin(theta/2): eta enters at theta^4 only, so **no eta changes beta** (the table), it changes the "
-              "short waves and the stable step (CFL limit sqrt(E / eta) for eta >= E/3).",
-              f"- Fully discrete at CFL 0.75 the time error cancels part of the space error: beta_0.75 = "
-              f"{base['beta_full']['0.75']:.4f} (DEM) against {p1['beta_full']['0.75']:.4f} (P1), {ratio_beta:.1f} times. "
-              "The tip error of a dispersive scheme at a travelling jump (the impact sends one) scales like the "
-              f"width of the front, (beta t)^(1/3) h^(2/3) (order 2/3: measured 0.68): predicted error ratio "
-              f"{ratio_beta:.1f}^(1/3) = {ratio_beta ** (1 / 3):.2f}, measured {eq['projection']['error_ratio'][-1]:.2f} "
-              f"against (a) at N = {eq['n'][-1]} (same CFL, same lumped structure; (b) differs at the contact node).",
-              "- So on equal meshes the DEM resolves the wave like a P1 FEM with about N/2 nodes, and needs about "
-              f"{ratio_beta ** (1 / 3):.2f}^(1/0.68) = {ratio_beta ** (1 / 3 / 0.68):.1f} times the cells for the same error.",
-              "", "### Variants the paper and the scene allow", "",
-              "Same measurement (bare MEMM loop, set-up + stepping, best of "
-              f"{res['repeats']}, N = {', '.join(map(str, var['n']))}; `time_to_error` at each target) in this "
-              "script's run, against (a), (b) run in the same process at CFL 0.75 (the benchmark's FEM) and at "
-              "CFL 0.99 (the FEM's best step). Paper: any eta > 0 converges, eta = E recommended; schemes A, B.", "",
-              "| variant | beta_nu | predicted error / (a)'s, (beta_nu / beta_P1,0.75)^(1/3) | measured, N = "
-              f"{var['n'][-1]} | tip L2 error at N = " + ", ".join(map(str, var["n"]))
-              + " | N = 100: RMS(p - 300)/300, max p (Pa), max \\|E-E0\\|/E_exact |", "|---|---|---|---|---|---|"]
-    a_075 = var["fem"]["projection CFL 0.75"][-1]["tip_l2"]
-    for v in var["variants"]:
-        d = next(d for d in disp["dem"] if d["method"] == v["method"] and abs(d["eta_over_E"] - v["eta_over_E"]) < 1e-12)
-        beta = d["beta_full"].get(f"{v['cfl']:g}")
-        pred = None if beta is None else (beta / p1["beta_full"]["0.75"]) ** (1.0 / 3.0)
-        last = v["rows"][-1]
-        q = v["contact_n100"]
-        lines.append(f"| {v['label']} | {_f(beta, '{:.4f}')} | {_f(pred)} "
-                     f"| {_f(None if 'failed' in last else last['tip_l2'] / a_075)} | "
-                     + ", ".join(f"{r['tip_l2']:.4f}" if "failed" not in r else "unstable" for r in v["rows"])
-                     + f" | {q['pressure_rms_oscillation_contact']:.3f}, {q['pressure_max']:.0f}, "
-                     f"{q['energy_rel_error_max']:.1e} |")
-    for key, rows in var["fem"].items():
-        lines.append(f"| FEM {key} | {_f(p1['beta_full'].get(key.split()[-1]), '{:.4f}')} | | | "
-                     + ", ".join(f"{r['tip_l2']:.4f}" for r in rows if r["n"] in var["n"]) + " | |")
-    lines += ["", "Time to reach the error, DEM / best of (a), (b), at each target: **steps** = the DEM's time steps "
-              "over the fewest of (a), (b) (interpolated like the wall time: deterministic, factors (a) x (b) of the "
-              "decomposition); **est.** = the ratio with the wall times of the benchmark's run above instead of this "
-              "run's: on each mesh its DEM set-up + its stepping time x the variant's steps / its steps (eta and CFL "
-              "do not change the cost of a step), against its best explicit FEM (only at CFL 0.75: it has no FEM "
-              "run at 0.99); **meas.** = the wall-time ratio measured in this run (noisy: the shared machine was "
-              "loaded, so its benchmark row does not repeat the 6.5 above).", ""]
-    for cfl_f in FEM_CFLS:
-        lines += [f"Against the FEM at CFL {cfl_f:g}:", "",
-                  "| variant | " + " | ".join(f"{t}: steps / est. / meas." for t in res["targets"]) + " |",
-                  "|---|" + "---|" * len(res["targets"])]
-        for v in var["variants"]:
-            cells = []
-            for t in res["targets"]:
-                e = v["time_to_error"][f"{t:g}"]
-                cells.append(f"{_f(e[f'step_ratio_cfl_{cfl_f:g}'])} / {_f(e.get(f'estimate_cfl_{cfl_f:g}'))} "
-                             f"/ {_f(e[f'ratio_cfl_{cfl_f:g}'])}")
-            lines.append(f"| {v['label']} | " + " | ".join(cells) + " |")
-        first = var["variants"][0]["time_to_error"]
-        lines += ["| best FEM: time (s) | " + " | ".join(_f(first[f'{t:g}'][f'best_fem_cfl_{cfl_f:g}'], '{:.3f}')
-                                                         for t in res["targets"]) + " |", ""]
-    return "\n".join(lines) + "\n"
-
-
-def write_section(md_path, text):
-    """Replace the section under HEADING in ``md_path`` (up to the next '## ' heading) or append it."""
-    old = md_path.read_text() if md_path.exists() else ""
-    start = old.find(HEADING)
-    if start < 0:
-        new = old.rstrip("\n") + "\n\n" + text if old else text
-    else:
-        nxt = old.find("\n## ", start + len(HEADING))
-        new = old[:start] + text + ("" if nxt < 0 else old[nxt:])
-    md_path.write_text(new)
 
 
 def main(argv=None) -> int:

@@ -19,7 +19,7 @@ ROOT = pathlib.Path(__file__).resolve().parent.parent
 VALIDATION = ROOT / "docs" / "validation"
 SCRIPTS = sorted((ROOT / "benchmarks").glob("*.py")) + sorted((ROOT / "validation").glob("*.py"))
 #: the modules among them that scripts import, without a main of their own
-LIBRARIES = ("work_precision", "friction_slide_pages")
+LIBRARIES = ("work_precision", "friction_slide_pages", "signorini_tte_report")
 
 # each test runs a study (quick mode) in a process of its own
 pytestmark = pytest.mark.slow
