@@ -107,12 +107,13 @@ def dispersion_coefficient(omega, n, cfl=0.0, modes=slice(1, 9)):
 def dispersion_study(n, etas, cfls):
     out = {"n": n, "p1_lumped": {}, "dem": []}
     w = p1_lumped_frequencies(n)
+    j = np.array([n // 4, n // 2])  # theta = pi/4, pi/2
     out["p1_lumped"] = {"beta": dispersion_coefficient(w, n), "cfl_limit": 2.0 * C / (w.max() * L / n),
+                        "ratio_quarter_half": (w[j] / (j * math.pi * C / L)).tolist(),
                         "beta_full": {f"{c:g}": dispersion_coefficient(w, n, c) for c in cfls}}
     for method in ("dem-A", "dem-B"):
         for eta in etas:
             w = dem_frequencies(method, n, eta)
-            j = np.array([n // 4, n // 2])
             out["dem"].append({
                 "method": method, "eta_over_E": eta, "beta": dispersion_coefficient(w, n),
                 "cfl_limit": 2.0 * C / (w.max() * L / n),
