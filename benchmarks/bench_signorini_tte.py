@@ -20,7 +20,7 @@ Three parts, all on benchmark 1 of Doyen, Ern & Piperno (2011) (see bench_signor
 Writes ``signorini_tte.json`` and replaces (or appends) the section "Why the DEM takes ..." of
 ``signorini.md`` in the output folder (the text: signorini_tte_report.py). Serial. Usage::
 
-    python benchmarks/bench_signorini_tte.py                  # -> docs/bench/ (~3 min)
+    python benchmarks/bench_signorini_tte.py                  # -> docs/bench/ (~2 min)
     python benchmarks/bench_signorini_tte.py --quick --out-dir /tmp/tte   # ~15 s
 """
 

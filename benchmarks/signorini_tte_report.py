@@ -34,7 +34,7 @@ def section(res, command) -> str:
                      f"| {r['ratio']:.2f} | {100 * r['setup_share_fem']:.0f} % / {100 * r['setup_share_dem']:.0f} % |")
     lines += ["", "- (b) is 1: at equal N and CFL the DEM's step is the FEM's (dt = 0.75 h / c for both); its "
               f"linear limit with eta = E is CFL {base['cfl_limit']:.4f}, the lumped P1's {p1['cfl_limit']:.4f} "
-              "(the jump term does not shorten the step in 1D, see below).",
+              "(with eta = E the jump term does not shorten the step in 1D; eta > E does, see below).",
               "- (c) is the wall time per step with the set-up, on different meshes: on equal meshes the DEM's step "
               f"alone costs {_range(eq['modified-mass']['stepping_per_step_ratio'], '{:.2f}')} times (b)'s, its set-up "
               f"(building the discretisation) {_range(eq['modified-mass']['setup_ratio'])} times (b)'s (rows (c) below); "
