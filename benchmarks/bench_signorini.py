@@ -124,15 +124,16 @@ def run_fem(method, n, cfl=CFL, benchmark="impact", repeats=FEM_REPEATS, **kwarg
     return best
 
 
-def _dem_scene(method, n, dt, t_end, name="bar-impact"):
+def _dem_scene(method, n, dt, t_end, name="bar-impact", overrides=None):
     from dolfinx_dem import scenes
 
     return scenes.load(name, overrides={"method": method, "mesh.n": n, "time.dt": dt, "time.end": t_end,
-                                        "output.every": 10**6})
+                                        "output.every": 10**6, **(overrides or {})})
 
 
-def run_dem_runner(method, n, dt, t_end, workdir, name="bar-impact", allow_unstable=False):
-    """The scene runner; returns (summary, series record array, error or None)."""
+def run_dem_runner(method, n, dt, t_end, workdir, name="bar-impact", allow_unstable=False, overrides=None):
+    """The scene runner; returns (summary, series record array, error or None). ``overrides``: more
+    scene keys, as in :func:`run_dem_loop`."""
     from mpi4py import MPI
 
     from dolfinx_dem import memm, simulation
@@ -140,8 +141,8 @@ def run_dem_runner(method, n, dt, t_end, workdir, name="bar-impact", allow_unsta
     folder = pathlib.Path(workdir) / f"{name}-{method}-n{n}-dt{dt:.6g}"
     error = None
     try:
-        summary = simulation.run(_dem_scene(method, n, dt, t_end, name), folder, MPI.COMM_WORLD, quiet=True,
-                                 overwrite=True)
+        summary = simulation.run(_dem_scene(method, n, dt, t_end, name, overrides), folder, MPI.COMM_WORLD,
+                                 quiet=True, overwrite=True)
     except memm.InstabilityError as err:
         if not allow_unstable:
             raise
@@ -161,14 +162,15 @@ def tip_probe(problem):
     return lambda u: x_tip + float(c.facet_displacements(c.patch_values(u))[0, 0])
 
 
-def run_dem_loop(method, n, dt, t_end):
-    """Bare MEMM loop (no output): (setup s, stepping s, t, tip position)."""
+def run_dem_loop(method, n, dt, t_end, overrides=None):
+    """Bare MEMM loop (no output): (setup s, stepping s, t, tip position). ``overrides``: more
+    scene keys (e.g. ``{"material.eta": 300.0}``, bench_signorini_tte.py)."""
     from mpi4py import MPI
 
     from dolfinx_dem import memm, simulation
 
     t0 = time.perf_counter()
-    scene = _dem_scene(method, n, dt, t_end)
+    scene = _dem_scene(method, n, dt, t_end, overrides=overrides)
     problem = simulation.build(scene, MPI.COMM_WORLD)
     dem = problem.dem
     n_steps = round(t_end / dt)
@@ -664,6 +666,17 @@ def markdown(results, command) -> str:
     return "\n".join(lines) + "\n"
 
 
+#: the section that bench_signorini_tte.py writes into signorini.md: carried over when this rewrites it
+TTE_HEADING = "## Why the DEM takes"
+
+
+def _kept_section(md_path) -> str:
+    """The section of bench_signorini_tte.py in the existing ``md_path`` (to its end), or ''."""
+    old = md_path.read_text() if md_path.exists() else ""
+    start = old.find(TTE_HEADING)
+    return old[start:] if start >= 0 else ""
+
+
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--quick", action="store_true", help="N = 50, 100, a short sweep: < 60 s")
@@ -709,7 +722,11 @@ def main(argv=None) -> int:
     results["figures"] = charts(results, series, out_dir)
     (out_dir / "signorini.json").write_text(json.dumps(results, indent=1) + "\n")
     command = ".venv/bin/python benchmarks/bench_signorini.py" + (" --quick" if args.quick else "")
-    (out_dir / "signorini.md").write_text(markdown(results, command))
+    text = markdown(results, command)
+    kept = _kept_section(out_dir / "signorini.md")
+    if kept:
+        log(f"kept the section '{kept.splitlines()[0][3:]}' (bench_signorini_tte.py writes it: rerun it)")
+    (out_dir / "signorini.md").write_text(text + ("\n" + kept if kept else ""))
     log(f"wrote {out_dir / 'signorini.json'}, {out_dir / 'signorini.md'} and {len(results['figures'])} figures")
     print(markdown(results, command))
     return 0

@@ -10,7 +10,7 @@ from helpers import ROOT, import_script, run_quick
 
 SCRIPTS = sorted((ROOT / "benchmarks").glob("*.py")) + sorted((ROOT / "validation").glob("*.py"))
 #: the modules among them that scripts import, without a main of their own
-LIBRARIES = ("work_precision", "friction_slide_pages")
+LIBRARIES = ("work_precision", "friction_slide_pages", "signorini_tte_report")
 
 # each test runs a study (quick mode) in a process of its own
 pytestmark = pytest.mark.slow
@@ -74,6 +74,44 @@ def test_bench_signorini_quick(tmp_path):
     run_quick("benchmarks/bench_signorini.py", "--out-dir", str(tmp_path))
     data = json.loads((tmp_path / "signorini.json").read_text())
     assert data["quick"]
+
+
+def test_bench_signorini_tte_dispersion_and_decomposition(monkeypatch):
+    """bench_signorini_tte.py's analysis (measured 2026-12-06): the DEM's 1D operator disperses
+    like P1 on a mesh of spacing 2h (beta = 1/6 against P1 lumped's 1/24, whatever eta; scheme B
+    exactly), eta sets the CFL limit (sqrt(E / eta) for eta >= E/3, 1.0002 at eta = E with the
+    boundary cells), and on the documented run the time-to-error ratio is the product of its
+    factors, the mesh factor (4.71 at 0.05) being the largest."""
+    tte = import_script(ROOT / "benchmarks" / "bench_signorini_tte.py", monkeypatch)
+    d = tte.dispersion_study(100, (1.0 / 3.0, 1.0, 2.0), (0.75,))
+    assert abs(d["p1_lumped"]["beta"] - 1.0 / 24.0) < 2e-4 and abs(d["p1_lumped"]["cfl_limit"] - 1.0) < 1e-9
+    rows = {(r["method"], round(r["eta_over_E"], 3)): r for r in d["dem"]}
+    for eta in (0.333, 1.0, 2.0):
+        assert abs(rows["dem-B", eta]["beta"] - 1.0 / 6.0) < 2e-4, rows["dem-B", eta]
+        assert abs(rows["dem-A", eta]["beta"] - 1.0 / 6.0) < 0.01, rows["dem-A", eta]  # 0.1695-0.1728
+    assert abs(rows["dem-B", 0.333]["cfl_limit"] - 3**0.5) < 1e-3
+    assert 1.0 < rows["dem-A", 1.0]["cfl_limit"] < 1.001
+    assert abs(rows["dem-A", 2.0]["cfl_limit"] - 0.5**0.5) < 1e-3
+    conv = json.loads((ROOT / "docs" / "bench" / "signorini.json").read_text())["convergence"]["methods"]
+    dec = tte.decomposition(conv, (0.05, 0.025))
+    for r in dec.values():
+        assert r["steps_per_cell_ratio"] == pytest.approx(1.0, abs=1e-9)
+        assert r["product"] == pytest.approx(r["ratio"], rel=1e-9)
+    # deterministic (errors only): the DEM needs 4.7 (at 0.05) and 3.6 (at 0.025) times the cells of (b)
+    assert dec["0.05/dem-A"]["n_ratio"] == pytest.approx(4.71, abs=0.02)
+    assert dec["0.025/dem-A"]["n_ratio"] == pytest.approx(3.59, abs=0.02)
+
+
+def test_bench_signorini_tte_quick(tmp_path):
+    """The quick study: (A, eta = E, CFL 0.75) reproduces the benchmark's errors on N = 50, 100,
+    200; eta = E/6 at CFL 1.85 is stable with a smaller error (0.0574 against 0.0995 at N = 100);
+    the section goes into signorini.md."""
+    run_quick("benchmarks/bench_signorini_tte.py", "--out-dir", str(tmp_path))
+    data = json.loads((tmp_path / "signorini_tte.json").read_text())
+    base, _, small_eta = data["variants"]["variants"]
+    assert [r["tip_l2"] for r in base["rows"]] == pytest.approx([0.1618, 0.0995, 0.0621], abs=2e-4)
+    assert small_eta["rows"][1]["tip_l2"] == pytest.approx(0.0574, abs=2e-4)
+    assert (tmp_path / "signorini.md").read_text().startswith("## Why the DEM takes")
 
 
 def test_bench_wave2d_quick(tmp_path):
