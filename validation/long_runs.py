@@ -370,6 +370,15 @@ def summary(name: str, data: dict) -> list[str]:
            f"{listed(coarse['dem-B'], 'axial_error')} m, fem-P1 {listed(coarse['fem-P1'], 'axial_error')} m.")]
 
 
+KEPT = "\n## Why the DEM's cradle drifts sideways\n"  # a section of the page written by validation/cradle_drift.py's runs
+
+
+def write_page(path: pathlib.Path, text: str) -> None:
+    """Write the page, keeping the section ``KEPT`` of the page already there (not made from this JSON)."""
+    old = path.read_text() if path.exists() else ""
+    path.write_text(text + (old[old.index(KEPT):] if KEPT in old else ""))
+
+
 def main():
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--scenes", nargs="+", default=list(SCENES), choices=list(SCENES))
@@ -387,7 +396,7 @@ def main():
     if args.render:
         results = json.loads(args.out.read_text())
         chart(results, png)
-        args.out.with_suffix(".md").write_text(page(results, png.name))
+        write_page(args.out.with_suffix(".md"), page(results, png.name))
         return
     levels = {"billiard": tuple(args.billiard_h), "cradle": tuple(args.cradle_h)}
     command = "validation/long_runs.py " + ("--quick" if args.quick else " ".join(
@@ -405,7 +414,7 @@ def main():
                                             args.keep and args.work is not None)
     args.out.write_text(json.dumps(results, indent=1) + "\n")
     chart(results, png)
-    args.out.with_suffix(".md").write_text(page(results, png.name))
+    write_page(args.out.with_suffix(".md"), page(results, png.name))
 
 
 if __name__ == "__main__":
