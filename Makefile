@@ -141,7 +141,7 @@ bench: setup
 	$(PYTHON) benchmarks/bench_femp1.py --out docs/bench/femp1.json
 	$(PYTHON) benchmarks/bench_parallel.py --out docs/bench/parallel.json
 
-# The validation studies of docs/validation/README.md (about 4.7 h by their JSON's wall times):
+# The validation studies of docs/validation/README.md (about 4.9 h by their JSON's wall times):
 # each writes its JSON and page there. The pages written by the demos and the 3D contact runs give
 # their own commands. hertz3d_diagnostics adds its levels to its JSON, so that starts empty.
 VALIDATE_WORK := results/validate
@@ -152,6 +152,18 @@ validate: setup
 	$(PYTHON) validation/scheme_b.py --out docs/validation/scheme_b.json
 	$(PYTHON) validation/long_bounce.py --n 100 200 400 --out docs/validation/long_bounce.json
 	$(PYTHON) validation/long_runs.py --out docs/validation/long_runs.json
+	rm -f docs/validation/cradle_drift.json
+	for s in 1 0.1; do \
+	  for h in 0.042 0.04 0.038 0.028; do \
+	    $(PYTHON) validation/cradle_drift.py --out docs/validation/cradle_drift.json --method dem-B --h $$h --speed $$s && \
+	    $(PYTHON) validation/cradle_drift.py --out docs/validation/cradle_drift.json --method fem-P1 --h $$h --speed $$s && \
+	    $(PYTHON) validation/cradle_drift.py --out docs/validation/cradle_drift.json --method dem-B --h $$h --speed $$s --set contact.surface=vertex || exit 1; \
+	  done; \
+	  $(PYTHON) validation/cradle_drift.py --out docs/validation/cradle_drift.json --method dem-B --h 0.04 --speed $$s --set material.eta=1000 && \
+	  $(PYTHON) validation/cradle_drift.py --out docs/validation/cradle_drift.json --method dem-B --h 0.04 --speed $$s --set time.cfl=0.1 && \
+	  $(PYTHON) validation/cradle_drift.py --out docs/validation/cradle_drift.json --method fem-P1 --h 0.04 --speed $$s --set time.cfl=0.1 || exit 1; \
+	done
+	$(PYTHON) validation/cradle_drift.py --page docs/validation/cradle_drift.md --out docs/validation/cradle_drift.json
 	$(PYTHON) validation/friction_slide.py --out docs/validation/friction.json
 	$(PYTHON) validation/friction_slide.py --scheme B --out docs/validation/friction_scheme_b.json
 	$(PYTHON) validation/friction_slide.py --scheme AB --out docs/validation/friction_scheme_ab.json

@@ -236,6 +236,26 @@ def test_long_bounce_quick_keeps_the_dem_energy_and_ranks_the_fem(tmp_path):
     assert (tmp_path / "b.md").read_text().startswith("# Many impacts")
 
 
+def test_cradle_drift_page_is_its_json_and_the_shipped_run_reproduces_its_row(monkeypatch):
+    """cradle_drift.md's table is the one its JSON gives; the shipped cradle (dem-B, h = 0.04 m, 0.3
+    m/s, 3 s) keeps its energy (measured 4.9e-15) and, on the pages' gmsh, drifts sideways as the
+    documented row says (0.066 m, crossing at 81.8 degrees; the same run: to 1e-9 m)."""
+    import gmsh
+
+    drift = import_script(ROOT / "validation" / "cradle_drift.py", monkeypatch)
+    rows = _documented("cradle_drift.json")
+    page = (VALIDATION / "cradle_drift.md").read_text()
+    assert drift.with_table(page, drift.table(rows)) == page
+    row = drift.run("dem-B", 0.04, 1.0, {})
+    assert row["energy_error"] < 1e-13 and row["contact_episodes"] >= 4
+    assert 0.0 < row["lateral_end"] < 0.2
+    if gmsh.__version__ == PAGES_GMSH:
+        study = next(r for r in rows if (r["method"], r["h"], r["speed"], r["set"]) == ("dem-B", 0.04, 0.3, {}))
+        assert row["steps"] == study["steps"]
+        assert row["lateral_end"] == pytest.approx(study["lateral_end"], abs=1e-9)
+        assert row["crossing_angle"] == pytest.approx(study["crossing_angle"], abs=1e-9)
+
+
 def test_long_runs_quick_keeps_the_dem_energy_and_reproduces_the_study(tmp_path):
     """billiard (h = 0.2, 0.1, to 20 s) and cradle (h = 0.04, 0.028, to 1 s), dem-B and fem-P1: the
     DEM's energy error stays at rounding (measured <= 1.1e-14), fem-P1's does not (1.6e-4 to 9.0e-3);

@@ -281,7 +281,9 @@ def page(results: dict, png: str) -> str:
         "- **Lateral drift** (`cradle`): the balls start on the x axis and only the first moves, along x, so in the "
         "exact solution they move along x only; the largest distance of a ball's centre of mass from the x axis "
         "(its y, z displacement) is an error against an exact reference, made by the faceted contact surfaces of "
-        "the meshed balls. The *axial error* is the x part of the trajectory error.",
+        "the meshed balls. The *axial error* is the x part of the trajectory error. Why the DEM's drifts more than "
+        "fem-P1's (neither the crossing angle nor eta nor the time step; the contact surface in part): "
+        "[cradle_drift.md](cradle_drift.md).",
         "- **Contact episodes**: per pair of bodies, the stretches of nonzero pair force (gaps shorter than the grid's "
         "interval merged), summed over the pairs (the billiard's frame is a body).",
         "- **Wall time**: the whole run (set-up, steps, the series every step and the fields about every interval), "
