@@ -1,0 +1,62 @@
+"""The discrete energy release rate of a facet at fixed cell displacements (issue 34; design
+note §1.2):
+
+    Delta V_f(u) = V(u; C) - V(u; C + {f}),    G_h(f) = Delta V_f(u) / |f|,
+
+C the current crack set and V the discretisation's potential (eq. (11), (13) and the data's
+work). It is exactly the energy that leaves the potential when f breaks at a step boundary,
+hence what the fracture energy Gamma books in the MEMM balance (design note §2), and the
+literal Griffith criterion G_h >= G_c of the issue (option 1 of the design note §1.6).
+
+Both operators have the same row layout (operator.py), so the difference is summed row by row,
+
+    Delta V_f = sum_r 1/2 (a_r - a'_r)(a_r + a'_r) + sum_T (w'_T - w_T),
+
+a and a' the energy rows before and after, w the tractions' work densities (a scheme A
+traction facet of a lip cell changes its reconstruction). Unchanged rows give exact zeros,
+so no cancellation between the two potentials, which are much larger than Delta V_f on a big
+mesh; ``math.fsum`` makes the sum exactly rounded, hence independent of the order of the rows
+(the design note §4 needs it in parallel). In 1D with scheme A (design note §6):
+
+    Delta V_f = 1/2 (E - eta/4) h (a^2 + b^2) + eta/(2h) J_f^2 + eta/2 (a J_l + b J_r),
+
+a, b the gradients of the two cells, J_f, J_l, J_r the jumps of f and of the two neighbouring
+facets; (E - eta/4) h eps^2 for a uniform strain eps, (3/4 E - eta/16) h eps^2 with scheme B.
+
+The trial operator is ``break_facets``'s, the one code path of an actual break (design note §3).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from mpi4py import MPI
+
+from dolfinx_dem.fracture.operator import CrackedOperator, break_facets, row_values, traction_values
+
+
+def potential_drop(before: CrackedOperator, after: CrackedOperator, u: np.ndarray, g: np.ndarray,
+                   t: np.ndarray) -> float:
+    """V(u; before) - V(u; after) for two operators of the same intact geometry (module
+    docstring), at the cell values ``u`` (N d,), Dirichlet values ``g`` (n_D d,) and tractions
+    ``t`` (n_T d,)."""
+    a, b = row_values(before, u, g, t), row_values(after, u, g, t)
+    w, w_after = traction_values(before, u, g, t), traction_values(after, u, g, t)
+    changed = a != b
+    return math.fsum(np.concatenate([0.5 * (a[changed] - b[changed]) * (a[changed] + b[changed]), w_after - w]))
+
+
+def energy_release(op: CrackedOperator, facets: np.ndarray, u: np.ndarray, comm: MPI.Comm,
+                   g: np.ndarray | None = None, t: np.ndarray | None = None) -> np.ndarray:
+    """G_h of each of the intact geometry's interior ``facets`` (J/m^2; J/m in 2D, J in 1D),
+    each broken alone from the crack set of ``op`` at fixed ``u`` (module docstring); ``g`` and
+    ``t`` default to zero data. A facet whose break ``op`` cannot represent raises InputError
+    (crack.py: a tip in 2D or 3D)."""
+    rec = op.reconstruction
+    g = np.zeros(rec.D.shape[1]) if g is None else np.asarray(g, dtype=float)
+    t = np.zeros(rec.N.shape[1]) if t is None else np.asarray(t, dtype=float)
+    facets = np.asarray(facets, dtype=np.int64)
+    # one trial per candidate (a few per step once screened); the step number does not enter the rows
+    drops = [potential_drop(op, break_facets(op, [f], 0, comm), u, g, t) for f in facets]
+    return np.array(drops) / op.intact.facet_areas[facets]
