@@ -56,12 +56,37 @@ def grid(nx, ny, cut, cut_to=1.0, hole=False, jitter=0.0, duplicate=False):
     if duplicate:
         right = grid_points[cells].mean(axis=1)[:, 0] > cut / nx
         ids[right[:, None] & on_cut[cells]] += len(points)
-    opposite = [[1, 2], [0, 2], [0, 1]]  # the vertices of facet j
-    edges = np.sort(ids[:, opposite], axis=2)
-    keys = edges[..., 0] * 4 * len(points) + edges[..., 1]
-    geom = geometry_from_arrays(points[cells], ids, np.unique(keys, return_inverse=True)[1].reshape(-1, 3))
+    return simplices(points, cells, ids, on_cut)
+
+
+def simplices(points, cells, ids, on_cut):
+    """The geometry of the simplices ``cells`` (indices into ``points``) with vertex numbers
+    ``ids`` (facets identified by their vertex numbers), and its interior facets whose vertices
+    are all ``on_cut`` (per point)."""
+    nv = cells.shape[1]
+    opposite = [[k for k in range(nv) if k != j] for j in range(nv)]  # the vertices of facet j
+    tuples = np.sort(ids[:, opposite], axis=2).reshape(-1, nv - 1)
+    facet_ids = np.unique(tuples, axis=0, return_inverse=True)[1].reshape(-1, nv)
+    geom = geometry_from_arrays(points[cells], ids, facet_ids)
     crack = np.unique(geom.cell_facets[on_cut[cells][:, opposite].all(axis=2)])
     return geom, crack[geom.facet_cells[crack, 1] >= 0]
+
+
+def cube(n, duplicate=False):
+    """The unit cube in n^3 cubes of 6 tetrahedra each (Kuhn's conforming subdivision), with the
+    crack through it along x = 1/2 (as ``grid``)."""
+    g = np.linspace(0, 1, n + 1)
+    points = np.stack(np.meshgrid(g, g, g, indexing="ij"), axis=-1).reshape(-1, 3)
+    v = lambda i: (i[..., 0] * (n + 1) + i[..., 1]) * (n + 1) + i[..., 2]  # noqa: E731
+    corner = np.stack(np.meshgrid(*[np.arange(n)] * 3, indexing="ij"), axis=-1).reshape(-1, 1, 3)
+    paths = [np.cumsum(np.r_[[[0, 0, 0]], np.eye(3, dtype=int)[list(p)]], axis=0)
+             for p in ((0, 1, 2), (0, 2, 1), (1, 0, 2), (1, 2, 0), (2, 0, 1), (2, 1, 0))]
+    cells = np.concatenate([v(corner + p) for p in paths])
+    on_cut = np.isclose(points[:, 0], 0.5)
+    ids = cells.copy()
+    if duplicate:
+        ids[(points[cells].mean(axis=1)[:, 0] > 0.5)[:, None] & on_cut[cells]] += len(points)
+    return simplices(points, cells, ids, on_cut)
 
 
 def material(eta):
@@ -180,6 +205,21 @@ def test_split_2d_through_crack_is_the_duplicated_mesh(scheme, hole, cut_to, bod
     assert np.abs(F - F_ref).max() < 1e-13 * np.abs(F_ref).max()
 
 
+@pytest.mark.parametrize("scheme", ["A", "B"])
+def test_split_3d_through_crack_is_the_duplicated_mesh(scheme):
+    """The same in 3D: a cube cut through along x = 1/2 (4 x 4 x 4 x 6 tetrahedra)."""
+    (geom, crack), (dup, _) = cube(4), cube(4, duplicate=True)
+    mat = CellMaterials.uniform(material(3.0), geom.num_cells)
+    op = compute_operator(geom, Conditions(mat, scheme), CrackState.intact(geom).broken(geom, crack, 0), SELF)
+    ref = compute_operator(dup, Conditions(mat, scheme), CrackState.intact(dup), SELF)
+    assert len(crack) == 32 and op.geometry.num_bodies == ref.geometry.num_bodies == 2
+    u, empty = np.random.default_rng(6).standard_normal(geom.num_cells * 3), np.empty(0)
+    V, V_ref = potential(op, u, empty, empty), potential(ref, u, empty, empty)
+    assert abs(V - V_ref) < 1e-13 * abs(V_ref)
+    F, F_ref = forces(op, u, empty, empty), forces(ref, u, empty, empty)
+    assert np.abs(F - F_ref).max() < 1e-13 * np.abs(F_ref).max()
+
+
 def test_release_2d_corner_fragment():
     """G_h of the one 2D facet here whose break has no tip (both vertices on the boundary: it cuts
     off the corner cell at (1, 0)) is the drop of the whole potential, and positive."""
@@ -231,3 +271,15 @@ def test_intact_operator_is_the_discretisations():
     V = potential(op, u, dem.data.dirichlet_values(0.0).ravel(), dem.data.traction_values(0.0).ravel())
     V_dem = dem.energies(dem.vector(u), 0.0)["potential"]
     assert abs(V - V_dem) < 1e-13 * abs(V_dem)
+
+
+def test_intact_rows_are_the_discretisations_rows():
+    """With nothing broken, the operator's energy rows are DEMDiscretisation's, bit for bit
+    (same layout on one process, entries sorted by column), so a MEMM hook can install the
+    rows of a crack set in place of the discretisation's."""
+    mesh = meshes.create_rectangle(SELF, [0.0, 0.0], [1.0, 1.0], [6, 6])[0]
+    dem = DEMDiscretisation(mesh, material(3.0), "A")
+    op = compute_operator(dem.geometry, Conditions(dem.materials, "A"), CrackState.intact(dem.geometry), SELF)
+    Q = op.rows.Q.copy()
+    Q.sort_indices()
+    assert all(np.array_equal(getattr(Q, a), getattr(dem.rows.Q, a)) for a in ("indptr", "indices", "data"))
