@@ -221,8 +221,8 @@ def test_split_3d_through_crack_is_the_duplicated_mesh(scheme):
 
 
 def test_release_2d_corner_fragment():
-    """G_h of the one 2D facet here whose break has no tip (both vertices on the boundary: it cuts
-    off the corner cell at (1, 0)) is the drop of the whole potential, and positive."""
+    """G_h of a 2D facet whose break has no tip (both vertices on the boundary: it cuts off the
+    corner cell at (1, 0)) is the drop of the whole potential, and positive."""
     geom, _ = grid(4, 4, 0)
     op = compute_operator(geom, Conditions(CellMaterials.uniform(material(E), geom.num_cells), "A"),
                           CrackState.intact(geom), SELF)
