@@ -10,10 +10,11 @@ eq. (12)-(13) any more. The mass and the body force's work f.u do not change.
 ``compute_operator`` forms all of it from scratch on the split geometry (crack.py) with the
 functions of the intact discretisation (``compute_reconstruction``, ``compute_energy_rows``),
 so the operator of a crack set is by construction the operator of the mesh whose vertices are
-duplicated along the crack (for the crack sets without a tip that ``split_geometry`` admits). ``break_facets`` is the one entry point that adds broken facets to
-an operator: today it recomputes everything; the local rebuild of the design note §3 (only the
-rows within two vertex rings of the new lips) is to replace its body, with the from-scratch
-operator as its test.
+duplicated along the crack (for the crack sets without a tip that ``split_geometry`` admits).
+``break_facets`` is the one entry point that adds broken facets to an operator: today it
+recomputes everything; the local rebuild of the design note §3 (only the rows within two
+vertex rings of the new lips) is to replace its body, with the from-scratch operator as its
+test.
 
 Row layout (design note §1.2): the rows keep the intact operator's layout whatever breaks, so
 that a row has one meaning in every crack set and energies compare row by row: the m =
