@@ -14,6 +14,7 @@ from dolfinx_dem.discretisation import DEMDiscretisation
 from dolfinx_dem.errors import InputError
 from dolfinx_dem.fracture import Conditions, CrackState, break_facets, compute_operator, energy_release
 from dolfinx_dem.fracture.operator import potential, row_values
+from dolfinx_dem.fracture.rebuild import break_facets_with_changes
 from dolfinx_dem.geometry import geometry_from_arrays
 from dolfinx_dem.material import CellMaterials, ElasticMaterial
 
@@ -283,3 +284,67 @@ def test_intact_rows_are_the_discretisations_rows():
     Q = op.rows.Q.copy()
     Q.sort_indices()
     assert all(np.array_equal(getattr(Q, a), getattr(dem.rows.Q, a)) for a in ("indptr", "indices", "data"))
+
+
+def _identical(a, b):
+    """Two sparse matrices with the same shape, pattern and bits (entries sorted by column)."""
+    a, b = a.tocsr().copy(), b.tocsr().copy()
+    a.sort_indices()
+    b.sort_indices()
+    return a.shape == b.shape and all(np.array_equal(getattr(a, k), getattr(b, k))
+                                      for k in ("indptr", "indices", "data"))
+
+
+def _check_local_rebuild(geom, conditions, batches):
+    """Break ``batches`` one after the other with the local rebuild; after each, every matrix and
+    list of the operator is the from-scratch operator's, bit for bit. Returns the changed rows."""
+    op = compute_operator(geom, conditions, CrackState.intact(geom), SELF)
+    changes = []
+    for step, facets in enumerate(batches):
+        op, changed = break_facets_with_changes(op, facets, step, SELF)
+        ref = compute_operator(geom, conditions, op.crack, SELF)
+        for name in "RDN":
+            assert _identical(getattr(op.reconstruction, name), getattr(ref.reconstruction, name)), (step, name)
+        for name in ("Q", "Q_dirichlet", "QF"):
+            assert _identical(getattr(op.rows, name), getattr(ref.rows, name)), (step, name)
+        for name in ("neumann_facets", "scheme_a_facets", "multi_neumann_cells", "extrapolated_facets"):
+            assert np.array_equal(getattr(op.reconstruction, name), getattr(ref.reconstruction, name)), (step, name)
+        assert np.array_equal(op.lips, ref.lips) and np.array_equal(op.geometry.facet_cells, ref.geometry.facet_cells)
+        changes.append((len(changed.facets), len(changed.cells), len(changed.jump_facets)))
+    return changes
+
+
+@pytest.mark.parametrize("scheme", ["A", "B"])
+def test_local_rebuild_1d_successive_breaks(scheme):
+    """Design note §3: breaking facets one step after the other (a jittered bar with a Dirichlet
+    end and a loaded end; the last batch breaks two adjacent facets, leaving a cell with two
+    open facets), the locally rebuilt operator is the from-scratch operator bit for bit, and a
+    single break changes 2 R rows (the facet and its lip), 2 S cells and 3 J facets."""
+    geom = bar(N, H, jitter=0.3)
+    conditions = Conditions(CellMaterials.uniform(material(3.0), N), scheme, np.array([facet_at(geom, [0.0])]),
+                            traction_facets=np.array([facet_at(geom, [geom.facet_centres[:, 0].max()])]))
+    f = [geom.cell_facets[i, 0] for i in (9, 4, 17, 18)]
+    changes = _check_local_rebuild(geom, conditions, [[f[0]], [f[1]], [f[2], f[3]]])
+    assert changes[:2] == [(2, 2, 3), (2, 2, 3)]
+
+
+@pytest.mark.parametrize("scheme", ["A", "B"])
+def test_local_rebuild_2d(scheme):
+    """The same for the 2D cuts the split admits: a plate cut through, a ring cut from the edge to
+    the hole, and two corner cells cut off one step after the other."""
+    for geom, batches in ((grid(6, 6, 3, 1.0, False, jitter=0.3)[0], [grid(6, 6, 3, 1.0, False, jitter=0.3)[1]]),
+                          (grid(6, 6, 3, 1 / 3, True, jitter=0.3)[0], [grid(6, 6, 3, 1 / 3, True, jitter=0.3)[1]])):
+        _check_local_rebuild(geom, Conditions(CellMaterials.uniform(material(3.0), geom.num_cells), scheme), batches)
+    geom, _ = grid(4, 4, 0)
+    corners = [[facet_at(geom, [0.875, 0.125])], [facet_at(geom, [0.125, 0.875])]]
+    changes = _check_local_rebuild(geom, Conditions(CellMaterials.uniform(material(3.0), geom.num_cells), scheme),
+                                   corners)
+    assert changes[0][1:] == (2, 3)
+
+
+def test_break_before_the_latest_refused():
+    """Lips are numbered by break step: a break at an earlier step than the latest is refused."""
+    geom = bar(N, H)
+    op = compute_operator(geom, Conditions(CellMaterials.uniform(material(E), N), "A"), CrackState.intact(geom), SELF)
+    with pytest.raises(InputError, match="before the latest break"):
+        break_facets(break_facets(op, [3], 5, SELF), [7], 4, SELF)

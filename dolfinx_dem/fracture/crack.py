@@ -4,7 +4,8 @@
 A broken interior facet f between cells c_a and c_b (c_a the one with the smaller global number)
 becomes two boundary facets, the crack lips: f itself, now with ``facet_cells[f] = (c_a, -1)``,
 and a new facet F + k (appended after the F facets of the intact geometry, k the rank of f among
-the broken facets) with ``facet_cells = (c_b, -1)``, which replaces f in c_b's ``cell_facets``.
+the broken facets by break step, then index) with ``facet_cells = (c_b, -1)``, which replaces f
+in c_b's ``cell_facets``.
 Both lips keep f's barycentre and area; a 1D lip takes the boundary facet's length scale
 (geometry.py: twice the distance to its cell's barycentre), a 2D or 3D lip keeps f's diameter.
 Everything that tests "boundary" (``facet_cells[:, 1] == -1``) then sees the lips: scheme A or
@@ -59,6 +60,19 @@ class CrackState:
         """The broken facets (indices into the intact geometry ``geom``), sorted."""
         return np.unique(geom.cell_facets[self.broken_step >= 0])
 
+    def lip_order(self, geom: MeshGeometry) -> np.ndarray:
+        """The broken facets in the order of their lips (``split_geometry``): by the step at which
+        they broke, then by index. A later break appends its lips, so the local rebuild
+        (rebuild.py) keeps the facet numbers of the earlier lips."""
+        facets = self.facets(geom)
+        step = self.broken_step[geom.facet_cells[facets, 0], geom.facet_local[facets, 0]]
+        return facets[np.lexsort((facets, step))]
+
+    @property
+    def last_step(self) -> int:
+        """The latest step at which a facet broke, -1 if none did."""
+        return int(self.broken_step.max(initial=-1))
+
     def broken(self, geom: MeshGeometry, facets: np.ndarray, step: int) -> CrackState:
         """A new state with the interior ``facets`` of the intact geometry ``geom`` broken at ``step``."""
         facets = np.unique(np.asarray(facets, dtype=np.int64))
@@ -80,8 +94,8 @@ class CrackState:
 def split_geometry(intact: MeshGeometry, crack: CrackState, comm: MPI.Comm) -> tuple[MeshGeometry, np.ndarray]:
     """The geometry of ``intact`` with the facets broken in ``crack`` split into lips (module
     docstring), and the new lip of each broken facet: (geometry, ``lips`` (k,)). The k-th broken
-    facet (``crack.facets(intact)``, sorted) keeps its index for its cell of smaller global
-    number; ``lips[k] = F + k`` is the other cell's lip. Vertex numbers of the split geometry
+    facet in ``crack.lip_order(intact)`` (by break step, then index) keeps its index for its cell
+    of smaller global number; ``lips[k] = F + k`` is the other cell's lip. Vertex numbers of the split geometry
     may exceed the mesh's vertex count (module docstring). ``intact`` must be a whole mesh
     held by one process.
 
@@ -92,7 +106,7 @@ def split_geometry(intact: MeshGeometry, crack: CrackState, comm: MPI.Comm) -> t
                          "process boundary must break on both sides (stage S3 of the design)")
     if intact.num_owned != intact.num_cells:
         raise InputError("fracture needs the intact geometry of the whole mesh (no halo cells)")
-    facets = crack.facets(intact)
+    facets = crack.lip_order(intact)
     F, k = intact.num_facets, len(facets)
     lips = F + np.arange(k, dtype=np.int64)
     cells, local = intact.facet_cells[facets].copy(), intact.facet_local[facets].copy()

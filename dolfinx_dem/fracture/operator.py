@@ -11,10 +11,8 @@ eq. (12)-(13) any more. The mass and the body force's work f.u do not change.
 functions of the intact discretisation (``compute_reconstruction``, ``compute_energy_rows``),
 so the operator of a crack set is by construction the operator of the mesh whose vertices are
 duplicated along the crack (for the crack sets without a tip that ``split_geometry`` admits).
-``break_facets`` is the one entry point that adds broken facets to an operator: today it
-recomputes everything; the local rebuild of the design note §3 (only the rows within two
-vertex rings of the new lips) is to replace its body, with the from-scratch operator as its
-test.
+``rebuild.break_facets`` is the one entry point that adds broken facets to an operator: it
+recomputes only the rows a break changes (design note §3), and equals ``compute_operator``.
 
 Row layout (design note §1.2): the rows keep the intact operator's layout whatever breaks, so
 that a row has one meaning in every crack set and energies compare row by row: the m =
@@ -60,7 +58,7 @@ class CrackedOperator:
     crack set (module docstring), serial: every cell is owned.
 
     ``geometry`` is the split geometry (F + k facets, the lips last, ``lips[i]`` the second lip
-    of the i-th broken facet); ``rows`` has the intact layout, ``jump_facets`` the intact facet
+    of the i-th broken facet in ``crack.lip_order``); ``rows`` has the intact layout, ``jump_facets`` the intact facet
     of each group of d jump rows; R, D and N have the split geometry's F + k facet rows; QF
     the split geometry's boundary-facet columns (the lips' included)."""
 
@@ -110,13 +108,6 @@ def compute_operator(intact: MeshGeometry, conditions: Conditions, crack: CrackS
                       QF=(place @ rows.QF).tocsc(), num_owned=n_rows, num_elastic=n_elastic)
     return CrackedOperator(intact=intact, conditions=conditions, crack=crack, geometry=geom, lips=lips,
                            reconstruction=rec, rows=rows, jump_facets=jump_facets)
-
-
-def break_facets(op: CrackedOperator, facets: np.ndarray, step: int, comm: MPI.Comm) -> CrackedOperator:
-    """The operator with the intact geometry's interior ``facets`` broken too, at time step
-    ``step``. From scratch today (``compute_operator``); the local rebuild of the design note §3
-    is to replace this body and keep its result."""
-    return compute_operator(op.intact, op.conditions, op.crack.broken(op.intact, facets, step), comm)
 
 
 def row_values(op: CrackedOperator, u: np.ndarray, g: np.ndarray, t: np.ndarray) -> np.ndarray:

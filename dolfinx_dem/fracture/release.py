@@ -33,7 +33,8 @@ import math
 import numpy as np
 from mpi4py import MPI
 
-from dolfinx_dem.fracture.operator import CrackedOperator, break_facets, row_values, traction_values
+from dolfinx_dem.fracture.operator import CrackedOperator, row_values, traction_values
+from dolfinx_dem.fracture.rebuild import break_facets
 
 
 def potential_drop(before: CrackedOperator, after: CrackedOperator, u: np.ndarray, g: np.ndarray,
@@ -57,6 +58,7 @@ def energy_release(op: CrackedOperator, facets: np.ndarray, u: np.ndarray, comm:
     g = np.zeros(rec.D.shape[1]) if g is None else np.asarray(g, dtype=float)
     t = np.zeros(rec.N.shape[1]) if t is None else np.asarray(t, dtype=float)
     facets = np.asarray(facets, dtype=np.int64)
-    # one trial per candidate (a few per step once screened); the step number does not enter the rows
-    drops = [potential_drop(op, break_facets(op, [f], 0, comm), u, g, t) for f in facets]
+    # one local trial per candidate; the step number does not enter the rows (only the lips' order)
+    step = max(op.crack.last_step, 0)
+    drops = [potential_drop(op, break_facets(op, [f], step, comm), u, g, t) for f in facets]
     return np.array(drops) / op.intact.facet_areas[facets]
