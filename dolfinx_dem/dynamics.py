@@ -477,7 +477,8 @@ def scene_instability(error: InstabilityError, time_spec: Mapping) -> Instabilit
 def fields(problem: DEMProblem, stepper: MEMM) -> dict:
     """DG0 displacement, velocity (vbar at t_n) and von Mises stress for XDMF output, in 1D the
     stress sigma_xx (``stress_xx``, signed, for ``plotting.animate_bar``), and with several
-    bodies the body number of each cell (``body``: 1-based connected component)."""
+    bodies the body number of each cell (``body``: 1-based connected component); with fracture
+    ``body`` from the start and ``broken``, the number of broken facets of each cell."""
     dem = problem.dem
     v = stepper.v_prev.copy()
     v.axpy(1.0, stepper.v_next)
@@ -490,6 +491,9 @@ def fields(problem: DEMProblem, stepper: MEMM) -> dict:
     v.destroy()  # petsc4py frees a vector not on COMM_SELF only at PETSc.garbage_cleanup
     if dem.d == 1:
         out["stress_xx"] = dem.scalar_function(problem.stress(stepper.u, stepper.t)[:, 0, 0], "stress_xx")
-    if dem.geometry.num_bodies > 1:
+    if dem.geometry.num_bodies > 1 or problem.fracture is not None:
         out["body"] = dem.scalar_function(dem.geometry.cell_bodies[: dem.n_owned] + 1.0, "body")
+    if problem.fracture is not None:
+        broken = (problem.fracture.operator.crack.broken_step[: dem.n_owned] >= 0).sum(axis=1)
+        out["broken"] = dem.scalar_function(broken.astype(float), "broken")
     return out

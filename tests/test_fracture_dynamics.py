@@ -191,6 +191,8 @@ def test_scene(tmp_path):
     assert series["fracture_excess"][-1] > 0
     assert np.abs(series["balance"] - series["balance"][0]).max() < 1e-13 * series["kinetic"][0]
     assert json.loads((tmp_path / "run" / "summary.json").read_text())["fracture"]["Gc"] == summary["fracture"]["Gc"]
+    xdmf = (tmp_path / "run" / "solution.xdmf").read_text()
+    assert xdmf.count('Name="broken"') == xdmf.count('Name="body"') == xdmf.count('Name="velocity"') > 1
 
 
 @pytest.mark.parametrize("changes, message", [
