@@ -58,6 +58,7 @@ def test_expanding_bar(n, scheme):
     fracture = Fracture(dem, Gc, [facet_at(dem, L / 2)])
     stepper = MEMM(DEMProblem(dem, fracture=fracture), dt)
     first = stepper.initialise(np.zeros(n), V0 * (2 * x / L - 1))
+    mass = dem.mass.array_r.copy()
     steps = np.arange(1, 1000)
     predicted = int(steps[np.argmax(released(h, steps * dt, scheme) >= Gc)])
     left, balance, momenta = x < L / 2, [], []
@@ -72,6 +73,7 @@ def test_expanding_bar(n, scheme):
             momenta.append([h * vbar[left].sum(), h * vbar[~left].sum()])
     assert [b.step for b in fracture.breaks] == [predicted]
     assert dem.geometry.num_bodies == 2 and fracture.cracked_area == pytest.approx(1.0, rel=1e-15)
+    assert np.array_equal(dem.mass.array_r, mass)
     G = released(h, t_b, scheme)
     assert abs(fracture.breaks[0].release_rates[0] / G - 1) < 1e-13
     assert abs(fracture.gamma / G - 1) < 1e-12

@@ -136,7 +136,9 @@ class Fracture:
         """At the step boundary t_n of ``diag`` (after ``MEMM.step``): break the facets the
         criterion accepts and return the diagnostics at t_n (the new ones if something broke,
         with Gamma^n; module docstring)."""
-        candidates, G, changes = self.release_rates(stepper.u.array_r, diag.step)
+        # at u^n less the free bodies' mean translations, which no row sees (as the stepper's y^n)
+        w = self.dem.bodies.relative_displacement(stepper.u).array_r.copy()
+        candidates, G, changes = self.release_rates(w, diag.step)
         over = np.flatnonzero(G >= self.Gc)
         if not len(over):
             return diag
