@@ -46,8 +46,8 @@ import numpy as np
 from dolfinx_dem.errors import InputError, InstabilityError, StateError
 from dolfinx_dem.fracture.crack import CrackState
 from dolfinx_dem.fracture.operator import Conditions, compute_operator
-from dolfinx_dem.fracture.rebuild import break_facets, break_facets_with_changes
-from dolfinx_dem.fracture.release import potential_drop
+from dolfinx_dem.fracture.rebuild import break_facets
+from dolfinx_dem.fracture.release import trial_breaks
 
 
 @dataclasses.dataclass(frozen=True)
@@ -119,26 +119,15 @@ class Fracture:
         if self.breaks:
             raise StateError("MEMM.initialise after facets broke: build the discretisation and its Fracture again")
 
-    def release_rates(self, u: np.ndarray, step: int) -> tuple[np.ndarray, np.ndarray, list]:
-        """The breakable facets not broken yet, their G_h at the cell values ``u`` (N d,) and data
-        of now (release.py), and the rows each break alone changes (rebuild.ChangedRows)."""
-        op = self.operator
-        candidates = self.breakable[~np.isin(self.breakable, op.broken)]
-        g, t = self.dem.data.facet_data()
-        drops, changes = [], []
-        for f in candidates:
-            trial, changed = break_facets_with_changes(op, [f], step, self.dem.comm)
-            drops.append(potential_drop(op, trial, u, g, t))
-            changes.append(changed)
-        return candidates, np.array(drops) / self.intact.facet_areas[candidates], changes
-
     def update(self, stepper, diag):
         """At the step boundary t_n of ``diag`` (after ``MEMM.step``): break the facets the
         criterion accepts and return the diagnostics at t_n (the new ones if something broke,
         with Gamma^n; module docstring)."""
         # at u^n less the free bodies' mean translations, which no row sees (as the stepper's y^n)
         w = self.dem.bodies.relative_displacement(stepper.u).array_r.copy()
-        candidates, G, changes = self.release_rates(w, diag.step)
+        candidates = self.breakable[~np.isin(self.breakable, self.operator.broken)]
+        G, changes = trial_breaks(self.operator, candidates, w, self.dem.comm, *self.dem.data.facet_data(),
+                                  step=diag.step)
         over = np.flatnonzero(G >= self.Gc)
         if not len(over):
             return diag

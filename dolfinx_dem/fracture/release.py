@@ -34,7 +34,7 @@ import numpy as np
 from mpi4py import MPI
 
 from dolfinx_dem.fracture.operator import CrackedOperator, row_values, traction_values
-from dolfinx_dem.fracture.rebuild import break_facets
+from dolfinx_dem.fracture.rebuild import ChangedRows, break_facets_with_changes
 
 
 def potential_drop(before: CrackedOperator, after: CrackedOperator, u: np.ndarray, g: np.ndarray,
@@ -50,15 +50,27 @@ def potential_drop(before: CrackedOperator, after: CrackedOperator, u: np.ndarra
 
 def energy_release(op: CrackedOperator, facets: np.ndarray, u: np.ndarray, comm: MPI.Comm,
                    g: np.ndarray | None = None, t: np.ndarray | None = None) -> np.ndarray:
-    """G_h of each of the intact geometry's interior ``facets`` (J/m^2; J/m in 2D, J in 1D),
-    each broken alone from the crack set of ``op`` at fixed ``u`` (module docstring); ``g`` and
-    ``t`` default to zero data. A facet whose break ``op`` cannot represent raises InputError
-    (crack.py: a tip in 2D or 3D)."""
+    """G_h of each of the intact geometry's interior ``facets`` (J/m^2 in any dimension: Delta V
+    is per unit length in 2D and per unit cross-section in 1D, where |f| = 1), each broken alone
+    from the crack set of ``op`` at fixed ``u`` (module docstring); ``g`` and ``t`` default to
+    zero data. A facet whose break ``op`` cannot represent raises InputError (crack.py: a tip
+    in 2D or 3D)."""
+    return trial_breaks(op, facets, u, comm, g, t)[0]
+
+
+def trial_breaks(op: CrackedOperator, facets: np.ndarray, u: np.ndarray, comm: MPI.Comm,
+                 g: np.ndarray | None = None, t: np.ndarray | None = None,
+                 step: int | None = None) -> tuple[np.ndarray, list[ChangedRows]]:
+    """``energy_release`` and the rows each facet's break alone changes (rebuild.ChangedRows),
+    each trial broken at ``step`` (default: the latest break's; it orders the lips only)."""
     rec = op.reconstruction
     g = np.zeros(rec.D.shape[1]) if g is None else np.asarray(g, dtype=float)
     t = np.zeros(rec.N.shape[1]) if t is None else np.asarray(t, dtype=float)
     facets = np.asarray(facets, dtype=np.int64)
-    # one local trial per candidate; the step number does not enter the rows (only the lips' order)
-    step = max(op.crack.last_step, 0)
-    drops = [potential_drop(op, break_facets(op, [f], step, comm), u, g, t) for f in facets]
-    return np.array(drops) / op.intact.facet_areas[facets]
+    step = max(op.crack.last_step, 0) if step is None else step
+    drops, changes = [], []
+    for f in facets:  # one local trial per candidate (the actual break's code path, rebuild.py)
+        trial, changed = break_facets_with_changes(op, [f], step, comm)
+        drops.append(potential_drop(op, trial, u, g, t))
+        changes.append(changed)
+    return np.array(drops) / op.intact.facet_areas[facets], changes
