@@ -277,6 +277,7 @@ class MEMM:
         old, self._state = self._state, StepState(self.dem, self.dt)
         for a, b in ((old.u, self._state.u), (old.v_prev, self._state.v_prev), (old.v_next, self._state.v_next)):
             a.copy(b)
+        old.destroy()
         self._state.restart(self.t)
         self._patches = []
         return self._diagnostics()
