@@ -15,6 +15,7 @@ from dolfinx_dem.errors import InputError
 from dolfinx_dem.fracture import Conditions, CrackState, break_facets, compute_operator, energy_release
 from dolfinx_dem.fracture.operator import potential, row_values
 from dolfinx_dem.fracture.rebuild import break_facets_with_changes
+from dolfinx_dem.fracture.release import release_bound, trial_breaks
 from dolfinx_dem.geometry import geometry_from_arrays
 from dolfinx_dem.material import CellMaterials, ElasticMaterial
 
@@ -348,3 +349,26 @@ def test_break_before_the_latest_refused():
     op = compute_operator(geom, Conditions(CellMaterials.uniform(material(E), N), "A"), CrackState.intact(geom), SELF)
     with pytest.raises(InputError, match="before the latest break"):
         break_facets(break_facets(op, [3], 5, SELF), [7], 4, SELF)
+
+
+@pytest.mark.parametrize("scheme", ["A", "B"])
+def test_release_bound_is_an_upper_bound(scheme):
+    """release_bound (the screen) >= Delta V_f for every candidate of a cracked bar (a two-cell
+    fragment, a Dirichlet end, a loaded end) at rough random u, eta != E: the energy of the rows
+    next to f bounds what its break releases; the bound is reached by the facet that splits the
+    two-cell fragment into one-cell fragments, and is infinite next to the loaded end."""
+    geom = bar(N, H, jitter=0.3)
+    conditions = Conditions(CellMaterials.uniform(material(3.0), N), scheme, np.array([facet_at(geom, [0.0])]),
+                            traction_facets=np.array([facet_at(geom, [geom.facet_centres[:, 0].max()])]))
+    op = compute_operator(geom, conditions, CrackState.intact(geom), SELF)
+    op = break_facets(op, [geom.cell_facets[i, 0] for i in (5, 7, 12)], 0, SELF)  # right ends of the cells
+    candidates = np.setdiff1d(geom.interior_facets, op.broken)
+    rng = np.random.default_rng(8)
+    for _ in range(3):
+        u, g, t = rng.standard_normal(N) * 1e-3, rng.standard_normal(1) * 1e-3, rng.standard_normal(1)
+        drop = trial_breaks(op, candidates, u, SELF, g, t)[0] * geom.facet_areas[candidates]
+        bound = release_bound(op, candidates, u, g, t)
+        assert np.all(bound >= drop * (1 - 1e-12))
+        finite = np.isfinite(bound)
+        exact = np.abs(bound[finite] / drop[finite] - 1) < 1e-12
+        assert (~finite).sum() == 1 and candidates[finite][exact].tolist() == [geom.cell_facets[6, 0]]

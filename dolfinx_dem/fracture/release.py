@@ -33,6 +33,7 @@ import math
 import numpy as np
 from mpi4py import MPI
 
+from dolfinx_dem.errors import InputError
 from dolfinx_dem.fracture.operator import CrackedOperator, row_values, traction_values
 from dolfinx_dem.fracture.rebuild import ChangedRows, break_facets_with_changes
 
@@ -74,3 +75,35 @@ def trial_breaks(op: CrackedOperator, facets: np.ndarray, u: np.ndarray, comm: M
         drops.append(potential_drop(op, trial, u, g, t))
         changes.append(changed)
     return np.array(drops) / op.intact.facet_areas[facets], changes
+
+
+def release_bound(op: CrackedOperator, facets: np.ndarray, u: np.ndarray, g: np.ndarray,
+                  t: np.ndarray) -> np.ndarray:
+    """An upper bound on Delta V_f (J/m^2 in 1D) of each of the intact geometry's interior
+    ``facets`` broken alone at ``u``, without a trial: the screen of the candidates (1D).
+
+    Delta V_f = sum over the changed rows of 1/2 (a_r^2 - a'_r^2) <= sum of 1/2 a_r^2, and in 1D
+    a break changes the S rows of the facet's two cells and the J rows of their facets only
+    (rebuild.ChangedRows: the stencils are the two adjacent cells), so
+
+        Delta V_f <= 1/2 |a_S(c1)|^2 + 1/2 |a_S(c2)|^2 + sum over the facets f' of c1, c2 of 1/2 |a_J(f')|^2,
+
+    the energy of the rows next to f: rigorous, not a fraction of G_h (the design note §1.3's
+    closed form 1/2 t^T A^-1 t per cell + 1/2 |a_J(f)|^2 omits the neighbours' J rows and fell to
+    0.14-0.25 of G_h on rough 1D fields). A cell with a traction facet changes the tractions'
+    work too, which no row bounds: +inf there. Equality holds when both cells lose all their
+    energy (one-cell fragments)."""
+    geom = op.intact
+    if geom.d != 1:
+        raise InputError("release_bound knows the rows a break changes in 1D only (2D, 3D: issue 34, stage S2)")
+    facets = np.asarray(facets, dtype=np.int64)
+    a = row_values(op, u, g, t)
+    m = op.rows.num_elastic
+    energy_S = 0.5 * (a[:m].reshape(geom.num_cells, -1) ** 2).sum(axis=1)
+    energy_J = np.zeros(geom.num_facets)
+    energy_J[op.jump_facets] = 0.5 * (a[m:].reshape(len(op.jump_facets), -1) ** 2).sum(axis=1)
+    cells = geom.facet_cells[facets]
+    near = geom.cell_facets[cells].reshape(len(facets), 2 * (geom.d + 1))  # f itself twice
+    bound = energy_S[cells].sum(axis=1) + energy_J[near].sum(axis=1) - energy_J[facets]
+    bound[np.isin(near, op.reconstruction.traction_facets).any(axis=1)] = np.inf
+    return bound
