@@ -47,6 +47,11 @@ class BoundaryData:
         self.time_dependent = any(bc.time_dependent for _, bc in self._dirichlet + self._tractions)
         self._update(0.0)
 
+    def rebuilt(self) -> BoundaryData:
+        """The same data on the discretisation's current operator (after
+        ``DEMDiscretisation.replace_operator``: the lifts read its rows)."""
+        return BoundaryData(self._dem, self._dirichlet, self._tractions, self._dirichlet_condition, self.body_force)
+
     def _setup_tractions(self):
         """The work of the tractions on the facets of the owned cells (each boundary facet counted
         once, by its cell's owner), W = sum_f |f| t_f . u_f with u_f = R_f u + D_f g + N_f t:

@@ -223,6 +223,8 @@ class DEMDiscretisation:
             components = range(d) if bc.components is None else list(bc.components)
             fixed[np.ix_(condition[is_dirichlet] == k, components)] = True
         b_facets = None if scheme_b_facets is None else np.unique(geom.cell_facets[facet_marks["scheme_b"] >= 0])
+        #: the held facets reconstructed by scheme B under scheme A (None: none; fracture/ rebuilds with them)
+        self.scheme_b_facets = b_facets
         self.reconstruction: Reconstruction = compute_reconstruction(
             geom, materials, dirichlet_facets, scheme, geom.facets_of_layers(1), self.comm, fixed,
             marked_facets[~is_dirichlet], b_facets)
@@ -274,12 +276,43 @@ class DEMDiscretisation:
         self.prescribed = PrescribedMotion(self, prescribed, cell_tags)
         self.mass.array[self.prescribed.dofs] = 0.0
         self.inverse_mass.array[self.prescribed.dofs] = 0.0
-        clamped = np.zeros(geom.num_bodies, dtype=np.int64)
-        clamped[geom.cell_bodies[geom.facet_cells[rec.dirichlet_facets, 0]]] = 1
-        self.comm.Allreduce(MPI.IN_PLACE, clamped, op=MPI.MAX)
         #: the free bodies' mean translations (bodies.py); a prescribed body translates exactly
-        self.bodies = _bodies.FreeBodies(self.comm, geom.cell_bodies, geom.num_bodies,
-                                         (clamped > 0) | self.prescribed.flags, self.n_owned, self.mass, d)
+        self.bodies = self._free_bodies(self.prescribed.flags)
+
+    def _free_bodies(self, prescribed: np.ndarray) -> _bodies.FreeBodies:
+        """The bodies of ``geometry``; clamped: those with a Dirichlet facet, and the ``prescribed``
+        ones (per body)."""
+        geom = self.geometry
+        clamped = np.zeros(geom.num_bodies, dtype=np.int64)
+        clamped[geom.cell_bodies[geom.facet_cells[self.reconstruction.dirichlet_facets, 0]]] = 1
+        self.comm.Allreduce(MPI.IN_PLACE, clamped, op=MPI.MAX)
+        return _bodies.FreeBodies(self.comm, geom.cell_bodies, geom.num_bodies,
+                                  (clamped > 0) | prescribed, self.n_owned, self.mass, self.d)
+
+    def replace_operator(self, geometry: MeshGeometry, reconstruction: Reconstruction, rows: EnergyRows) -> None:
+        """Install another operator on the same cells, with the row layout of the one it replaces
+        (fracture/: the split geometry, reconstruction and energy rows of a crack set, design note
+        ``design_34_fracture.md`` §2-3): the rows are sorted globally and factored again, the
+        boundary data's lifts, the free bodies and the cached stable steps are made again; the
+        mass does not change. One process, no prescribed body (fracture refuses both)."""
+        if self.comm.size > 1 or self.prescribed.flags.any():
+            raise InputError("replace_operator: one process and no prescribed body (issue 34)")
+        if rows.Q.shape != self.rows.Q.shape or rows.num_owned != self.rows.num_owned:
+            raise InputError(f"replace_operator: rows of shape {rows.Q.shape}, not the layout {self.rows.Q.shape}")
+        d = self.d
+        self.geometry, self.reconstruction = geometry, reconstruction
+        Q = rows.Q.copy()  # sorted here, the caller's rows stay as they are
+        _sort_rows_globally(Q, self.columns)
+        self.rows = EnergyRows(Q=Q, Q_dirichlet=rows.Q_dirichlet, QF=rows.QF, num_owned=rows.num_owned,
+                               num_elastic=rows.num_elastic)
+        self.factored = FactoredStiffness(self.comm, Q, rows.num_owned, self.n_owned * d * (d + 1) // 2,
+                                          self.n_owned * d, self.columns[self.n_owned * d:])
+        self._K, self._held, self._stable_dt = None, None, {}
+        self.multi_neumann_cells = reconstruction.multi_neumann_cells
+        self.num_multi_neumann_cells = len(self.multi_neumann_cells)
+        self.num_extrapolated_facets = len(reconstruction.extrapolated_facets)
+        self.data = self.data.rebuilt()
+        self.bodies = self._free_bodies(np.zeros(geometry.num_bodies, dtype=bool))
 
     # -- forces and energies -----------------------------------------------------------------
     def force(self, u: PETSc.Vec, t: float, out: PETSc.Vec) -> PETSc.Vec:

@@ -54,6 +54,9 @@ class DynamicRun:
         self.wall = time.perf_counter()
         self.scene, self.comm, self.quiet, self.checkpoint_every = scene, comm, quiet, checkpoint_every
         self.problem = problem = model.build(scene, comm)
+        self.fracture = problem.fracture
+        if self.fracture is not None and checkpoint_every is not None:
+            raise InputError("checkpoints of runs with fracture are not implemented yet (issue 34, design stage S3)")
         self.dem = dem = problem.dem
         self.pairs, self.obstacles = problem.find(PairContact), problem.find(RigidContact)
         time_spec = scene["time"]
@@ -65,9 +68,11 @@ class DynamicRun:
         # friction the dissipation D^n (contact/friction.py), and the balance E^n + D^n - W^n
         self.frictional = any(c.friction is not None for c in problem.contacts)
         does_work = self.stepper.does_work
+        # with fracture Gamma^n's parts (fracture/dynamics.py), and the balance E^n + D^n + Gamma^n - W^n
+        self.fracture_columns = () if self.fracture is None else self.fracture.COLUMNS
         self.work_columns = ((("work",) if does_work else ()) + (("dissipation",) if self.frictional else ())
-                             + (("balance",) if does_work or self.frictional else ()))
-        self.columns = (model.SERIES_COLUMNS + self.work_columns + model.reaction_columns(dem)
+                             + (("balance",) if does_work or self.frictional or self.fracture is not None else ()))
+        self.columns = (model.SERIES_COLUMNS + self.fracture_columns + self.work_columns + model.reaction_columns(dem)
                         + model.prescribed_columns(dem) + model.contact_columns(problem) + tuple(self.probes.names))
         output = scene.get("output", {})
         self.every = output.get("every", max(1, self.n_steps // 50))
@@ -166,6 +171,9 @@ class DynamicRun:
                 note = (
                     f"interrupted by {interrupts.name} at step {self.stepper.n} (t = {self.stepper.t:.9g}); "
                     f"outputs closed and checkpoint written; continue with: dolfinx-dem resume {directory}"
+                    if self.fracture is None else
+                    f"interrupted by {interrupts.name} at step {self.stepper.n} (t = {self.stepper.t:.9g}); "
+                    "outputs closed; no checkpoint: runs with fracture cannot resume yet (issue 34)"
                 )
                 output.keep_incomplete(note)
                 if self.comm.rank == 0 and not self.quiet:
@@ -211,7 +219,7 @@ class DynamicRun:
             except UnresolvedContactError as err:
                 status, error = "unresolved", err
             progress.finish()
-            if error is None:
+            if error is None and self.fracture is None:  # no checkpoint with fracture yet (issue 34)
                 self._checkpoint(directory)
         return status, error
 
@@ -238,6 +246,7 @@ class DynamicRun:
                     diag.stabilisation,
                     diag.external,
                     diag.pseudo_energy,
+                    *([] if self.fracture is None else self.fracture.values()),
                     *work,
                     *dem.reactions(stepper.u, diag.t).ravel(),
                     *model.prescribed_values(self.problem, stepper.u, diag.t),
@@ -370,8 +379,14 @@ class DynamicRun:
             "scheme_b_thin_bodies": [k for k, _, _ in dem.thin_scheme_b_bodies],
             "extrapolated_facets": dem.num_extrapolated_facets,
         }
-        if error is None:
+        if error is None and self.fracture is None:
             summary["checkpoint"] = checkpoint.DIRECTORY
+        if self.fracture is not None:
+            f = self.fracture
+            summary["fracture"] = {"Gc": f.Gc, "gamma": f.gamma, "fracture_energy": f.fracture_energy,
+                                   "cracked_area": f.cracked_area, "excess": f.excess,
+                                   "breaks": [{"step": b.step, "facets": len(b.facets), "energy": b.energy}
+                                              for b in f.breaks]}
         if self.frictional:
             summary["dissipation"] = stepper.dissipation  # D at the end (contact/friction.py)
         if self.obstacles is not None:
@@ -462,7 +477,8 @@ def scene_instability(error: InstabilityError, time_spec: Mapping) -> Instabilit
 def fields(problem: DEMProblem, stepper: MEMM) -> dict:
     """DG0 displacement, velocity (vbar at t_n) and von Mises stress for XDMF output, in 1D the
     stress sigma_xx (``stress_xx``, signed, for ``plotting.animate_bar``), and with several
-    bodies the body number of each cell (``body``: 1-based connected component)."""
+    bodies the body number of each cell (``body``: 1-based connected component); with fracture
+    ``body`` from the start and ``broken``, the number of broken facets of each cell."""
     dem = problem.dem
     v = stepper.v_prev.copy()
     v.axpy(1.0, stepper.v_next)
@@ -475,6 +491,9 @@ def fields(problem: DEMProblem, stepper: MEMM) -> dict:
     v.destroy()  # petsc4py frees a vector not on COMM_SELF only at PETSc.garbage_cleanup
     if dem.d == 1:
         out["stress_xx"] = dem.scalar_function(problem.stress(stepper.u, stepper.t)[:, 0, 0], "stress_xx")
-    if dem.geometry.num_bodies > 1:
+    if dem.geometry.num_bodies > 1 or problem.fracture is not None:
         out["body"] = dem.scalar_function(dem.geometry.cell_bodies[: dem.n_owned] + 1.0, "body")
+    if problem.fracture is not None:
+        broken = (problem.fracture.operator.crack.broken_step[: dem.n_owned] >= 0).sum(axis=1)
+        out["broken"] = dem.scalar_function(broken.astype(float), "broken")
     return out

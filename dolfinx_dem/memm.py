@@ -112,12 +112,13 @@ class Diagnostics:
     work: float = 0.0  # the work W^n done by time-dependent data and prescribed bodies since t0 (MEMM's docstring)
     momentum: np.ndarray | None = None
     dissipation: float = 0.0  # D^n, the energy friction dissipated since t0 (contact/friction.py)
+    fracture: float = 0.0  # Gamma^n, the energy broken facets took from the potential since t0 (fracture/)
 
     @property
     def balance(self) -> float:
-        """E^n + D^n - W^n: constant in exact arithmetic (the pseudo-energy itself with constant
-        data and without friction)."""
-        return self.pseudo_energy + self.dissipation - self.work
+        """E^n + D^n + Gamma^n - W^n: constant in exact arithmetic (the pseudo-energy itself with
+        constant data, without friction and without fracture)."""
+        return self.pseudo_energy + self.dissipation + self.fracture - self.work
 
     @property
     def mechanical(self) -> float:
@@ -219,6 +220,8 @@ class MEMM:
         owned values (``DEMDiscretisation.vector``); they are copied."""
         self.t0, self.n = float(t0), 0
         self._patches = []
+        if self.problem.fracture is not None:
+            self.problem.fracture.check_intact()
         f = self._state.impulse  # free until the first step: no vector of the mesh's size more
         u0, v0 = self.dem.vector(u0), self.dem.vector(v0)
         for contact in self.problem.contacts:
@@ -259,8 +262,25 @@ class MEMM:
         self._patches = []  # u^{n+1}: gathered again
         self.n += 1
         diag = self._diagnostics()
+        if self.problem.fracture is not None:  # breaks at t_{n+1}, between two flights (fracture/dynamics.py)
+            diag = self.problem.fracture.update(self, diag)
         self.check_stability(diag)
         return diag
+
+    def rows_changed(self) -> Diagnostics:
+        """After the discretisation's operator changed at t_n, between two flights (fracture/, a
+        break: ``DEMDiscretisation.replace_operator``): a new ``StepState`` on its rows with the
+        same u^n, v^{n-1/2}, v^{n+1/2}, restarted (y^n and z^n = Q^T y^n of the new rows by a true
+        product, the new bodies' means), and the diagnostics at t_n with the new potential. The
+        pseudo-energy then jumps by -Delta V(u^n) and is conserved from there on (design note
+        ``design_34_fracture.md`` §2): the caller books the jump."""
+        old, self._state = self._state, StepState(self.dem, self.dt)
+        for a, b in ((old.u, self._state.u), (old.v_prev, self._state.v_prev), (old.v_next, self._state.v_next)):
+            a.copy(b)
+        old.destroy()
+        self._state.restart(self.t)
+        self._patches = []
+        return self._diagnostics()
 
     def impulse(self) -> PETSc.Vec | None:
         """The part of int_0^dt F(u^n + tau v^{n+1/2}, t_n + tau) dtau (eq. (35b)) that ``step``
@@ -326,7 +346,8 @@ class MEMM:
         return Diagnostics(step=self.n, t=self.t, kinetic=s[KINETIC], elastic=elastic, stabilisation=stabilisation,
                            external=external, pseudo_kinetic=s[PSEUDO],
                            pseudo_energy=s[PSEUDO] + elastic + stabilisation + external, work=self.work,
-                           momentum=s[MOMENTUM : MOMENTUM + self.problem.d].copy(), dissipation=self.dissipation)
+                           momentum=s[MOMENTUM : MOMENTUM + self.problem.d].copy(), dissipation=self.dissipation,
+                           fracture=self._fracture_energy)
 
     def contact_patch_values(self) -> list[np.ndarray]:
         """The patch values of u^n of each contact model (``problem.contacts``), gathered once
@@ -371,7 +392,13 @@ class MEMM:
             work=self.work,
             momentum=momentum,
             dissipation=self.dissipation,
+            fracture=self._fracture_energy,
         )
+
+    @property
+    def _fracture_energy(self) -> float:
+        """Gamma^n (fracture/dynamics.py), 0 without fracture."""
+        return 0.0 if self.problem.fracture is None else self.problem.fracture.gamma
 
     def check_stability(self, diag: Diagnostics):
         """The a-posteriori stability monitor.
@@ -411,6 +438,8 @@ class MEMM:
         process's entries), t0, n, dt, the stability budget, the work W^n and
         the data potential it continues from (global), the evaluation counters, and
         ``recurrence``, what the energy-row recurrence carries on this process (memm_state.py)."""
+        if self.problem.fracture is not None:
+            raise InputError("checkpoints of runs with fracture are not implemented yet (issue 34, design stage S3)")
         return {
             "u": self.u, "v_prev": self.v_prev, "v_next": self.v_next,
             "t0": self.t0, "n": self.n, "dt": self.dt, "budget": self.budget,
@@ -428,6 +457,8 @@ class MEMM:
         ``step`` computes bit for bit what it would have without the stop; without it the energy
         rows are recomputed from u^n by a true product (as at a refresh: a difference in the last
         bits)."""
+        if self.problem.fracture is not None:
+            raise InputError("restoring runs with fracture is not implemented yet (issue 34, design stage S3)")
         self.u.array[:], self.v_prev.array[:], self.v_next.array[:] = u, v_prev, v_next
         self._patches = []
         self.t0, self.n, self.budget = float(t0), int(n), float(budget)

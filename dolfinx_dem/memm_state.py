@@ -125,6 +125,13 @@ class StepState:
         if self._body is not None:
             np.add.at(self.sums[MOMENTA:], self._slot[: len(vn)], M * vn)
 
+    def destroy(self):
+        """Frees the PETSc vectors (petsc4py frees a vector not on COMM_SELF only at
+        ``PETSc.garbage_cleanup``): for a state that is replaced (``MEMM.rows_changed``)."""
+        for v in (self.u, self.v_prev, self.v_next, self._x, *self._z, self.impulse, self.load):
+            if v is not None:
+                v.destroy()
+
     def recurrence(self) -> dict[str, np.ndarray]:
         """What the recurrence carries besides u and v (copies, this process's): the rows y^n,
         the owned entries of z^n = Q^T y^n and the free bodies' mean velocities. With them a

@@ -19,6 +19,7 @@ from dolfinx_dem.conditions import DirichletBC, PrescribedBody, Traction
 from dolfinx_dem.contact import HalfSpace, PairContact, RigidContact
 from dolfinx_dem.discretisation import DEMDiscretisation
 from dolfinx_dem.errors import InputError, SceneError
+from dolfinx_dem.fracture import Fracture
 from dolfinx_dem.material import ElasticMaterial
 from dolfinx_dem.problem import DEMProblem
 
@@ -191,7 +192,21 @@ def build(scene: Mapping, comm: MPI.Comm = MPI.COMM_WORLD) -> DEMProblem:
         contacts.append(PairContact(dem, pair_facets, c.get("self_contact", False), c.get("skin"),
                                     c.get("tolerance", 0.0), friction=c.get("friction", 0.0),
                                     surface=c.get("surface", "facet")))
-    return DEMProblem(dem, contacts)
+    fracture = None
+    if "Gc" in scene.get("material", {}):
+        points = scene.get("fracture", {}).get("breakable")
+        breakable = None if points is None else nearest_interior_facets(dem, points)
+        fracture = Fracture(dem, scene["material"]["Gc"], breakable)
+    return DEMProblem(dem, contacts, fracture)
+
+
+def nearest_interior_facets(dem: DEMDiscretisation, points) -> np.ndarray:
+    """The interior facet whose barycentre is nearest each of ``points`` (``fracture.breakable``),
+    indices of ``dem``'s geometry (one process: fracture refuses more)."""
+    geom = dem.geometry
+    interior = geom.interior_facets
+    x = geom.facet_centres[interior]
+    return np.unique([interior[np.argmin(np.linalg.norm(x - np.asarray(p), axis=1))] for p in points])
 
 
 def reaction_columns(dem: DEMDiscretisation) -> tuple[str, ...]:

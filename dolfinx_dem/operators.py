@@ -117,12 +117,15 @@ def _stack_columns(blocks: list, n_cols: int) -> scipy.sparse.csc_matrix:
 
 def compute_energy_rows(
     geom: MeshGeometry, materials: CellMaterials, rec: Reconstruction, num_cells: int, jump_facets: np.ndarray,
-    num_own_jumps: int,
+    num_own_jumps: int, elastic_cells: np.ndarray | None = None,
 ) -> EnergyRows:
     """S for the first ``num_cells`` cells, then J for ``jump_facets`` (in that row order), as in
     the module docstring; the rows of S and of the first ``num_own_jumps`` jump facets are
-    this process's. Q is formed in blocks of ``BLOCK_ROWS`` rows by sparse products (below)
-    and the blocks copied into it: no second copy of Q and no intermediate product of its size.
+    this process's. ``elastic_cells`` (an index array, in row order) replaces the first
+    ``num_cells`` cells when given (``num_cells`` is then its length): the rows of a subset
+    of cells, as fracture's local rebuild needs (fracture/rebuild.py). Q is formed in blocks of
+    ``BLOCK_ROWS`` rows by sparse products (below) and the blocks copied into it: no second
+    copy of Q and no intermediate product of its size.
     Each row of a product depends on the same row of its left factor only, so the rows do not
     depend on the blocks."""
     d, N, F = geom.d, geom.num_cells, geom.num_facets
@@ -137,17 +140,17 @@ def compute_energy_rows(
     # sqrt|c| L_c^T P of each owned cell, (num_cells, m, d*d): one Cholesky factor per material
     factors = np.stack([np.linalg.cholesky(mandel_stiffness(mat, d)).T @ mandel(d) for mat in materials.materials])
 
-    def elastic(a: int, b: int):
-        """(M_G, its cells, M_C) of the rows of S for the owned cells a .. b-1: row i of cell a + k
+    def elastic(cells: np.ndarray):
+        """(M_G, its cells, M_C) of the rows of S for the owned ``cells``: row i of cells[k]
         reads the gradient entries k d d + (0..d d - 1); no direct part."""
-        n = b - a
+        n = len(cells)
         W = scipy.sparse.csr_matrix(
-            ((np.sqrt(geom.cell_volumes[a:b])[:, None, None] * factors[materials.index[a:b]]).ravel(),
+            ((np.sqrt(geom.cell_volumes[cells])[:, None, None] * factors[materials.index[cells]]).ravel(),
              np.repeat(np.arange(n * d * d, dtype=np.int32).reshape(n, 1, d * d), m, axis=1).ravel(),
              np.arange(0, n * m * d * d + 1, d * d, dtype=np.int32)),
             shape=(n * m, n * d * d))
         W.eliminate_zeros()
-        return W, np.arange(a, b), None
+        return W, cells, None
 
     def jump(facets: np.ndarray):
         """(M_G, its cells, M_C) of the rows of J for ``facets``: the jump of the P1
@@ -180,10 +183,12 @@ def compute_energy_rows(
         ).tocsr()
         return X, cells, delta
 
+    s_cells = np.arange(num_cells) if elastic_cells is None else np.asarray(elastic_cells, dtype=np.int64)
+    num_cells = len(s_cells)
     Q, Q_dirichlet, QF = [], [], []
     cell_block, facet_block = max(1, BLOCK_ROWS // m), max(1, BLOCK_ROWS // d)
     M_blocks = itertools.chain(
-        (elastic(a, min(a + cell_block, num_cells)) for a in range(0, num_cells, cell_block)),
+        (elastic(s_cells[a : a + cell_block]) for a in range(0, num_cells, cell_block)),
         (jump(jump_facets[a : a + facet_block]) for a in range(0, len(jump_facets), facet_block)))
     for M_G, cells, M_C in M_blocks:
         QF_block = (M_G @ facet_gradient(geom, cells)).tocsr()

@@ -27,9 +27,11 @@ class DEMProblem:
 
     The potential is V(u, t) of ``dem`` plus each model's energy change, and ``force`` is its
     exact negative gradient (contact/: every correction is the gradient of its energy).
+    ``fracture``: a ``fracture.Fracture`` built on ``dem`` (issue 34; no contact models then),
+    whose breaks change ``dem``'s operator between MEMM's steps.
     """
 
-    def __init__(self, dem: DEMDiscretisation, contacts: Sequence[ContactModel] = ()):
+    def __init__(self, dem: DEMDiscretisation, contacts: Sequence[ContactModel] = (), fracture=None):
         if not isinstance(dem, DEMDiscretisation):
             raise InputError(f"DEMProblem needs a DEMDiscretisation, got {type(dem).__name__}")
         contacts = tuple(contacts)
@@ -46,6 +48,11 @@ class DEMProblem:
         self.comm, self.d = dem.comm, dem.d
         #: the contact models, in the order given (their outputs follow it)
         self.contacts = contacts
+        if fracture is not None and (contacts or fracture.dem is not dem):
+            raise InputError("fracture (issue 34) needs a problem without contact models, on the discretisation "
+                             "it was built on: contact with fracture is design stage S5")
+        #: the breaking facets (fracture.Fracture), or None; MEMM calls its ``update`` after each step
+        self.fracture = fracture
         self._work = None
 
     def find(self, kind: type) -> ContactModel | None:

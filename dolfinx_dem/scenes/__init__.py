@@ -17,7 +17,7 @@ import numpy as np
 
 from dolfinx_dem.errors import MissingFileError, SceneError
 from dolfinx_dem.material import ElasticMaterial
-from dolfinx_dem.scenes.usage import check_method, check_names, check_static, check_used
+from dolfinx_dem.scenes.usage import check_fracture, check_method, check_names, check_static, check_used
 
 BUILTIN = pathlib.Path(__file__).parent
 
@@ -108,6 +108,7 @@ SCHEMA = {
         "rho": lambda k, v, d: _number(k, v),
         "plane": lambda k, v, d: _string(k, v, ("strain", "stress")),
         "eta": lambda k, v, d: _number(k, v),
+        "Gc": lambda k, v, d: _number(k, v, positive=True),  # fracture (issue 34): J/m^2
     },
     "materials": [{
         "tag": lambda k, v, d: _integer(k, v, minimum=0),
@@ -180,6 +181,9 @@ SCHEMA = {
         "time": lambda k, v, d: _number(k, v),
         "tangential_body_force": lambda k, v, d: _vector(k, v, d),
         "increments": lambda k, v, d: _integer(k, v, minimum=1),
+    },
+    "fracture": {
+        "breakable": lambda k, v, d: [_vector(f"{k}[{i}]", x, d) for i, x in enumerate(_list(k, v))],
     },
     "output": {
         "every": lambda k, v, d: _integer(k, v),
@@ -295,6 +299,7 @@ def validate(scene: Mapping, mesh_dimension: int | None = None) -> dict:
     if ("material" in scene) == ("materials" in scene):
         raise SceneError("a scene needs exactly one of 'material' (one material) and 'materials' (one per cell tag)")
     check_used(scene, d)
+    check_fracture(scene, d)
     for section, keys in REQUIRED.items():
         if (
             section not in scene

@@ -53,6 +53,25 @@ def check_used(scene: Mapping, d: int | None) -> None:
                              f"this scene is {d}D")
 
 
+def check_fracture(scene: Mapping, d: int | None) -> None:
+    """A SceneError for fracture (``material.Gc``, issue 34) with what it does not support yet:
+    contact, prescribed bodies, statics, several materials, 2D and 3D meshes (cracks with tips),
+    FEM methods; and for a ``fracture`` table without ``material.Gc``."""
+    if "Gc" not in scene.get("material", {}):
+        if "fracture" in scene:
+            raise SceneError("scene table 'fracture' configures the breaking facets of 'material.Gc', which this "
+                             "scene does not give")
+        return
+    refused = [what for what, present in (
+        ("'obstacles'", bool(scene.get("obstacles"))), ("'contact'", "contact" in scene),
+        ("'prescribed'", bool(scene.get("prescribed"))), ("'statics'", "statics" in scene),
+        (f"a {d}D mesh (2D and 3D cracks have tips: stage S2)", d is not None and d != 1),
+        (f"method '{scene.get('method')}'", scene.get("method", "dem-A") not in ("dem-A", "dem-B"))) if present]
+    if refused:
+        raise SceneError(f"scene key 'material.Gc': fracture (issue 34) is not implemented with {refused[0]} yet "
+                         "(dynamic 1D scenes, one process, dem-A or dem-B, no contact)")
+
+
 def check_names(scene: Mapping) -> None:
     """A SceneError for a time-dependent value without ``time_dependent``, names of the reaction
     columns (Dirichlet conditions and prescribed bodies) that are not unique, or a prescribed body
