@@ -35,7 +35,7 @@ from dolfinx_dem.errors import InputError
 from dolfinx_dem.factored import FactoredStiffness
 from dolfinx_dem.geometry import MeshGeometry, compute_geometry
 from dolfinx_dem.halo import owned_facet_marks
-from dolfinx_dem.material import CellMaterials, ElasticMaterial
+from dolfinx_dem.material import ElasticMaterial, cell_materials
 from dolfinx_dem.operators import EnergyRows, compute_energy_rows
 from dolfinx_dem.prescribed import PrescribedMotion
 from dolfinx_dem.reconstruction import Reconstruction, compute_reconstruction
@@ -94,39 +94,6 @@ def _jump_facets(geom: MeshGeometry, n_owned: int) -> tuple[np.ndarray, np.ndarr
     order = np.concatenate([order[owned_jumps[order]], order[touches[order] & ~owned_jumps[order]]])
     mine = interior[owned_jumps]
     return mine, interior[order], c[order[: len(mine)]]
-
-
-def _cell_materials(dem, material, cell_tags, prescribed: bool) -> CellMaterials:
-    """The ``CellMaterials`` of the held cells of ``dem``: one material, or one per cell tag (the
-    owned cells' tags, extended to the halo by ``halo_exchange``). Every cell needs exactly one
-    tag of ``material`` and every tag a cell; errors are raised on every process."""
-    if isinstance(material, ElasticMaterial):
-        if cell_tags is not None and not prescribed:
-            raise InputError("cell_tags are only used with several materials ({cell tag: ElasticMaterial}) "
-                             "or prescribed bodies")
-        return CellMaterials.uniform(material, dem.geometry.num_cells)
-    if cell_tags is None:
-        raise InputError("several materials ({cell tag: ElasticMaterial}) need cell_tags")
-    tags = [int(t) for t in material]
-    n, comm = dem.n_owned, dem.comm
-    count = np.zeros(n, dtype=np.int64)  # tags of each owned cell (dolfinx_dem's cell order)
-    index = np.full(n, -1, dtype=np.int64)
-    selected = np.zeros(len(tags), dtype=np.int64)
-    for k, tag in enumerate(tags):
-        cells = _bodies.tagged_cells(dem.V, cell_tags, tag)
-        count[cells] += 1
-        index[cells] = k
-        selected[k] = len(cells)
-    selected = comm.allreduce(selected, op=MPI.SUM)
-    counts = comm.allreduce(np.array([(count > 1).sum(), (count == 0).sum()]), op=MPI.SUM)
-    if np.any(selected == 0):
-        raise InputError(f"the material of cell tag {tags[int(np.argmin(selected))]} selects no cell")
-    if counts[0]:
-        raise InputError(f"{counts[0]} cells carry several material tags (materials overlap); tags {tags}")
-    if counts[1]:
-        raise InputError(f"{counts[1]} cells carry none of the material tags {tags}: give every cell a material")
-    held = dem.halo_exchange(index[:, None])[:, 0]
-    return CellMaterials(tuple(material[t] for t in material), held.astype(np.int32))
 
 
 class DEMDiscretisation:
@@ -203,7 +170,7 @@ class DEMDiscretisation:
         geom = self.geometry
         self.n_owned = geom.num_owned
         #: the material of each held cell
-        self.materials = materials = _cell_materials(self, material, cell_tags, bool(prescribed))
+        self.materials = materials = cell_materials(self, material, cell_tags, bool(prescribed))
 
         # Facets held here and the condition of each (owned cells' marks decide).
         mark = facet_marks["conditions"]

@@ -7,7 +7,9 @@ import math
 import numbers
 
 import numpy as np
+from mpi4py import MPI
 
+from dolfinx_dem import bodies
 from dolfinx_dem.errors import InputError
 
 
@@ -167,3 +169,36 @@ class CellMaterials:
             s[:, 2, 2] = lmbda * (G[:, 0, 0] + G[:, 1, 1])
         dev = s - np.trace(s, axis1=1, axis2=2)[:, None, None] * np.eye(3) / 3
         return np.sqrt(1.5 * np.einsum("nij,nij->n", dev, dev))
+
+
+def cell_materials(dem, material, cell_tags, prescribed: bool) -> CellMaterials:
+    """The ``CellMaterials`` of the held cells of ``dem``: one material, or one per cell tag (the
+    owned cells' tags, extended to the halo by ``halo_exchange``). Every cell needs exactly one
+    tag of ``material`` and every tag a cell; errors are raised on every process."""
+    if isinstance(material, ElasticMaterial):
+        if cell_tags is not None and not prescribed:
+            raise InputError("cell_tags are only used with several materials ({cell tag: ElasticMaterial}) "
+                             "or prescribed bodies")
+        return CellMaterials.uniform(material, dem.geometry.num_cells)
+    if cell_tags is None:
+        raise InputError("several materials ({cell tag: ElasticMaterial}) need cell_tags")
+    tags = [int(t) for t in material]
+    n, comm = dem.n_owned, dem.comm
+    count = np.zeros(n, dtype=np.int64)  # tags of each owned cell (dolfinx_dem's cell order)
+    index = np.full(n, -1, dtype=np.int64)
+    selected = np.zeros(len(tags), dtype=np.int64)
+    for k, tag in enumerate(tags):
+        cells = bodies.tagged_cells(dem.V, cell_tags, tag)
+        count[cells] += 1
+        index[cells] = k
+        selected[k] = len(cells)
+    selected = comm.allreduce(selected, op=MPI.SUM)
+    counts = comm.allreduce(np.array([(count > 1).sum(), (count == 0).sum()]), op=MPI.SUM)
+    if np.any(selected == 0):
+        raise InputError(f"the material of cell tag {tags[int(np.argmin(selected))]} selects no cell")
+    if counts[0]:
+        raise InputError(f"{counts[0]} cells carry several material tags (materials overlap); tags {tags}")
+    if counts[1]:
+        raise InputError(f"{counts[1]} cells carry none of the material tags {tags}: give every cell a material")
+    held = dem.halo_exchange(index[:, None])[:, 0]
+    return CellMaterials(tuple(material[t] for t in material), held.astype(np.int32))
