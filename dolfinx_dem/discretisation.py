@@ -259,7 +259,7 @@ class DEMDiscretisation:
     def replace_operator(self, geometry: MeshGeometry, reconstruction: Reconstruction, rows: EnergyRows) -> None:
         """Install another operator on the same cells, with the row layout of the one it replaces
         (fracture/: the split geometry, reconstruction and energy rows of a crack set, design note
-        ``design_34_fracture.md`` §2-3): the rows are sorted globally and factored again, the
+        ``docs/design/fracture.md`` §2-3): the rows are sorted globally and factored again, the
         boundary data's lifts, the free bodies and the cached stable steps are made again; the
         mass does not change. One process, no prescribed body (fracture refuses both)."""
         if self.comm.size > 1 or self.prescribed.flags.any():

@@ -273,7 +273,7 @@ class MEMM:
         same u^n, v^{n-1/2}, v^{n+1/2}, restarted (y^n and z^n = Q^T y^n of the new rows by a true
         product, the new bodies' means), and the diagnostics at t_n with the new potential. The
         pseudo-energy then jumps by -Delta V(u^n) and is conserved from there on (design note
-        ``design_34_fracture.md`` §2): the caller books the jump."""
+        ``docs/design/fracture.md`` §2): the caller books the jump."""
         old, self._state = self._state, StepState(self.dem, self.dt)
         for a, b in ((old.u, self._state.u), (old.v_prev, self._state.v_prev), (old.v_next, self._state.v_next)):
             a.copy(b)

@@ -1,6 +1,6 @@
 """Dynamic fracture along facets (issue 34): the crack state, the split geometry, the operator
 of a crack set, the energy release rate G_h at fixed displacements and the breaks in MEMM runs
-with the balance exact (design note ``design_34_fracture.md`` §1-3, §6). Serial, 1D in runs.
+with the balance exact (design note ``docs/design/fracture.md`` §1-3, §6). Serial, 1D in runs.
 
 - ``CrackState``, ``split_geometry`` (crack.py): broken facets become two boundary facets;
 - ``Conditions``, ``compute_operator`` (operator.py): R and Q = [S; J] of a crack set from

@@ -1,5 +1,5 @@
 """The crack state and the split geometry of fracture along facets (issue 34; design note
-``design_34_fracture.md`` §3, rows "crack state" and "geometry").
+``docs/design/fracture.md`` §3, rows "crack state" and "geometry").
 
 A broken interior facet f between cells c_a and c_b (c_a the one with the smaller global number)
 becomes two boundary facets, the crack lips: f itself, now with ``facet_cells[f] = (c_a, -1)``,

@@ -1,5 +1,5 @@
 """Facets breaking in a MEMM run, with the energy balance exact (issue 34; design note
-``design_34_fracture.md`` §2).
+``docs/design/fracture.md`` §2).
 
 MEMM conserves E^n = 1/2 (v^{n-1/2})^T M v^{n+1/2} + V(u^n) when each flight's force integral
 is that of one potential (memm.py, paper eq. (35a)-(35b)). Nothing ties one flight's potential
