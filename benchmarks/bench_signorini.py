@@ -583,6 +583,8 @@ def markdown(results, command) -> str:
         lines.append(f"| {target} | " + " | ".join(_f(row[m], "{:.3f}") for m in conv["methods"])
                      + f" | {row['best_explicit_fem'] or '-'} | {_f(row['dem-A_over_best_explicit_fem'], '{:.1f}')}"
                      + f" | {_f(row['dem-B_over_best_explicit_fem'], '{:.1f}')} |")
+    lines += ["", "Why the DEM takes that long (the factors of the ratio, dispersion, the variants the paper allows): "
+              "[signorini_tte.md](signorini_tte.md) (`bench_signorini_tte.py`)."]
     n_show = 100 if 100 in ns else ns[-1]
     i_show = ns.index(n_show)
     lines += ["", f"### Contact pressure, energy, N = {n_show}", "",
@@ -666,15 +668,16 @@ def markdown(results, command) -> str:
     return "\n".join(lines) + "\n"
 
 
-#: the section that bench_signorini_tte.py writes into signorini.md: carried over when this rewrites it
-TTE_HEADING = "## Why the DEM takes"
+def started(out_dir: str):
+    """The folder ``out_dir`` (made), the start time, and a log that prints the time since it."""
+    folder = pathlib.Path(out_dir)
+    folder.mkdir(parents=True, exist_ok=True)
+    wall = time.perf_counter()
 
+    def log(msg):
+        print(f"[{time.perf_counter() - wall:7.1f} s] {msg}", flush=True)
 
-def _kept_section(md_path) -> str:
-    """The section of bench_signorini_tte.py in the existing ``md_path`` (to its end), or ''."""
-    old = md_path.read_text() if md_path.exists() else ""
-    start = old.find(TTE_HEADING)
-    return old[start:] if start >= 0 else ""
+    return folder, wall, log
 
 
 def main(argv=None) -> int:
@@ -682,12 +685,7 @@ def main(argv=None) -> int:
     parser.add_argument("--quick", action="store_true", help="N = 50, 100, a short sweep: < 60 s")
     parser.add_argument("--out-dir", default=str(ROOT / "docs" / "bench"), help="folder for the JSON, PNGs, md")
     args = parser.parse_args(argv)
-    out_dir = pathlib.Path(args.out_dir)
-    out_dir.mkdir(parents=True, exist_ok=True)
-    wall = time.perf_counter()
-
-    def log(msg):
-        print(f"[{time.perf_counter() - wall:7.1f} s] {msg}", flush=True)
+    out_dir, wall, log = started(args.out_dir)
 
     from dolfinx_dem.fem import signorini
 
@@ -723,10 +721,7 @@ def main(argv=None) -> int:
     (out_dir / "signorini.json").write_text(json.dumps(results, indent=1) + "\n")
     command = ".venv/bin/python benchmarks/bench_signorini.py" + (" --quick" if args.quick else "")
     text = markdown(results, command)
-    kept = _kept_section(out_dir / "signorini.md")
-    if kept:
-        log(f"kept the section '{kept.splitlines()[0][3:]}' (bench_signorini_tte.py writes it: rerun it)")
-    (out_dir / "signorini.md").write_text(text + ("\n" + kept if kept else ""))
+    (out_dir / "signorini.md").write_text(text)
     log(f"wrote {out_dir / 'signorini.json'}, {out_dir / 'signorini.md'} and {len(results['figures'])} figures")
     print(markdown(results, command))
     return 0

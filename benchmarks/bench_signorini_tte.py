@@ -17,8 +17,8 @@ Three parts, all on benchmark 1 of Doyen, Ern & Piperno (2011) (see bench_signor
    ``REPEATS``, N = 50 ... 800, ``time_to_error`` at 0.05, 0.03, 0.025), against the explicit
    FEM schemes (a), (b) run in the same process at CFL 0.75 (the benchmark's) and at 0.99.
 
-Writes ``signorini_tte.json`` and replaces (or appends) the section "Why the DEM takes ..." of
-``signorini.md`` in the output folder (the text: signorini_tte_report.py). Serial. Usage::
+Writes ``signorini_tte.json`` and the page ``signorini_tte.md`` in the output folder (the text:
+signorini_tte_report.py). Serial. Usage::
 
     python benchmarks/bench_signorini_tte.py                  # -> docs/bench/ (~2 min)
     python benchmarks/bench_signorini_tte.py --quick --out-dir /tmp/tte   # ~15 s
@@ -35,7 +35,7 @@ import time
 
 import bench_signorini as bs
 import numpy as np
-from signorini_tte_report import _f, section, write_section
+from signorini_tte_report import _f, section
 from work_precision import time_to_error  # benchmarks/ is on sys.path when a script runs
 
 ROOT = pathlib.Path(__file__).resolve().parent.parent
@@ -299,12 +299,7 @@ def main(argv=None) -> int:
     parser.add_argument("--signorini-json", default=str(ROOT / "docs" / "bench" / "signorini.json"),
                         help="bench_signorini.py's results, for part 2")
     args = parser.parse_args(argv)
-    out_dir = pathlib.Path(args.out_dir)
-    out_dir.mkdir(parents=True, exist_ok=True)
-    wall = time.perf_counter()
-
-    def log(msg):
-        print(f"[{time.perf_counter() - wall:7.1f} s] {msg}", flush=True)
+    out_dir, wall, log = bs.started(args.out_dir)
 
     global REPEATS
     if args.quick:
@@ -332,7 +327,7 @@ def main(argv=None) -> int:
     (out_dir / "signorini_tte.json").write_text(json.dumps(res, indent=1) + "\n")
     command = ".venv/bin/python benchmarks/bench_signorini_tte.py" + (" --quick" if args.quick else "")
     text = section(res, command)
-    write_section(out_dir / "signorini.md", text)
+    (out_dir / "signorini_tte.md").write_text(text)
     print(text)
     return 0
 

@@ -1,11 +1,11 @@
-"""The section "Why the DEM takes 6.5 times longer to reach an error" of docs/bench/signorini.md,
+"""The page docs/bench/signorini_tte.md, "Why the DEM takes 6.5 times longer to reach an error",
 written from the results of bench_signorini_tte.py (its ``res``)."""
 
 from __future__ import annotations
 
 import math
 
-HEADING = "## Why the DEM takes 6.5 times longer to reach an error"
+HEADING = "# Signorini bar: why the DEM takes 6.5 times longer to reach an error"
 
 
 def _f(x, fmt="{:.2f}"):
@@ -20,14 +20,14 @@ def section(res, command) -> str:
     lines = [HEADING, "",
              f"Written by `benchmarks/bench_signorini_tte.py` (run {res['date']}, commit {res['commit']}, "
              f"{res['wall_time_s']:.0f} s{', quick mode' if res['quick'] else ''}; numbers in `signorini_tte.json`); "
-             "its decomposition reads `signorini.json`, the run above. Command:", "", "```", command, "```", "",
+             "its decomposition reads `signorini.json`, the run of [signorini.md](signorini.md). Command:", "", "```", command, "```", "",
              "### The ratio is the product of three factors", "",
              "At each target error, N is the mesh each method needs and steps its time steps (both log-log interpolated "
              "between meshes like the wall time), wall the wall time (set-up + stepping) at the target; best FEM = the "
-             "faster of (a), (b) (both at CFL 0.75, as in the table above). wall_D / wall_F = (N_D / N_F) x "
+             "faster of (a), (b) (both at CFL 0.75, as in signorini.md's table). wall_D / wall_F = (N_D / N_F) x "
              "[(steps_D / N_D) / (steps_F / N_F)] x [(wall_D / steps_D) / (wall_F / steps_F)] exactly.", "",
              "| target / DEM | best FEM | N_F | N_D | (a) N_D / N_F | (b) steps per cell D / F | (c) wall per step D / F "
-             "| product | ratio (table above) | set-up share F / D |", "|---|---|---|---|---|---|---|---|---|---|"]
+             "| product | ratio (signorini.md) | set-up share F / D |", "|---|---|---|---|---|---|---|---|---|---|"]
     for key, r in dec.items():
         lines.append(f"| {key} | {r['best_fem']} | {r['n_fem']:.0f} | {r['n_dem']:.0f} | {r['n_ratio']:.2f} "
                      f"| {r['steps_per_cell_ratio']:.2f} | {r['cost_per_step_ratio']:.2f} | {r['product']:.2f} "
@@ -109,12 +109,12 @@ def section(res, command) -> str:
                      + ", ".join(f"{r['tip_l2']:.4f}" for r in rows if r["n"] in var["n"]) + " | |")
     lines += ["", "Time to reach the error, DEM / best of (a), (b), at each target: **steps** = the DEM's time steps "
               "over the fewest of (a), (b) (interpolated like the wall time: deterministic, factors (a) x (b) of the "
-              "decomposition); **est.** = the ratio with the wall times of the benchmark's run above instead of this "
+              "decomposition); **est.** = the ratio with the wall times of the benchmark's run (signorini.md) instead of this "
               "run's: on each mesh its DEM set-up + its stepping time x the variant's steps / its steps (eta and CFL "
               "do not change the cost of a step), against its best explicit FEM (only at CFL 0.75: it has no FEM "
               "run at 0.99); **meas.** = the wall-time ratio measured in this run, noisy: for the benchmark's own case "
               f"it gives {_range(tt(var['variants'][:1], 'ratio_cfl_0.75'))} here against the "
-              f"{_range(tt(var['variants'][:1], 'estimate_cfl_0.75'))} of the run above (the machine is shared; "
+              f"{_range(tt(var['variants'][:1], 'estimate_cfl_0.75'))} of the benchmark's run (the machine is shared; "
               "a loaded machine slows the DEM's step more than the FEM's).", ""]
     for cfl_f in var["fem_cfls"]:
         lines += [f"Against the FEM at CFL {cfl_f:g}:", "",
@@ -190,15 +190,3 @@ def conclusion(res) -> list:
         f"{_range(cells)} "
         "times the cells. Or a gradient over h instead of 2h (the P1's "
         "dispersion), which is not the paper's reconstruction.", ""]
-
-
-def write_section(md_path, text):
-    """Replace the section under HEADING in ``md_path`` (up to the next '## ' heading) or append it."""
-    old = md_path.read_text() if md_path.exists() else ""
-    start = old.find(HEADING)
-    if start < 0:
-        new = old.rstrip("\n") + "\n\n" + text if old else text
-    else:
-        nxt = old.find("\n## ", start + len(HEADING))
-        new = old[:start] + text + ("" if nxt < 0 else old[nxt:])
-    md_path.write_text(new)

@@ -105,13 +105,13 @@ def test_bench_signorini_tte_dispersion_and_decomposition(monkeypatch):
 def test_bench_signorini_tte_quick(tmp_path):
     """The quick study: (A, eta = E, CFL 0.75) reproduces the benchmark's errors on N = 50, 100,
     200; eta = E/6 at CFL 1.85 is stable with a smaller error (0.0574 against 0.0995 at N = 100);
-    the section goes into signorini.md."""
+    the page is signorini_tte.md."""
     run_quick("benchmarks/bench_signorini_tte.py", "--out-dir", str(tmp_path))
     data = json.loads((tmp_path / "signorini_tte.json").read_text())
     base, _, small_eta = data["variants"]["variants"]
     assert [r["tip_l2"] for r in base["rows"]] == pytest.approx([0.1618, 0.0995, 0.0621], abs=2e-4)
     assert small_eta["rows"][1]["tip_l2"] == pytest.approx(0.0574, abs=2e-4)
-    assert (tmp_path / "signorini.md").read_text().startswith("## Why the DEM takes")
+    assert (tmp_path / "signorini_tte.md").read_text().startswith("# Signorini bar: why the DEM takes")
 
 
 def test_bench_wave2d_quick(tmp_path):
