@@ -45,9 +45,9 @@ import math
 
 import numpy as np
 
-from dolfinx_dem.errors import InputError, InstabilityError, StateError
+from dolfinx_dem.errors import InputError, InstabilityError, StateError, UnresolvedContactError
 from dolfinx_dem.fracture.crack import CrackState
-from dolfinx_dem.fracture.operator import Conditions, compute_operator
+from dolfinx_dem.fracture.operator import Conditions, compute_operator, lip_openings
 from dolfinx_dem.fracture.rebuild import break_facets
 from dolfinx_dem.fracture.release import release_bound, trial_breaks
 
@@ -76,6 +76,9 @@ class Fracture:
 
     #: the screen's margin: ``release_bound`` equals Delta V for one-cell fragments, up to rounding
     SCREEN_MARGIN = 1e-12
+
+    #: the lips' overlap, over the facet's diameter h_f, at which a run stops (``_check_lips``)
+    LIP_OVERLAP = 1e-3
 
     def __init__(self, dem, Gc: float, breakable: np.ndarray | None = None, screen: bool = True):
         refused = [what for what, present in (
@@ -126,6 +129,23 @@ class Fracture:
         if self.breaks:
             raise StateError("MEMM.initialise after facets broke: build the discretisation and its Fracture again")
 
+    def _check_lips(self, stepper, diag, data):
+        """UnresolvedContactError once the lips of a broken facet pass through each other by more
+        than ``LIP_OVERLAP`` of its diameter h_f (eq. (13)): nothing resists it before contact of
+        the lips and fragments (design stage S5), so the run stops rather than go on wrong."""
+        broken = self.operator.broken
+        if not len(broken):
+            return
+        opening = lip_openings(self.operator, broken, stepper.u.array_r, *data)
+        limit = -self.LIP_OVERLAP * self.intact.facet_diameters[broken]
+        worst = int(np.argmin(opening - limit))
+        if opening[worst] < limit[worst]:
+            x = self.intact.facet_centres[broken[worst]].tolist()
+            raise UnresolvedContactError(
+                f"at t = {diag.t:.6g} (step {diag.step}) the lips of the broken facet at {x} pass through each other "
+                f"by {-opening[worst]:.3g} m: the fragments met again, and contact between crack lips and fragments "
+                "is not implemented yet (issue 34, stage S5); the run stops rather than let them interpenetrate")
+
     def update(self, stepper, diag):
         """At the step boundary t_n of ``diag`` (after ``MEMM.step``): break the facets the
         criterion accepts and return the diagnostics at t_n (the new ones if something broke,
@@ -137,9 +157,10 @@ class Fracture:
         if self.screen:
             bound = release_bound(self.operator, candidates, w, *data)
             candidates = candidates[bound >= (1 - self.SCREEN_MARGIN) * self.Gc * self.intact.facet_areas[candidates]]
-        G, changes = trial_breaks(self.operator, candidates, w, self.dem.comm, *data, step=diag.step)
+        self._check_lips(stepper, diag, data)
+        G, changes, opening = trial_breaks(self.operator, candidates, w, self.dem.comm, *data, step=diag.step)
         self.trials += len(candidates)
-        over = np.flatnonzero(G >= self.Gc)
+        over = np.flatnonzero((G >= self.Gc) & (opening > 0))  # lips that would close: no crack opens
         if not len(over):
             return diag
         accepted, cells, jumps = [], np.empty(0, np.int64), np.empty(0, np.int64)

@@ -132,3 +132,22 @@ def potential(op: CrackedOperator, u: np.ndarray, g: np.ndarray, t: np.ndarray) 
     ``row_values``, W_T the tractions' work (V less the body force's -f.u, which no break changes)."""
     a = row_values(op, u, g, t)
     return 0.5 * float(a @ a) - float(traction_values(op, u, g, t).sum())
+
+
+def lip_openings(op: CrackedOperator, facets: np.ndarray, u: np.ndarray, g: np.ndarray, t: np.ndarray) -> np.ndarray:
+    """The opening (u_{f'} - u_f) . n_f of each broken facet of ``facets`` (intact geometry's
+    indices) at the cell values ``u``: u_f = R u + D g + N t the lips' reconstructions, f the lip of
+    the cell that kept the facet's index, f' the other, n_f the outward unit normal of f's cell.
+    Negative: the lips pass through each other, which nothing resists without contact of the lips
+    (design stage S5)."""
+    geom, rec, d = op.geometry, op.reconstruction, op.geometry.d
+    facets = np.asarray(facets, dtype=np.int64)
+    order = op.crack.lip_order(op.intact)  # lips[i] is the second lip of order[i]
+    sort = np.argsort(order)
+    other = op.lips[sort[np.searchsorted(order[sort], facets)]]
+    both = np.concatenate([facets, other])
+    dofs = (both[:, None] * d + np.arange(d)).ravel()
+    uF = (rec.R[dofs] @ u + rec.D[dofs] @ g + rec.N[dofs] @ t).reshape(2, len(facets), d)
+    c, j = geom.facet_cells[facets, 0], geom.facet_local[facets, 0]
+    normal = geom.facet_area_normals[c, j] / geom.facet_areas[facets, None]
+    return np.einsum("ij,ij->i", uF[1] - uF[0], normal)

@@ -34,7 +34,7 @@ import numpy as np
 from mpi4py import MPI
 
 from dolfinx_dem.errors import InputError
-from dolfinx_dem.fracture.operator import CrackedOperator, row_values, traction_values
+from dolfinx_dem.fracture.operator import CrackedOperator, lip_openings, row_values, traction_values
 from dolfinx_dem.fracture.rebuild import ChangedRows, break_facets_with_changes
 
 
@@ -62,19 +62,22 @@ def energy_release(op: CrackedOperator, facets: np.ndarray, u: np.ndarray, comm:
 def trial_breaks(op: CrackedOperator, facets: np.ndarray, u: np.ndarray, comm: MPI.Comm,
                  g: np.ndarray | None = None, t: np.ndarray | None = None,
                  step: int | None = None) -> tuple[np.ndarray, list[ChangedRows]]:
-    """``energy_release`` and the rows each facet's break alone changes (rebuild.ChangedRows),
-    each trial broken at ``step`` (default: the latest break's; it orders the lips only)."""
+    """``energy_release``, the rows each facet's break alone changes (rebuild.ChangedRows) and
+    the opening of its lips just after it (``operator.lip_openings``: negative when the break
+    would close, under compression), each trial broken at ``step`` (default: the latest break's;
+    it orders the lips only)."""
     rec = op.reconstruction
     g = np.zeros(rec.D.shape[1]) if g is None else np.asarray(g, dtype=float)
     t = np.zeros(rec.N.shape[1]) if t is None else np.asarray(t, dtype=float)
     facets = np.asarray(facets, dtype=np.int64)
     step = max(op.crack.last_step, 0) if step is None else step
-    drops, changes = [], []
+    drops, changes, openings = [], [], []
     for f in facets:  # one local trial per candidate (the actual break's code path, rebuild.py)
         trial, changed = break_facets_with_changes(op, [f], step, comm)
         drops.append(potential_drop(op, trial, u, g, t))
         changes.append(changed)
-    return np.array(drops) / op.intact.facet_areas[facets], changes
+        openings.append(lip_openings(trial, [f], u, g, t)[0])
+    return np.array(drops) / op.intact.facet_areas[facets], changes, np.array(openings)
 
 
 def release_bound(op: CrackedOperator, facets: np.ndarray, u: np.ndarray, g: np.ndarray,
