@@ -10,7 +10,7 @@ from helpers import ROOT, import_script, run_quick
 
 SCRIPTS = sorted((ROOT / "benchmarks").glob("*.py")) + sorted((ROOT / "validation").glob("*.py"))
 #: the modules among them that scripts import, without a main of their own
-LIBRARIES = ("work_precision", "friction_slide_pages", "signorini_tte_report")
+LIBRARIES = ("work_precision", "friction_slide_pages", "signorini_report", "signorini_tte_report")
 
 # each test runs a study (quick mode) in a process of its own
 pytestmark = pytest.mark.slow
